@@ -1,0 +1,34 @@
+#!/usr/bin/env bash
+# Idempotent set-up on a fresh Debian machine (root, Python 3.11): system packages, venv, package.
+# Usage: bash scripts/setup.sh [--gui]   (--gui adds the X server and Qt libraries for the napari tests)
+set -euo pipefail
+cd "$(dirname "$0")/.."
+GUI=0
+[[ "${1:-}" == "--gui" ]] && GUI=1
+
+apt_pkgs=()
+command -v python3 >/dev/null || apt_pkgs+=(python3 python3-venv python3-pip)
+if [[ $GUI == 1 ]]; then
+    for p in xvfb xauth libxcb-icccm4 libxcb-keysyms1 libgl1 libegl1 libxkbcommon-x11-0 libxcb-cursor0 \
+             libdbus-1-3 libxcb-image0 libxcb-render-util0 libxcb-xinerama0 libxcb-randr0 libxcb-shape0 \
+             libfontconfig1; do
+        dpkg -s "$p" >/dev/null 2>&1 || apt_pkgs+=("$p")
+    done
+fi
+if (( ${#apt_pkgs[@]} )); then
+    SUDO=""; [[ $(id -u) != 0 ]] && SUDO="sudo"
+    $SUDO apt-get update -qq
+    DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq "${apt_pkgs[@]}" >/dev/null
+fi
+
+PY=${PYTHON:-python3}
+if [[ ! -x .venv/bin/python ]]; then
+    "$PY" -m venv .venv
+fi
+stamp=.venv/.installed-$(sha1sum pyproject.toml | cut -c1-12)
+if [[ ! -f $stamp ]]; then
+    .venv/bin/python -m pip install -q --upgrade pip
+    .venv/bin/python -m pip install -q -e ".[test]"
+    rm -f .venv/.installed-*
+    touch "$stamp"
+fi

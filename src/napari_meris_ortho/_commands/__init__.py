@@ -1,0 +1,1 @@
+"""Subcommands of ``meris-ortho``: each module has ``register(subparsers)``."""

@@ -1,0 +1,28 @@
+"""Errors that end in one clear message (CLI exit code 2), never a traceback."""
+
+from __future__ import annotations
+
+
+class MerisOrthoError(Exception):
+    """Base of every error caused by the user's input (files, options, outputs)."""
+
+
+class N1FormatError(MerisOrthoError, ValueError):
+    """An ENVISAT N1 file that cannot be read: truncated, foreign, inconsistent or unsupported."""
+
+    def __init__(self, path: object, problem: str) -> None:
+        self.path = str(path)
+        self.problem = problem
+        super().__init__(f"{self.path}: {problem}")
+
+
+class DemError(MerisOrthoError):
+    """A DEM that cannot be opened or read."""
+
+
+class OptionsError(MerisOrthoError, ValueError):
+    """Inconsistent or invalid options (extent, pixel size, CRS, elevation source...)."""
+
+
+class OutputError(MerisOrthoError):
+    """An output that cannot be written (missing or read-only directory...)."""

@@ -1,0 +1,1 @@
+"""File formats: ENVISAT N1 products, DEM sources, GeoTIFF outputs."""

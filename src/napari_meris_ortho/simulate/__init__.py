@@ -1,0 +1,1 @@
+"""Simulator of MERIS L1b products with exact ground truth."""
