@@ -241,9 +241,15 @@ class MerisL1bProduct:
             return tuple(v / 1000.0 for v in values)
         return (math.nan,) * NUM_BANDS
 
+    @cached_property
+    def _file_map(self) -> np.memmap:
+        """The whole file, memory-mapped read-only on first use (nothing is read)."""
+        return np.memmap(self.path, dtype=np.uint8, mode="r")
+
     def _records(self, name: str, dtype: np.dtype) -> np.memmap:
+        """Records of data set ``name`` as a structured memmap view (validated at open)."""
         d = self.dsd(name)
-        return np.memmap(self.path, dtype=dtype, mode="r", offset=d.offset, shape=(d.num_dsr,))
+        return self._file_map[d.offset : d.offset + d.num_dsr * dtype.itemsize].view(dtype)
 
     def _check_band(self, band: int) -> None:
         if isinstance(band, bool) or not isinstance(band, int | np.integer):

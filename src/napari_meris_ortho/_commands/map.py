@@ -1,0 +1,192 @@
+"""``meris-ortho map``: orthorectified mapping of one product to a GeoTIFF (MERSYN use case 3).
+
+The log follows Appendix B: pixel size, image size and origin, facet-search shares, the
+prediction/correction histogram, the processed points and the elapsed time.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import math
+from pathlib import Path
+from typing import Any
+
+from ..errors import OptionsError
+
+log = logging.getLogger("napari_meris_ortho")
+
+
+def _bands(text: str) -> list[int]:
+    try:
+        values = [int(v) for v in text.replace(",", " ").split()]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"bands {text!r}: expected e.g. 3,5,7") from None
+    if not values or any(not 1 <= v <= 15 for v in values):
+        raise argparse.ArgumentTypeError(f"bands {text!r}: MERIS bands are 1..15")
+    return values
+
+
+def register(subparsers: Any) -> None:
+    """Add the ``map`` subcommand."""
+    p = subparsers.add_parser(
+        "map", help="orthorectify one product to a GeoTIFF",
+        description="Orthorectify a MERIS L1b product onto a map grid (handbook sections 3.1-3.4, "
+        "MERSYN use case 3) and write the radiances as a GeoTIFF.")
+    p.add_argument("product", metavar="PRODUCT.N1", help="MERIS L1b product")
+    p.add_argument("-o", "--output", required=True, metavar="OUT.tif", help="output GeoTIFF")
+    p.add_argument("--dem", action="append", default=[], metavar="PATH",
+                   help="DEM (repeatable; tried in order at each point, then the tie points)")
+    p.add_argument("--elevation", choices=("none", "tiepoints", "dem"), default="dem",
+                   help="elevation source (default dem; without --dem: the tie points)")
+    p.add_argument("--crs", default="EPSG:4326", help="output CRS (default EPSG:4326)")
+    p.add_argument("--pixel-size", type=float, default=None, metavar="SIZE",
+                   help="pixel size in CRS units (default: 260 m FR / 1040 m RR)")
+    p.add_argument("--ul", type=float, nargs=2, default=None, metavar=("X", "Y"),
+                   help="upper-left corner of the output (CRS units)")
+    p.add_argument("--lr", type=float, nargs=2, default=None, metavar=("X", "Y"),
+                   help="lower-right corner of the output (CRS units)")
+    p.add_argument("--bands", type=_bands, default=None, metavar="LIST",
+                   help="bands to map, e.g. 3,5,7 (default all 15)")
+    p.add_argument("--sampling", choices=("nearest", "bilinear", "bicubic"), default="nearest",
+                   help="resampling (default nearest, as MERSYN)")
+    p.add_argument("--tolerance", type=float, default=0.01, metavar="PX",
+                   help="prediction/correction tolerance in product pixels (MERSYN: 0.1)")
+    p.add_argument("--parallax", choices=("handbook", "ellipsoid"), default="handbook",
+                   help="parallax model: handbook sphere R=6370997 m or WGS84 radii")
+    p.add_argument("--search", choices=("primary", "handbook"), default="primary",
+                   help="antecedent search: primary grid + Newton (fast) or MERSYN's facet "
+                   "search in the loop")
+    p.add_argument("--diagnostics", action="store_true",
+                   help="also write OUT_diagnostics.tif: antecedent line/column, elevation, its "
+                   "source, iterations, parallax shift east/north (m)")
+    p.add_argument("--stats-json", default=None, metavar="FILE", help="write statistics as JSON")
+    p.set_defaults(func=run)
+
+
+def _diagnostics_path(out: Path) -> Path:
+    return out.with_name(out.stem + "_diagnostics" + (out.suffix or ".tif"))
+
+
+def _check(args: argparse.Namespace) -> Any:
+    """Every check that needs no product read, before any work (Appendix C parameter checks)."""
+    from .._atomic import check_writable_dir
+    from ..engine.grid import OutputGrid, parse_crs
+
+    outputs = [Path(args.output)]
+    if args.diagnostics:
+        outputs.append(_diagnostics_path(Path(args.output)))
+    if args.stats_json:
+        outputs.append(Path(args.stats_json))
+    for out in outputs:
+        check_writable_dir(out)
+        if out.is_dir():
+            raise OptionsError(f"{out}: output is a directory")
+    if args.dem and args.elevation != "dem":
+        raise OptionsError(f"--dem given with --elevation {args.elevation}: DEMs need "
+                           "--elevation dem (MERSYN refuses -dem with -ort NO)")
+    if args.pixel_size is not None and not (math.isfinite(args.pixel_size)
+                                            and args.pixel_size > 0):
+        raise OptionsError(f"--pixel-size must be > 0, got {args.pixel_size}")
+    if not (math.isfinite(args.tolerance) and args.tolerance > 0):
+        raise OptionsError(f"--tolerance must be > 0 product pixels, got {args.tolerance}")
+    crs = parse_crs(args.crs)
+    if (args.ul is None) != (args.lr is None):
+        raise OptionsError("--ul and --lr need each other")
+    if args.ul is None:
+        return None
+    if args.pixel_size is None:
+        raise OptionsError("--ul/--lr need --pixel-size")
+    return OutputGrid.from_extent(crs, args.ul, args.lr, args.pixel_size)
+
+
+def log_lines(stats: dict[str, Any], default_pixel: bool) -> list[str]:
+    """The Appendix B style log of a mapping run."""
+    from ..ortho import histogram_lines
+
+    s = stats
+    out = []
+    if default_pixel:
+        out.append("SETTING PIXEL SIZE DEFAULT VALUES")
+    out += [f"PIXEL HEIGHT = {s['pixel_height']:.6f}", f"PIXEL WIDTH  = {s['pixel_width']:.6f}",
+            "", "COMPUTING IMAGE SIZE AND ORIGIN",
+            f"UL: X = {s['ul_x']:.6f}  Y = {s['ul_y']:.6f}",
+            f"LR: X = {s['lr_x']:.6f}  Y = {s['lr_y']:.6f}",
+            f"IMAGE HEIGHT = {s['ul_y'] - s['lr_y']:.6f} ({s['crs']} units)",
+            f"IMAGE WIDTH  = {s['lr_x'] - s['ul_x']:.6f}",
+            f"LINE NUMBER  = {s['output_lines']}", f"PIXEL NUMBER = {s['output_columns']}"]
+    fs = dict(s["facet_search"])
+    primary = fs.pop("primary grid", None)
+    fs.pop("not found", None)
+    n = sum(fs.values()) or 1
+    nb = fs.get("4-connex", 0) + fs.get("8-connex", 0)
+    what = "primary-grid nodes" if primary is not None else "points"
+    out.append(f"facet search ({what}): -same= {100 * fs.get('same', 0) / n:.1f}% "
+               f"-neighbour= {100 * nb / n:.1f}% -all= {100 * fs.get('all', 0) / n:.1f}%")
+    if primary is not None:
+        out.append(f"points predicted from the primary grid = {primary}")
+    sec = s["seconds"]
+    out.append(f"Total elapsed time={sec['total']:.3f} seconds "
+               f"(prediction/correction {sec['prediction_correction']:.3f} s, "
+               f"resampling {sec['resample']:.3f} s, DEM {sec['dem']:.3f} s)")
+    out.append("")
+    out += histogram_lines(s["iterations_histogram"])
+    out.append("")
+    total = s["output_points"] or 1
+    seg = s["points_in_boundary"] or 1
+    out.append(f"ORTHORECTIFICATION PROCESSING = {'YES' if s['orthorectification'] else 'NO'}")
+    out.append(f"NUMBER OF PROCESSED POINTS IN SEGMENT = {s['processed_points']} "
+               f"({100 * s['processed_points'] / total:.1f}% of image, "
+               f"{100 * s['processed_points'] / seg:.1f}% of segment boundary)")
+    if s.get("elevation_sources"):
+        out.append("ELEVATION SOURCES = " + ", ".join(
+            f"{k}: {v}" for k, v in s["elevation_sources"].items()))
+    return out
+
+
+def _write(args: argparse.Namespace, result: Any) -> None:
+    import numpy as np
+
+    from ..io.geotiff import meris_band_description, write_geotiff
+
+    bands = sorted(result.bands)
+    wl = result.stats.get("wavelengths", {})
+    write_geotiff(args.output, [result.bands[b] for b in bands], result.grid,
+                  descriptions=[meris_band_description(b, wl.get(b)) for b in bands],
+                  metadata={"product": result.stats["product"], "elevation": args.elevation,
+                            "parallax": args.parallax, "tolerance_px": args.tolerance,
+                            "sampling": args.sampling, "software": "napari-meris-ortho map"})
+    if args.diagnostics:
+        names = ("line", "col", "elevation", "elevation_source", "iterations", "shift_east_m",
+                 "shift_north_m")
+        arrays = [np.nan_to_num(result.diagnostics[n].astype(np.float32), nan=0.0)
+                  for n in names]
+        write_geotiff(_diagnostics_path(Path(args.output)), arrays, result.grid, nodata=None,
+                      descriptions=list(names), dtype="float32",
+                      metadata={"elevation_source": "k >= 0: DEM k; -1: tie points; -2: none"})
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run ``meris-ortho map``."""
+    from .._atomic import atomic_path
+    from ..ortho import orthorectify
+    from ..progress import tqdm_progress
+
+    grid = _check(args)
+    show = log.isEnabledFor(logging.INFO)
+    with tqdm_progress("map", enabled=show, unit="step") as progress:
+        result = orthorectify(args.product, grid=grid, dems=args.dem, elevation=args.elevation,
+                              sampling=args.sampling, bands=args.bands,
+                              tolerance=args.tolerance, parallax=args.parallax,
+                              diagnostics=args.diagnostics, progress=progress,
+                              method=args.search, crs=args.crs, pixel_size=args.pixel_size)
+    _write(args, result)
+    if args.stats_json:
+        with atomic_path(args.stats_json) as tmp:
+            tmp.write_text(json.dumps(result.stats, indent=2, default=str))
+    for line in log_lines(result.stats, grid is None and args.pixel_size is None):
+        log.info(line)
+    log.info("wrote %s (%d x %d, %d bands)", args.output, result.grid.width, result.grid.height,
+             len(result.bands))
+    return 0

@@ -1,0 +1,175 @@
+"""napari readers: MERIS L1b ``.N1`` products (product geometry) and geocoded GeoTIFFs.
+
+N1: the 15 radiance bands as one multichannel image (band axis first, lazy), an RGB quick-look
+from bands 7, 5, 2, the flags as a labels layer; tie points and headers in the layer metadata.
+Arrays stay in the stored (chronological/detector) column order, like MERSYN (ARCHITECTURE.md).
+
+GeoTIFF: every band placed in the world frame (``_layers`` module doc): north up, pixel centres
+right; a raster in another CRS or pixel size than the viewer's geocoded layers is reprojected
+onto their grid.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ._layers import (
+    QUICKLOOK_BANDS,
+    GeoFrame,
+    contrast_limits,
+    geo_image_kwargs,
+    place_on_frame,
+    stretch_rgb,
+    viewer_frame,
+)
+from .errors import MerisOrthoError, N1FormatError
+
+LayerData = tuple[Any, dict[str, Any], str]
+N1_SUFFIXES = (".n1",)
+TIFF_SUFFIXES = (".tif", ".tiff")
+
+
+def get_reader(path: str | list[str]) -> Callable[[str | list[str]], list[LayerData]] | None:
+    """npe2 reader hook: a reader function for N1 products and GeoTIFFs, else None."""
+    paths = [path] if isinstance(path, str | Path) else list(path)
+    if not paths:
+        return None
+    suffixes = {Path(p).suffix.lower() for p in paths}
+    if suffixes <= set(N1_SUFFIXES) | set(TIFF_SUFFIXES):
+        return read_layers
+    return None
+
+
+def read_layers(path: str | list[str]) -> list[LayerData]:
+    """Read one or several N1 / GeoTIFF files into napari layer tuples."""
+    paths = [path] if isinstance(path, str | Path) else list(path)
+    frame = _current_frame()
+    layers: list[LayerData] = []
+    for p in paths:
+        if Path(p).suffix.lower() in N1_SUFFIXES:
+            layers.extend(n1_layers(p))
+        else:
+            new = geotiff_layers(p, frame)
+            layers.extend(new)
+            if frame is None and new:
+                frame = GeoFrame.from_transform(**_frame_args(new[0][1]))
+    return layers
+
+
+def _frame_args(kwargs: dict[str, Any]) -> dict[str, Any]:
+    geo = kwargs["metadata"]["geo"]
+    return {"crs": geo["crs"], "transform": geo["transform"], "shape": geo["shape"]}
+
+
+def _current_frame() -> GeoFrame | None:
+    """The world frame of the current napari viewer (None without viewer or geocoded layer)."""
+    try:
+        import napari
+
+        viewer = napari.current_viewer()
+    except Exception:  # no Qt app: plain reading
+        return None
+    return None if viewer is None else viewer_frame(viewer.layers)
+
+
+# --------------------------------------------------------------------------------------------
+# GeoTIFF
+# --------------------------------------------------------------------------------------------
+def geotiff_layers(path: str | Path, frame: GeoFrame | None = None) -> list[LayerData]:
+    """Image layers of a geocoded GeoTIFF placed in the world frame ``frame`` (or its own)."""
+    import rasterio
+    from rasterio.errors import RasterioIOError
+
+    path = Path(path)
+    try:
+        with rasterio.open(path) as ds:
+            if ds.crs is None:
+                raise MerisOrthoError(f"{path}: GeoTIFF has no CRS (not geocoded)")
+            data = ds.read()
+            source = GeoFrame.from_transform(ds.crs, tuple(ds.transform), (ds.height, ds.width))
+            names = [d or f"band {i + 1}" for i, d in enumerate(ds.descriptions)]
+            tags = ds.tags()
+            nodata = ds.nodata
+    except RasterioIOError as exc:
+        raise MerisOrthoError(f"{path}: cannot read GeoTIFF ({exc})") from None
+    is_mask = data.dtype.kind in "iu" and data.dtype.itemsize == 1
+    placed, grid = place_on_frame(data, source, frame, nearest=is_mask)
+    layers = []
+    for k, band_name in enumerate(names):
+        band = placed[k]
+        meta = {"path": str(path), "tags": tags, "nodata": nodata, "band": k + 1,
+                "source_crs": source.crs, "reprojected": grid is not source}
+        name = path.stem if len(names) == 1 else f"{path.stem} {band_name}"
+        kwargs = geo_image_kwargs(grid, name=name, metadata=meta)
+        kwargs["contrast_limits"] = _contrast_limits(band, nodata)
+        kwargs["colormap"] = "gray"
+        layers.append((band, kwargs, "image"))
+    return layers
+
+
+def _contrast_limits(band: np.ndarray, nodata: float | None) -> tuple[float, float]:
+    """Contrast limits of a band, 0 and ``nodata`` excluded (1-99 percentiles)."""
+    values = np.asarray(band, np.float64)
+    if nodata is not None and nodata != 0:
+        values = np.where(values == nodata, 0.0, values)
+    return contrast_limits(values, 0.0)
+
+
+# --------------------------------------------------------------------------------------------
+# N1
+# --------------------------------------------------------------------------------------------
+def n1_layers(path: str | Path) -> list[LayerData]:
+    """Radiance stack, RGB quick-look (bands 7, 5, 2) and flags of a MERIS L1b product."""
+    from .io.n1 import read_product
+
+    try:
+        product = read_product(path)
+    except MerisOrthoError:
+        raise
+    except (OSError, ValueError) as exc:
+        raise N1FormatError(path, str(exc)) from None
+    meta = n1_metadata(product)
+    stem = Path(path).stem
+    return [
+        (radiance_stack(product), {"name": f"{stem} radiance", "metadata": meta,
+                                   "colormap": "gray", "axis_labels": ("band", "line", "column"),
+                                   "contrast_limits": _contrast_limits(product.radiance(7), None)},
+         "image"),
+        (quicklook_rgb(product), {"name": f"{stem} RGB 7-5-2", "rgb": True, "metadata": meta},
+         "image"),
+        (np.asarray(product.flags), {"name": f"{stem} flags", "metadata": meta,
+                                     "opacity": 0.4, "visible": False}, "labels"),
+    ]
+
+
+def n1_metadata(product: Any) -> dict[str, Any]:
+    """Tie points and headers of a product, for the layer metadata."""
+    return {
+        "path": str(product.path), "product_type": product.product_type,
+        "mph": dict(product.mph), "sph": dict(product.sph),
+        "tie_points": {k: np.asarray(v) for k, v in product.tie_points.items()},
+        "lines_per_tie_point": product.lines_per_tie_point,
+        "samples_per_tie_point": product.samples_per_tie_point,
+        "wavelengths": list(product.wavelengths),
+        "column_order": "stored (chronological/detector)",
+    }
+
+
+def radiance_stack(product: Any) -> Any:
+    """The 15 radiance bands as a lazy (15, H, W) float32 dask array."""
+    import dask
+    import dask.array as da
+
+    shape = (product.height, product.width)
+    bands = [da.from_delayed(dask.delayed(product.radiance)(b), shape, dtype=np.float32)
+             for b in range(1, 16)]
+    return da.stack(bands)
+
+
+def quicklook_rgb(product: Any, bands: tuple[int, int, int] = QUICKLOOK_BANDS) -> np.ndarray:
+    """An RGB quick-look (H, W, 3) uint8 from three radiance bands, 1-99 % stretch each."""
+    return stretch_rgb([product.radiance(b) for b in bands])

@@ -1,0 +1,292 @@
+"""Segment boundary and its intersections with output lines (handbook section 3.1, figs. 17-20;
+Appendix C ``TimMersynComputeBoundary`` and ``TimMersynComputeIntersectionsWithBoundary``).
+
+``segment_boundary(tp_lat, tp_lon)`` builds the closed polygon of the border tie points in
+MERSYN's order: first tie column top to bottom, last tie line left to right, last tie column
+bottom to top, first tie line right to left, first vertex repeated at the end. Longitudes are
+unwrapped so that the polygon is continuous across +-180 deg (first vertex in [-180, 180)).
+
+``row_spans(boundary, grid)`` gives, for every output line, the [start, stop) column intervals
+whose pixel centres lie inside the boundary (even-odd scanline rule, half-open crossing test, so
+a line touching a single vertex never yields a lone point). The polygons are taken in the output
+CRS: a WGS84 geographic grid uses the unwrapped polygon and its copies shifted by +-360 deg (an
+x range such as 170..190 works, and so does a grid in [-180, 180) for a segment crossing the
+antimeridian); any other CRS uses ``Boundary.split_antimeridian()`` (fig. 20) with densified
+vertices projected by pyproj. ``margin`` dilates the spans by whole output pixels.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import pyproj
+from numba import njit, prange
+
+from .grid import OutputGrid, parse_crs
+
+_WGS84 = pyproj.CRS.from_epsg(4326)
+
+
+@dataclass(frozen=True, eq=False)
+class Boundary:
+    """Closed polygon (first vertex == last) of the segment boundary; lon unwrapped, degrees."""
+
+    lon: np.ndarray
+    lat: np.ndarray
+
+    @property
+    def crosses_antimeridian(self) -> bool:
+        return bool(np.nanmin(self.lon) < -180.0 or np.nanmax(self.lon) > 180.0)
+
+    def densified(self, n: int = 2) -> Boundary:
+        """The polygon with ``n - 1`` extra vertices on each edge (linear in lon/lat)."""
+        if n <= 1:
+            return self
+        t = np.arange(n) / n
+        lon = (self.lon[:-1, None] + t * np.diff(self.lon)[:, None]).ravel()
+        lat = (self.lat[:-1, None] + t * np.diff(self.lat)[:, None]).ravel()
+        return Boundary(np.r_[lon, self.lon[-1]], np.r_[lat, self.lat[-1]])
+
+    def split_antimeridian(self) -> list[tuple[np.ndarray, np.ndarray]]:
+        """Closed polygons in [-180, 180], the boundary cut at +-180 deg (section 3.1, fig. 20)."""
+        lo, hi = float(np.nanmin(self.lon)), float(np.nanmax(self.lon))
+        k_lo = int(np.floor((lo + 180.0) / 360.0))
+        k_hi = int(np.floor((hi + 180.0) / 360.0 - 1e-12))
+        pieces = []
+        for k in range(k_lo, max(k_hi, k_lo) + 1):
+            west, east = -180.0 + 360.0 * k, 180.0 + 360.0 * k
+            x, y = _clip_vertical(self.lon[:-1], self.lat[:-1], west, keep_greater=True)
+            x, y = _clip_vertical(x, y, east, keep_greater=False)
+            if x.size >= 3:
+                pieces.append((np.r_[x, x[0]] - 360.0 * k, np.r_[y, y[0]]))
+        return pieces
+
+    def polygons(self, crs: Any, densify: int = 2) -> list[tuple[np.ndarray, np.ndarray]]:
+        """The boundary in the coordinates of ``crs``: the unwrapped polygon for WGS84 lon/lat,
+        else the antimeridian pieces, densified, projected (non-finite vertices dropped)."""
+        crs = parse_crs(crs)
+        probe = OutputGrid(crs, 0.0, 1.0, 1.0, 1.0, 1, 1)
+        if probe.is_lonlat:
+            return [(self.lon.copy(), self.lat.copy())]
+        tr = pyproj.Transformer.from_crs(_WGS84, crs, always_xy=True)
+        out = []
+        for lon, lat in self.split_antimeridian():
+            b = Boundary(lon, lat).densified(densify)
+            x, y = tr.transform(b.lon, b.lat, errcheck=False)
+            x, y = np.asarray(x, dtype=np.float64), np.asarray(y, dtype=np.float64)
+            ok = np.isfinite(x) & np.isfinite(y)
+            if ok.sum() >= 3:
+                x, y = x[ok], y[ok]
+                if x[0] != x[-1] or y[0] != y[-1]:
+                    x, y = np.r_[x, x[0]], np.r_[y, y[0]]
+                out.append((x, y))
+        return out
+
+    def intersects(self, grid: OutputGrid) -> bool:
+        """True when at least one output pixel centre of ``grid`` is inside the boundary."""
+        return row_spans(self, grid).count > 0
+
+
+def segment_boundary(tp_lat: np.ndarray, tp_lon: np.ndarray) -> Boundary:
+    """Closed polygon of the border tie points (section 3.1; Appendix C TimMersynComputeBoundary).
+
+    ``tp_lat``/``tp_lon``: (n_tie_lines, n_tie_cols) degrees, stored column order.
+    """
+    lat = np.asarray(tp_lat, dtype=np.float64)
+    lon = np.asarray(tp_lon, dtype=np.float64)
+    if lat.ndim != 2 or lat.shape != lon.shape or min(lat.shape) < 2:
+        raise ValueError(f"tie-point grids must be 2-D, >= 2 x 2, got {lat.shape}")
+    n_lines, n_cols = lat.shape
+    il = np.r_[np.arange(n_lines - 1), np.full(n_cols - 1, n_lines - 1),
+               np.arange(n_lines - 1, 0, -1), np.zeros(n_cols - 1, int)]
+    ic = np.r_[np.zeros(n_lines - 1, int), np.arange(n_cols - 1),
+               np.full(n_lines - 1, n_cols - 1), np.arange(n_cols - 1, 0, -1)]
+    blon = np.r_[lon[il, ic], lon[0, 0]]
+    blat = np.r_[lat[il, ic], lat[0, 0]]
+    blon = np.unwrap(blon, period=360.0)
+    blon -= 360.0 * np.floor((blon[0] + 180.0) / 360.0)
+    return Boundary(blon, blat)
+
+
+def _clip_vertical(x: np.ndarray, y: np.ndarray, x_cut: float, keep_greater: bool
+                   ) -> tuple[np.ndarray, np.ndarray]:
+    """Sutherland-Hodgman clip of an open polygon (no repeated vertex) by x >= / <= x_cut."""
+    n = x.size
+    if n == 0:
+        return x, y
+    inside = x >= x_cut if keep_greater else x <= x_cut
+    ox: list[float] = []
+    oy: list[float] = []
+    for i in range(n):
+        j = (i + 1) % n
+        if inside[i]:
+            ox.append(x[i])
+            oy.append(y[i])
+        if inside[i] != inside[j]:
+            t = (x_cut - x[i]) / (x[j] - x[i])
+            ox.append(x_cut)
+            oy.append(y[i] + t * (y[j] - y[i]))
+    return np.asarray(ox, dtype=np.float64), np.asarray(oy, dtype=np.float64)
+
+
+@dataclass(frozen=True, eq=False)
+class RowSpans:
+    """Column intervals inside the boundary for output rows [row_start, row_start + n_rows).
+
+    Row ``row_start + r`` holds the intervals ``[start[k], stop[k])`` for k in
+    ``ptr[r]:ptr[r + 1]``, sorted and disjoint.
+    """
+
+    row_start: int
+    width: int
+    ptr: np.ndarray
+    start: np.ndarray
+    stop: np.ndarray
+
+    @property
+    def n_rows(self) -> int:
+        return self.ptr.size - 1
+
+    @property
+    def count(self) -> int:
+        """Number of output pixels inside."""
+        return int(np.sum(self.stop - self.start))
+
+    def spans(self, row: int) -> list[tuple[int, int]]:
+        r = row - self.row_start
+        return [(int(a), int(b)) for a, b in zip(self.start[self.ptr[r]:self.ptr[r + 1]],
+                                                  self.stop[self.ptr[r]:self.ptr[r + 1]],
+                                                  strict=True)]
+
+    def mask(self) -> np.ndarray:
+        """Boolean (n_rows, width) mask of the pixels inside."""
+        out = np.zeros((self.n_rows, self.width), dtype=np.bool_)
+        _fill_mask(self.ptr, self.start, self.stop, out)
+        return out
+
+
+def row_spans(boundary: Boundary, grid: OutputGrid, row_start: int = 0,
+              row_stop: int | None = None, margin: int = 0) -> RowSpans:
+    """Intersections of output lines with the segment boundary (Appendix C
+    TimMersynComputeIntersectionsWithBoundary), as column spans (module docstring)."""
+    row_stop = grid.height if row_stop is None else int(row_stop)
+    margin = max(int(margin), 0)
+    polys = boundary.polygons(grid.crs)
+    if grid.is_lonlat:
+        lo, hi = float(np.nanmin(boundary.lon)), float(np.nanmax(boundary.lon))
+        gx0, gx1 = grid.bounds[0], grid.bounds[2]
+        k_lo = int(np.floor((gx0 - hi) / 360.0))
+        k_hi = int(np.ceil((gx1 - lo) / 360.0))
+        shifts = 360.0 * np.arange(k_lo, k_hi + 1, dtype=np.float64)
+    else:
+        shifts = np.zeros(1)
+    xs = [p[0] for p in polys]
+    ys = [p[1] for p in polys]
+    ptr = np.r_[0, np.cumsum([len(x) for x in xs])].astype(np.int64)
+    xv = np.concatenate(xs) if xs else np.empty(0)
+    yv = np.concatenate(ys) if ys else np.empty(0)
+    r0, r1 = row_start - margin, row_stop + margin
+    counts = np.zeros(max(r1 - r0, 0), np.int64)
+    _scan(xv, yv, ptr, shifts, grid.x0, grid.y0, grid.dx, grid.dy, grid.width, r0, margin,
+          counts, np.empty(0, np.int64), np.empty(0, np.int64), np.zeros(1, np.int64), False)
+    rptr = np.r_[0, np.cumsum(counts)].astype(np.int64)
+    start = np.empty(rptr[-1], np.int64)
+    stop = np.empty(rptr[-1], np.int64)
+    _scan(xv, yv, ptr, shifts, grid.x0, grid.y0, grid.dx, grid.dy, grid.width, r0, margin,
+          counts, start, stop, rptr, True)
+    if margin:
+        rptr, start, stop = _dilate_rows(rptr, start, stop, margin, row_stop - row_start)
+    return RowSpans(row_start, grid.width, rptr, start, stop)
+
+
+@njit(cache=True, parallel=True)
+def _scan(xv, yv, ptr, shifts, x0, y0, dx, dy, width, r0, margin, counts, start, stop, rptr,
+          fill):  # pragma: no cover
+    """Scanline fill: for each line y = y0 - (i + 0.5) dy, pixel-centre intervals inside."""
+    n_edges = xv.size
+    for r in prange(counts.size):
+        y = y0 - (r0 + r + 0.5) * dy
+        xs = np.empty(n_edges * shifts.size + 1)
+        n = 0
+        for p in range(ptr.size - 1):
+            for e in range(ptr[p], ptr[p + 1] - 1):
+                ya, yb = yv[e], yv[e + 1]
+                if (ya <= y) != (yb <= y):
+                    x = xv[e] + (y - ya) * (xv[e + 1] - xv[e]) / (yb - ya)
+                    for s in range(shifts.size):
+                        xs[n] = x + shifts[s]
+                        n += 1
+        xs_sorted = np.sort(xs[:n])
+        k = 0
+        w = rptr[r] if fill else 0
+        last_stop = -1
+        for m in range(0, n - 1, 2):
+            a = int(np.ceil((xs_sorted[m] - x0) / dx - 0.5)) - margin
+            b = int(np.ceil((xs_sorted[m + 1] - x0) / dx - 0.5)) + margin
+            a = min(max(a, 0), width)
+            b = min(max(b, 0), width)
+            if b <= a:
+                continue
+            if k > 0 and a <= last_stop:
+                if b > last_stop:
+                    last_stop = b
+                    if fill:
+                        stop[w - 1] = b
+                continue
+            if fill:
+                start[w] = a
+                stop[w] = b
+                w += 1
+            k += 1
+            last_stop = b
+        if not fill:
+            counts[r] = k
+
+
+def _dilate_rows(rptr: np.ndarray, start: np.ndarray, stop: np.ndarray, margin: int,
+                 n_rows: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Union over rows i - margin .. i + margin of the (already widened) spans."""
+    counts = np.zeros(n_rows, np.int64)
+    _union_rows(rptr, start, stop, margin, counts, start, stop, counts, False)
+    optr = np.r_[0, np.cumsum(counts)].astype(np.int64)
+    ostart = np.empty(optr[-1], np.int64)
+    ostop = np.empty(optr[-1], np.int64)
+    _union_rows(rptr, start, stop, margin, counts, ostart, ostop, optr, True)
+    return optr, ostart, ostop
+
+
+@njit(cache=True)
+def _union_rows(rptr, start, stop, margin, counts, ostart, ostop, optr, fill):  # pragma: no cover
+    for r in range(counts.size):
+        a = rptr[r]
+        b = rptr[r + 2 * margin + 1]
+        s = start[a:b]
+        e = stop[a:b]
+        order = np.argsort(s)
+        k = 0
+        w = optr[r] if fill else 0
+        last = -1
+        for q in order:
+            if k > 0 and s[q] <= last:
+                if e[q] > last:
+                    last = e[q]
+                    if fill:
+                        ostop[w - 1] = last
+                continue
+            if fill:
+                ostart[w] = s[q]
+                ostop[w] = e[q]
+                w += 1
+            k += 1
+            last = e[q]
+        if not fill:
+            counts[r] = k
+
+
+@njit(cache=True, parallel=True)
+def _fill_mask(ptr, start, stop, out):  # pragma: no cover
+    for r in prange(ptr.size - 1):
+        for k in range(ptr[r], ptr[r + 1]):
+            out[r, start[k]:stop[k]] = True

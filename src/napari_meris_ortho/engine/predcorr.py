@@ -1,0 +1,329 @@
+"""Prediction/correction: the antecedent (l, p) of every output point (section 3.2, Appendix C).
+
+Two paths find the same antecedent, the point where the direct model with height gives the
+output point's lon/lat, ``f(l, p, h) = (lon, lat)``:
+
+* ``find_antecedents`` (default, fast): the zero-height inverse is computed exactly (facet
+  search, ``inverse.search_facet``) on a coarse *primary grid* of output points, every ``step``
+  pixels, and interpolated bilinearly in between as the prediction (the terrain-correction
+  paper's primary grids). Each point is then corrected by Newton steps on the direct model with
+  its facet's analytic Jacobian until a step is below ``tolerance`` product pixels (1-3 steps).
+* ``find_antecedents_handbook`` (reference): MERSYN's loop verbatim — inverse by facet search,
+  then ``x <- x + (x_origin - f^-1(f(x, h)))`` until the correction is below the tolerance.
+
+Both stop after ``max_iter`` iterations (histogram like Appendix B) and drop points whose
+antecedent leaves the product (-0.5 <= l < H-0.5, -0.5 <= p < W-0.5). Heights (``hmode``):
+0 none (MERSYN ``-ort NO``), 1 tie-point dem_alt at the antecedent, 2 the given per-point height
+(the DEM at the output point; NaN falls back to the tie points, as MERSYN does).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit, prange
+
+from .inverse import search_facet, wrap180
+from .location import direct_point
+
+HEIGHT_NONE = 0
+HEIGHT_TIEPOINTS = 1
+HEIGHT_GIVEN = 2
+MAX_ITERATIONS = 10
+#: guesses further than this many product pixels outside the product are dropped at once
+_FAR = 256.0
+
+
+@njit(cache=True)
+def _newton(tlon, tlat, line, col, h, lat_tp, lon_tp, le, ln, dem, df, dj, model, tol, max_iter):
+    """Correct (line, col) until f(line, col, h) = (tlon, tlat); returns (line, col, iterations)."""
+    it = 0
+    while it < max_iter:
+        it += 1
+        r = direct_point(line, col, h, lat_tp, lon_tp, le, ln, dem, df, dj, model)
+        rx = wrap180(tlon - r[0])
+        ry = tlat - r[1]
+        det = r[3] * r[6] - r[4] * r[5]
+        if det == 0.0 or math.isnan(det):
+            return math.nan, math.nan, it
+        dl = (rx * r[6] - ry * r[4]) / det
+        dp = (r[3] * ry - r[5] * rx) / det
+        line += dl
+        col += dp
+        if abs(dl) <= tol and abs(dp) <= tol:
+            break
+    return line, col, it
+
+
+@njit(cache=True)
+def primary_grid(lon, lat, lat_tp, lon_tp, le, ln, dem, df, dj):
+    """Exact zero-height inverse (section 3.4) at the primary-grid nodes (2-D lon/lat arrays).
+
+    Nodes held by a facet come from the handbook search (warm-started from the previous node);
+    nodes outside the tie-point grid from Newton on the extended edge facets (they are needed to
+    predict output points near the swath border). Returns (line, col, path counts[5]).
+    """
+    nr, nc = lon.shape
+    line = np.full((nr, nc), np.nan)
+    col = np.full((nr, nc), np.nan)
+    paths = np.zeros(5, np.int64)
+    f = -1
+    j = -1
+    last_l = (lat_tp.shape[0] - 1) * df * 0.5
+    last_p = (lat_tp.shape[1] - 1) * dj * 0.5
+    for r in range(nr):
+        for c in range(nc):
+            if math.isnan(lon[r, c]) or math.isnan(lat[r, c]):
+                continue
+            f2, j2, u, v, path = search_facet(lon[r, c], lat[r, c], f, j, lat_tp, lon_tp)
+            paths[path + 1] += 1
+            if path >= 0:
+                f = f2
+                j = j2
+                line[r, c] = (f + u) * df
+                col[r, c] = (j + v) * dj
+            else:
+                l2, p2, it = _newton(lon[r, c], lat[r, c], last_l, last_p, 0.0, lat_tp, lon_tp,
+                                     le, ln, dem, df, dj, 0, 1e-6, 30)
+                if it < 30 and not math.isnan(l2):
+                    line[r, c] = l2
+                    col[r, c] = p2
+            if not math.isnan(line[r, c]):
+                last_l = line[r, c]
+                last_p = col[r, c]
+    return line, col, paths
+
+
+@njit(cache=True)
+def _predict(cl, cp, step, i, j):
+    """Primary grid interpolated bilinearly at output pixel (i, j); node missing: any valid one."""
+    nr, nc = cl.shape
+    ti = i / step
+    tj = j / step
+    a = min(int(ti), nr - 2)
+    b = min(int(tj), nc - 2)
+    u = ti - a
+    v = tj - b
+    l = ((1 - u) * ((1 - v) * cl[a, b] + v * cl[a, b + 1])
+         + u * ((1 - v) * cl[a + 1, b] + v * cl[a + 1, b + 1]))
+    p = ((1 - u) * ((1 - v) * cp[a, b] + v * cp[a, b + 1])
+         + u * ((1 - v) * cp[a + 1, b] + v * cp[a + 1, b + 1]))
+    if math.isnan(l):  # a missing node: take any valid one (then Newton does the rest)
+        for da in range(2):
+            for db in range(2):
+                if not math.isnan(cl[a + da, b + db]):
+                    return cl[a + da, b + db], cp[a + da, b + db]
+    return l, p
+
+
+@njit(cache=True)
+def _columns(ptr, start, stop, i):
+    """Output columns of row i inside the segment-boundary spans (CSR layout of RowSpans)."""
+    n = 0
+    for k in range(ptr[i], ptr[i + 1]):
+        n += stop[k] - start[k]
+    out = np.empty(n, np.int64)
+    n = 0
+    for k in range(ptr[i], ptr[i + 1]):
+        for j in range(start[k], stop[k]):
+            out[n] = j
+            n += 1
+    return out
+
+
+def full_spans(n_rows: int, width: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """CSR spans covering every column of every row (no segment boundary)."""
+    return (np.arange(n_rows + 1, dtype=np.int64), np.zeros(n_rows, np.int64),
+            np.full(n_rows, width, np.int64))
+
+
+@njit(cache=True, parallel=True)
+def find_antecedents(lon, lat, height, hmode, ptr, start, stop, cl, cp, step,
+                     lat_tp, lon_tp, le, ln, dem, df, dj, n_lines, n_cols, model, tol, max_iter,
+                     diagnostics):
+    """Antecedents of output points: rows in parallel, row i over the column spans
+    ``[start[k], stop[k])`` for k in ``ptr[i]:ptr[i + 1]`` (``boundary.RowSpans``).
+
+    Returns line, col (float32, NaN when dropped), iterations (int8, -1 when dropped), and when
+    ``diagnostics``: elevation used (m), parallax shift east and north (m) — else 1x1 arrays.
+    """
+    nr, nc = lon.shape
+    out_l = np.full((nr, nc), np.nan, np.float32)
+    out_p = np.full((nr, nc), np.nan, np.float32)
+    iters = np.full((nr, nc), -1, np.int8)
+    dshape = (nr, nc) if diagnostics else (1, 1)
+    h_used = np.full(dshape, np.nan, np.float32)
+    sh_e = np.full(dshape, np.nan, np.float32)
+    sh_n = np.full(dshape, np.nan, np.float32)
+    nt_l, nt_c = lat_tp.shape
+    for i in prange(nr):
+        for j in _columns(ptr, start, stop, i):
+            tlon = lon[i, j]
+            tlat = lat[i, j]
+            if math.isnan(tlon) or math.isnan(tlat):
+                continue
+            gl, gp = _predict(cl, cp, step, i, j)
+            if math.isnan(gl):
+                continue
+            if gl < -_FAR or gl > n_lines + _FAR or gp < -_FAR or gp > n_cols + _FAR:
+                continue
+            if hmode == 0:
+                h = 0.0
+            elif hmode == 1:
+                h = math.nan
+            else:
+                h = height[i, j]
+            l2, p2, it = _newton(tlon, tlat, gl, gp, h, lat_tp, lon_tp, le, ln, dem, df, dj,
+                                 model, tol, max_iter)
+            if not (-0.5 <= l2 < n_lines - 0.5 and -0.5 <= p2 < n_cols - 0.5):
+                continue
+            out_l[i, j] = l2
+            out_p[i, j] = p2
+            iters[i, j] = it
+            if diagnostics:
+                r = direct_point(l2, p2, h, lat_tp, lon_tp, le, ln, dem, df, dj, model)
+                hh = r[2]
+                h_used[i, j] = hh
+                f = min(max(int(math.floor(l2 / df)), 0), nt_l - 2)
+                g = min(max(int(math.floor(p2 / dj)), 0), nt_c - 2)
+                u = l2 / df - f
+                v = p2 / dj - g
+                e = ((1 - u) * ((1 - v) * le[f, g] + v * le[f, g + 1])
+                     + u * ((1 - v) * le[f + 1, g] + v * le[f + 1, g + 1]))
+                n = ((1 - u) * ((1 - v) * ln[f, g] + v * ln[f, g + 1])
+                     + u * ((1 - v) * ln[f + 1, g] + v * ln[f + 1, g + 1]))
+                sh_e[i, j] = hh * e
+                sh_n[i, j] = hh * n
+    return out_l, out_p, iters, h_used, sh_e, sh_n
+
+
+@njit(cache=True, parallel=True)
+def find_antecedents_handbook(lon, lat, height, hmode, ptr, start, stop, lat_tp, lon_tp, le,
+                              ln, dem, df, dj, n_lines, n_cols, model, tol, max_iter):
+    """MERSYN's prediction/correction loop (Appendix C) with the handbook facet search.
+
+    Rows run in parallel, each keeping its last facet. Returns line, col (float32), iterations
+    (int8, -1 dropped) and the facet-search counts per path ([not found, same, 4, 8, all]).
+    """
+    nr, nc = lon.shape
+    out_l = np.full((nr, nc), np.nan, np.float32)
+    out_p = np.full((nr, nc), np.nan, np.float32)
+    iters = np.full((nr, nc), -1, np.int8)
+    paths = np.zeros((nr, 5), np.int64)
+    for i in prange(nr):
+        f = -1
+        g = -1
+        for j in _columns(ptr, start, stop, i):
+            tlon = lon[i, j]
+            tlat = lat[i, j]
+            if math.isnan(tlon) or math.isnan(tlat):
+                continue
+            f2, g2, u, v, path = search_facet(tlon, tlat, f, g, lat_tp, lon_tp)
+            paths[i, path + 1] += 1
+            if path < 0:
+                continue
+            f = f2
+            g = g2
+            l0 = (f + u) * df
+            p0 = (g + v) * dj
+            x = l0
+            y = p0
+            it = 0
+            ok = True
+            while hmode != 0 and it < max_iter:
+                it += 1
+                h = math.nan if hmode == 1 else height[i, j]
+                r = direct_point(x, y, h, lat_tp, lon_tp, le, ln, dem, df, dj, model)
+                f3, g3, u3, v3, path3 = search_facet(r[0], r[1], f, g, lat_tp, lon_tp)
+                paths[i, path3 + 1] += 1
+                if path3 < 0:
+                    ok = False
+                    break
+                x1 = (f3 + u3) * df
+                y1 = (g3 + v3) * dj
+                x += l0 - x1
+                y += p0 - y1
+                if abs(l0 - x1) <= tol and abs(p0 - y1) <= tol:
+                    break
+            if not ok or not (-0.5 <= x < n_lines - 0.5 and -0.5 <= y < n_cols - 0.5):
+                continue
+            out_l[i, j] = x
+            out_p[i, j] = y
+            iters[i, j] = it
+    total = np.zeros(5, np.int64)
+    for i in range(nr):
+        total += paths[i]
+    return out_l, out_p, iters, total
+
+
+def iteration_histogram(iters: np.ndarray, max_iter: int = MAX_ITERATIONS) -> np.ndarray:
+    """Counts of points per number of prediction/correction iterations (0..max_iter), Appendix B."""
+    valid = iters[iters >= 0]
+    return np.bincount(valid.ravel().astype(np.int64), minlength=max_iter + 1)[: max_iter + 1]
+
+
+def _node_lonlat(grid, rows: np.ndarray, cols: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """WGS84 lon/lat of output pixel positions (primary-grid nodes may lie past the grid edge)."""
+    import pyproj
+
+    x, y = grid.xy(rows[:, None], cols[None, :])
+    x, y = np.broadcast_arrays(x, y)
+    if grid.is_lonlat:
+        return (x + 180.0) % 360.0 - 180.0, np.array(y, dtype=np.float64)
+    tr = pyproj.Transformer.from_crs(grid.crs, "EPSG:4326", always_xy=True)
+    lon, lat = tr.transform(x, y, errcheck=False)
+    lon = np.asarray(lon, dtype=np.float64)
+    lat = np.asarray(lat, dtype=np.float64)
+    bad = ~(np.isfinite(lon) & np.isfinite(lat))
+    return np.where(bad, np.nan, lon), np.where(bad, np.nan, lat)
+
+
+def solve(tp, grid, lon: np.ndarray, lat: np.ndarray, height: np.ndarray | None, hmode: int,
+          spans: tuple[np.ndarray, np.ndarray, np.ndarray], *, row_start: int = 0,
+          tolerance: float = 0.01, max_iter: int = MAX_ITERATIONS, model: int = 0,
+          method: str = "primary", step: int = 16, diagnostics: bool = False) -> dict:
+    """Antecedents of output rows [row_start, row_start + lon.shape[0]) of ``grid`` (section 3.2).
+
+    ``tp``: ``TiePointGrid``; ``lon``/``lat``: WGS84 degrees of the pixel centres of those rows;
+    ``height``: per-point heights for ``hmode=HEIGHT_GIVEN`` (NaN: tie points); ``spans``: CSR
+    (ptr, start, stop) of the columns to process per row. ``method``: "primary" (primary grid +
+    Newton) or "handbook" (MERSYN's loop and facet search). Returns a dict with "line", "col",
+    "iterations" and, with ``diagnostics``, "elevation", "shift_east_m", "shift_north_m"; plus
+    "search" (facet-search counts by path).
+    """
+    lat_tp, lon_tp, le, ln, dem, df, dj = tp.kernel_args()
+    lon = np.ascontiguousarray(lon, dtype=np.float64)
+    lat = np.ascontiguousarray(lat, dtype=np.float64)
+    h = (np.zeros((1, 1), np.float32) if height is None
+         else np.ascontiguousarray(height, dtype=np.float32))
+    ptr, start, stop = (np.ascontiguousarray(a, dtype=np.int64) for a in spans)
+    names = ("not found", "same", "4-connex", "8-connex", "all")
+    if method == "handbook":
+        line, col, iters, paths = find_antecedents_handbook(
+            lon, lat, h, hmode, ptr, start, stop, lat_tp, lon_tp, le, ln, dem, df, dj,
+            tp.height, tp.width, model, tolerance, max_iter)
+        out = {"line": line, "col": col, "iterations": iters}
+        out["search"] = {n: int(c) for n, c in zip(names, paths, strict=True)}
+        return out
+    if method != "primary":
+        raise ValueError(f"unknown prediction/correction method {method!r}")
+    nr, nc = lon.shape
+    rows = row_start + np.arange(0, max(nr - 1, 0) + step, step, dtype=np.float64)
+    cols = np.arange(0, max(nc - 1, 0) + step, step, dtype=np.float64)
+    if rows.size < 2:
+        rows = np.r_[rows, rows[-1] + step]
+    if cols.size < 2:
+        cols = np.r_[cols, cols[-1] + step]
+    nlon, nlat = _node_lonlat(grid, rows, cols)
+    cl, cp, paths = primary_grid(nlon, nlat, lat_tp, lon_tp, le, ln, dem, df, dj)
+    line, col, iters, h_used, sh_e, sh_n = find_antecedents(
+        lon, lat, h, hmode, ptr, start, stop, cl, cp, float(step), lat_tp, lon_tp, le, ln, dem,
+        df, dj, tp.height, tp.width, model, tolerance, max_iter, diagnostics)
+    out = {"line": line, "col": col, "iterations": iters}
+    if diagnostics:
+        out.update(elevation=h_used, shift_east_m=sh_e, shift_north_m=sh_n)
+    search = {n: int(c) for n, c in zip(names, paths, strict=True)}
+    search["primary grid"] = int(np.count_nonzero(iters >= 0))
+    out["search"] = search
+    return out

@@ -1,0 +1,519 @@
+"""Elevation sources for orthorectification (handbook section 3.1 "Digital elevation data",
+chapter 5 GETASSE30, Appendix C ``TimMersynGetAltitudeFromDem``).
+
+``open_dem(path)`` detects the format:
+
+- a directory (or one file) of GETASSE30 tiles: 15 x 15 deg, 1800 x 1800 posts of 30", named
+  from the lower-left corner (``45N015E.GETASSE30``). Handbook variant: float32 (12 960 000
+  bytes), rows South to North, byte order detected from the values; BEAM variant: int16
+  big-endian (6 480 000 bytes), rows North to South, -32768/32767 no data, also inside
+  ``45N015E.zip``. Post (r, c) of a tile with lower-left (lat0, lon0) is at
+  lon0 + (c + 0.5)/120 and lat0 + (r + 0.5)/120 (handbook) or lat0 + 15 - (r + 0.5)/120 (BEAM).
+  A missing tile is no data.
+- SRTM30/GTOPO30 ``.DEM`` + ``.HDR`` tiles (ULXMAP/ULYMAP = centre of the upper-left post,
+  BYTEORDER M/I, NODATA -9999), a file or a directory of them.
+- any raster GDAL reads (GeoTIFF...) in any CRS: posts at pixel centres, lookups reprojected with
+  pyproj, nodata honoured, only the window under the requested points read.
+
+``DemSource.sample(lon, lat, method="bilinear")`` -> float64 heights, NaN outside or where a post
+used by the interpolation is no data (as MERSYN: a background post sends the point to the next
+DEM). Methods "nearest", "bilinear" (2x2 posts), "bicubic" (4x4 posts, Keys a = -0.5).
+``DemStack(sources).sample(lon, lat)`` -> (heights, source index), trying each DEM in order;
+index -1 (and NaN) where none has data (the caller then falls back to the tie points).
+"""
+
+from __future__ import annotations
+
+import re
+import zipfile
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pyproj
+
+from ..errors import DemError
+
+METHODS = ("nearest", "bilinear", "bicubic")
+_CHUNK = 1 << 18
+GETASSE_POSTS = 1800
+GETASSE_TILE_DEG = 15
+GETASSE_PER_DEG = 120
+GETASSE_FLOAT_SIZE = GETASSE_POSTS * GETASSE_POSTS * 4
+GETASSE_INT16_SIZE = GETASSE_POSTS * GETASSE_POSTS * 2
+_TILE_RE = re.compile(r"^(\d{2})([NS])(\d{3})([EW])\.GETASSE30$", re.IGNORECASE)
+_ZIP_RE = re.compile(r"^(\d{2})([NS])(\d{3})([EW])(\.GETASSE30)?\.zip$", re.IGNORECASE)
+_WGS84 = pyproj.CRS.from_epsg(4326)
+
+
+def getasse_tile_name(lat0: int, lon0: int) -> str:
+    """Tile name ``nnVeeeH`` from the lower-left corner (handbook chapter 5)."""
+    return (f"{abs(lat0):02d}{'N' if lat0 >= 0 else 'S'}"
+            f"{abs(lon0):03d}{'E' if lon0 >= 0 else 'W'}.GETASSE30")
+
+
+# ---------------------------------------------------------------------- interpolation
+def _kernel(frac: np.ndarray, method: str) -> tuple[np.ndarray, np.ndarray]:
+    """Integer offsets from floor(x) and weights (n, k) of the 1-D kernel of ``method``."""
+    if method == "nearest":
+        off = np.where(frac >= 0.5, 1, 0)[:, None]
+        return off, np.ones_like(frac)[:, None]
+    if method == "bilinear":
+        return np.array([[0, 1]]), np.stack([1.0 - frac, frac], axis=1)
+    a = -0.5
+    t = np.abs(frac[:, None] - np.array([-1.0, 0.0, 1.0, 2.0]))
+    w = np.where(t <= 1.0, (a + 2) * t**3 - (a + 3) * t**2 + 1.0,
+                 np.where(t < 2.0, a * t**3 - 5 * a * t**2 + 8 * a * t - 4 * a, 0.0))
+    return np.array([[-1, 0, 1, 2]]), w
+
+
+class DemSource:
+    """A DEM as a lattice of posts; subclasses give the lattice geometry and the post values."""
+
+    name: str = "DEM"
+    n_rows: int = 0
+    n_cols: int = 0
+    wrap_cols: bool = False
+
+    @property
+    def bounds(self) -> tuple[float, float, float, float]:
+        """(lon_min, lat_min, lon_max, lat_max) covered, degrees."""
+        raise NotImplementedError
+
+    def _to_lattice(self, lon: np.ndarray, lat: np.ndarray
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Fractional post (row, col) of each point (integers = posts) and an inside mask."""
+        raise NotImplementedError
+
+    def _fetch(self, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
+        """float64 values of posts (rows, cols) (already clamped/wrapped); NaN = no data."""
+        raise NotImplementedError
+
+    def sample(self, lon: Any, lat: Any, method: str = "bilinear") -> np.ndarray:
+        """Heights (m) at WGS84 (lon, lat) degrees; NaN outside or no data (module docstring)."""
+        if method not in METHODS:
+            raise DemError(f"{self.name}: unknown DEM interpolation {method!r}")
+        lon, lat = np.broadcast_arrays(np.asarray(lon, dtype=np.float64),
+                                       np.asarray(lat, dtype=np.float64))
+        out = np.full(lon.size, np.nan)
+        flon, flat = lon.reshape(-1), lat.reshape(-1)
+        for a in range(0, lon.size, _CHUNK):
+            b = min(a + _CHUNK, lon.size)
+            out[a:b] = self._sample_chunk(flon[a:b], flat[a:b], method)
+        return out.reshape(lon.shape)
+
+    def _sample_chunk(self, lon: np.ndarray, lat: np.ndarray, method: str) -> np.ndarray:
+        out = np.full(lon.size, np.nan)
+        ok = np.isfinite(lon) & np.isfinite(lat)
+        idx = np.flatnonzero(ok)
+        if idx.size == 0:
+            return out
+        r, c, inside = self._to_lattice(lon[idx], lat[idx])
+        idx, r, c = idx[inside], r[inside], c[inside]
+        if idx.size == 0:
+            return out
+        r0, c0 = np.floor(r), np.floor(c)
+        roff, rw = _kernel(r - r0, method)
+        coff, cw = _kernel(c - c0, method)
+        rows = r0.astype(np.int64)[:, None] + roff
+        cols = c0.astype(np.int64)[:, None] + coff
+        rows = np.clip(rows, 0, self.n_rows - 1)
+        cols = cols % self.n_cols if self.wrap_cols else np.clip(cols, 0, self.n_cols - 1)
+        kr, kc = rows.shape[1], cols.shape[1]
+        rr = np.broadcast_to(rows[:, :, None], (idx.size, kr, kc))
+        cc = np.broadcast_to(cols[:, None, :], (idx.size, kr, kc))
+        vals = self._fetch(rr.reshape(-1), cc.reshape(-1)).reshape(idx.size, kr, kc)
+        out[idx] = np.einsum("nij,ni,nj->n", vals, rw, cw)
+        return out
+
+    def close(self) -> None:
+        """Release open files (memmaps, datasets)."""
+
+
+# ---------------------------------------------------------------------- GETASSE30
+class _GetasseTile:
+    """One GETASSE30 tile: lazily mapped values (rows as stored) and its row order."""
+
+    def __init__(self, path: Path, member: str | None = None) -> None:
+        self.path, self.member = path, member
+        self._data: np.ndarray | None = None
+        self.south_to_north = True
+        size = self._size()
+        if size == GETASSE_FLOAT_SIZE:
+            self.kind = "float32"
+        elif size == GETASSE_INT16_SIZE:
+            self.kind, self.south_to_north = "int16", False
+        else:
+            raise DemError(f"{self._label}: {size} bytes is neither a GETASSE30 float32 tile "
+                           f"({GETASSE_FLOAT_SIZE}) nor a BEAM int16 tile ({GETASSE_INT16_SIZE})")
+
+    @property
+    def _label(self) -> str:
+        return f"{self.path}:{self.member}" if self.member else str(self.path)
+
+    def _size(self) -> int:
+        try:
+            if self.member is None:
+                return self.path.stat().st_size
+            with zipfile.ZipFile(self.path) as zf:
+                return zf.getinfo(self.member).file_size
+        except (OSError, zipfile.BadZipFile, KeyError) as exc:
+            raise DemError(f"{self._label}: cannot read GETASSE30 tile ({exc})") from exc
+
+    def data(self) -> np.ndarray:
+        if self._data is None:
+            self._data = self._load()
+        return self._data
+
+    def _load(self) -> np.ndarray:
+        try:
+            if self.member is None:
+                raw = np.memmap(self.path, dtype=np.uint8, mode="r")
+            else:
+                with zipfile.ZipFile(self.path) as zf:
+                    raw = np.frombuffer(zf.read(self.member), dtype=np.uint8)
+        except (OSError, ValueError, zipfile.BadZipFile, KeyError) as exc:
+            raise DemError(f"{self._label}: cannot read GETASSE30 tile ({exc})") from exc
+        shape = (GETASSE_POSTS, GETASSE_POSTS)
+        if self.kind == "int16":
+            return raw.view(">i2").reshape(shape)
+        return raw.view(_float_order(raw)).reshape(shape)
+
+    def values(self, local_rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
+        rows = local_rows if self.south_to_north else GETASSE_POSTS - 1 - local_rows
+        v = self.data()[rows, cols].astype(np.float64)
+        if self.kind == "int16":
+            v[(v == -32768) | (v == 32767)] = np.nan
+        else:
+            v[~np.isfinite(v) | (np.abs(v) > 1e5)] = np.nan
+        return v
+
+
+def _float_order(raw: np.ndarray) -> str:
+    """Byte order of a float32 tile: the one whose sampled values are plausible heights
+    (0 or 1e-3 < |h| < 12 000 m; a swapped order gives huge, tiny or non-finite values)."""
+    starts = np.arange(0, raw.size // 4, 997) * 4
+    sample = np.ascontiguousarray(raw[starts[:, None] + np.arange(4)])
+    best, score = "<f4", -1
+    for order in ("<f4", ">f4"):
+        v = sample.view(order)
+        with np.errstate(invalid="ignore", over="ignore"):
+            a = np.abs(v)
+            good = int(np.sum(np.isfinite(v) & (a < 1.2e4) & ((a == 0) | (a > 1e-3))))
+        if good > score:
+            best, score = order, good
+    return best
+
+
+class GetasseSource(DemSource):
+    """GETASSE30 tiles of a directory (both variants, plain or zipped); global 30" lattice with
+    rows from South to North (row r at lat -90 + (r + 0.5)/120)."""
+
+    n_rows = 180 * GETASSE_PER_DEG
+    n_cols = 360 * GETASSE_PER_DEG
+    wrap_cols = True
+
+    def __init__(self, path: str | Path, files: Sequence[Path] | None = None) -> None:
+        self.path = Path(path)
+        self.name = str(path)
+        self.tiles: dict[tuple[int, int], _GetasseTile] = {}
+        for f in files if files is not None else sorted(self.path.iterdir()):
+            self._add(f)
+        if not self.tiles:
+            raise DemError(f"{path}: no GETASSE30 tile found")
+
+    def _add(self, f: Path) -> None:
+        m = _TILE_RE.match(f.name)
+        member = None
+        if m is None:
+            m = _ZIP_RE.match(f.name)
+            if m is None:
+                return
+            member = _zip_member(f)
+        lat0 = int(m.group(1)) * (1 if m.group(2).upper() == "N" else -1)
+        lon0 = int(m.group(3)) * (1 if m.group(4).upper() == "E" else -1)
+        if lat0 % GETASSE_TILE_DEG or lon0 % GETASSE_TILE_DEG or not (
+                -90 <= lat0 < 90 and -180 <= lon0 < 180):
+            raise DemError(f"{f}: not a 15-degree GETASSE30 tile name")
+        key = ((lat0 + 90) // GETASSE_TILE_DEG, (lon0 + 180) // GETASSE_TILE_DEG)
+        self.tiles.setdefault(key, _GetasseTile(f, member))
+
+    @property
+    def bounds(self) -> tuple[float, float, float, float]:
+        tr = np.array([k[0] for k in self.tiles])
+        tc = np.array([k[1] for k in self.tiles])
+        return (-180.0 + 15.0 * tc.min(), -90.0 + 15.0 * tr.min(),
+                -180.0 + 15.0 * (tc.max() + 1), -90.0 + 15.0 * (tr.max() + 1))
+
+    def _to_lattice(self, lon, lat):
+        r = (lat + 90.0) * GETASSE_PER_DEG - 0.5
+        c = (((lon + 180.0) % 360.0) * GETASSE_PER_DEG) - 0.5
+        return r, c, (lat >= -90.0) & (lat <= 90.0)
+
+    def _fetch(self, rows, cols):
+        out = np.full(rows.size, np.nan)
+        key = (rows // GETASSE_POSTS) * 1000 + cols // GETASSE_POSTS
+        for k in np.unique(key):
+            tile = self.tiles.get((int(k) // 1000, int(k) % 1000))
+            if tile is None:
+                continue
+            m = key == k
+            out[m] = tile.values(rows[m] % GETASSE_POSTS, cols[m] % GETASSE_POSTS)
+        return out
+
+
+def _zip_member(path: Path) -> str:
+    try:
+        with zipfile.ZipFile(path) as zf:
+            names = [n for n in zf.namelist() if n.upper().endswith(".GETASSE30")]
+    except (OSError, zipfile.BadZipFile) as exc:
+        raise DemError(f"{path}: cannot read zip file ({exc})") from exc
+    if len(names) != 1:
+        raise DemError(f"{path}: expected one .GETASSE30 member, found {len(names)}")
+    return names[0]
+
+
+# ---------------------------------------------------------------------- SRTM30 / GTOPO30
+def _read_hdr(path: Path) -> dict[str, str]:
+    try:
+        text = path.read_text(errors="replace")
+    except OSError as exc:
+        raise DemError(f"{path}: cannot read header ({exc})") from exc
+    out = {}
+    for line in text.splitlines():
+        parts = line.split()
+        if len(parts) >= 2:
+            out[parts[0].upper()] = parts[1]
+    return out
+
+
+class SrtmTile(DemSource):
+    """One SRTM30/GTOPO30 ``.DEM`` tile (int16, ``.HDR`` header; ULXMAP/ULYMAP = post centre)."""
+
+    def __init__(self, dem_path: str | Path) -> None:
+        p = Path(dem_path)
+        dem = next((q for q in (p.with_suffix(".DEM"), p.with_suffix(".dem")) if q.exists()),
+                   p.with_suffix(".DEM"))
+        hdr = next((q for q in (p.with_suffix(".HDR"), p.with_suffix(".hdr")) if q.exists()),
+                   p.with_suffix(".HDR"))
+        self.name = str(dem)
+        h = _read_hdr(hdr)
+        try:
+            self.n_rows, self.n_cols = int(h["NROWS"]), int(h["NCOLS"])
+            self.ulx, self.uly = float(h["ULXMAP"]), float(h["ULYMAP"])
+            self.xdim, self.ydim = float(h["XDIM"]), float(h["YDIM"])
+            nbits = int(h.get("NBITS", "16"))
+            self.nodata = float(h.get("NODATA", "-9999"))
+        except (KeyError, ValueError) as exc:
+            raise DemError(f"{hdr}: incomplete SRTM30/GTOPO30 header ({exc})") from exc
+        order = ">" if h.get("BYTEORDER", "M").upper().startswith("M") else "<"
+        signed = h.get("PIXELTYPE", "SIGNEDINT").upper().startswith("SIGNED")
+        if nbits != 16 or self.xdim <= 0 or self.ydim <= 0:
+            raise DemError(f"{hdr}: unsupported header (NBITS {nbits}, XDIM/YDIM must be > 0)")
+        self.dtype = np.dtype(f"{order}{'i' if signed else 'u'}2")
+        try:
+            size = dem.stat().st_size
+        except OSError as exc:
+            raise DemError(f"{dem}: cannot read DEM ({exc})") from exc
+        if size != self.n_rows * self.n_cols * 2:
+            raise DemError(f"{dem}: {size} bytes, expected {self.n_rows * self.n_cols * 2} "
+                           f"({self.n_rows} x {self.n_cols} int16)")
+        self.dem_path = dem
+        self._data: np.ndarray | None = None
+
+    @property
+    def bounds(self) -> tuple[float, float, float, float]:
+        return (self.ulx - 0.5 * self.xdim, self.uly - (self.n_rows - 0.5) * self.ydim,
+                self.ulx + (self.n_cols - 0.5) * self.xdim, self.uly + 0.5 * self.ydim)
+
+    def _to_lattice(self, lon, lat):
+        lon_c = 0.5 * (self.bounds[0] + self.bounds[2])
+        lon = lon + 360.0 * np.round((lon_c - lon) / 360.0)
+        r = (self.uly - lat) / self.ydim
+        c = (lon - self.ulx) / self.xdim
+        inside = (r >= -0.5) & (r < self.n_rows - 0.5) & (c >= -0.5) & (c < self.n_cols - 0.5)
+        return r, c, inside
+
+    def _fetch(self, rows, cols):
+        if self._data is None:
+            try:
+                self._data = np.memmap(self.dem_path, dtype=self.dtype, mode="r",
+                                       shape=(self.n_rows, self.n_cols))
+            except (OSError, ValueError) as exc:
+                raise DemError(f"{self.dem_path}: cannot read DEM ({exc})") from exc
+        v = self._data[rows, cols].astype(np.float64)
+        v[v == self.nodata] = np.nan
+        return v
+
+    def close(self) -> None:
+        self._data = None
+
+
+# ---------------------------------------------------------------------- GDAL rasters
+class RasterSource(DemSource):
+    """Any raster GDAL opens (GeoTIFF...), any CRS; posts at pixel centres; nodata honoured."""
+
+    def __init__(self, path: str | Path, band: int = 1) -> None:
+        import rasterio
+        from rasterio.errors import RasterioError
+
+        self.name = str(path)
+        self._band = band
+        try:
+            self._ds = rasterio.open(path)
+        except (RasterioError, OSError) as exc:
+            raise DemError(f"{path}: cannot read DEM ({exc})") from exc
+        ds = self._ds
+        if ds.crs is None:
+            raise DemError(f"{path}: the DEM has no coordinate reference system")
+        if not 1 <= band <= ds.count:
+            raise DemError(f"{path}: no band {band}")
+        self.n_rows, self.n_cols = ds.height, ds.width
+        self.crs = pyproj.CRS.from_user_input(ds.crs.to_wkt())
+        self._inv = ~ds.transform
+        self._nodata = ds.nodatavals[band - 1]
+        self._scale = float((ds.scales or (1.0,))[band - 1] or 1.0)
+        self._offset = float((ds.offsets or (0.0,))[band - 1] or 0.0)
+        self._tr = pyproj.Transformer.from_crs(_WGS84, self.crs, always_xy=True)
+        self._geographic = self.crs.is_geographic
+        left, bottom, right, top = ds.bounds
+        self._x_centre = 0.5 * (left + right)
+        self._window: tuple[int, int, np.ndarray] | None = None
+
+    @property
+    def bounds(self) -> tuple[float, float, float, float]:
+        from rasterio.warp import transform_bounds
+
+        b = self._ds.bounds
+        return tuple(transform_bounds(self._ds.crs, "EPSG:4326", *b, densify_pts=21))
+
+    def _to_lattice(self, lon, lat):
+        x, y = self._tr.transform(lon, lat, errcheck=False)
+        x, y = np.asarray(x, dtype=np.float64), np.asarray(y, dtype=np.float64)
+        if self._geographic:
+            x = x + 360.0 * np.round((self._x_centre - x) / 360.0)
+        a = self._inv
+        c = a.a * x + a.b * y + a.c - 0.5
+        r = a.d * x + a.e * y + a.f - 0.5
+        inside = (r >= -0.5) & (r < self.n_rows - 0.5) & (c >= -0.5) & (c < self.n_cols - 0.5)
+        return r, c, inside
+
+    def _fetch(self, rows, cols):
+        from rasterio.errors import RasterioError
+        from rasterio.windows import Window
+
+        r0, r1, c0, c1 = int(rows.min()), int(rows.max()) + 1, int(cols.min()), int(cols.max()) + 1
+        w = self._window
+        if w is None or not (w[0] <= r0 and w[1] <= c0 and r1 <= w[0] + w[2].shape[0]
+                             and c1 <= w[1] + w[2].shape[1]):
+            try:
+                data = self._ds.read(self._band, window=Window(c0, r0, c1 - c0, r1 - r0))
+            except (RasterioError, OSError) as exc:
+                raise DemError(f"{self.name}: cannot read DEM ({exc})") from exc
+            data = data.astype(np.float64)
+            if self._nodata is not None:
+                data[data == self._nodata] = np.nan
+            data = data * self._scale + self._offset
+            w = self._window = (r0, c0, data)
+        return w[2][rows - w[0], cols - w[1]]
+
+    def close(self) -> None:
+        self._ds.close()
+
+
+# ---------------------------------------------------------------------- several sources
+class CompositeSource(DemSource):
+    """Several sources of one DEM series (tiles): the first with data wins at each point."""
+
+    def __init__(self, name: str, sources: Sequence[DemSource]) -> None:
+        self.name = name
+        self.sources = list(sources)
+
+    @property
+    def bounds(self) -> tuple[float, float, float, float]:
+        b = np.array([s.bounds for s in self.sources])
+        return (b[:, 0].min(), b[:, 1].min(), b[:, 2].max(), b[:, 3].max())
+
+    def sample(self, lon: Any, lat: Any, method: str = "bilinear") -> np.ndarray:
+        return DemStack(self.sources).sample(lon, lat, method)[0]
+
+    def close(self) -> None:
+        for s in self.sources:
+            s.close()
+
+
+class DemStack:
+    """DEMs tried in order at each point (section 3.1: outside or background -> next DEM)."""
+
+    def __init__(self, sources: Sequence[DemSource | str | Path]) -> None:
+        self.sources = [s if isinstance(s, DemSource) else open_dem(s) for s in sources]
+
+    def sample(self, lon: Any, lat: Any, method: str = "bilinear"
+               ) -> tuple[np.ndarray, np.ndarray]:
+        """(heights float64, index int16 of the DEM used; -1 and NaN where none has data)."""
+        lon, lat = np.broadcast_arrays(np.asarray(lon, dtype=np.float64),
+                                       np.asarray(lat, dtype=np.float64))
+        h = np.full(lon.shape, np.nan)
+        index = np.full(lon.shape, -1, dtype=np.int16)
+        todo = np.ones(lon.shape, dtype=bool)
+        for i, src in enumerate(self.sources):
+            if not todo.any():
+                break
+            v = src.sample(lon[todo], lat[todo], method)
+            got = np.isfinite(v)
+            sel = np.flatnonzero(todo.ravel())[got]
+            h.ravel()[sel] = v[got]
+            index.ravel()[sel] = i
+            todo.ravel()[sel] = False
+        return h, index
+
+    def close(self) -> None:
+        for s in self.sources:
+            s.close()
+
+
+def open_dem(path: str | Path) -> DemSource:
+    """Open a DEM, detecting its format (module docstring). Raises DemError."""
+    p = Path(path)
+    if not p.exists():
+        raise DemError(f"{p}: DEM not found")
+    if p.is_dir():
+        return _open_directory(p)
+    if _TILE_RE.match(p.name) or _ZIP_RE.match(p.name):
+        return GetasseSource(p.parent, files=[p])
+    if p.suffix.upper() in (".DEM", ".HDR"):
+        return SrtmTile(p)
+    return RasterSource(p)
+
+
+def _open_directory(p: Path) -> DemSource:
+    try:
+        files = sorted(f for f in p.iterdir() if f.is_file())
+    except OSError as exc:
+        raise DemError(f"{p}: cannot list DEM directory ({exc})") from exc
+    if any(_TILE_RE.match(f.name) or _ZIP_RE.match(f.name) for f in files):
+        return GetasseSource(p, files)
+    dems = [f for f in files if f.suffix.upper() == ".DEM"]
+    if dems:
+        return CompositeSource(str(p), [SrtmTile(f) for f in dems])
+    rasters = [f for f in files if f.suffix.lower() in (".tif", ".tiff", ".vrt", ".img")]
+    if rasters:
+        return CompositeSource(str(p), [RasterSource(f) for f in rasters])
+    raise DemError(f"{p}: no GETASSE30, SRTM30/GTOPO30 or GeoTIFF DEM found in the directory")
+
+
+def heights_or_fallback(stack: DemStack | None, lon: np.ndarray, lat: np.ndarray,
+                        fallback: np.ndarray, method: str = "bilinear"
+                        ) -> tuple[np.ndarray, np.ndarray]:
+    """DEM heights with ``fallback`` (e.g. tie-point heights) where no DEM has data
+    (section 3.1); index -1 marks the fallback."""
+    fallback = np.broadcast_to(np.asarray(fallback, dtype=np.float64), np.shape(lon))
+    if stack is None:
+        return fallback.copy(), np.full(np.shape(lon), -1, np.int16)
+    h, idx = stack.sample(lon, lat, method)
+    return np.where(idx >= 0, h, fallback), idx
+
+
+__all__ = ["CompositeSource", "DemSource", "DemStack", "GetasseSource", "RasterSource",
+           "SrtmTile", "getasse_tile_name", "heights_or_fallback", "open_dem"]

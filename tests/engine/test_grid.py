@@ -1,0 +1,198 @@
+"""Output grid: conventions, validation, default size (Appendix B/C), primary-grid lon/lat."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pyproj
+import pytest
+
+from napari_meris_ortho.engine.boundary import segment_boundary
+from napari_meris_ortho.engine.grid import (
+    MEAN_EARTH_RADIUS,
+    OutputGrid,
+    default_grid,
+    pixel_size_for,
+    utm_crs_for,
+)
+from napari_meris_ortho.errors import OptionsError
+
+
+def fr_footprint(lon0: float = 12.0, lat0: float = 47.5, n_lines: int = 50, azimuth=-167.0):
+    """Tie points of an FR-like segment: 36 tie columns over ~1150 km, lines every 64 x 300 m."""
+    geod = pyproj.Geod(ellps="WGS84")
+    lat = np.empty((n_lines, 36))
+    lon = np.empty((n_lines, 36))
+    for i in range(n_lines):
+        clon, clat, _ = geod.fwd(lon0, lat0, azimuth, i * 64 * 300.0)
+        for k in range(36):
+            d = (k - 17.5) * 64 * 260.0 * (1 + 0.3 * abs(k - 17.5) / 17.5)
+            lon[i, k], lat[i, k], _ = geod.fwd(clon, clat, azimuth + 90.0, d)
+    return lat, lon
+
+
+def max_pixel_error(grid: OutputGrid, row_start: int, row_stop: int) -> float:
+    """Largest distance (output px) between the interpolated lon/lat and the exact pixel centre."""
+    lon, lat = grid.lonlat(row_start, row_stop)
+    r, c = grid.xy_of_lonlat(lon, lat)
+    rows = np.arange(row_start, row_stop)[:, None]
+    cols = np.arange(grid.width)[None, :]
+    return float(np.nanmax(np.hypot(r - rows, c - cols)))
+
+
+def test_pixel_centre_and_transform_conventions():
+    g = OutputGrid("EPSG:32631", 1000.0, 5000.0, 10.0, 20.0, 7, 5)
+    x, y = g.xy(np.array([0, 4]), np.array([0, 6]))
+    assert x.tolist() == [1005.0, 1065.0]
+    assert y.tolist() == [4990.0, 4910.0]
+    t = g.transform
+    assert (t.a, t.b, t.c, t.d, t.e, t.f) == (10.0, 0.0, 1000.0, 0.0, -20.0, 5000.0)
+    assert t @ (0.5, 0.5) == (1005.0, 4990.0)
+    assert g.bounds == (1000.0, 4900.0, 1070.0, 5000.0)
+    assert not g.is_geographic and g.shape == (5, 7)
+
+
+def test_from_extent_rounds_outwards_and_validates():
+    g = OutputGrid.from_extent("EPSG:4326", (10.0, 46.0), (11.0, 45.0), 0.3)
+    assert (g.width, g.height) == (4, 4)
+    g = OutputGrid.from_extent("EPSG:32631", (0.0, 2600.0), (2600.0, 0.0), (260.0, 520.0))
+    assert (g.width, g.height) == (10, 5)
+    with pytest.raises(OptionsError, match="pixel size"):
+        OutputGrid.from_extent("EPSG:4326", (10, 46), (11, 45), 0.0)
+    with pytest.raises(OptionsError, match="pixel size"):
+        OutputGrid.from_extent("EPSG:4326", (10, 46), (11, 45), -1.0)
+    with pytest.raises(OptionsError, match="upper-left"):
+        OutputGrid.from_extent("EPSG:4326", (11, 46), (10, 45), 0.1)
+    with pytest.raises(OptionsError, match="upper-left"):
+        OutputGrid.from_extent("EPSG:4326", (10, 45), (11, 46), 0.1)
+    with pytest.raises(OptionsError, match="unknown CRS"):
+        OutputGrid.from_extent("EPSG:999999", (10, 46), (11, 45), 0.1)
+    with pytest.raises(OptionsError, match="unknown CRS"):
+        OutputGrid.from_extent("not a crs", (10, 46), (11, 45), 0.1)
+
+
+def test_default_pixel_sizes_match_mersyn():
+    """Appendix C: Geographic pixel = nominal size / mean Earth radius; metric otherwise."""
+    fr = pixel_size_for(260.0, "EPSG:4326")
+    assert fr == pytest.approx(math.degrees(260.0 / MEAN_EARTH_RADIUS), rel=1e-15)
+    assert fr == pytest.approx(0.00233823727, abs=1e-11)
+    assert pixel_size_for(1040.0, "EPSG:4326") == pytest.approx(4 * fr, rel=1e-15)
+    assert pixel_size_for(260.0, "EPSG:32631") == 260.0
+    assert pixel_size_for(260.0, "EPSG:2264") == pytest.approx(260.0 / 0.3048006096, rel=1e-9)
+
+
+def test_utm_zone_helper():
+    assert utm_crs_for(2.5, 45.0).to_epsg() == 32631
+    assert utm_crs_for(-3.0, -10.0).to_epsg() == 32730
+    assert utm_crs_for(179.9, 0.0).to_epsg() == 32660
+    assert utm_crs_for(180.0, 1.0).to_epsg() == 32601
+    assert utm_crs_for(-180.0, 1.0).to_epsg() == 32601
+
+
+class _Poly:
+    def __init__(self, x, y):
+        self.x, self.y = np.asarray(x, float), np.asarray(y, float)
+
+    def polygons(self, crs):
+        return [(self.x, self.y)]
+
+
+def test_default_grid_mersyn_size_reproduces_appendix_b_log():
+    """Appendix B: UL (1025533.1875, 5226455.019), LR (2002024.5, 4461188.5) at 260 m gives
+    2943 lines and 3755 columns."""
+    y_min, y_ul = 4461188.5, 5226455.019
+    y_max = (y_ul + y_min / 10000.0) / (1.0 + 1.0 / 10000.0)
+    poly = _Poly([1025533.1875, 2002024.5, 2002024.5, 1025533.1875],
+                 [y_max, y_max, y_min, y_min])
+    g = default_grid(poly, 260.0, "EPSG:32662", mersyn_size=True)
+    assert (g.height, g.width) == (2943, 3755)
+    assert (g.x0, g.y0) == (1025533.1875, pytest.approx(y_ul, abs=1e-6))
+    g = default_grid(poly, 260.0, "EPSG:32662")
+    assert (g.height, g.width) == (math.ceil((y_max - y_min) / 260), 3756)
+    assert g.y0 - g.height * g.dy <= y_min and g.x0 + g.width * g.dx >= 2002024.5
+
+
+def test_default_grid_holds_footprint_geographic_and_utm():
+    lat, lon = fr_footprint()
+    b = segment_boundary(lat, lon)
+    g = default_grid(b, 260.0, "EPSG:4326")
+    assert g.dx == pytest.approx(pixel_size_for(260.0, "EPSG:4326"))
+    assert g.x0 == pytest.approx(lon.min()) and g.y0 == pytest.approx(lat.max())
+    assert g.x0 + g.width * g.dx >= lon.max() > g.x0 + (g.width - 1) * g.dx
+    assert g.y0 - g.height * g.dy <= lat.min() < g.y0 - (g.height - 1) * g.dy
+    u = default_grid(b, 260.0, utm_crs_for(12.0, 45.0))
+    x, y = pyproj.Transformer.from_crs(4326, u.crs, always_xy=True).transform(lon, lat)
+    assert u.x0 <= x.min() and u.x0 + u.width * 260.0 >= x.max()
+    assert u.y0 >= y.max() and u.y0 - u.height * 260.0 <= y.min()
+
+
+def test_geographic_lonlat_exact_and_wrapped_past_180():
+    g = OutputGrid("EPSG:4326", 170.0, 10.0, 0.5, 0.25, 40, 8)
+    lon, lat = g.lonlat(2, 5)
+    assert lon.shape == (3, 40)
+    assert lat[0, 0] == 10.0 - 2.5 * 0.25 and lat[2, 0] == 10.0 - 4.5 * 0.25
+    assert lon[0, 0] == 170.25 and lon[0, 19] == 179.75 and lon[0, 20] == -179.75
+    assert np.all((lon >= -180) & (lon < 180))
+    r, c = g.xy_of_lonlat(np.array([-179.75, 170.25]), np.array([9.375, 9.375]))
+    np.testing.assert_allclose(c, [20.0, 0.0])
+    np.testing.assert_allclose(r, [2.0, 2.0])
+
+
+@pytest.mark.parametrize("epsg", [32631, 32633, 32662])
+def test_projected_lonlat_within_a_hundredth_of_pixel(epsg):
+    """Primary-grid bilinear lon/lat against pyproj at every pixel of row blocks across an FR
+    footprint at 260 m (the terrain-correction paper's 0.01 px)."""
+    lat, lon = fr_footprint()
+    g = default_grid(segment_boundary(lat, lon), 260.0, f"EPSG:{epsg}")
+    assert g.width > 3000 and g.height > 3000
+    errors = [max_pixel_error(g, a, a + 40) for a in (0, g.height // 2 - 20, g.height - 40)]
+    assert max(errors) <= 0.01
+    stats = g.interpolation_stats
+    assert 4 <= stats["step"] <= 256
+    assert stats["max_error_px"] <= 0.005
+    if epsg == 32662:  # Plate Carree is linear in lon/lat: the largest step, no error
+        assert stats["step"] == 256 and max(errors) < 1e-6
+    else:
+        assert stats["trial_max_error_px"] > 0.005 and stats["step"] < 64
+
+
+def test_projected_lonlat_is_independent_of_row_chunks():
+    lat, lon = fr_footprint(n_lines=10)
+    g = default_grid(segment_boundary(lat, lon), 1040.0, "EPSG:32633")
+    full_lon, full_lat = g.lonlat()
+    part_lon, part_lat = g.lonlat(37, 101)
+    np.testing.assert_array_equal(part_lon, full_lon[37:101])
+    np.testing.assert_array_equal(part_lat, full_lat[37:101])
+
+
+def test_cells_off_the_projection_fall_back_to_exact():
+    """An orthographic grid larger than the visible disk: corners off the globe are not
+    interpolated; every finite pixel equals pyproj's position, pixels off the disk are NaN."""
+    crs = "+proj=ortho +lat_0=45 +lon_0=10 +ellps=WGS84"
+    g = OutputGrid.from_extent(crs, (-7.0e6, 7.0e6), (7.0e6, -7.0e6), 50_000.0)
+    lon, lat = g.lonlat()
+    elon, elat = g.lonlat_exact()
+    np.testing.assert_array_equal(np.isnan(lon), np.isnan(elon))
+    assert np.isnan(elon).sum() > 1000 and np.isfinite(elon).sum() > 1000
+    assert g.interpolation_stats["exact_pixels"] > 0
+    ok = np.isfinite(elon)
+    r, c = g.xy_of_lonlat(lon[ok], lat[ok])
+    rows, cols = np.nonzero(ok)
+    assert np.max(np.hypot(r - rows, c - cols)) <= 0.01
+
+
+def test_xy_of_lonlat_round_trip_utm():
+    g = OutputGrid.from_extent("EPSG:32631", (300000, 5100000), (700000, 4800000), 260.0)
+    lon, lat = g.lonlat_exact(100, 102)
+    r, c = g.xy_of_lonlat(lon, lat)
+    np.testing.assert_allclose(r, np.broadcast_to(np.arange(100, 102)[:, None], r.shape),
+                               atol=1e-6)
+    np.testing.assert_allclose(c, np.broadcast_to(np.arange(g.width), c.shape), atol=1e-6)
+
+
+def test_grid_rejects_bad_size():
+    with pytest.raises(OptionsError):
+        OutputGrid("EPSG:4326", 0, 0, 0.1, 0.1, 0, 10)
+    with pytest.raises(OptionsError):
+        OutputGrid("EPSG:4326", 0, 0, 0.1, float("nan"), 10, 10)

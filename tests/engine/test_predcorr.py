@@ -1,0 +1,130 @@
+"""Prediction/correction loop (handbook section 3.2, Appendix C) on a synthetic swath."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from napari_meris_ortho.engine.boundary import row_spans, segment_boundary
+from napari_meris_ortho.engine.grid import OutputGrid
+from napari_meris_ortho.engine.location import direct_location
+from napari_meris_ortho.engine.predcorr import (
+    HEIGHT_GIVEN,
+    HEIGHT_NONE,
+    HEIGHT_TIEPOINTS,
+    full_spans,
+    iteration_histogram,
+    solve,
+)
+from napari_meris_ortho.engine.tiepoints import analytic_swath
+
+
+def _terrain(lon, lat):
+    return 1500.0 + 1200.0 * np.sin(np.radians(lon) * 40.0) * np.cos(np.radians(lat) * 30.0)
+
+
+def _scene(lon0=11.0, nadir_col=0.0, width=1025):
+    tp = analytic_swath(height=300, width=width, lon0=lon0, nadir_col=nadir_col)
+    b = segment_boundary(tp.latitude, tp.longitude)
+    d = np.degrees(260.0 / 6370997.0)
+    x0, x1 = b.lon.min(), b.lon.max()
+    grid = OutputGrid("EPSG:4326", x0, b.lat.max(), d * 1.4, d, int((x1 - x0) / (d * 1.4)) + 1,
+                      int((b.lat.max() - b.lat.min()) / d) + 1)
+    lon, lat = grid.lonlat()
+    spans = row_spans(b, grid, margin=30)
+    return tp, grid, lon, lat, (spans.ptr, spans.start, spans.stop)
+
+
+@pytest.fixture(scope="module")
+def scene():
+    return _scene()
+
+
+def _check_consistent(tp, lon, lat, res, h, tol_px):
+    ok = res["iterations"] >= 0
+    line = res["line"][ok].astype(np.float64)
+    col = res["col"][ok].astype(np.float64)
+    hh = None if h is None else h[ok]
+    lon2, lat2 = direct_location(tp, line, col, hh)
+    # residual in product pixels of ~260 m
+    dx = ((lon2 - lon[ok] + 180) % 360 - 180) * 111320 * np.cos(np.radians(lat[ok])) / 260.0
+    dy = (lat2 - lat[ok]) * 111320 / 260.0
+    assert np.max(np.hypot(dx, dy)) < tol_px
+    return ok
+
+
+def test_dem_heights_converge_and_match_the_handbook_loop(scene):
+    tp, grid, lon, lat, spans = scene
+    h = _terrain(lon, lat).astype(np.float32)
+    fast = solve(tp, grid, lon, lat, h, HEIGHT_GIVEN, spans, tolerance=1e-4)
+    ref = solve(tp, grid, lon, lat, h, HEIGHT_GIVEN, spans, tolerance=1e-4, method="handbook")
+    ok = _check_consistent(tp, lon, lat, fast, h.astype(np.float64), 1e-3)
+    ok_ref = ref["iterations"] >= 0
+    both = ok & ok_ref
+    assert both.sum() > 0.97 * max(ok.sum(), ok_ref.sum())
+    assert np.max(np.abs(fast["line"][both] - ref["line"][both])) < 1e-3
+    assert np.max(np.abs(fast["col"][both] - ref["col"][both])) < 1e-3
+    # every product pixel is seen: the antecedents fill the product
+    assert fast["line"][ok].min() < 0.5 and fast["line"][ok].max() > 298.5
+    assert fast["col"][ok].min() < 0.5 and fast["col"][ok].max() > 1023.5
+    s = ref["search"]
+    assert s["same"] > 0.8 * (s["same"] + s["4-connex"] + s["8-connex"] + s["all"])
+
+
+def test_iteration_histogram_and_tolerance(scene):
+    tp, grid, lon, lat, spans = scene
+    h = _terrain(lon, lat).astype(np.float32)
+    res = solve(tp, grid, lon, lat, h, HEIGHT_GIVEN, spans, tolerance=0.01)
+    hist = iteration_histogram(res["iterations"])
+    assert hist.size == 11 and hist.sum() == np.count_nonzero(res["iterations"] >= 0)
+    assert hist[0] == 0 and hist[4:].sum() == 0  # Newton: 1-3 corrections
+    _check_consistent(tp, lon, lat, res, h.astype(np.float64), 0.01)
+    res01 = solve(tp, grid, lon, lat, h, HEIGHT_GIVEN, spans, tolerance=0.1)
+    assert iteration_histogram(res01["iterations"])[1:3].sum() >= hist[1:3].sum()
+
+
+def test_no_orthorectification_is_the_zero_height_inverse(scene):
+    tp, grid, lon, lat, spans = scene
+    res = solve(tp, grid, lon, lat, None, HEIGHT_NONE, spans)
+    ref = solve(tp, grid, lon, lat, None, HEIGHT_NONE, spans, method="handbook")
+    ok = _check_consistent(tp, lon, lat, res, np.zeros(lon.shape), 0.01)
+    assert np.all(ref["iterations"][ref["iterations"] >= 0] == 0)  # MERSYN: ITERATION[0] = 100 %
+    both = ok & (ref["iterations"] >= 0)
+    assert np.max(np.abs(res["line"][both] - ref["line"][both])) < 0.01
+
+
+def test_tie_point_heights(scene):
+    tp, grid, lon, lat, spans = scene
+    res = solve(tp, grid, lon, lat, None, HEIGHT_TIEPOINTS, spans, tolerance=1e-4,
+                diagnostics=True)
+    _check_consistent(tp, lon, lat, res, None, 1e-3)
+    ok = res["iterations"] >= 0
+    assert np.nanmin(res["elevation"][ok]) >= tp.dem_alt.min() - 1
+    assert np.nanmax(res["elevation"][ok]) <= tp.dem_alt.max() + 1
+    # seen from the west part of the swath the parallax shift points east (towards nadir)
+    far = ok & (res["col"] > 800)
+    assert np.all(res["shift_east_m"][far] > 0)
+    assert np.nanmax(np.hypot(res["shift_east_m"], res["shift_north_m"])) < 2000 * np.tan(
+        np.radians(tp.view_zenith.max())) + 1
+
+
+def test_points_outside_the_product_are_dropped(scene):
+    tp, grid, lon, lat, _ = scene
+    spans = full_spans(*lon.shape)
+    res = solve(tp, grid, lon, lat, None, HEIGHT_NONE, spans)
+    ok = res["iterations"] >= 0
+    assert 0.2 < ok.mean() < 0.9  # the swath is oblique in its bounding box
+    assert np.all(res["line"][ok] >= -0.5) and np.all(res["line"][ok] < 299.5)
+    assert np.all(np.isnan(res["line"][~ok]))
+
+
+def test_nadir_and_antimeridian_swath():
+    tp, grid, lon, lat, spans = _scene(lon0=-179.0, nadir_col=512.0)
+    assert np.nanmin(lon) < -179 and np.nanmax(lon) > 179
+    h = _terrain(lon, lat).astype(np.float32)
+    res = solve(tp, grid, lon, lat, h, HEIGHT_GIVEN, spans, tolerance=1e-4)
+    ok = _check_consistent(tp, lon, lat, res, h.astype(np.float64), 1e-3)
+    # no hole: every product pixel centre has an output point within 1 px
+    hit = np.zeros((300, 1025), bool)
+    hit[np.round(res["line"][ok]).astype(int), np.round(res["col"][ok]).astype(int)] = True
+    assert hit.mean() > 0.95

@@ -1,0 +1,85 @@
+"""Resampling at fractional antecedents: nearest (MERSYN), bilinear, bicubic (section 3.1)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from napari_meris_ortho.engine.resample import resample, resample_bands
+from napari_meris_ortho.errors import OptionsError
+
+
+def test_nearest_rounds_half_up_and_respects_pixel_extent():
+    img = np.arange(20, dtype=np.uint16).reshape(4, 5) + 1
+    lines = np.array([0.0, 0.49, 0.5, 1.5, -0.5, -0.51, 3.49, 3.5, 0.0, 0.0, np.nan])
+    cols = np.array([0.0, 0.0, 0.0, 2.5, 0.0, 0.0, 4.49, 0.0, -0.5, 4.5, 1.0])
+    out = resample(img, lines, cols, "nearest")
+    assert out.dtype == np.float32
+    assert out.tolist() == [1, 1, 6, 14, 1, 0, 20, 0, 1, 0, 0]
+
+
+def test_bilinear_reproduces_a_plane_and_clamps_edges():
+    ll, pp = np.mgrid[0:30, 0:40].astype(float)
+    img = (3.0 + 2.0 * ll - 0.5 * pp).astype(np.float64)
+    rng = np.random.default_rng(1)
+    lines = rng.uniform(0, 29, 500)
+    cols = rng.uniform(0, 39, 500)
+    out = resample(img, lines, cols, "bilinear")
+    np.testing.assert_allclose(out, 3.0 + 2.0 * lines - 0.5 * cols, rtol=1e-6)
+    # half a pixel beyond the first line: edge clamped -> value of line 0
+    edge = resample(img, np.array([-0.4]), np.array([10.0]), "bilinear")
+    assert edge[0] == pytest.approx(3.0 - 5.0)
+
+
+def test_bicubic_reproduces_quadratics_inside():
+    """Keys a = -0.5 is exact for polynomials up to degree 2 (away from the clamped edges)."""
+    ll, pp = np.mgrid[0:30, 0:40].astype(float)
+    f = lambda a, b: 1.0 + 0.3 * a + 0.7 * b + 0.05 * a * a - 0.02 * b * b + 0.01 * a * b  # noqa: E731
+    img = f(ll, pp)
+    rng = np.random.default_rng(2)
+    lines = rng.uniform(1, 27.99, 500)
+    cols = rng.uniform(1, 37.99, 500)
+    out = resample(img, lines, cols, "bicubic")
+    np.testing.assert_allclose(out, f(lines, cols), rtol=2e-6)
+    bil = resample(img, lines, cols, "bilinear")
+    assert np.max(np.abs(bil - f(lines, cols))) > 1e-3  # bilinear is not exact there
+
+
+def test_integer_positions_return_pixels_for_all_methods():
+    rng = np.random.default_rng(3)
+    img = rng.uniform(0, 100, (12, 9)).astype(np.float32)
+    ll, pp = np.mgrid[0:12, 0:9]
+    for method in ("nearest", "bilinear", "bicubic"):
+        out = resample(img, ll.astype(float), pp.astype(float), method)
+        np.testing.assert_allclose(out, img, rtol=1e-6)
+
+
+def test_many_bands_share_antecedents_and_keep_shape():
+    rng = np.random.default_rng(4)
+    bands = [rng.uniform(0, 1000, (50, 60)).astype(np.float32) for _ in range(3)]
+    lines = rng.uniform(-1, 50, (7, 11))
+    cols = rng.uniform(-1, 60, (7, 11))
+    lines[0, 0] = np.nan
+    for method in ("nearest", "bilinear", "bicubic"):
+        many = resample_bands(bands, lines, cols, method)
+        assert len(many) == 3 and many[0].shape == (7, 11)
+        for b, m in zip(bands, many, strict=True):
+            np.testing.assert_array_equal(m, resample(b, lines, cols, method))
+        assert many[1][0, 0] == 0.0
+
+
+def test_big_endian_memmap_and_out_argument(tmp_path):
+    data = (np.arange(100, dtype=np.uint16) * 7).reshape(10, 10)
+    path = tmp_path / "counts.raw"
+    data.astype(">u2").tofile(path)
+    mm = np.memmap(path, dtype=">u2", mode="r", shape=(10, 10))
+    out = np.full((2, 3), -1.0, np.float32)
+    res = resample(mm, np.array([[0, 1, 2], [9, 9.6, 3]], float),
+                   np.array([[0, 1, 2], [9, 0, 3]], float), "nearest", out=out)
+    assert res is out
+    assert out.tolist() == [[0, 77, 154], [693, 0, 231]]
+
+
+def test_unknown_method_is_an_options_error():
+    with pytest.raises(OptionsError, match="sampling method"):
+        resample(np.zeros((3, 3)), np.zeros(1), np.zeros(1), "lanczos")

@@ -1,0 +1,168 @@
+"""napari readers: N1 products (product geometry) and geocoded GeoTIFFs (world frame)."""
+
+from __future__ import annotations
+
+import datetime as dt
+
+import numpy as np
+import pytest
+import rasterio
+from rasterio.transform import Affine
+
+from napari_meris_ortho._layers import GeoFrame
+from napari_meris_ortho._reader import get_reader, read_layers
+from napari_meris_ortho.errors import MerisOrthoError, N1FormatError
+from napari_meris_ortho.io.n1 import tie_columns, tie_lines, write_product
+
+H, W = 70, 2241
+
+
+@pytest.fixture(scope="module")
+def n1_path(tmp_path_factory):
+    path = tmp_path_factory.mktemp("n1") / "MER_FR__1PTEST.N1"
+    nt, nc = tie_lines(H, 64), tie_columns(W, 64)
+    i, k = np.mgrid[0:nt, 0:nc].astype(np.float64)
+    tie_points = {"latitude": 45.9 - 0.16 * i + 0.03 * k, "longitude": 8.0 - 0.06 * i - 0.21 * k,
+                  "dem_alt": 100.0 * k, "view_zenith": np.linspace(0, 40.7, nc) + 0 * i,
+                  "view_azimuth": 99.6 + 0 * i}
+    rows, cols = np.mgrid[0:H, 0:W]
+    counts = [((rows * 3 + cols + 100 * b) % 4000).astype(np.uint16) for b in range(15)]
+    flags = np.where(cols < 100, 16, 0).astype(np.uint8)
+    write_product(path, product_type="MER_FR__1P", tie_points=tie_points, counts=counts,
+                  flags=flags, detector_index=(cols % 740).astype(np.int16),
+                  first_line_time=dt.datetime(2003, 9, 21, 9, 23, 41))
+    return path
+
+
+def test_reader_accepts_n1_and_tiff_only():
+    assert get_reader("x/MER_FR__1P.N1") is read_layers
+    assert get_reader("x/out.tif") is read_layers
+    assert get_reader(["a.tif", "b.N1"]) is read_layers
+    assert get_reader("x/image.png") is None
+    assert get_reader(["a.tif", "b.png"]) is None
+
+
+def test_n1_reader_layers(n1_path):
+    from napari_meris_ortho.io.n1 import read_product
+
+    layers = read_layers(str(n1_path))
+    assert [t for _, _, t in layers] == ["image", "image", "labels"]
+    radiance, rgb, flags = (d for d, _, _ in layers)
+    assert radiance.shape == (15, H, W)
+    product = read_product(n1_path)
+    np.testing.assert_array_equal(np.asarray(radiance[6]), product.radiance(7))
+    np.testing.assert_array_equal(np.asarray(radiance[0, 5, :10]), product.radiance(1)[5, :10])
+    assert rgb.shape == (H, W, 3) and rgb.dtype == np.uint8 and layers[1][1]["rgb"]
+    assert rgb.min() == 0 and rgb.max() == 255
+    # the red channel is band 7: it follows band 7's ordering
+    r7 = product.radiance(7)
+    assert np.corrcoef(rgb[..., 0].ravel(), r7.ravel())[0, 1] > 0.95
+    assert flags.shape == (H, W) and flags.dtype == np.uint8
+    assert int(flags[0, 50]) == 16 and int(flags[0, 500]) == 0
+    meta = layers[0][1]["metadata"]
+    assert meta["tie_points"]["latitude"].shape == (tie_lines(H, 64), 36)
+    assert meta["tie_points"]["latitude"][0, 0] == pytest.approx(45.9, abs=1e-6)
+    assert meta["mph"]["PRODUCT"].startswith("MER_FR__1P")
+    assert "FIRST_LINE_TIME" in meta["sph"]
+
+
+def test_truncated_n1_is_a_clear_error(n1_path, tmp_path):
+    bad = tmp_path / "bad.N1"
+    bad.write_bytes(n1_path.read_bytes()[:5000])
+    with pytest.raises(N1FormatError):
+        read_layers(str(bad))
+
+
+def _write_tif(path, data, crs, transform, descriptions=None):
+    data = data[None] if data.ndim == 2 else data
+    with rasterio.open(path, "w", driver="GTiff", width=data.shape[2], height=data.shape[1],
+                       count=data.shape[0], dtype=data.dtype, crs=crs, transform=transform,
+                       nodata=0) as ds:
+        ds.write(data)
+        for k, d in enumerate(descriptions or []):
+            ds.set_band_description(k + 1, d)
+    return path
+
+
+def test_geotiff_layers_in_world_frame(tmp_path):
+    a = np.arange(1, 1 + 20 * 30, dtype=np.float32).reshape(1, 20, 30)
+    path = _write_tif(tmp_path / "ortho.tif", np.concatenate([a, 2 * a]), "EPSG:32632",
+                      Affine(300.0, 0, 400_000.0, 0, -300.0, 5_100_000.0), ["band_7", "band_5"])
+    layers = read_layers(str(path))
+    assert [kw["name"] for _, kw, _ in layers] == ["ortho band_7", "ortho band_5"]
+    data, kw, kind = layers[0]
+    assert kind == "image" and data.shape == (20, 30)
+    assert kw["scale"] == (300.0, 300.0)
+    # centre of pixel (0, 0): x = 400150, y = 5099850 -> world (-5099850, 400150)
+    assert kw["translate"] == (-5_099_850.0, 400_150.0)
+    frame = GeoFrame.from_transform(**{k: kw["metadata"]["geo"][k]
+                                       for k in ("crs", "transform", "shape")})
+    assert frame.x0 == 400_000.0 and frame.y0 == 5_100_000.0 and frame.width == 30
+    np.testing.assert_array_equal(layers[1][0], 2 * a[0])
+
+
+def test_geotiff_other_crs_reprojected_onto_frame(tmp_path):
+    # frame: UTM 32N, 1 km pixels; reference: lon/lat grid with a value = 1000 * column index
+    frame = GeoFrame.from_transform("EPSG:32632", (1000.0, 0, 300_000.0, 0, -1000.0, 5_000_000.0),
+                                    (40, 50))
+    lon0, lat0 = 5.0, 45.3
+    ref = np.tile(np.arange(1, 301, dtype=np.float32), (200, 1))
+    path = _write_tif(tmp_path / "ref.tif", ref, "EPSG:4326",
+                      Affine(0.01, 0, lon0, 0, -0.01, lat0))
+    from napari_meris_ortho._reader import geotiff_layers
+
+    (data, kw, _), = geotiff_layers(path, frame)
+    assert data.shape == (40, 50)
+    assert kw["scale"] == frame.scale and kw["translate"] == frame.translate
+    assert kw["metadata"]["reprojected"]
+    # check one pixel centre: its lon gives the expected column value of the reference
+    from pyproj import Transformer
+
+    x, y = 300_000.0 + 10.5 * 1000.0, 5_000_000.0 - 20.5 * 1000.0
+    lon, lat = Transformer.from_crs("EPSG:32632", "EPSG:4326", always_xy=True).transform(x, y)
+    expected = np.floor((lon - lon0) / 0.01) + 1
+    assert data[20, 10] == pytest.approx(expected, abs=1.0)
+
+
+def test_geotiff_same_crs_other_pixel_size_overlays(tmp_path):
+    """Two rasters of the same CRS and different pixel sizes cover the same world area."""
+    from napari_meris_ortho._reader import geotiff_layers
+
+    fine = _write_tif(tmp_path / "fine.tif", np.ones((40, 60), np.float32), "EPSG:32632",
+                      Affine(250.0, 0, 500_000.0, 0, -250.0, 5_000_000.0))
+    coarse = _write_tif(tmp_path / "coarse.tif", np.ones((10, 15), np.float32), "EPSG:32632",
+                        Affine(1000.0, 0, 500_000.0, 0, -1000.0, 5_000_000.0))
+    (d1, k1, _), = geotiff_layers(fine)
+    (d2, k2, _), = geotiff_layers(coarse)
+    # world extents (pixel edges) are identical
+    for d, k in ((d1, k1), (d2, k2)):
+        top = k["translate"][0] - k["scale"][0] / 2
+        left = k["translate"][1] - k["scale"][1] / 2
+        bottom = top + d.shape[0] * k["scale"][0]
+        right = left + d.shape[1] * k["scale"][1]
+        assert (top, left, bottom, right) == (-5_000_000.0, 500_000.0, -4_990_000.0, 515_000.0)
+
+
+def test_geotiff_without_crs_is_refused(tmp_path):
+    path = tmp_path / "plain.tif"
+    with rasterio.open(path, "w", driver="GTiff", width=4, height=4, count=1,
+                       dtype="float32") as ds:
+        ds.write(np.ones((1, 4, 4), np.float32))
+    with pytest.raises(MerisOrthoError, match="no CRS"):
+        read_layers(str(path))
+
+
+def test_reader_in_viewer_reprojects_onto_first_geocoded_layer(make_napari_viewer, tmp_path):
+    viewer = make_napari_viewer()
+    base = _write_tif(tmp_path / "base.tif", np.ones((30, 40), np.float32), "EPSG:32632",
+                      Affine(1000.0, 0, 300_000.0, 0, -1000.0, 5_000_000.0))
+    ref = _write_tif(tmp_path / "ref.tif", np.full((100, 200), 7.0, np.float32), "EPSG:4326",
+                     Affine(0.01, 0, 6.0, 0, -0.01, 45.3))
+    viewer.open(str(base), plugin="napari-meris-ortho")
+    (layer,) = viewer.open(str(ref), plugin="napari-meris-ortho")
+    assert layer.data.shape == (30, 40)
+    np.testing.assert_allclose(layer.scale, viewer.layers["base"].scale)
+    np.testing.assert_allclose(layer.translate, viewer.layers["base"].translate)
+    assert layer.metadata["reprojected"]
+    # lon 6..8, lat 44.3..45.3 covers the whole UTM frame (lon 6.4..7.0, lat 44.8..45.1)
+    assert np.all(layer.data == pytest.approx(7.0))

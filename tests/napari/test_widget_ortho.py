@@ -1,0 +1,239 @@
+"""Orthorectify widget end to end (thread worker) and the geometry layers it adds."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from napari.layers import Image, Labels, Shapes, Vectors
+from pyproj import Transformer
+
+from napari_meris_ortho._layers import GeoFrame
+from napari_meris_ortho._widget_ortho import (
+    CRS_EPSG,
+    CRS_GEOGRAPHIC,
+    OrthorectifyWidget,
+    parse_bands,
+)
+from napari_meris_ortho.engine.boundary import segment_boundary
+from napari_meris_ortho.engine.grid import default_grid
+from napari_meris_ortho.errors import OptionsError
+from napari_meris_ortho.io.n1 import read_product
+
+
+def _run(widget, qtbot, timeout=60_000):
+    worker = widget.start()
+    assert worker is not None, widget.status.value
+    with qtbot.waitSignal(worker.finished, timeout=timeout):
+        pass
+    return worker
+
+
+def test_widget_runs_end_to_end(make_napari_viewer, qtbot, tiny_n1, tiny_dem):
+    viewer = make_napari_viewer()
+    widget = OrthorectifyWidget(viewer)
+    widget.products.value = [tiny_n1]
+    widget.add_dem(tiny_dem)
+    widget.vector_step.value = 8
+    _run(widget, qtbot)
+    assert widget.status.value.startswith("done"), widget.status.value
+    stem = tiny_n1.stem
+    names = [layer.name for layer in viewer.layers]
+    for suffix in ("RGB 7-5-2", "band 2", "band 5", "band 7", "iterations", "elevation",
+                   "elevation source", "tie-point facets", "footprint", "parallax shift"):
+        assert f"{stem} {suffix}" in names, suffix
+    rgb = viewer.layers[f"{stem} RGB 7-5-2"]
+    assert isinstance(rgb, Image) and rgb.rgb
+
+    # the grid: UTM 32N (footprint centre ~7.6 E), smallest rectangle holding the boundary
+    product = read_product(tiny_n1)
+    tp = product.tie_points
+    expected = default_grid(segment_boundary(tp["latitude"], tp["longitude"]),
+                            crs="EPSG:32632", pixel_size=260.0)
+    frame = GeoFrame.from_transform(**rgb.metadata["geo"])
+    assert frame.same_grid(GeoFrame.from_grid(expected))
+    assert (frame.x0, frame.y0, frame.width, frame.height) == pytest.approx(
+        (expected.x0, expected.y0, expected.width, expected.height))
+    # world extent of the pixel corners = the grid bounds, north up
+    top_left = np.asarray(rgb.translate) - np.asarray(rgb.scale) / 2
+    assert top_left == pytest.approx([-expected.y0, expected.x0])
+    bottom_right = top_left + np.asarray(rgb.scale) * rgb.data.shape[:2]
+    x_min, y_min, x_max, y_max = expected.bounds
+    assert bottom_right == pytest.approx([-y_min, x_max])
+    band7 = viewer.layers[f"{stem} band 7"]
+    assert band7.data.shape == (expected.height, expected.width)
+    assert np.count_nonzero(band7.data) > 0.5 * band7.data.size
+
+    run = widget.last_run
+    item = run.items[0]
+    # elevation source: the DEM (label 1) everywhere it was valid
+    src = viewer.layers[f"{stem} elevation source"]
+    assert isinstance(src, Labels)
+    assert set(np.unique(src.data[item["valid"]])) == {1}
+    it = viewer.layers[f"{stem} iterations"].data
+    assert it[item["valid"]].min() >= 1 and it[~item["valid"]].max() == -1
+
+
+def test_footprint_and_facets_match_engine_boundary(make_napari_viewer, qtbot, tiny_n1):
+    viewer = make_napari_viewer()
+    widget = OrthorectifyWidget(viewer)
+    widget.products.value = [tiny_n1]
+    widget.elevation.value = "tiepoints"
+    _run(widget, qtbot)
+    stem = tiny_n1.stem
+    tp = read_product(tiny_n1).tie_points
+    lat, lon = tp["latitude"], tp["longitude"]
+    to_utm = Transformer.from_crs("EPSG:4326", "EPSG:32632", always_xy=True)
+
+    footprint = viewer.layers[f"{stem} footprint"]
+    assert isinstance(footprint, Shapes) and len(footprint.data) == 1
+    assert footprint.shape_type == ["polygon"]
+    assert np.all(footprint.face_color[:, 3] == 0)  # transparent face
+    boundary = segment_boundary(lat, lon)
+    bx, by = to_utm.transform(boundary.lon, boundary.lat)
+    vertices = footprint.data[0]
+    # every boundary vertex (border tie point) is a footprint vertex: world = (-northing, easting)
+    for x, y in zip(bx, by, strict=True):
+        d = np.hypot(vertices[:, 0] + y, vertices[:, 1] - x)
+        assert d.min() < 1.0  # napari keeps shapes in float32: 0.5 m steps at 5000 km
+    n_border = 2 * (lat.shape[0] - 1) + 2 * (lat.shape[1] - 1)
+    assert len(vertices) in (n_border * 4, n_border * 4 + 1)  # densified x4
+
+    facets = viewer.layers[f"{stem} tie-point facets"]
+    n_lines, n_cols = lat.shape
+    assert len(facets.data) == (n_lines - 1) * (n_cols - 1)
+    x, y = to_utm.transform(lon, lat)
+    first = facets.data[0]
+    np.testing.assert_allclose(first, [[-y[0, 0], x[0, 0]], [-y[0, 1], x[0, 1]],
+                                       [-y[1, 1], x[1, 1]], [-y[1, 0], x[1, 0]]], atol=1.0)
+    last = facets.data[-1]
+    np.testing.assert_allclose(last[2], [-y[-1, -1], x[-1, -1]], atol=1.0)
+
+
+def test_parallax_vectors_count_and_direction(make_napari_viewer, qtbot, tiny_n1):
+    viewer = make_napari_viewer()
+    widget = OrthorectifyWidget(viewer)
+    widget.products.value = [tiny_n1]
+    widget.elevation.value = "tiepoints"
+    widget.vector_step.value = 10
+    widget.exaggeration.value = 5.0
+    _run(widget, qtbot)
+    item = widget.last_run.items[0]
+    diag, valid, grid = item["diagnostics"], item["valid"], item["grid"]
+    vec = viewer.layers[f"{tiny_n1.stem} parallax shift"]
+    assert isinstance(vec, Vectors)
+    rows = np.arange(5, grid.height, 10)
+    cols = np.arange(5, grid.width, 10)
+    sub = (valid & np.isfinite(diag["shift_east_m"]))[np.ix_(rows, cols)]
+    assert len(vec.data) == int(sub.sum()) > 20
+    rr, cc = np.meshgrid(rows, cols, indexing="ij")
+    rr, cc = rr[sub], cc[sub]
+    east, north = diag["shift_east_m"][rr, cc], diag["shift_north_m"][rr, cc]
+    # direction = shift x 5 in world (row = -north, col = east); ends on the pixel centre
+    np.testing.assert_allclose(vec.data[:, 1, 0], -5.0 * north, rtol=1e-5, atol=1e-3)
+    np.testing.assert_allclose(vec.data[:, 1, 1], 5.0 * east, rtol=1e-5, atol=1e-3)
+    x_c, y_c = grid.xy(rr, cc)
+    np.testing.assert_allclose(vec.data[:, 0] + vec.data[:, 1], np.c_[-y_c, x_c], atol=1e-3)
+    # the satellite is east (view azimuth 100 deg): terrain points move east, more with height
+    assert np.all(east >= 0) and east.max() > 50.0
+    np.testing.assert_allclose(vec.features["height"], diag["elevation"][rr, cc])
+
+
+def test_geographic_and_epsg_output(make_napari_viewer, qtbot, tiny_n1, tmp_path):
+    viewer = make_napari_viewer()
+    widget = OrthorectifyWidget(viewer)
+    widget.products.value = [tiny_n1]
+    widget.elevation.value = "none"
+    widget.geometry.value = False
+    widget.crs.value = CRS_GEOGRAPHIC
+    widget.bands.value = "13"
+    out = tmp_path / "ortho.tif"
+    widget.output.value = out
+    _run(widget, qtbot)
+    layer = viewer.layers[f"{tiny_n1.stem} band 13"]
+    frame = GeoFrame.from_transform(**layer.metadata["geo"])
+    assert frame.is_geographic
+    assert frame.dx == pytest.approx(np.degrees(260.0 / 6_370_997.0))
+    assert out.is_file()
+    from napari_meris_ortho._reader import read_layers
+
+    (data, kwargs, _), = read_layers(str(out))
+    np.testing.assert_array_equal(data, layer.data)
+    assert kwargs["scale"] == pytest.approx(tuple(layer.scale))
+    assert kwargs["translate"] == pytest.approx(tuple(layer.translate))
+    assert len(viewer.layers) == 1
+
+    widget.crs.value = CRS_EPSG
+    widget.epsg.value = 3035
+    widget.output.value = ""
+    widget.pixel_size.value = 1000.0
+    _run(widget, qtbot)
+    frame = GeoFrame.from_transform(**viewer.layers[-1].metadata["geo"])
+    assert frame.dx == 1000.0
+    from pyproj import CRS
+
+    assert CRS.from_wkt(frame.crs).to_epsg() == 3035
+
+
+def test_dem_list_order(make_napari_viewer, tiny_dem, tmp_path):
+    import shutil
+
+    viewer = make_napari_viewer()
+    widget = OrthorectifyWidget(viewer)
+    second = tmp_path / "dem2.tif"
+    shutil.copy(tiny_dem, second)
+    widget.add_dem(tiny_dem)
+    widget.add_dem(second)
+    widget.add_dem(tmp_path / "missing.tif")
+    assert widget.dems == [tiny_dem, second]
+    assert "not found" in widget.status.value
+    widget.move_dem(second, -1)
+    assert widget.dems == [second, tiny_dem]
+    widget.dem_list.value = [second]
+    widget._move_selected(+1)
+    assert widget.dems == [tiny_dem, second]
+    widget.dem_list.value = [tiny_dem]
+    widget._remove_selected()
+    assert widget.dems == [second]
+    assert widget.dem_list.choices == (second,)
+
+
+def test_bad_options_are_reported(make_napari_viewer, qtbot, tiny_n1, tiny_dem):
+    viewer = make_napari_viewer()
+    widget = OrthorectifyWidget(viewer)
+    assert widget.start() is None
+    assert "at least one N1 product" in widget.status.value
+    widget.products.value = [tiny_n1]
+    widget.bands.value = "7,16"
+    assert widget.start() is None and "1..15" in widget.status.value
+    widget.bands.value = "7"
+    widget.add_dem(tiny_dem)
+    widget.elevation.value = "none"
+    _run(widget, qtbot)
+    assert "only used with elevation 'dem'" in widget.status.value
+    assert len(viewer.layers) == 0
+    assert widget.run_button.enabled and not widget.cancel_button.enabled
+
+
+def test_cancel_stops_the_worker(make_napari_viewer, qtbot, tiny_n1):
+    viewer = make_napari_viewer()
+    widget = OrthorectifyWidget(viewer)
+    widget.products.value = [tiny_n1, tiny_n1]
+    widget.elevation.value = "tiepoints"
+    widget.cancel()  # a cancel before the start is forgotten
+    widget._cancel.set()
+    worker = widget.start()
+    assert not widget._cancel.is_set()
+    widget.cancel()
+    with qtbot.waitSignal(worker.finished, timeout=60_000):
+        pass
+    assert widget.status.value == "cancelled by the user"
+    assert len(viewer.layers) == 0
+
+
+def test_parse_bands():
+    assert parse_bands("7, 5,2") == (7, 5, 2)
+    assert parse_bands("all") is None and parse_bands("") is None
+    with pytest.raises(OptionsError):
+        parse_bands("0")
+    with pytest.raises(OptionsError):
+        parse_bands("x")

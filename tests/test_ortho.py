@@ -1,0 +1,206 @@
+"""orthorectify(): the glue from a product and DEMs to mapped bands (sections 3.1-3.4)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from napari_meris_ortho import orthorectify
+from napari_meris_ortho.engine.grid import OutputGrid
+from napari_meris_ortho.engine.location import direct_location
+from napari_meris_ortho.engine.tiepoints import TiePointGrid
+from napari_meris_ortho.errors import DemError, N1FormatError, OptionsError
+from napari_meris_ortho.io.n1 import read_product
+from ortho_samples import make_dem, make_product, terrain
+
+
+@pytest.fixture(scope="module")
+def files(tmp_path_factory):
+    d = tmp_path_factory.mktemp("ortho")
+    # west part of a swath: view zenith 29..35 deg, so the parallax is several pixels
+    prod = make_product(d / "west.N1", height=200, width=513, lon0=17.0, nadir_col=-1700.0)
+    tp = read_product(prod).tie_points
+    w, e = tp["longitude"].min() - 0.3, tp["longitude"].max() + 0.3
+    s, n = tp["latitude"].min() - 0.3, tp["latitude"].max() + 0.3
+    dem = make_dem(d / "dem.tif", w, s, e, n)
+    part = make_dem(d / "part.tif", w, 0.5 * (s + n), e, n)  # the northern part only
+    return d, prod, dem, part
+
+
+@pytest.fixture(scope="module")
+def dem_run(files):
+    _, prod, dem, _ = files
+    return orthorectify(prod, dems=[dem], diagnostics=True)
+
+
+def _pixel_residual(tp, grid, diag, heights):
+    ok = diag["iterations"] >= 0
+    rows, cols = np.nonzero(ok)
+    lon_t, lat_t = grid.lonlat()
+    lon, lat = direct_location(tp, diag["line"][ok].astype(float), diag["col"][ok].astype(float),
+                               heights)
+    dx = ((lon - lon_t[rows, cols] + 180) % 360 - 180) * np.cos(np.radians(lat)) * 111320 / 260
+    dy = (lat - lat_t[rows, cols]) * 111320 / 260
+    return np.hypot(dx, dy)
+
+
+def test_dem_mode_finds_consistent_antecedents(files, dem_run):
+    _, prod, _, _ = files
+    r = dem_run
+    tp = TiePointGrid.from_product(read_product(prod))
+    ok = r.valid
+    d = r.diagnostics
+    assert ok.sum() > 0.6 * 200 * 513 * (260 / 260) * 0.9
+    # the band holding the product line/column shows the nearest antecedent (scaled radiance)
+    f1 = read_product(prod).scaling.radiance[0]
+    f2 = read_product(prod).scaling.radiance[1]
+    assert np.array_equal(np.round(r.bands[1][ok] / f1), np.floor(d["line"][ok] + 0.5))
+    assert np.array_equal(np.round(r.bands[2][ok] / f2), np.floor(d["col"][ok] + 0.5))
+    assert np.array_equal(r.flags[ok], ((np.round(r.bands[1][ok] / f1) + np.round(
+        r.bands[2][ok] / f2)) % 256).astype(np.uint8))
+    assert np.all(r.bands[1][~ok] == 0) and np.all(r.flags[~ok] == 0)
+    # the direct model at the antecedent with the DEM height gives the output point (0.01 px)
+    res = _pixel_residual(tp, r.grid, d, d["elevation"][ok].astype(float))
+    assert res.max() < 0.01
+    lon, lat = r.grid.lonlat()
+    assert np.max(np.abs(d["elevation"][ok] - terrain(lon[ok], lat[ok]))) < 5.0
+    assert np.all(d["elevation_source"][ok] == 0)
+    assert r.stats["elevation_sources"]["tiepoints"] == 0
+    hist = r.stats["iterations_histogram"]
+    assert len(hist) == 11 and sum(hist) == ok.sum() and sum(hist[4:]) == 0
+
+
+def test_parallax_shift_matches_the_antecedent_move(files, dem_run):
+    _, prod, _, _ = files
+    none = orthorectify(prod, elevation="none", diagnostics=True)
+    both = none.valid & dem_run.valid
+    move_px = dem_run.diagnostics["col"][both] - none.diagnostics["col"][both]
+    # terrain at 300..2700 m seen at ~30 deg moves the antecedent by several pixels
+    assert 0.5 < np.abs(move_px).mean() < 15.0 and np.abs(move_px).max() > 3.0
+    east = dem_run.diagnostics["shift_east_m"][both]
+    assert np.all(east > 0)  # seen from the west, towards the satellite
+    assert np.all(none.diagnostics["elevation"][none.valid] == 0)
+    assert np.all(none.diagnostics["elevation_source"][none.valid] == -2)
+    assert none.stats["orthorectification"] is False
+
+
+def test_handbook_search_gives_the_same_antecedents(files):
+    _, prod, dem, _ = files
+    a = orthorectify(prod, dems=[dem], bands=[1], tolerance=1e-4, diagnostics=True)
+    b = orthorectify(prod, dems=[dem], bands=[1], tolerance=1e-4, diagnostics=True,
+                     method="handbook")
+    both = a.valid & b.valid
+    # MERSYN drops terrain points whose zero-height position is outside the swath (its first
+    # inverse fails); the primary grid extends the edge facets and keeps them
+    assert both.sum() >= 0.999 * b.valid.sum()
+    assert b.valid.sum() < a.valid.sum() < 1.05 * b.valid.sum()
+    assert np.max(np.abs(a.diagnostics["line"][both] - b.diagnostics["line"][both])) < 1e-3
+    assert np.max(np.abs(a.diagnostics["col"][both] - b.diagnostics["col"][both])) < 1e-3
+    fs = b.stats["facet_search"]
+    assert fs["same"] > 0.8 * (fs["same"] + fs["4-connex"] + fs["8-connex"] + fs["all"])
+
+
+def test_dem_list_falls_back_to_tie_points(files):
+    _, prod, _, part = files
+    r = orthorectify(prod, dems=[part], bands=[1], diagnostics=True)
+    src = r.diagnostics["elevation_source"][r.valid]
+    assert 0.1 < np.mean(src == 0) < 0.9
+    assert set(np.unique(src)) == {-1, 0}
+    n = r.stats["elevation_sources"]
+    assert n["tiepoints"] == np.sum(src == -1) and n["0:part.tif"] == np.sum(src == 0)
+    tp = TiePointGrid.from_product(read_product(prod))
+    d = r.diagnostics
+    ok = r.valid
+    heights = np.where(d["elevation_source"][ok] == 0, d["elevation"][ok], np.nan)
+    heights = np.where(np.isnan(heights), np.nan, heights)
+    # tie-point points: the direct model with tie-point heights (None) must match as well
+    res_t = _pixel_residual(tp, r.grid, {**d, "iterations": np.where(
+        d["elevation_source"] == -1, d["iterations"], -1)}, None)
+    assert res_t.max() < 0.01
+
+
+def test_tie_point_mode_and_ellipsoid(files):
+    _, prod, _, _ = files
+    t = orthorectify(prod, elevation="tiepoints", bands=[2], diagnostics=True)
+    assert np.all(t.diagnostics["elevation_source"][t.valid] == -1)
+    h = orthorectify(prod, elevation="tiepoints", bands=[2], diagnostics=True,
+                     parallax="handbook", tolerance=1e-4)
+    e = orthorectify(prod, elevation="tiepoints", bands=[2], diagnostics=True,
+                     parallax="ellipsoid", tolerance=1e-4)
+    both = h.valid & e.valid
+    diff = np.abs(h.diagnostics["col"][both] - e.diagnostics["col"][both])
+    # the WGS84 radii move the parallax by a fraction of a percent: > 0, < 0.1 px
+    assert 1e-4 < diff.max() < 0.1
+
+
+def test_bilinear_sampling_interpolates_the_line_band(files, dem_run):
+    _, prod, dem, _ = files
+    r = orthorectify(prod, dems=[dem], bands=[1], sampling="bilinear", diagnostics=True)
+    f1 = read_product(prod).scaling.radiance[0]
+    line = r.diagnostics["line"]
+    inner = r.valid & (line > 1) & (line < 198)
+    assert np.max(np.abs(r.bands[1][inner] / f1 - line[inner])) < 2e-3
+
+
+def test_explicit_grid_and_projected_crs(files):
+    _, prod, dem, _ = files
+    import pyproj
+
+    tp = read_product(prod).tie_points
+    x, y = pyproj.Transformer.from_crs("EPSG:4326", "EPSG:32633", always_xy=True).transform(
+        tp["longitude"][1, 4], tp["latitude"][1, 4])
+    x, y = round(x, -3), round(y, -3)
+    grid = OutputGrid.from_extent("EPSG:32633", (x - 20000, y + 15000), (x + 20000, y - 15000),
+                                  300.0)
+    r = orthorectify(prod, grid=grid, dems=[dem], bands=[1, 2])
+    assert r.bands[1].shape == (100, 134) and r.grid is grid
+    assert r.valid.mean() > 0.3
+    assert sorted(r.bands) == [1, 2]
+
+
+def test_antimeridian_product_has_no_holes(tmp_path):
+    prod = make_product(tmp_path / "am.N1", height=150, width=321, lon0=-179.6, nadir_col=160.0)
+    r = orthorectify(prod, elevation="tiepoints", bands=[1, 2], diagnostics=True)
+    lon, _ = r.grid.lonlat()
+    assert np.nanmin(lon) < -179.5 and np.nanmax(lon) > 179.5
+    # every product pixel is reached by some output pixel (no seam at 180 deg)
+    f1 = read_product(prod).scaling.radiance[0]
+    f2 = read_product(prod).scaling.radiance[1]
+    hit = np.zeros((150, 321), bool)
+    hit[np.round(r.bands[1][r.valid] / f1).astype(int),
+        np.round(r.bands[2][r.valid] / f2).astype(int)] = True
+    assert hit[1:-1, 1:-1].mean() > 0.95
+    # and the output columns on both sides of 180 deg are mapped
+    near = np.abs(np.abs(lon) - 180.0) < 0.01
+    assert r.valid[near].mean() > 0.3
+
+
+def test_bad_inputs(files, tmp_path):
+    d, prod, dem, _ = files
+    with pytest.raises(N1FormatError):
+        orthorectify(tmp_path / "missing.N1")
+    foreign = tmp_path / "foreign.N1"
+    foreign.write_bytes(b"hello, I am not an ENVISAT product" * 100)
+    with pytest.raises(N1FormatError):
+        orthorectify(foreign)
+    with pytest.raises(DemError):
+        orthorectify(prod, dems=[tmp_path / "nodem.tif"])
+    bad_dem = tmp_path / "bad.tif"
+    bad_dem.write_bytes(b"garbage" * 10)
+    with pytest.raises(DemError):
+        orthorectify(prod, dems=[bad_dem])
+    with pytest.raises(OptionsError, match="DEMs"):
+        orthorectify(prod, dems=[dem], elevation="none")
+    far = OutputGrid.from_extent("EPSG:4326", (100.0, 10.0), (101.0, 9.0), 0.01)
+    with pytest.raises(OptionsError, match="misses"):
+        orthorectify(prod, grid=far)
+    with pytest.raises(OptionsError, match="tolerance"):
+        orthorectify(prod, tolerance=0.0)
+    with pytest.raises(OptionsError, match="CRS"):
+        orthorectify(prod, crs="EPSG:999999")
+    with pytest.raises(OptionsError, match="pixel size"):
+        orthorectify(prod, pixel_size=-1.0)
+    with pytest.raises(OptionsError, match="bands"):
+        orthorectify(prod, bands=[16])
+    with pytest.raises(OptionsError, match="elevation"):
+        orthorectify(prod, elevation="srtm")
