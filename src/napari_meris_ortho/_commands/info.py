@@ -1,0 +1,159 @@
+"""``meris-ortho info PRODUCT.N1``: the decoded MPH/SPH summary, the data sets and a tie-point
+table like the handbook's Appendix A and E (first and last tie point of every 8th tie-point line,
+and of the last one). A file that is not a readable MERIS L1b product: one message, exit code 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+from typing import Any
+
+import numpy as np
+
+from ..io.n1 import FLAG_NAMES, MerisL1bProduct, read_product
+from ..io.n1_format import EPOCH_2000
+
+_RESOLUTION_NAMES = {"FR": "full resolution", "RR": "reduced resolution"}
+
+
+def register(subparsers: Any) -> None:
+    """Add the ``info`` subcommand."""
+    p = subparsers.add_parser(
+        "info",
+        help="describe a MERIS L1b product (headers, data sets, tie points)",
+        description="Print the decoded main and specific product headers of a MERIS L1b N1 "
+        "product, its data set descriptors and a tie-point table like the handbook's "
+        "Appendix A (first and last tie point of every 8th tie-point line).",
+    )
+    p.add_argument(
+        "product", metavar="PRODUCT.N1", help="MERIS L1b product (MER_FR__1P, MER_RR__1P)"
+    )
+    p.add_argument(
+        "--every",
+        type=_positive,
+        default=8,
+        metavar="N",
+        help="tie-point lines in the table: 1, 1+N, 1+2N, ... and the last (default 8)",
+    )
+    p.set_defaults(func=run)
+
+
+def _positive(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        value = 0
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a positive integer")
+    return value
+
+
+def run(args: argparse.Namespace) -> int:
+    product = read_product(args.product)
+    print("\n".join(describe(product, every=args.every)))
+    return 0
+
+
+def _utc(seconds: float) -> str:
+    t = EPOCH_2000 + np.timedelta64(int(round(seconds * 1e6)), "us")
+    return str(t).replace("T", " ") + " UTC"
+
+
+def describe(product: MerisL1bProduct, every: int = 8) -> list[str]:
+    """The lines ``meris-ortho info`` prints."""
+    mph, sph = product.mph, product.sph
+    res = _RESOLUTION_NAMES.get(product.resolution.name, product.resolution.name)
+    size = product.path.stat().st_size
+    times = product.line_times
+    lines = [
+        f"Product        {product.product_name}",
+        f"File           {product.path} ({size} bytes)",
+        f"Product type   {product.product_type} (MERIS Level 1b, {res})",
+        f"Size           {product.width} columns x {product.height} lines",
+        f"Tie points     {product.n_tie_columns} columns x {product.n_tie_lines} lines, every "
+        f"{product.samples_per_tie_point} samples and {product.lines_per_tie_point} lines",
+        f"First line     {_utc(times[0])}  ({times[0]:.6f} s since 2000-01-01)",
+        f"Last line      {_utc(times[-1])}",
+        f"Line interval  {product.line_interval_s:.6f} s",
+        f"Processing     {mph.get('PROC_CENTER', '?')}, {mph.get('SOFTWARE_VER', '?')}, "
+        f"{mph.get('PROC_TIME', '?')} (stage {mph.get('PROC_STAGE', '?')})",
+        f"Sensing        {mph.get('SENSING_START', '?')} to {mph.get('SENSING_STOP', '?')}",
+        f"Orbit          phase {mph.get('PHASE', '?')}, cycle {mph.get('CYCLE', '?')}, "
+        f"relative orbit {mph.get('REL_ORBIT', '?')}, absolute orbit {mph.get('ABS_ORBIT', '?')}",
+        f"Headers        MPH 1247 bytes, SPH {mph['SPH_SIZE']} bytes, {mph['NUM_DSD']} DSDs, "
+        f"{mph.get('NUM_DATA_SETS', '?')} data sets, total {mph['TOT_SIZE']} bytes",
+        "",
+        "Corners (lat, lon)  first sample            middle sample           last sample",
+    ]
+    for which in ("FIRST", "LAST"):
+        cells = []
+        for col in ("FIRST", "MID", "LAST"):
+            lat, lon = sph.get(f"{which}_{col}_LAT"), sph.get(f"{which}_{col}_LONG")
+            if isinstance(lat, int) and isinstance(lon, int):
+                cells.append(f"({lat * 1e-6:.6f}, {lon * 1e-6:.6f})")
+            else:
+                cells.append("?")
+        row = f"  {which.lower()} line".ljust(20) + "".join(c.ljust(24) for c in cells)
+        lines.append(row.rstrip())
+    sf = product.scaling
+    lines += [
+        "",
+        f"Scaling factors  altitude {sf.altitude:g}, roughness {sf.roughness:g}, "
+        f"zonal wind {sf.zonal_wind:g}, meridional wind {sf.merid_wind:g}, "
+        f"pressure {sf.atm_pressure:g}, ozone {sf.ozone:g}, humidity {sf.rel_humidity:g}",
+        f"Sampling rate    {sf.sampling_rate_us} (1e-6 s)",
+        "",
+        "Band  wavelength  bandwidth  radiance factor  sun flux",
+    ]
+    for b in range(15):
+        lines.append(
+            f"{b + 1:>4}  {product.wavelengths[b]:8.3f} nm {product.bandwidths[b]:6.3f} nm  "
+            f"{sf.radiance[b]:15.6f}  {sf.sun_flux[b]:9.3f}"
+        )
+    bits = ", ".join(f"{name}={1 << i}" for i, name in enumerate(FLAG_NAMES))
+    lines += ["", f"Flags (Flags MDS(16))  {bits}", "", "Data sets"]
+    lines.append("  #  DS_NAME                       T  DS_OFFSET   DS_SIZE  NUM_DSR  DSR_SIZE")
+    for i, d in enumerate(product.dsds, start=1):
+        if d.is_spare:
+            lines.append(f"{i:>3}  (spare)")
+        elif d.type == "R":
+            lines.append(f"{i:>3}  {d.name:<28}  R  {d.filename}")
+        else:
+            lines.append(
+                f"{i:>3}  {d.name:<28}  {d.type}  {d.offset:>9}  {d.size:>9}  {d.num_dsr:>7}  "
+                f"{d.dsr_size:>8}"
+            )
+    lines += ["", 'DATA SET "Tie points ADS" (first and last tie point of the tie-point lines)']
+    lines += tie_point_table(product, every)
+    return lines
+
+
+def tie_point_table(product: MerisL1bProduct, every: int = 8) -> list[str]:
+    """Appendix A/E tie-point table: for tie-point lines 1, 1+every, ... and the last one, the
+    date (s since 2000-01-01), then for the FIRST and LAST tie point: (lat, lon), altitude,
+    roughness, latitude and longitude corrections (1e-6 deg), sun and view (zenith, azimuth)."""
+    tp = product.tie_points
+    n = product.n_tie_lines
+    rows = sorted(set(range(0, n, every)) | {n - 1})
+    head = "No.  Date              "
+    part = "{:<24}{:>6} {:>6}  {:>14}  {:>15}  {:<14}  {:<14}"
+    title = part.format("(Lat., Lon.)", "Alt.", "Rough.", "Corr. Lat.", "Corr. Lon.",
+                        "Sun (Zen., Azi.)", "View (Zen., Azi.)")  # fmt: skip
+    out = [head + "FIRST " + title + "   LAST " + title]
+    for i in rows:
+        cells = []
+        for k in (0, product.n_tie_columns - 1):
+            cells.append(
+                part.format(
+                    f"({tp['latitude'][i, k]:.6f}, {tp['longitude'][i, k]:.6f})",
+                    f"{tp['dem_alt'][i, k]:.0f}",
+                    f"{tp['dem_rough'][i, k]:.0f}",
+                    f"{round(tp['lat_corr'][i, k] * 1e6):d} 1e-6",
+                    f"{round(tp['lon_corr'][i, k] * 1e6):d} 1e-6",
+                    f"({tp['sun_zenith'][i, k]:.1f}, {tp['sun_azimuth'][i, k]:.1f})",
+                    f"({tp['view_zenith'][i, k]:.1f}, {tp['view_azimuth'][i, k]:.1f})",
+                )
+            )
+        row = f"{i + 1:<4} {product.tie_point_times[i]:<17.6f} " + "      ".join(cells)
+        out.append(row.rstrip())
+    return out
