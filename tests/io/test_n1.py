@@ -186,6 +186,7 @@ def test_writer_refuses_bad_arguments(tmp_path):
         {"counts": inputs["counts"][:14]},
         {"flags": inputs["flags"][:-1]},
         {"tie_points": {k: v[:1] for k, v in tie.items()}},
+        {"tie_points": {k: v for k, v in tie.items() if k != "latitude"}},
         {"tie_points": {**tie, "sun_zenith": -tie["sun_zenith"]}},
         {"tie_points": {**tie, "latitude": tie["latitude"] * np.nan}},
         {"tie_points": {**tie, "bogus": tie["latitude"]}},
@@ -222,3 +223,15 @@ def test_invalid_flag_and_aware_datetimes(tmp_path):
     )
     assert np.all(product.flags & FLAG_INVALID)
     assert product.sph["FIRST_LINE_TIME"] == "21-SEP-2003 09:23:41.714409"
+
+
+@pytest.mark.parametrize("other", ["MER_FRS_1P", "MER_FSG_1P"])
+def test_other_fr_level1b_types_are_tolerated(tmp_path, other):
+    inputs = sample_inputs("MER_FR__1P", height=20, width=129)
+    data = write_product(tmp_path / "fr.N1", **inputs).read_bytes()
+    path = tmp_path / "other.N1"
+    path.write_bytes(data.replace(b'PRODUCT="MER_FR__1P', f'PRODUCT="{other}'.encode(), 1))
+    product = read_product(path)
+    assert product.product_type == other
+    assert product.lines_per_tie_point == 64
+    np.testing.assert_array_equal(product.counts(4), inputs["counts"][3])

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import os
 
 import numpy as np
 import pytest
@@ -51,9 +52,12 @@ def patch_text(data: bytes, old: bytes, new: bytes) -> bytes:
     return data.replace(old, new)
 
 
-def test_missing_file_and_directory(tmp_path):
-    expect_error(tmp_path / "nope.N1", "cannot read")
-    expect_error(tmp_path, "cannot read")
+def test_missing_file_directory_and_fifo(tmp_path):
+    expect_error(tmp_path / "nope.N1", "cannot read", "No such file")
+    expect_error(tmp_path, "not a regular file")
+    fifo = tmp_path / "fifo.N1"
+    os.mkfifo(fifo)
+    expect_error(fifo, "not a regular file")  # and no hang on open()
 
 
 @pytest.mark.parametrize(

@@ -14,6 +14,7 @@ from __future__ import annotations
 import math
 import os
 import re
+import stat
 from functools import cached_property
 from pathlib import Path
 from typing import Any
@@ -165,6 +166,7 @@ class MerisL1bProduct:
         mph: dict[str, Any],
         sph: dict[str, Any],
         dsds: list[Dsd],
+        datasets: dict[str, Dsd],
         product_type: str,
         resolution: Resolution,
         width: int,
@@ -178,6 +180,7 @@ class MerisL1bProduct:
         self.mph = mph
         self.sph = sph
         self.dsds = dsds
+        self._datasets = datasets
         self.product_type = product_type
         self.resolution = resolution
         self.width = width
@@ -202,7 +205,10 @@ class MerisL1bProduct:
 
     # -- data sets ------------------------------------------------------------------------
     def dsd(self, name: str) -> Dsd:
-        """The DSD called ``name`` (KeyError if absent)."""
+        """The DSD called ``name`` (the validated one of a data set stored in the product, else
+        the first DSD of that name; KeyError if absent)."""
+        if name in self._datasets:
+            return self._datasets[name]
         for d in self.dsds:
             if d.name == name:
                 return d
@@ -248,7 +254,7 @@ class MerisL1bProduct:
 
     def _records(self, name: str, dtype: np.dtype) -> np.memmap:
         """Records of data set ``name`` as a structured memmap view (validated at open)."""
-        d = self.dsd(name)
+        d = self._datasets[name]
         return self._file_map[d.offset : d.offset + d.num_dsr * dtype.itemsize].view(dtype)
 
     def _check_band(self, band: int) -> None:
@@ -323,6 +329,8 @@ def read_product(path: str | os.PathLike[str]) -> MerisL1bProduct:
     """
     path = Path(path)
     try:
+        if not stat.S_ISREG(path.stat().st_mode):  # a FIFO would block open(): never hang
+            raise N1FormatError(path, "not a regular file")
         with open(path, "rb") as f:
             file_size = os.fstat(f.fileno()).st_size
             head = f.read(MPH_SIZE)
@@ -448,6 +456,7 @@ def _read(path: Path, f, file_size: int, head: bytes) -> MerisL1bProduct:
         mph=mph,
         sph=sph,
         dsds=dsds,
+        datasets=by_name,
         product_type=product_type,
         resolution=resolution,
         width=width,

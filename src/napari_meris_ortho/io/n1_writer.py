@@ -159,18 +159,11 @@ def _as_datetime64(t: _dt.datetime | np.datetime64 | str) -> np.datetime64:
 
 
 def _interp_tie(grid: np.ndarray, line: float, col: float, df: int, dj: int) -> float:
-    """Bilinear value of a tie-point grid at product pixel (line, col) (clamped to the grid)."""
-    fi = min(max(line / df, 0.0), grid.shape[0] - 1.0)
-    fk = min(max(col / dj, 0.0), grid.shape[1] - 1.0)
-    i0, k0 = min(int(fi), grid.shape[0] - 2), min(int(fk), grid.shape[1] - 2)
-    i0, k0 = max(i0, 0), max(k0, 0)
-    a, b = fi - i0, fk - k0
-    g = grid[i0 : i0 + 2, k0 : k0 + 2]
-    if g.shape != (2, 2):  # a single tie line or column
-        g = np.broadcast_to(grid[i0 : i0 + 2, k0 : k0 + 2], (2, 2))
-    return float(
-        (1 - a) * ((1 - b) * g[0, 0] + b * g[0, 1]) + a * ((1 - b) * g[1, 0] + b * g[1, 1])
-    )
+    """Bilinear value of a tie-point grid at product pixel (line, col), clamped to the grid
+    (tie point (i, k) sits on pixel (i*DF, k*DJ))."""
+    rows = np.arange(grid.shape[0]) * df
+    along_track = [np.interp(line, rows, grid[:, k]) for k in range(grid.shape[1])]
+    return float(np.interp(col, np.arange(grid.shape[1]) * dj, along_track))
 
 
 def _corners(lat: np.ndarray, lon: np.ndarray, height: int, width: int, df: int, dj: int):
@@ -214,9 +207,6 @@ def _quantize_tie_points(
     unknown = set(tie_points) - set(TIE_POINT_NAMES)
     if unknown:
         raise OptionsError(f"tie_points: unknown names {sorted(unknown)}")
-    for required in ("latitude", "longitude"):
-        if required not in tie_points:
-            raise OptionsError(f"tie_points: {required!r} is required")
     out = {}
     for field in TIE_POINT_FIELDS:
         values = np.asarray(tie_points.get(field.name, np.zeros(shape)), dtype=np.float64)
@@ -289,7 +279,10 @@ def write_product(
             f"multiple of {dj} for {product_type})"
         )
     n_cols = tie_columns(width, dj)
-    lat = np.asarray(tie_points.get("latitude", ()), dtype=np.float64)
+    for required in ("latitude", "longitude"):
+        if required not in tie_points:
+            raise OptionsError(f"tie_points: {required!r} is required")
+    lat = np.asarray(tie_points["latitude"], dtype=np.float64)
     n_tie = lat.shape[0] if lat.ndim == 2 else 0
     if n_tie < tie_lines(height, df):
         raise OptionsError(
