@@ -55,10 +55,6 @@ class Resolution:
     column_spacing_m: float  #: on-ground spacing between columns at nadir
     quality_lines: int  #: product lines per Quality ADS record
 
-    @property
-    def tie_columns(self) -> int:
-        return tie_columns(self.width, self.samples_per_tie_point)
-
 
 #: FR: 2241 columns, tie points every 64 lines/columns, 0.043997 s per line (Appendix A).
 FULL_RESOLUTION = Resolution("FR", 2241, 64, 64, 0.043997, 260.0, 512)
@@ -285,7 +281,6 @@ RECORD_HEADER_FIELDS = [
     ("microseconds", ">u4"),
     ("quality", "u1"),
 ]
-RECORD_HEADER_DTYPE = np.dtype(RECORD_HEADER_FIELDS)
 
 
 @dataclass(frozen=True)

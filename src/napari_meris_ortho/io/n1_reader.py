@@ -30,8 +30,8 @@ from .n1_format import (
     MPH_SIZE,
     NUM_BANDS,
     PRODUCT_TYPES,
-    RECORD_HEADER_DTYPE,
     SCALING_GADS,
+    SPARE_DSD,
     TIE_POINT_FIELDS,
     TIE_POINTS_ADS,
     Dsd,
@@ -121,7 +121,7 @@ def parse_header(block: bytes, what: str, path: object) -> dict[str, Any]:
 def parse_dsd(block: bytes, path: object = "<dsd>") -> Dsd:
     """Parse one 280-byte Data Set Descriptor (all spaces: a spare DSD)."""
     if not block.strip(b" \n\x00"):
-        return Dsd("", "", "", 0, 0, 0, 0)
+        return SPARE_DSD
     d = parse_header(block, "DSD", path)
     try:
         name, kind, filename = d["DS_NAME"], d["DS_TYPE"], d.get("FILENAME", "")
@@ -296,15 +296,7 @@ class MerisL1bProduct:
     def line_times(self) -> np.ndarray:
         """Time of each product line: float64 seconds since 2000-01-01 (MJD2000 of Radiance
         MDS(1) record headers)."""
-        head = np.dtype(
-            {
-                "names": list(RECORD_HEADER_DTYPE.names),
-                "formats": [RECORD_HEADER_DTYPE.fields[n][0] for n in RECORD_HEADER_DTYPE.names],
-                "offsets": [RECORD_HEADER_DTYPE.fields[n][1] for n in RECORD_HEADER_DTYPE.names],
-                "itemsize": radiance_record_size(self.width),
-            }
-        )
-        rec = self._records(radiance_mds(1), head)
+        rec = self._records(radiance_mds(1), radiance_dtype(self.width))  # headers only read
         return mjd2000_to_seconds(rec["days"], rec["seconds"], rec["microseconds"])
 
     @property
@@ -351,16 +343,11 @@ def _read(path: Path, f, file_size: int, head: bytes) -> MerisL1bProduct:
     mph = parse_header(head, "MPH", path)
     product = _get(mph, "PRODUCT", str, "MPH", path)
     product_type = product[:10]
-    if not product_type.startswith("MER_") or product_type[8:10] != "1P":
+    if product_type not in PRODUCT_TYPES:
         raise N1FormatError(
             path, f"unsupported product type {product_type!r}: MERIS Level 1b products only "
             f"({', '.join(PRODUCT_TYPES)})"
         )  # fmt: skip
-    if product_type not in PRODUCT_TYPES:
-        raise N1FormatError(
-            path,
-            f"unsupported product type {product_type!r} (supported: {', '.join(PRODUCT_TYPES)})",
-        )
     resolution = PRODUCT_TYPES[product_type]
 
     sph_size = _get(mph, "SPH_SIZE", int, "MPH", path)
