@@ -217,6 +217,37 @@ def run_layers(run: OrthoRun) -> list[LayerData]:
     return layers
 
 
+def _import_engine() -> None:
+    """Import the engine in the main thread (module-level pyproj objects made here)."""
+    from . import ortho, synthesis  # noqa: F401
+    from .engine import boundary, grid  # noqa: F401
+    from .io import dem, geotiff, n1  # noqa: F401
+
+
+def in_python_thread(func: Any, *args: Any) -> Any:
+    """Run ``func(*args)`` in a fresh Python thread and return its result (or raise).
+
+    napari's thread workers run on QThreadPool threads whose Python thread state is dropped
+    after every job; pyproj's per-thread PROJ context goes with it and the next job on a pooled
+    thread crashes inside PROJ (segmentation fault in ``proj_create``, reproduced with a bare
+    QRunnable). A Python thread keeps one thread state for the whole job.
+    """
+    outcome: dict[str, Any] = {}
+
+    def target() -> None:
+        try:
+            outcome["value"] = func(*args)
+        except BaseException as exc:  # re-raised in the worker thread
+            outcome["error"] = exc
+
+    thread = threading.Thread(target=target, name="meris-ortho-job", daemon=True)
+    thread.start()
+    thread.join()
+    if "error" in outcome:
+        raise outcome["error"]
+    return outcome["value"]
+
+
 class OrthorectifyWidget(Container):
     """The "Orthorectify" dock widget (thread worker, progress bar, cancel)."""
 
@@ -355,13 +386,14 @@ class OrthorectifyWidget(Container):
         except MerisOrthoError as exc:
             self.status.value = str(exc)
             return None
+        _import_engine()
         self._cancel.clear()
         self._progress_state = (0, 1)
         self._pbar = progress(total=1000, desc="Orthorectify")
         self._timer = QTimer()
         self._timer.timeout.connect(self._update_progress)
         self._timer.start(100)
-        self.worker = create_worker(run_orthorectify, options, self._report,
+        self.worker = create_worker(in_python_thread, run_orthorectify, options, self._report,
                                     _start_thread=False)
         self.worker.returned.connect(self._done)
         self.worker.errored.connect(self._failed)

@@ -240,3 +240,24 @@ def test_unreadable_dems_raise_dem_error(tmp_path):
         open_dem(srtm / "W020N90.DEM")
     with pytest.raises(DemError, match="interpolation"):
         open_dem(write_srtm(tmp_path)).sample(0.0, 0.0, method="spline")
+
+
+def test_reads_the_simulator_exports_at_their_posts():
+    """Every DEM format the simulator exports reads back the scene's truth heights at the posts
+    (float formats exactly, int16 formats to the 0.5 m rounding)."""
+    from napari_meris_ortho.simulate.scene import generate_scene
+
+    scene = generate_scene({"base": "fr-small", "lines": 128, "columns": 193,
+                            "first_column": 1150})
+    b = open_dem(scene.dem_paths["geotiff"]).bounds
+    rng = np.random.default_rng(7)
+    c = np.floor(rng.uniform(b[0] + 0.02, b[2] - 0.02, 2000) * 120)
+    r = np.floor(rng.uniform(b[1] + 0.02, b[3] - 0.02, 2000) * 120)
+    lon, lat = (c + 0.5) / 120, (r + 0.5) / 120
+    truth = scene.dem_height(lon, lat)
+    tolerance = {"geotiff": 1e-6, "getasse30": 1e-3, "getasse30_beam": 0.5, "srtm30": 0.5}
+    for key, tol in tolerance.items():
+        h = open_dem(scene.dem_paths[key]).sample(lon, lat)
+        ok = np.isfinite(h)
+        assert ok.mean() > 0.9, key
+        assert np.max(np.abs(h[ok] - truth[ok])) <= tol, key

@@ -34,8 +34,10 @@ from ..progress import ProgressCallback
 
 __all__ = ["DisparityResult", "disparity", "displacement_statistics", "format_report"]
 
-#: rows handed to one numba call between two progress reports
-_ROW_CHUNK = 128
+#: lines handed to one numba call between two progress reports
+_ROW_CHUNK = 256
+#: consecutive lines sharing running column sums in the whole-pixel search
+_BLOCK = 32
 #: pixels whose whole-pixel confidence is within this many % below the threshold are refined
 _REFINE_MARGIN = 25.0
 
@@ -120,27 +122,33 @@ def disparity(
     _check_options(a64.shape, stat_window, explore, threshold, step)
     half = stat_window // 2
     hy, hx = explore[0] // 2, explore[1] // 2
-    mean_a, inv_sd_a, ok_a = _window_moments(a64, valid, half)
-    mean_b, inv_sd_b, ok_b = _window_moments(b64, valid, half)
+    mean_a, isd_a = _window_moments(a64, valid, half)
+    mean_b, isd_b = _window_moments(b64, valid, half)
     height, width = a64.shape
     analysed = np.zeros((height, width), dtype=np.bool_)
     analysed[::step, ::step] = True
     image = analysed & valid
+    invalid_sum = np.zeros((height + 1, width + 1), dtype=np.int32)
+    invalid_sum[1:, 1:] = np.cumsum(np.cumsum(~valid, axis=0, dtype=np.int32), axis=1)
     rows = np.arange(0, height, step, dtype=np.int64)
     dx, dy, conf = (np.full((height, width), np.nan, dtype=np.float32) for _ in range(3))
     limit = np.zeros((height, width), dtype=np.uint8)
     for start in range(0, len(rows), _ROW_CHUNK):
         chunk = rows[start : start + _ROW_CHUNK]
-        _zncc_rows(a64, b64, mean_a, inv_sd_a, ok_a, mean_b, inv_sd_b, ok_b, image,
-                   chunk, half, hy, hx, step, dx, dy, conf, limit)
-        if progress is not None:
-            progress(min(start + _ROW_CHUNK, len(rows)), len(rows))
+        best_val = np.full((len(chunk), width), -np.inf)
+        best_idx = np.zeros((len(chunk), width), dtype=np.int32)
+        _integer_search(a64, b64, mean_a, isd_a, mean_b, isd_b, chunk, half, hy, hx,
+                        best_val, best_idx)
+        _peaks(a64, b64, mean_a, isd_a, mean_b, isd_b, image, chunk, half, hy, hx, step,
+               best_val, best_idx, dx, dy, conf, limit)
         if subpixel == "grid":
             ii, jj = np.nonzero(image[chunk[0] : chunk[-1] + 1])
             ii += chunk[0]
             keep = (conf[ii, jj] >= threshold - _REFINE_MARGIN) & (limit[ii, jj] == 0)
-            _refine_on_grid(a64, b64, valid, ii[keep], jj[keep], half, hy, hx,
+            _refine_on_grid(a64, b64, invalid_sum, ii[keep], jj[keep], half, hy, hx,
                             float(resolution), dx, dy, conf)
+        if progress is not None:
+            progress(min(start + _ROW_CHUNK, len(rows)), len(rows))
     if resolution > 0:
         dx = (np.round(dx / resolution) * resolution).astype(np.float32)
         dy = (np.round(dy / resolution) * resolution).astype(np.float32)
@@ -187,106 +195,6 @@ def _check_options(shape, stat_window, explore, threshold, step) -> None:
     if min(shape) < stat_window:
         raise OptionsError(f"images {shape} are smaller than the statistical window {stat_window}")
 
-
-@njit(cache=True)
-def _window_moments(img, valid, half):
-    """Mean, 1/standard deviation and full-window validity of each statistical window."""
-    height, width = img.shape
-    n = (2 * half + 1) ** 2
-    mean = np.zeros((height, width))
-    inv_sd = np.zeros((height, width))
-    ok = np.zeros((height, width), dtype=np.bool_)
-    for i in range(half, height - half):
-        for j in range(half, width - half):
-            s = 0.0
-            s2 = 0.0
-            good = True
-            for r in range(-half, half + 1):
-                for c in range(-half, half + 1):
-                    if not valid[i + r, j + c]:
-                        good = False
-                    v = img[i + r, j + c]
-                    s += v
-                    s2 += v * v
-            m = s / n
-            var = s2 / n - m * m
-            mean[i, j] = m
-            ok[i, j] = good
-            if good and var > 1e-12 * (s2 / n + 1e-300):
-                inv_sd[i, j] = 1.0 / math.sqrt(var)
-    return mean, inv_sd, ok
-
-
-@njit(cache=True, parallel=True)
-def _zncc_rows(a, b, mean_a, inv_sd_a, ok_a, mean_b, inv_sd_b, ok_b, image,
-               rows, half, hy, hx, step, dx, dy, conf, limit):
-    """ZNCC over the exploration window for the given lines: writes the parabola's sub-pixel
-    peak (dx, dy), the confidence (%) and the on-limit bits (1: X, 2: Y) of each image pixel."""
-    height, width = a.shape
-    ny, nx = 2 * hy + 1, 2 * hx + 1
-    n = (2 * half + 1) ** 2
-    for k in prange(rows.shape[0]):
-        i = rows[k]
-        corr = np.full((ny, nx, width), -2.0)
-        colsum = np.zeros(width)
-        for v in range(-hy, hy + 1):
-            ib = i + v
-            if ib - half < 0 or ib + half >= height or i - half < 0 or i + half >= height:
-                continue
-            for u in range(-hx, hx + 1):
-                j0 = max(0, -u)
-                j1 = min(width, width - u)
-                for j in range(j0, j1):
-                    s = 0.0
-                    for r in range(-half, half + 1):
-                        s += a[i + r, j] * b[ib + r, j + u]
-                    colsum[j] = s
-                for j in range(max(j0 + half, half), min(j1 - half, width - half)):
-                    if not (ok_a[i, j] and ok_b[ib, j + u]):
-                        continue
-                    s = 0.0
-                    for c in range(-half, half + 1):
-                        s += colsum[j + c]
-                    cov = s / n - mean_a[i, j] * mean_b[ib, j + u]
-                    corr[v + hy, u + hx, j] = cov * inv_sd_a[i, j] * inv_sd_b[ib, j + u]
-        for j in range(0, width, step):
-            if image[i, j]:
-                dx[i, j], dy[i, j], conf[i, j], limit[i, j] = _best_match(corr, j, hy, hx)
-
-
-@njit(cache=True)
-def _best_match(corr, j, hy, hx):
-    """Integer peak of the correlation surface at column j, parabola refinement, on-limit flags."""
-    ny, nx = 2 * hy + 1, 2 * hx + 1
-    bv, bu, bc = hy, hx, -2.0
-    for y in range(ny):
-        for x in range(nx):
-            c = corr[y, x, j]
-            if c > bc or (c == bc and abs(y - hy) + abs(x - hx) < abs(bv - hy) + abs(bu - hx)):
-                bv, bu, bc = y, x, c
-    if bc <= -2.0:  # no matchable window: zero displacement, zero confidence
-        return 0.0, 0.0, 0.0, 0
-    fx = 0.0
-    fy = 0.0
-    limit_x = bu == 0 or bu == nx - 1
-    limit_y = bv == 0 or bv == ny - 1
-    if not limit_x:
-        fx = _parabola(corr[bv, bu - 1, j], bc, corr[bv, bu + 1, j])
-    if not limit_y:
-        fy = _parabola(corr[bv - 1, bu, j], bc, corr[bv + 1, bu, j])
-    bits = (1 if limit_x else 0) + (2 if limit_y else 0)
-    return bu - hx + fx, bv - hy + fy, min(max(bc, 0.0), 1.0) * 100.0, bits
-
-
-@njit(cache=True)
-def _parabola(cm, c0, cp):
-    """Vertex offset of the parabola through (-1, cm), (0, c0), (1, cp), within [-0.5, 0.5]."""
-    if cm <= -2.0 or cp <= -2.0:
-        return 0.0
-    den = cm - 2.0 * c0 + cp
-    if den >= 0.0:
-        return 0.0
-    return min(max(0.5 * (cm - cp) / den, -0.5), 0.5)
 
 
 def _moments(values: np.ndarray) -> dict:
@@ -388,47 +296,224 @@ def format_report(stats: dict, title: str | None = None) -> str:
     return "\n".join(lines) + "\n"
 
 
-@njit(cache=True)
-def _cubic_weights(f):
-    """Keys bicubic convolution weights (a = -0.5) of taps -1, 0, 1, 2 at fraction f."""
-    w = np.empty(4)
-    w[0] = ((-0.5 * f + 1.0) * f - 0.5) * f
-    w[1] = (1.5 * f - 2.5) * f * f + 1.0
-    w[2] = ((-1.5 * f + 2.0) * f + 0.5) * f
-    w[3] = (0.5 * f - 0.5) * f * f
-    return w
 
 
+# --- numba kernels -----------------------------------------------------------------------------
+
 @njit(cache=True)
-def _zncc_at(a, b, valid, i, j, sy, sx, half):
-    """ZNCC of A's window at (i, j) with B's window displaced by (sy, sx) px, B sampled by
-    bicubic interpolation; -2 when a tap leaves the image or touches background."""
+def _window_moments(img, valid, half):
+    """Mean and 1/standard deviation of each statistical window; 1/sd is NaN where the window
+    leaves the image or touches background, 0 for a flat window (ZNCC = 0)."""
+    height, width = img.shape
+    n = (2 * half + 1) ** 2
+    mean = np.zeros((height, width))
+    inv_sd = np.full((height, width), np.nan)
+    for i in range(half, height - half):
+        for j in range(half, width - half):
+            s = 0.0
+            s2 = 0.0
+            good = True
+            for r in range(-half, half + 1):
+                for c in range(-half, half + 1):
+                    if not valid[i + r, j + c]:
+                        good = False
+                    v = img[i + r, j + c]
+                    s += v
+                    s2 += v * v
+            if not good:
+                continue
+            m = s / n
+            var = s2 / n - m * m
+            mean[i, j] = m
+            inv_sd[i, j] = 1.0 / math.sqrt(var) if var > 1e-12 * (s2 / n + 1e-300) else 0.0
+    return mean, inv_sd
+
+
+@njit(cache=True, parallel=True)
+def _integer_search(a, b, mean_a, isd_a, mean_b, isd_b, rows, half, hy, hx, best_val, best_idx):
+    """Whole-pixel ZNCC peak over the exploration window for the given lines (section 4.6).
+
+    Blocks of lines run in parallel; inside a block the 5-line column sums of A x B(displaced)
+    are updated line by line (add the new line, drop the old), so one displacement costs two
+    products per pixel. ``best_val``/``best_idx`` (lines of ``rows`` x width) receive the peak.
+    """
     height, width = a.shape
+    nx = 2 * hx + 1
+    inv_n = 1.0 / (2 * half + 1) ** 2
+    nblocks = (rows.shape[0] + _BLOCK - 1) // _BLOCK
+    for blk in prange(nblocks):
+        k0 = blk * _BLOCK
+        k1 = min(rows.shape[0], k0 + _BLOCK)
+        colsum = np.zeros(width)
+        boxsum = np.zeros(width)
+        for v in range(-hy, hy + 1):
+            for u in range(-hx, hx + 1):
+                d = (v + hy) * nx + (u + hx)
+                j0, j1 = max(half, half - u), min(width - half, width - half - u)
+                c0, c1 = j0 - half, j1 + half
+                prev = -10
+                for k in range(k0, k1):
+                    i = rows[k]
+                    ib = i + v
+                    if i - half < 0 or i + half >= height or ib - half < 0 or ib + half >= height:
+                        prev = -10
+                        continue
+                    # 1-D views and loops from 0 let LLVM vectorise (no negative-index check)
+                    cs = colsum[c0:c1]
+                    if prev == i - 1:
+                        _slide(cs, a[i + half, c0:c1], b[ib + half, c0 + u : c1 + u],
+                               a[i - half - 1, c0:c1], b[ib - half - 1, c0 + u : c1 + u])
+                    else:
+                        cs[:] = 0.0
+                        for r in range(-half, half + 1):
+                            _accumulate(cs, a[i + r, c0:c1], b[ib + r, c0 + u : c1 + u])
+                    prev = i
+                    bs = boxsum[j0:j1]
+                    bs[:] = 0.0
+                    for c in range(2 * half + 1):
+                        _accumulate_sum(bs, colsum[j0 - half + c : j1 - half + c])
+                    _keep_best(bs, inv_n, mean_a[i, j0:j1], isd_a[i, j0:j1],
+                               mean_b[ib, j0 + u : j1 + u], isd_b[ib, j0 + u : j1 + u],
+                               best_val[k, j0:j1], best_idx[k, j0:j1], d)
+
+
+@njit(cache=True)
+def _accumulate(cs, aa, bb):
+    """cs += A B (one line of products)."""
+    for t in range(cs.shape[0]):
+        cs[t] += aa[t] * bb[t]
+
+
+@njit(cache=True)
+def _accumulate_sum(bs, cs):
+    """bs += cs."""
+    for t in range(bs.shape[0]):
+        bs[t] += cs[t]
+
+
+@njit(cache=True)
+def _slide(cs, a_new, b_new, a_old, b_old):
+    """Move the column sums one line down: add the new line's products, drop the old ones."""
+    for t in range(cs.shape[0]):
+        cs[t] += a_new[t] * b_new[t] - a_old[t] * b_old[t]
+
+
+@njit(cache=True)
+def _keep_best(bs, inv_n, ma, ia, mb, ib, best_val, best_idx, d):
+    """ZNCC = (sum/n - mean_a mean_b) / (sd_a sd_b) on one line; keep the best displacement."""
+    for t in range(bs.shape[0]):
+        z = (bs[t] * inv_n - ma[t] * mb[t]) * ia[t] * ib[t]
+        better = z > best_val[t]
+        best_val[t] = z if better else best_val[t]
+        best_idx[t] = d if better else best_idx[t]
+
+
+@njit(cache=True)
+def _zncc_direct(a, b, mean_a, isd_a, mean_b, isd_b, i, j, v, u, half):
+    """ZNCC of A's window at (i, j) with B's window at (i + v, j + u); NaN off the image."""
+    height, width = a.shape
+    ib, jb = i + v, j + u
+    if ib - half < 0 or ib + half >= height or jb - half < 0 or jb + half >= width:
+        return np.nan
+    s = 0.0
+    for r in range(-half, half + 1):
+        for c in range(-half, half + 1):
+            s += a[i + r, j + c] * b[ib + r, jb + c]
+    n = (2 * half + 1) ** 2
+    return (s / n - mean_a[i, j] * mean_b[ib, jb]) * isd_a[i, j] * isd_b[ib, jb]
+
+
+@njit(cache=True, parallel=True)
+def _peaks(a, b, mean_a, isd_a, mean_b, isd_b, image, rows, half, hy, hx, step,
+           best_val, best_idx, dx, dy, conf, limit):
+    """Parabola refinement of each whole-pixel peak, confidence (%), on-limit bits (1 X, 2 Y)."""
+    width = a.shape[1]
+    nx, ny = 2 * hx + 1, 2 * hy + 1
+    for k in prange(rows.shape[0]):
+        i = rows[k]
+        for j in range(0, width, step):
+            if not image[i, j]:
+                continue
+            c0 = best_val[k, j]
+            if not c0 > -2.0:  # no matchable window: zero displacement, zero confidence
+                dx[i, j], dy[i, j], conf[i, j], limit[i, j] = 0.0, 0.0, 0.0, 0
+                continue
+            v, u = best_idx[k, j] // nx - hy, best_idx[k, j] % nx - hx
+            bits = 0
+            fx = fy = 0.0
+            if u == -hx or u == hx:
+                bits += 1
+            else:
+                fx = _parabola(_zncc_direct(a, b, mean_a, isd_a, mean_b, isd_b, i, j, v, u - 1,
+                                            half), c0,
+                               _zncc_direct(a, b, mean_a, isd_a, mean_b, isd_b, i, j, v, u + 1,
+                                            half))
+            if v == -hy or v == hy or ny == 1:
+                bits += 2 if ny > 1 else 0
+            else:
+                fy = _parabola(_zncc_direct(a, b, mean_a, isd_a, mean_b, isd_b, i, j, v - 1, u,
+                                            half), c0,
+                               _zncc_direct(a, b, mean_a, isd_a, mean_b, isd_b, i, j, v + 1, u,
+                                            half))
+            dx[i, j] = u + fx
+            dy[i, j] = v + fy
+            conf[i, j] = min(max(c0, 0.0), 1.0) * 100.0
+            limit[i, j] = bits
+
+
+@njit(cache=True)
+def _parabola(cm, c0, cp):
+    """Vertex offset of the parabola through (-1, cm), (0, c0), (1, cp), within [-0.5, 0.5]."""
+    if not (cm > -2.0 and cp > -2.0):
+        return 0.0
+    den = cm - 2.0 * c0 + cp
+    if den >= 0.0:
+        return 0.0
+    return min(max(0.5 * (cm - cp) / den, -0.5), 0.5)
+
+
+@njit(cache=True)
+def _cubic(f, m):
+    """Keys bicubic convolution weight (a = -0.5) of tap m in (-1, 0, 1, 2) at fraction f."""
+    if m == -1:
+        return ((-0.5 * f + 1.0) * f - 0.5) * f
+    if m == 0:
+        return (1.5 * f - 2.5) * f * f + 1.0
+    if m == 1:
+        return ((-1.5 * f + 2.0) * f + 0.5) * f
+    return (0.5 * f - 0.5) * f * f
+
+
+@njit(cache=True)
+def _zncc_at(a, b, invalid_sum, i, j, sy, sx, half, tmp):
+    """ZNCC of A's window at (i, j) with B's window displaced by (sy, sx) px, B sampled by
+    bicubic interpolation; NaN when a tap leaves the image or touches background.
+    ``invalid_sum`` is the summed-area table of background pixels; ``tmp`` a scratch array."""
+    height, width = a.shape
+    size = 2 * half + 1
     by, bx = int(math.floor(sy + 1e-9)), int(math.floor(sx + 1e-9))
     fy, fx = max(sy - by, 0.0), max(sx - bx, 0.0)
-    wy, wx = _cubic_weights(fy), _cubic_weights(fx)
-    r0, c0 = i + by - half - 1, j + bx - half - 1
-    size = 2 * half + 1
-    # taps with a zero weight (whole-pixel shifts) may lie outside the image
-    ly, hy_ = (0, 3) if fy > 1e-9 else (1, 1)
-    lx, hx_ = (0, 3) if fx > 1e-9 else (1, 1)
-    if r0 + ly < 0 or c0 + lx < 0 or r0 + size - 1 + hy_ >= height \
-            or c0 + size - 1 + hx_ >= width:
-        return -2.0
-    tmp = np.zeros((size + 3, size))
-    for r in range(ly, size + hy_):
+    ly, hy_ = (-1, 2) if fy > 1e-9 else (0, 0)  # taps with a zero weight are not read
+    lx, hx_ = (-1, 2) if fx > 1e-9 else (0, 0)
+    r0, r1 = i + by - half + ly, i + by + half + hy_ + 1
+    c0, c1 = j + bx - half + lx, j + bx + half + hx_ + 1
+    if r0 < 0 or c0 < 0 or r1 > height or c1 > width:
+        return np.nan
+    if invalid_sum[r1, c1] - invalid_sum[r0, c1] - invalid_sum[r1, c0] + invalid_sum[r0, c0] > 0:
+        return np.nan
+    nrow = r1 - r0
+    for r in range(nrow):
         for c in range(size):
             s = 0.0
             for m in range(lx, hx_ + 1):
-                if not valid[r0 + r, c0 + c + m]:
-                    return -2.0
-                s += wx[m] * b[r0 + r, c0 + c + m]
+                s += _cubic(fx, m) * b[r0 + r, j + bx - half + c + m]
             tmp[r, c] = s
     sa = sb = saa = sbb = sab = 0.0
     for r in range(size):
         for c in range(size):
-            vb = wy[0] * tmp[r, c] + wy[1] * tmp[r + 1, c] + wy[2] * tmp[r + 2, c] \
-                + wy[3] * tmp[r + 3, c]
+            vb = 0.0
+            for m in range(ly, hy_ + 1):
+                vb += _cubic(fy, m) * tmp[r + m - ly, c]
             va = a[i - half + r, j - half + c]
             sa += va
             sb += vb
@@ -443,39 +528,51 @@ def _zncc_at(a, b, valid, i, j, sy, sx, half):
 
 
 @njit(cache=True, parallel=True)
-def _refine_on_grid(a, b, valid, ii, jj, half, hy, hx, res, dx, dy, conf):
-    """Climb the ZNCC on the ``res`` grid from the parabola's estimate (8-neighbourhood moves,
-    within 1 px of the start and inside the exploration window); write the refined peak."""
-    span = int(round(1.0 / res))
-    for k in prange(ii.shape[0]):
-        i, j = ii[k], jj[k]
-        ty0, tx0 = int(round(dy[i, j] / res)), int(round(dx[i, j] / res))
-        seen = np.full((2 * span + 1, 2 * span + 1), -3.0)
-        cy, cx = 0, 0
-        best = _zncc_at(a, b, valid, i, j, ty0 * res, tx0 * res, half)
-        if best <= -2.0:  # interpolation taps off the image: start from the whole-pixel peak
-            ty0, tx0 = int(round(round(dy[i, j]) / res)), int(round(round(dx[i, j]) / res))
-            best = _zncc_at(a, b, valid, i, j, ty0 * res, tx0 * res, half)
-        seen[span, span] = best
-        for _ in range(4 * span):
-            my, mx, mbest = cy, cx, best
-            for oy in range(-1, 2):
-                for ox in range(-1, 2):
-                    ny, nx = cy + oy, cx + ox
-                    if abs(ny) > span or abs(nx) > span:
-                        continue
-                    if abs((ty0 + ny) * res) > hy or abs((tx0 + nx) * res) > hx:
-                        continue
-                    c = seen[ny + span, nx + span]
-                    if c < -2.5:
-                        c = _zncc_at(a, b, valid, i, j, (ty0 + ny) * res, (tx0 + nx) * res, half)
-                        seen[ny + span, nx + span] = c
-                    if c > mbest:
-                        my, mx, mbest = ny, nx, c
-            if my == cy and mx == cx:
-                break
-            cy, cx, best = my, mx, mbest
-        if best > -2.0:
-            dy[i, j] = (ty0 + cy) * res
-            dx[i, j] = (tx0 + cx) * res
-            conf[i, j] = min(max(best, 0.0), 1.0) * 100.0
+def _refine_on_grid(a, b, invalid_sum, ii, jj, half, hy, hx, res, dx, dy, conf):
+    """Climb the ZNCC on the ``res`` grid (8-neighbour moves, within 0.5 px of the parabola's
+    estimate and inside the exploration window); write the refined peak and its confidence."""
+    span = max(int(round(0.5 / res)), 1)
+    n = ii.shape[0]
+    nchunks = min(n, 64)
+    for q in prange(nchunks):
+        tmp = np.empty((2 * half + 4, 2 * half + 1))
+        seen = np.empty((2 * span + 1, 2 * span + 1))
+        for k in range(q * n // nchunks, (q + 1) * n // nchunks):
+            _climb(a, b, invalid_sum, ii[k], jj[k], half, hy, hx, res, span, tmp, seen,
+                   dx, dy, conf)
+
+
+@njit(cache=True)
+def _climb(a, b, invalid_sum, i, j, half, hy, hx, res, span, tmp, seen, dx, dy, conf):
+    """Hill climbing of one pixel on the sub-pixel grid, memoised in ``seen``."""
+    ty0, tx0 = int(round(dy[i, j] / res)), int(round(dx[i, j] / res))
+    best = _zncc_at(a, b, invalid_sum, i, j, ty0 * res, tx0 * res, half, tmp)
+    if not best > -2.0:  # taps off the image: start from the whole-pixel peak
+        ty0, tx0 = int(round(round(dy[i, j]) / res)), int(round(round(dx[i, j]) / res))
+        best = _zncc_at(a, b, invalid_sum, i, j, ty0 * res, tx0 * res, half, tmp)
+        if not best > -2.0:
+            return
+    seen[:, :] = -3.0
+    seen[span, span] = best
+    cy = cx = 0
+    for _ in range(4 * span):
+        my, mx, mbest = cy, cx, best
+        for o in range(9):  # 8-neighbourhood: ZNCC ridges may run diagonally
+            ny, nx = cy + o // 3 - 1, cx + o % 3 - 1
+            if abs(ny) > span or abs(nx) > span:
+                continue
+            if abs((ty0 + ny) * res) > hy or abs((tx0 + nx) * res) > hx:
+                continue
+            c = seen[ny + span, nx + span]
+            if c < -2.5:
+                c = _zncc_at(a, b, invalid_sum, i, j, (ty0 + ny) * res, (tx0 + nx) * res,
+                             half, tmp)
+                seen[ny + span, nx + span] = c
+            if c > mbest:
+                my, mx, mbest = ny, nx, c
+        if my == cy and mx == cx:
+            break
+        cy, cx, best = my, mx, mbest
+    dy[i, j] = (ty0 + cy) * res
+    dx[i, j] = (tx0 + cx) * res
+    conf[i, j] = min(max(best, 0.0), 1.0) * 100.0

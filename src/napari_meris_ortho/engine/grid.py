@@ -15,7 +15,10 @@ Map-to-geographic conversion (``OutputGrid.lonlat``):
   ``tolerance / 4``; every cell whose measured midpoint error still exceeds ``tolerance / 2``
   (or whose corners are outside the projection) is computed exactly with pyproj, pixel by pixel.
   ``OutputGrid.interpolation_stats`` reports the step, the largest measured error and the number
-  of exact fallback pixels.
+  of exact fallback pixels. Measured over an FR footprint (~3700 x 3300 px at 260 m) against
+  pyproj at every pixel: a 64-px primary grid errs by 0.024 px in UTM 31/33 and LAEA
+  (EPSG:3035); the chosen step (20 px) gives at most 0.0023 px; EPSG:32662 is exact (step 256).
+  The interpolation takes about a third of the time of one pyproj call per pixel.
 
 Default grid (``default_grid``): the smallest rectangle holding the segment boundary (section 3.1,
 fig. 19). Pixel size: MERSYN's nominal FR/RR size, 260 m / 1040 m in a metric CRS and, for a

@@ -253,11 +253,16 @@ class GetasseSource(DemSource):
 
     def _fetch(self, rows, cols):
         out = np.full(rows.size, np.nan)
-        key = (rows // GETASSE_POSTS) * 1000 + cols // GETASSE_POSTS
-        for k in np.unique(key):
-            tile = self.tiles.get((int(k) // 1000, int(k) % 1000))
+        n_tc = self.n_cols // GETASSE_POSTS
+        key = (rows // GETASSE_POSTS) * n_tc + cols // GETASSE_POSTS
+        present = np.flatnonzero(np.bincount(key, minlength=1))
+        for k in present:
+            tile = self.tiles.get((int(k) // n_tc, int(k) % n_tc))
             if tile is None:
                 continue
+            if present.size == 1:
+                out[:] = tile.values(rows % GETASSE_POSTS, cols % GETASSE_POSTS)
+                break
             m = key == k
             out[m] = tile.values(rows[m] % GETASSE_POSTS, cols[m] % GETASSE_POSTS)
         return out

@@ -52,7 +52,7 @@ def write_geotiff(
     from rasterio.errors import RasterioError
 
     out = Path(path)
-    bands = list(bands)
+    bands = [np.asarray(b) for b in bands]
     if not bands:
         raise OutputError(f"{out}: no band to write")
     for i, b in enumerate(bands):
@@ -72,7 +72,7 @@ def write_geotiff(
         with atomic_path(out, suffix=".tif") as tmp, rasterio.open(tmp, "w", **profile) as ds:
             ds.update_tags(**_tag_values(metadata))
             for i, b in enumerate(bands, start=1):
-                ds.write(np.asarray(b).astype(dt, copy=False), i)
+                ds.write(b.astype(dt, copy=False), i)
                 if descriptions is not None:
                     ds.set_band_description(i, str(descriptions[i - 1]))
                 if band_metadata is not None:

@@ -174,14 +174,23 @@ def make_ground_truth(terrain: Terrain, seed: int, sun_zenith: float, sun_azimut
 
 
 @njit(cache=True)
-def _post_radiance(cover: np.ndarray, brightness: np.ndarray, cloud: np.ndarray,
-                   spectra: np.ndarray, cloud_spec: np.ndarray, r: int, c: int, b: int) -> float:
-    ground = 0.0
-    for k in range(spectra.shape[0]):
-        ground += cover[k, r, c] * spectra[k, b]
-    ground *= brightness[r, c] / 255.0
-    cl = cloud[r, c] / 255.0
-    return (1.0 - cl) * ground + cl * cloud_spec[b]
+def _mixture(cover: np.ndarray, brightness: np.ndarray, cloud: np.ndarray, r: int, c: int,
+             fx: float, fy: float, acc: np.ndarray) -> float:
+    """Bilinear weights folded into the class amounts: acc[k] = sum over the 4 posts of
+    w (1 - cloud) brightness cover_k; returns the weighted cloud amount. Then the radiance of
+    band b is sum_k acc[k] spectrum[k, b] + cloud * cloud_spectrum[b]."""
+    for k in range(acc.size):
+        acc[k] = 0.0
+    cl_sum = 0.0
+    for dr in range(2):
+        for dc in range(2):
+            w = (fy if dr else 1.0 - fy) * (fx if dc else 1.0 - fx)
+            cl = cloud[r + dr, c + dc] / 255.0
+            g = w * (1.0 - cl) * brightness[r + dr, c + dc] / 255.0
+            for k in range(acc.size):
+                acc[k] += g * cover[k, r + dr, c + dc]
+            cl_sum += w * cl
+    return cl_sum
 
 
 @njit(cache=True)
@@ -205,18 +214,18 @@ def truth_radiance_kernel(lon: np.ndarray, lat: np.ndarray, bands: np.ndarray,
     nr, nc = brightness.shape
     for i in prange(lon.size):
         r, c, fx, fy = _weights(geo, nr, nc, lon[i], lat[i])
-        for k in range(bands.size):
-            if r < 0:
+        if r < 0:
+            for k in range(bands.size):
                 out[k, i] = np.nan
-                continue
+            continue
+        acc = np.empty(spectra.shape[0])
+        cl = _mixture(cover, brightness, cloud, r, c, fx, fy, acc)
+        for k in range(bands.size):
             b = bands[k]
-            v00 = _post_radiance(cover, brightness, cloud, spectra, cloud_spec, r, c, b)
-            v01 = _post_radiance(cover, brightness, cloud, spectra, cloud_spec, r, c + 1, b)
-            v10 = _post_radiance(cover, brightness, cloud, spectra, cloud_spec, r + 1, c, b)
-            v11 = _post_radiance(cover, brightness, cloud, spectra, cloud_spec, r + 1, c + 1, b)
-            top = v00 * (1.0 - fx) + v01 * fx
-            bot = v10 * (1.0 - fx) + v11 * fx
-            out[k, i] = top * (1.0 - fy) + bot * fy
+            v = cl * cloud_spec[b]
+            for m in range(acc.size):
+                v += acc[m] * spectra[m, b]
+            out[k, i] = v
 
 
 @njit(cache=True)
@@ -248,14 +257,12 @@ def product_radiometry(t_lon: np.ndarray, t_lat: np.ndarray, glint: np.ndarray,
                     counts[b, i, j] = 0
                 flags[i, j] = 128
                 continue
+            acc = np.empty(spectra.shape[0])
+            cl = _mixture(cover, brightness, cloud, r, c, fx, fy, acc)
             for b in range(15):
-                v00 = _post_radiance(cover, brightness, cloud, spectra, cloud_spec, r, c, b)
-                v01 = _post_radiance(cover, brightness, cloud, spectra, cloud_spec, r, c + 1, b)
-                v10 = _post_radiance(cover, brightness, cloud, spectra, cloud_spec, r + 1, c, b)
-                v11 = _post_radiance(cover, brightness, cloud, spectra, cloud_spec, r + 1,
-                                     c + 1, b)
-                rad = ((v00 * (1.0 - fx) + v01 * fx) * (1.0 - fy)
-                       + (v10 * (1.0 - fx) + v11 * fx) * fy)
+                rad = cl * cloud_spec[b]
+                for m in range(acc.size):
+                    rad += acc[m] * spectra[m, b]
                 cnt = math.floor(rad / sf_rad[b] + 0.5)
                 counts[b, i, j] = min(max(cnt, 1), 65535)
             pr, pc = nearest_post(geo, nr, nc, t_lon[i, j], t_lat[i, j])

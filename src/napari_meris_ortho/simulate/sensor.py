@@ -248,6 +248,36 @@ def _height_above_dem(dem: np.ndarray, geo: np.ndarray, p: np.ndarray) -> float:
 
 
 @njit(cache=True)
+def _refine_crossing(s0: np.ndarray, d: np.ndarray, dem: np.ndarray, geo: np.ndarray,
+                     lo: float, f_lo: float, hi: float, f_hi: float) -> float:
+    """Root of height-above-DEM along the ray inside [lo, hi] (f_lo > 0 >= f_hi): Illinois
+    false position, safe on the piecewise-bilinear surface (to 1e-5 m along the ray)."""
+    p = np.empty(3)
+    side = 0
+    s = hi
+    for _ in range(100):
+        s = (lo * f_hi - hi * f_lo) / (f_hi - f_lo)
+        if not (lo < s < hi):
+            s = 0.5 * (lo + hi)
+        for k in range(3):
+            p[k] = s0[k] + s * d[k]
+        f = _height_above_dem(dem, geo, p)
+        if f > 0.0:
+            lo, f_lo = s, f
+            if side == 1:
+                f_hi *= 0.5
+            side = 1
+        else:
+            hi, f_hi = s, f
+            if side == -1:
+                f_lo *= 0.5
+            side = -1
+        if hi - lo < 1e-5 or abs(f) < 1e-6:
+            break
+    return s
+
+
+@njit(cache=True)
 def terrain_intersection(s0: np.ndarray, d: np.ndarray, dem: np.ndarray, geo: np.ndarray,
                          bmax: np.ndarray, sin_zenith: float, out: np.ndarray) -> None:
     """First intersection T of the ray S + s d with the bilinear DEM surface (look-point method).
@@ -262,6 +292,7 @@ def terrain_intersection(s0: np.ndarray, d: np.ndarray, dem: np.ndarray, geo: np
     sz = max(sin_zenith, 1e-3)
     fine = 0.5 * geo[D_SPMIN] / sz
     jump_lim = 0.75 * geo[D_BLOCK] * geo[D_SPMIN] / sz
+    f_prev = np.inf
     while s < s_end:
         for k in range(3):
             p[k] = s0[k] + s * d[k]
@@ -269,22 +300,18 @@ def terrain_intersection(s0: np.ndarray, d: np.ndarray, dem: np.ndarray, geo: np
         room = h - _block_max(bmax, geo, lon, lat)
         if room > fine:
             s = min(s + min(room, jump_lim), s_end)
+            f_prev = np.inf
             continue
+        if f_prev == np.inf:
+            f_prev = _height_above_dem(dem, geo, p)
         s_new = min(s + fine, s_end)
         for k in range(3):
             p[k] = s0[k] + s_new * d[k]
-        if _height_above_dem(dem, geo, p) <= 0.0:
-            lo, hi = s, s_new
-            while hi - lo > 1e-5:
-                mid = 0.5 * (lo + hi)
-                for k in range(3):
-                    p[k] = s0[k] + mid * d[k]
-                if _height_above_dem(dem, geo, p) > 0.0:
-                    lo = mid
-                else:
-                    hi = mid
-            s = 0.5 * (lo + hi)
+        f_new = _height_above_dem(dem, geo, p)
+        if f_new <= 0.0:
+            s = _refine_crossing(s0, d, dem, geo, s, f_prev, s_new, f_new)
             break
+        f_prev = f_new
         s = s_new
     for k in range(3):
         p[k] = s0[k] + s * d[k]
@@ -324,11 +351,49 @@ def _azimuth_of(vec: np.ndarray, lon: float, lat: float) -> float:
     return math.degrees(math.atan2(east, north)) % 360.0
 
 
+@njit(cache=True)
+def _column_angles(basis: np.ndarray, grid: np.ndarray, cols: np.ndarray,
+                   psis: np.ndarray, gs: np.ndarray, n: int, out: np.ndarray) -> None:
+    """psi of every column: exact (Newton on the arc length) at nodes at most NODE_STEP columns
+    apart and at the last one, cubic Hermite in the ground distance in between (error below
+    1e-4 m)."""
+    nc = cols.size
+    j = 0
+    while j < nc:
+        k = min(j + 1, nc - 1)
+        while k < nc - 1 and cols[k + 1] - cols[j] <= NODE_STEP:
+            k += 1
+        ga = (grid[G_FIRST] + cols[j]) * grid[G_SPACING]
+        pa = _psi_from_table(basis, psis, gs, n, ga)
+        out[j] = pa
+        if k == j:
+            break
+        gb = (grid[G_FIRST] + cols[k]) * grid[G_SPACING]
+        pb = _psi_from_table(basis, psis, gs, n, gb)
+        da = 1.0 / arc_rate(basis, pa)
+        db = 1.0 / arc_rate(basis, pb)
+        hg = gb - ga
+        for m in range(j + 1, k):
+            u = ((grid[G_FIRST] + cols[m]) * grid[G_SPACING] - ga) / hg
+            h00 = (1.0 + 2.0 * u) * (1.0 - u) ** 2
+            h10 = u * (1.0 - u) ** 2
+            h01 = u * u * (3.0 - 2.0 * u)
+            h11 = u * u * (u - 1.0)
+            out[m] = h00 * pa + h10 * hg * da + h01 * pb + h11 * hg * db
+        out[k] = pb
+        j = k
+        if k == nc - 1:
+            break
+
+
+NODE_STEP = 16
+
+
 @njit(cache=True, parallel=True)
 def locate_pixels(orb: np.ndarray, grid: np.ndarray, lines: np.ndarray, cols: np.ndarray,
                   dem: np.ndarray, geo: np.ndarray, bmax: np.ndarray, terrain: bool,
                   side: float, out: np.ndarray) -> None:
-    """Direct model of the simulator for product pixels (lines x cols).
+    """Direct model of the simulator for product pixels (lines x cols, cols increasing).
 
     ``out[i, j]`` receives: E lon, E lat, view zenith, view azimuth, T lon, T lat, T h
     (T only when ``terrain``; otherwise NaN).
@@ -343,6 +408,8 @@ def locate_pixels(orb: np.ndarray, grid: np.ndarray, lines: np.ndarray, cols: np
         psis = np.empty(400)
         gs = np.empty(400)
         n = _line_table(basis, g_lo, g_hi, psis, gs)
+        col_psi = np.empty(nc)
+        _column_angles(basis, grid, cols, psis, gs, n, col_psi)
         s0 = basis[0].copy()
         d = np.empty(3)
         e = np.empty(3)
@@ -351,9 +418,7 @@ def locate_pixels(orb: np.ndarray, grid: np.ndarray, lines: np.ndarray, cols: np
         for k in range(3):
             side_vec[k] = -side * basis[3, k]
         for j in range(nc):
-            g = (grid[G_FIRST] + cols[j]) * grid[G_SPACING]
-            psi = _psi_from_table(basis, psis, gs, n, g)
-            look_direction(basis, psi, d)
+            look_direction(basis, col_psi[j], d)
             s_e = ray_ellipsoid(s0, d, 0.0)
             for k in range(3):
                 e[k] = s0[k] + s_e * d[k]
