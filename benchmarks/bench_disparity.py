@@ -5,6 +5,9 @@
 The pair is a smoothed random texture (a 5 x 5 window has MERIS-FR-like contrast) and the same
 texture moved by (dX, dY) = (0.3, -0.6) px with a Fourier shift. Prints one table row per
 sub-pixel mode: time, pixels per second, candidates and the recovered global displacement.
+The clean pair makes every pixel a candidate, the worst case of the 0.1-px grid refinement; the
+last row adds noise to B so that, as with real image pairs (section 4.6: 37 of 74771 pixels),
+few pixels reach the 95 % threshold and the refinement costs little.
 """
 
 from __future__ import annotations
@@ -46,15 +49,18 @@ def main() -> None:
     a, b = image_pair(args.lines, args.columns)
     print(f"ZNCC disparity, {args.lines} x {args.columns} px, stat. window 5, exploration 9 x 19, "
           f"{numba.get_num_threads()} numba threads, true shift (dX, dY) = {SHIFT}")
-    print(f"{'sub-pixel':<10}{'time (s)':>10}{'Mpx/s':>8}{'candidates':>12}"
+    print("(CPU s = process time of all threads: the cost on a machine shared with other jobs)")
+    print(f"{'sub-pixel':<10}{'wall (s)':>10}{'CPU (s)':>10}{'Mpx/s':>8}{'candidates':>12}"
           f"{'mean dX':>10}{'mean dY':>10}")
-    for mode in ("parabola", "grid"):
-        t0 = time.perf_counter()
-        r = disparity(a, b, subpixel=mode, pixel_size_m=(260.0, 260.0))
-        dt = time.perf_counter() - t0
+    noisy = b + np.random.default_rng(1).normal(0.0, 4.0, b.shape).astype(np.float32)
+    for label, mode, second in (("parabola", "parabola", b), ("grid", "grid", b),
+                                ("grid+noise", "grid", noisy)):
+        t0, c0 = time.perf_counter(), time.process_time()
+        r = disparity(a, second, subpixel=mode, pixel_size_m=(260.0, 260.0))
+        dt, dc = time.perf_counter() - t0, time.process_time() - c0
         gx, gy = r.global_displacement
-        print(f"{mode:<10}{dt:>10.2f}{a.size / dt / 1e6:>8.2f}{r.stats['candidate_pixels']:>12}"
-              f"{gx:>10.3f}{gy:>10.3f}")
+        print(f"{label:<10}{dt:>10.2f}{dc:>10.2f}{a.size / dt / 1e6:>8.2f}"
+              f"{r.stats['candidate_pixels']:>12}{gx:>10.3f}{gy:>10.3f}")
 
 
 if __name__ == "__main__":

@@ -44,9 +44,11 @@ class PeakRss:
         self.peak = max(self.peak, self.proc.memory_info().rss)
 
 
-def accuracy(scene, result) -> dict[str, float]:
-    """RMS / max distance (product px) to the simulator's true antecedent of the output points."""
-    ok = result.valid
+def accuracy(scene, result, stride: int = 5) -> dict[str, float]:
+    """RMS / max distance (product px) to the simulator's true antecedent, every ``stride``-th
+    mapped output point (the truth is an exact but slow line-of-sight solver)."""
+    ok = result.valid.copy()
+    ok.ravel()[np.arange(ok.size) % stride != 0] = False
     lon, lat = result.grid.lonlat()
     h = scene.dem_height(lon[ok], lat[ok])
     tl, tc = scene.true_antecedent(lon[ok], lat[ok], h)
@@ -94,7 +96,7 @@ def run_pyresample(scene) -> dict:
     data = np.dstack([prod.radiance(b) for b in range(1, 16)])
     swath = geometry.SwathDefinition(lons=lon, lats=lat)
     x0, y0, x1, y1 = grid.bounds
-    area = geometry.AreaDefinition("out", "out", "out", grid.crs.to_dict() or "EPSG:4326",
+    area = geometry.AreaDefinition("out", "out", "out", grid.crs,
                                    grid.width, grid.height, (x0, y0, x1, y1))
     radius = 2.0 * prod.resolution.column_spacing_m
     with PeakRss() as mem:
@@ -126,9 +128,12 @@ def main(argv: list[str] | None = None) -> int:
             ("dem handbook search", dict(dems=[dem], method="handbook", tolerance=0.1))]
     rows = []
     for label, kw in runs:
-        rows.append(run_engine(scene, label, kw, False))
+        # the accuracy run (one band) also warms this configuration up; then best of two
+        acc = run_engine(scene, label, {**kw, "bands": [7]}, not args.no_accuracy)
+        timed = [run_engine(scene, label, kw, False) for _ in range(2)]
+        rows.append(min(timed, key=lambda r: r["engine_s"]))
+        rows[-1]["peak_rss_mb"] = max(r["peak_rss_mb"] for r in timed)
         if not args.no_accuracy:
-            acc = run_engine(scene, label, {**kw, "bands": [7]}, True)
             rows[-1].update({k: acc[k] for k in ("rms_px", "max_px", "p99_px")})
         rows[-1]["mersyn_s"] = MERSYN_SECONDS.get(label.split()[0]) if " " not in label else None
     if not args.no_pyresample:

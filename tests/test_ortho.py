@@ -206,8 +206,9 @@ def test_bad_inputs(files, tmp_path):
         orthorectify(prod, elevation="srtm")
 
 
-def _truth_error(scene, r):
-    ok = r.valid
+def _truth_error(scene, r, stride=7):
+    ok = r.valid.copy()
+    ok.ravel()[np.arange(ok.size) % stride != 0] = False  # every 7th point: the truth is slow
     lon, lat = r.grid.lonlat()
     h = scene.dem_height(lon[ok], lat[ok])
     tl, tc = scene.true_antecedent(lon[ok], lat[ok], h)

@@ -14,6 +14,7 @@ import rasterio
 from napari_meris_ortho.engine.grid import OutputGrid
 from napari_meris_ortho.engine.synthesis import ndvi_encode
 from napari_meris_ortho.errors import OptionsError
+from napari_meris_ortho.ortho import orthorectify
 from napari_meris_ortho.simulate.radiometry import CLOUD_SPECTRUM
 from napari_meris_ortho.synthesis import (
     _commit,
@@ -52,7 +53,7 @@ def layers(path) -> dict[str, np.ndarray]:
 
 def stack(path) -> np.ndarray:
     store = open_synthesis(path)
-    return np.stack([store.read(f"band_{b:02d}") for b in store.bands])
+    return np.stack([store.band(b) for b in store.bands])
 
 
 @pytest.fixture(scope="module")
@@ -60,9 +61,8 @@ def products() -> dict[str, str]:
     out = {"clear": scene_product()}
     for k in (1, 2, 3):
         out[f"cloudy{k}"] = scene_product({"fraction": 0.4, "scale_km": 12.0, "seed": 10 * k})
-    # adjacent orbits without random INVALID pixels (they would hole the mosaic)
-    out["east"] = scene_product(invalid_fraction=0.0)
-    out["west"] = scene_product(orbit_shift_deg=-0.6, invalid_fraction=0.0)
+    out["east"] = out["clear"]
+    out["west"] = scene_product(orbit_shift_deg=-0.6)
     return out
 
 
@@ -149,6 +149,14 @@ def test_options_refused_like_mersyn(tmp_path) -> None:
         synthesize([product], tmp_path / "new", algorithm="mean")
     with pytest.raises(OptionsError, match="bands"):
         synthesize([product], tmp_path / "new", bands=[0, 16])
+    with pytest.raises(OptionsError, match="sampling"):
+        synthesize([product], tmp_path / "new", sampling="sinc")
+    with pytest.raises(OptionsError, match="elevation"):
+        synthesize([product], tmp_path / "new", elevation="sea")
+    with pytest.raises(OptionsError, match="DEMs need elevation"):
+        synthesize([product], tmp_path / "new", elevation="none", dems=["x.tif"])
+    with pytest.raises(OptionsError, match="CRS"):
+        synthesize([product], tmp_path / "new", crs="EPSG:99999999")
     with pytest.raises(OptionsError, match="not a synthesis"):
         synthesize([product], tmp_path / "new", input=tmp_path)
     (tmp_path / "syn" / "synthesis.json").write_text(json.dumps({"format": "other"}))
@@ -208,6 +216,9 @@ def test_maximum_ndvi_keeps_the_greenest_date(products, singles, tmp_path) -> No
     # the stored NDVI is the greenest date's, coded on 16 bits (within one quantum)
     diff = code[covered].astype(int) - ndvi_encode(best[covered]).astype(int)
     assert np.abs(diff).max() <= 1 and (diff == 0).mean() > 0.99
+    decoded = open_synthesis(tmp_path / "s").ndvi()
+    assert np.isnan(decoded[~covered]).all()
+    assert np.abs(decoded[covered] - best[covered]).max() <= 1.5 / 32767
     # every band comes from one date whose NDVI is the maximum (within one quantum)
     quantum = 2.0 / 65534
     from_date = np.all(dates == synthesis[None], axis=1) & (ndvi >= best - quantum)
@@ -242,7 +253,8 @@ def test_incremental_equals_batch(products, tmp_path, algorithm) -> None:
     store = open_synthesis(inc)
     assert store.manifest["generation"] == "gen-000003"
     assert [p["product"] for p in store.products] == [Path(n).name for n in names]
-    assert sorted(p.name for p in inc.iterdir()) == ["gen-000003", "synthesis.json"]
+    assert sorted(p.name for p in inc.iterdir() if p.name != ".lock") == \
+        ["gen-000003", "synthesis.json"]
 
 
 def test_adjacent_orbits_mosaic_without_seam(products, tmp_path) -> None:
@@ -259,10 +271,16 @@ def test_adjacent_orbits_mosaic_without_seam(products, tmp_path) -> None:
     overlap = cover_e & cover_w
     assert overlap.sum() > 2000 and (cover_e & ~cover_w).sum() > 2000
     # every line where the swaths meet is one run of covered pixels: no gap between orbits
+    # (but the product pixels flagged INVALID, which both orthorectified images show too)
+    flagged = np.zeros(count.shape, bool)
+    for product in (east, west):
+        direct = orthorectify(product, grid=grid, elevation="tiepoints", bands=[7])
+        flagged |= direct.valid & (direct.flags & 128 > 0)
+    assert flagged.sum() < 10
     rows = np.flatnonzero(overlap.any(axis=1))
     assert rows.size > 100
     for i in rows:
-        cols = np.flatnonzero(count[i])
+        cols = np.flatnonzero((count[i] > 0) | flagged[i])
         assert cols[-1] - cols[0] + 1 == cols.size, f"gap in line {i}"
     # the west product fills the mosaic beyond the east one with its own radiances
     mosaic, only_w = stack(tmp_path / "m"), stack(tmp_path / "w")
@@ -304,3 +322,34 @@ def test_new_synthesis_takes_the_first_footprint(products, tmp_path) -> None:
     assert result.grid == expected == open_synthesis(tmp_path / "s").grid
     count = open_synthesis(tmp_path / "s").read("count")
     assert count.sum() == result.reports[0].validated > 0.5 * count.size
+
+
+def test_update_into_another_directory_and_lock(products, tmp_path) -> None:
+    from napari_meris_ortho.synthesis import _locked
+
+    first, second = products["cloudy1"], products["cloudy2"]
+    a, b = tmp_path / "a", tmp_path / "b"
+    synthesize([first], a, grid=GRID, bands=(13,), tile=256, elevation="tiepoints")
+    before = {p.name: p.read_bytes() for p in (a / "gen-000001").iterdir()}
+    result = synthesize([second], b, input=a, tile=256, elevation="tiepoints")
+    assert result.generation == "gen-000002" and open_synthesis(b).grid == GRID
+    assert open_synthesis(b).read("count").max() == 2
+    assert {p.name: p.read_bytes() for p in (a / "gen-000001").iterdir()} == before
+    with _locked(a), pytest.raises(OptionsError, match="another synthesis run"):
+        synthesize([second], a, input=a, tile=256, elevation="tiepoints")
+
+
+def test_bright_pixels_kept_out_on_request(products, tmp_path) -> None:
+    cloudy = products["cloudy1"]
+    kept = synthesize([cloudy], tmp_path / "k", grid=GRID, bands=(13,), tile=256,
+                      elevation="tiepoints").reports[0]
+    out = synthesize([cloudy], tmp_path / "o", grid=GRID, bands=(13,), tile=256,
+                     elevation="tiepoints", reject_bright=True).reports[0]
+    assert kept.processed == out.processed
+    direct = orthorectify(cloudy, grid=GRID, elevation="tiepoints", bands=[13])
+    bright = direct.valid & (direct.flags & 32 > 0)
+    assert 0.1 * direct.valid.sum() < bright.sum()  # the clouds of this date
+    assert kept.validated - out.validated == pytest.approx(bright.sum(), rel=1e-3)
+    count = open_synthesis(tmp_path / "o").read("count")
+    expected = direct.valid & (direct.flags & (4 | 32 | 128) == 0)
+    assert (count.astype(bool) == expected).mean() > 0.999

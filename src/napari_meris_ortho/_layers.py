@@ -411,3 +411,46 @@ def geometry_layers(tie_points: dict[str, np.ndarray], frame: GeoFrame, name: st
             diagnostics.get("elevation"), step=step, exaggeration=exaggeration, valid=valid,
             name=f"{name} parallax shift"))
     return layers
+
+
+# --------------------------------------------------------------------------------------------
+# Moving layers into another world frame (another CRS)
+# --------------------------------------------------------------------------------------------
+def transform_world(points: np.ndarray, source_crs: Any, target_crs: Any) -> np.ndarray:
+    """World (row, col) points of ``source_crs`` -> world points of ``target_crs``."""
+    from pyproj import Transformer
+
+    x, y = from_world(points)
+    tr = Transformer.from_crs(crs_wkt(source_crs), crs_wkt(target_crs), always_xy=True)
+    tx, ty = tr.transform(x, y)
+    return to_world(np.asarray(tx), np.asarray(ty))
+
+
+def move_to_frame(layer: tuple[Any, dict, str], source: GeoFrame, target: GeoFrame
+                  ) -> tuple[Any, dict, str]:
+    """A layer tuple built on ``source`` placed in the world frame ``target``.
+
+    Rasters (images, labels) are reprojected onto the target grid (nearest for labels and
+    integer images, bilinear otherwise); shapes and vectors have their vertices projected.
+    """
+    data, kwargs, kind = layer
+    kwargs = dict(kwargs)
+    if kind in ("image", "labels"):
+        rgb = bool(kwargs.get("rgb"))
+        arr = np.moveaxis(np.asarray(data), -1, 0) if rgb else np.asarray(data)
+        nearest = kind == "labels" or arr.dtype.kind in "iu" and not rgb
+        out = reproject_onto(arr, source, target, nearest=nearest)
+        if rgb:
+            out = np.moveaxis(out, 0, -1).astype(np.asarray(data).dtype)
+        meta = dict(kwargs.pop("metadata", {}) or {})
+        meta["reprojected_from"] = source.metadata()
+        kwargs.update(geo_image_kwargs(target, metadata=meta))
+        return out, kwargs, kind
+    if kind == "shapes":
+        return [transform_world(p, source.crs, target.crs) for p in data], kwargs, kind
+    if kind == "vectors":
+        vec = np.asarray(data, np.float64)
+        start = transform_world(vec[:, 0], source.crs, target.crs)
+        end = transform_world(vec[:, 0] + vec[:, 1], source.crs, target.crs)
+        return np.stack([start, end - start], axis=1), kwargs, kind
+    return layer

@@ -10,7 +10,7 @@ ZNCC disparity analysis and shows the global displacement (the handbook's (+1.2,
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from magicgui.widgets import ComboBox, Container, FileEdit, FloatSpinBox, Label, PushButton, SpinBox
@@ -18,6 +18,9 @@ from magicgui.widgets import ComboBox, Container, FileEdit, FloatSpinBox, Label,
 from ._atomic import atomic_path
 from ._layers import GeoFrame, layer_frame, reproject_onto
 from .errors import MerisOrthoError, OptionsError
+
+if TYPE_CHECKING:
+    import napari
 
 FLICKER_KEY = "Shift-F"
 DISPARITY_EXAGGERATION = 10.0
@@ -53,21 +56,20 @@ def export_flicker_gif(viewer: Any, layer_a: Any, layer_b: Any, path: str | Path
 
 
 def show_viewer(viewer: Any) -> None:
-    """Show the viewer's window before a screenshot.
+    """Show the viewer's window before a screenshot (a no-op when it is already shown).
 
     The canvas of a never-shown viewer has no OpenGL context yet: a screenshot is black and
     leaves vispy's GL state broken (GL_INVALID_VALUE on every later draw, even under Xvfb).
     """
     window = getattr(viewer, "window", None)
-    qt_window = getattr(window, "_qt_window", None)
-    if qt_window is not None and not qt_window.isVisible():
+    if window is not None:
         window.show()
 
 
 class FlickerWidget(Container):
     """Alternate two layers at a chosen rate; start/stop, key binding, GIF export, disparity."""
 
-    def __init__(self, viewer: Any) -> None:
+    def __init__(self, viewer: napari.viewer.Viewer) -> None:
         self.viewer = viewer
         self.layer_a = ComboBox(label="layer A", choices=self._layer_choices, nullable=True)
         self.layer_b = ComboBox(label="layer B", choices=self._layer_choices, nullable=True)

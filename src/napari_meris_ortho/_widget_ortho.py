@@ -14,7 +14,7 @@ import tempfile
 import threading
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from magicgui.widgets import (
@@ -30,9 +30,20 @@ from magicgui.widgets import (
     SpinBox,
 )
 
-from ._layers import GeoFrame, band_layers, diagnostic_layers, geometry_layers
+from ._layers import (
+    GeoFrame,
+    band_layers,
+    diagnostic_layers,
+    geometry_layers,
+    move_to_frame,
+    same_crs,
+    viewer_frame,
+)
 from .errors import MerisOrthoError, OptionsError
 from .progress import ProgressCallback
+
+if TYPE_CHECKING:
+    import napari
 
 ELEVATIONS = ("dem", "tiepoints", "none")
 ALGORITHMS = ("mapping", "min-radiance", "max-ndvi")
@@ -197,23 +208,34 @@ def _run_synthesis(products: list[Any], crs: Any, options: OrthoOptions,
     return OrthoRun(items, options, [out])
 
 
-def run_layers(run: OrthoRun) -> list[LayerData]:
-    """napari layer tuples of a run: bands, diagnostics and geometry, all in the world frame."""
+def run_layers(run: OrthoRun, world: GeoFrame | None = None) -> list[LayerData]:
+    """napari layer tuples of a run: bands, diagnostics and geometry, in the world frame.
+
+    ``world``: the viewer's frame; results in another CRS are moved into it (reprojected).
+    """
     layers: list[LayerData] = []
-    opts = run.options
     for item in run.items:
         frame = GeoFrame.from_grid(item["grid"])
-        meta = {"stats": item["stats"], "algorithm": opts.algorithm,
-                "elevation": opts.elevation}
-        if item["bands"]:
-            layers += band_layers(item["bands"], frame, item["name"], meta, item["valid"])
-        if opts.geometry and item["diagnostics"]:
-            layers += diagnostic_layers(item["diagnostics"], frame, item["name"],
-                                        [Path(d).name for d in opts.dems])
-        if opts.geometry and item["tie_points"] is not None:
-            layers += geometry_layers(item["tie_points"], frame, item["name"],
-                                      item["diagnostics"], valid=item["valid"],
-                                      exaggeration=opts.exaggeration, step=opts.vector_step)
+        item_layers = _item_layers(item, frame, run.options)
+        if world is not None and not same_crs(world.crs, frame.crs):
+            item_layers = [move_to_frame(layer, frame, world) for layer in item_layers]
+        layers += item_layers
+    return layers
+
+
+def _item_layers(item: dict[str, Any], frame: GeoFrame, opts: OrthoOptions) -> list[LayerData]:
+    """Layers of one product (or of the synthesis) on its own grid."""
+    layers: list[LayerData] = []
+    meta = {"stats": item["stats"], "algorithm": opts.algorithm, "elevation": opts.elevation}
+    if item["bands"]:
+        layers += band_layers(item["bands"], frame, item["name"], meta, item["valid"])
+    if opts.geometry and item["diagnostics"]:
+        layers += diagnostic_layers(item["diagnostics"], frame, item["name"],
+                                    [Path(d).name for d in opts.dems])
+    if opts.geometry and item["tie_points"] is not None:
+        layers += geometry_layers(item["tie_points"], frame, item["name"], item["diagnostics"],
+                                  valid=item["valid"], exaggeration=opts.exaggeration,
+                                  step=opts.vector_step)
     return layers
 
 
@@ -251,7 +273,7 @@ def in_python_thread(func: Any, *args: Any) -> Any:
 class OrthorectifyWidget(Container):
     """The "Orthorectify" dock widget (thread worker, progress bar, cancel)."""
 
-    def __init__(self, viewer: Any) -> None:
+    def __init__(self, viewer: napari.viewer.Viewer) -> None:
         self.viewer = viewer
         self.products = FileEdit(label="N1 products", mode="rm", filter="*.N1")
         self.dem_kind = ComboBox(label="DEM type", choices=[DEM_FILE, DEM_DIR], value=DEM_FILE)
@@ -276,7 +298,7 @@ class OrthorectifyWidget(Container):
         self.exaggeration = FloatSpinBox(label="parallax exaggeration", value=10.0, min=0.1,
                                          max=1000.0)
         self.vector_step = SpinBox(label="vector every (px)", value=16, min=1, max=512)
-        self.output = FileEdit(label="output (optional)", mode="w", value="")
+        self.output = FileEdit(label="output (optional)", mode="w", nullable=True)
         self.run_button = PushButton(text="Run")
         self.cancel_button = PushButton(text="Cancel", enabled=False)
         self.status = Label(value="")
@@ -356,9 +378,8 @@ class OrthorectifyWidget(Container):
     # ---------------------------------------------------------------- options
     def options(self) -> OrthoOptions:
         """The widget's values as OrthoOptions (raises OptionsError on bad input)."""
-        products = [Path(p) for p in (self.products.value or ()) if str(p) not in ("", ".")]
-        output = self.output.value
-        output = None if output is None or str(output) in ("", ".") else Path(output)
+        products = [Path(p) for p in (self.products.value or ()) if Path(p).is_file()]
+        output = None if self.output.value is None else Path(self.output.value)
         return OrthoOptions(
             products=products, dems=self.dems, elevation=self.elevation.value,
             algorithm=self.algorithm.value, sampling=self.sampling.value, crs=self.crs.value,
@@ -393,15 +414,19 @@ class OrthorectifyWidget(Container):
         self._timer = QTimer()
         self._timer.timeout.connect(self._update_progress)
         self._timer.start(100)
-        self.worker = create_worker(in_python_thread, run_orthorectify, options, self._report,
-                                    _start_thread=False)
-        self.worker.returned.connect(self._done)
-        self.worker.errored.connect(self._failed)
-        self.worker.finished.connect(self._finished)
+        self.worker = create_worker(
+            in_python_thread, run_orthorectify, options, self._report, _start_thread=False,
+            _connect={"returned": self._done, "errored": self._failed,
+                      "finished": self._finished})
         self.run_button.enabled, self.cancel_button.enabled = False, True
         self.status.value = "running..."
         self.worker.start()
         return self.worker
+
+    @property
+    def running(self) -> bool:
+        """True from ``start`` until the worker has finished (results added)."""
+        return self._pbar is not None
 
     def cancel(self) -> None:
         """Ask the running worker to stop at its next progress report."""
@@ -416,7 +441,7 @@ class OrthorectifyWidget(Container):
 
     def _done(self, run: OrthoRun) -> None:
         self.last_run = run
-        for data, kwargs, kind in run_layers(run):
+        for data, kwargs, kind in run_layers(run, viewer_frame(self.viewer.layers)):
             getattr(self.viewer, f"add_{kind}")(data, **kwargs)
         written = f"; wrote {', '.join(str(p) for p in run.written)}" if run.written else ""
         self.status.value = f"done: {len(run.items)} result(s){written}"

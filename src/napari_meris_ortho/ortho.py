@@ -22,7 +22,7 @@ import numpy as np
 from .engine import predcorr
 from .engine.boundary import row_spans, segment_boundary
 from .engine.grid import OutputGrid, default_grid, parse_crs
-from .engine.location import parallax_code
+from .engine.location import geolocation_code, parallax_code
 from .engine.tiepoints import TiePointGrid
 from .errors import DemError, OptionsError
 from .progress import ProgressCallback
@@ -139,7 +139,8 @@ def orthorectify(product: Any, grid: OutputGrid | None = None, dems: Sequence[An
                  bands: Sequence[int] | None = None, tolerance: float = 0.01,
                  parallax: str = "handbook", diagnostics: bool = False,
                  progress: ProgressCallback | None = None, *, method: str = "primary",
-                 crs: Any = "EPSG:4326", pixel_size: float | None = None) -> OrthoResult:
+                 crs: Any = "EPSG:4326", pixel_size: float | None = None,
+                 geolocation: str | None = None) -> OrthoResult:
     """Map a MERIS L1b product onto ``grid`` with terrain correction (sections 3.1-3.4).
 
     ``product``: path or ``MerisL1bProduct``; ``grid``: ``OutputGrid`` (default: the smallest
@@ -148,11 +149,14 @@ def orthorectify(product: Any, grid: OutputGrid | None = None, dems: Sequence[An
     ``elevation``: "none" (MERSYN ``-ort NO``), "tiepoints" (dem_alt at the antecedent) or "dem"
     (the DEMs at the output point, tried in order, then the tie points; without DEMs: the tie
     points); ``tolerance``: prediction/correction tolerance in product pixels; ``parallax``:
-    "handbook" (sphere) or "ellipsoid" (WGS84 radii); ``method``: "primary" (primary grid +
-    Newton) or "handbook" (MERSYN's facet search in the loop).
+    "handbook" (sphere) or "ellipsoid" (WGS84 radii); ``geolocation``: "bilinear" lon/lat
+    (eq. 4a-4b) or "ecef" (default: bilinear with the handbook parallax, ecef with the
+    ellipsoid one); ``method``: "primary" (primary grid + Newton) or "handbook" (MERSYN's
+    facet search in the loop).
     """
     t_start = time.perf_counter()
     band_list = _check_options(elevation, dems, bands, tolerance, parallax, sampling, method)
+    geo = geolocation_code(geolocation, parallax)
     if grid is None:
         crs = parse_crs(crs)
         if pixel_size is not None and not (math.isfinite(pixel_size) and pixel_size > 0):
@@ -164,9 +168,12 @@ def orthorectify(product: Any, grid: OutputGrid | None = None, dems: Sequence[An
     if grid is None:
         res_m = float(getattr(getattr(prod, "resolution", None), "column_spacing_m", 260.0))
         grid = default_grid(boundary, res_m, crs, pixel_size=pixel_size)
-    margin = _margin_px(tp, grid) if elevation != "none" else 1
-    spans = row_spans(boundary, grid, margin=margin)
-    in_boundary = row_spans(boundary, grid).count
+    # MERSYN processes the points inside the segment boundary; the primary-grid path also tries
+    # a margin where terrain seen obliquely can lie outside the zero-height boundary
+    margin = _margin_px(tp, grid) if elevation != "none" and method == "primary" else 0
+    inner = row_spans(boundary, grid)
+    spans = row_spans(boundary, grid, margin=margin) if margin else inner
+    in_boundary = inner.count
     if in_boundary == 0:
         raise OptionsError(f"the output extent {grid.bounds} misses the product footprint")
     hmode = {"none": predcorr.HEIGHT_NONE, "tiepoints": predcorr.HEIGHT_TIEPOINTS,
@@ -174,8 +181,9 @@ def orthorectify(product: Any, grid: OutputGrid | None = None, dems: Sequence[An
         elevation]
     try:
         return _run(prod, tp, grid, spans, stack, hmode, band_list, sampling, tolerance,
-                    parallax_code(parallax), method, diagnostics, progress, t_start,
+                    (parallax_code(parallax), geo), method, diagnostics, progress, t_start,
                     dict(elevation=elevation, parallax=parallax, sampling=sampling,
+                         geolocation=("bilinear", "ecef")[geo],
                          tolerance=tolerance, method=method, margin_px=margin,
                          dems=[str(d) for d in dems], points_in_boundary=in_boundary))
     finally:
@@ -183,7 +191,7 @@ def orthorectify(product: Any, grid: OutputGrid | None = None, dems: Sequence[An
             stack.close()
 
 
-def _run(prod, tp, grid, spans, stack, hmode, band_list, sampling, tolerance, model, method,
+def _run(prod, tp, grid, spans, stack, hmode, band_list, sampling, tolerance, models, method,
          diagnostics, progress, t_start, options) -> OrthoResult:
     from .engine.resample import resample_bands
 
@@ -199,7 +207,7 @@ def _run(prod, tp, grid, spans, stack, hmode, band_list, sampling, tolerance, mo
                 "shift_north_m": np.full((nr, nc), np.nan, np.float32)}
     search: dict[str, int] = {}
     sources = np.zeros(len(stack.sources) + 1 if stack is not None else 1, np.int64)
-    t_dem = t_lonlat = t_engine = 0.0
+    t_dem = t_lonlat = t_engine = t_resample = 0.0
     total = nr + len(band_list)
     for r0 in range(0, nr, _BLOCK_ROWS):
         r1 = min(r0 + _BLOCK_ROWS, nr)
@@ -219,8 +227,8 @@ def _run(prod, tp, grid, spans, stack, hmode, band_list, sampling, tolerance, mo
             t_dem += time.perf_counter() - t0
         t0 = time.perf_counter()
         res = predcorr.solve(tp, grid, lon, lat, h, hmode, (ptr, start, stop), row_start=r0,
-                             tolerance=tolerance, model=model, method=method,
-                             diagnostics=diagnostics)
+                             tolerance=tolerance, model=models[0], geo=models[1],
+                             method=method, diagnostics=diagnostics)
         t_engine += time.perf_counter() - t0
         line[r0:r1], col[r0:r1], iters[r0:r1] = res["line"], res["col"], res["iterations"]
         for k, v in res["search"].items():
@@ -240,18 +248,39 @@ def _run(prod, tp, grid, spans, stack, hmode, band_list, sampling, tolerance, mo
             diag["elevation_source"][r0:r1] = np.where(ok, code, SOURCE_NONE)
         if progress is not None:
             progress(r1, total)
+    t_read = 0.0
     t0 = time.perf_counter()
-    images = [np.asarray(prod.counts(b)).astype(np.uint16) for b in band_list]
-    images.append(np.asarray(prod.flags).astype(np.uint8))
-    t_read = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    out = resample_bands(images[:-1], line, col, sampling)
-    flags = resample_bands(images[-1:], line, col, "nearest")[0].astype(np.uint8)
     radiance = {}
-    for b, o in zip(band_list, out, strict=True):
-        o *= np.float32(prod.scaling.radiance[b - 1])
-        radiance[b] = o
-    t_resample = time.perf_counter() - t0
+    if sampling == "nearest":
+        index = predcorr.nearest_pixel(line, col, tp.height, tp.width)
+        t_resample += time.perf_counter() - t0
+        for b in band_list:
+            t1 = time.perf_counter()
+            image = np.ascontiguousarray(prod.counts(b), dtype=np.uint16)
+            t2 = time.perf_counter()
+            t_read += t2 - t1
+            radiance[b] = np.empty((nr, nc), np.float32)
+            predcorr.gather(image, index, float(prod.scaling.radiance[b - 1]), radiance[b])
+            t_resample += time.perf_counter() - t2
+        t1 = time.perf_counter()
+        image = np.ascontiguousarray(prod.flags, dtype=np.uint8)
+        t_read += time.perf_counter() - t1
+        t1 = time.perf_counter()
+        flags = np.empty((nr, nc), np.float32)
+        predcorr.gather(image, index, 1.0, flags)
+        flags = flags.astype(np.uint8)
+        t_resample += time.perf_counter() - t1
+    else:
+        images = [np.ascontiguousarray(prod.counts(b), dtype=np.uint16) for b in band_list]
+        fl = np.ascontiguousarray(prod.flags, dtype=np.uint8)
+        t_read = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        out = resample_bands(images, line, col, sampling)
+        flags = resample_bands([fl], line, col, "nearest")[0].astype(np.uint8)
+        for b, o in zip(band_list, out, strict=True):
+            o *= np.float32(prod.scaling.radiance[b - 1])
+            radiance[b] = o
+        t_resample += time.perf_counter() - t0
     if progress is not None:
         progress(total, total)
     valid = iters >= 0

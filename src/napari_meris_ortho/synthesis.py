@@ -9,6 +9,7 @@ On disk a synthesis is a directory::
     DIR/gen-000003/band_07.tif  one float32 GeoTIFF per band (radiance, background 0)
     DIR/gen-000003/ndvi.tif     maximum NDVI on 16 bits (0 background, [-1, 1] -> [1, 65535])
     DIR/gen-000003/count.tif    uint16 number of products that gave a valid pixel
+    DIR/.lock                   advisory lock held by the run updating DIR
 
 An update writes a new generation into a hidden temporary directory, renames it, then replaces
 the manifest atomically (``os.replace``); a run killed at any moment leaves the previous
@@ -39,16 +40,18 @@ from .engine.synthesis import (
     merge_minimum_radiance,
     validated_pixels,
 )
-from .errors import MerisOrthoError, OptionsError, OutputError
+from .errors import DemError, MerisOrthoError, OptionsError, OutputError
 from .progress import ProgressCallback
 
 log = logging.getLogger("napari_meris_ortho.synthesis")
 
 ALGORITHMS = ("min-radiance", "max-ndvi")
 MANIFEST = "synthesis.json"
+LOCK = ".lock"
 FORMAT = "napari-meris-ortho synthesis"
 BLOCK = 256  # GeoTIFF block size; tiles are multiples of it
-DEFAULT_TILE = 512
+DEFAULT_TILE = 1024
+GDAL_CACHE_MB = 64
 ALL_BANDS = tuple(range(1, 16))
 _GENERATION = re.compile(r"^gen-(\d{6})$")
 
@@ -171,6 +174,17 @@ class SynthesisStore:
                                                  window[1] - window[0])
         with rasterio.open(path) as ds:
             return ds.read(1, window=win)
+
+
+    def band(self, band: int, window: tuple[int, int, int, int] | None = None) -> np.ndarray:
+        """Radiance of MERIS band ``band`` (float32, 0 = background)."""
+        return self.read(band_file(band)[:-4], window)
+
+    def ndvi(self, window: tuple[int, int, int, int] | None = None) -> np.ndarray:
+        """The maximum-NDVI layer decoded to float32 (Appendix C coding), NaN = background."""
+        from .engine.synthesis import ndvi_decode
+
+        return ndvi_decode(self.read("ndvi", window))
 
 
 def _layer_names(bands: Sequence[int], algorithm: str) -> list[str]:
@@ -366,18 +380,48 @@ def synthesize(products: Sequence[str | os.PathLike[str]], out: str | os.PathLik
     if not out_dir.exists():
         check_writable_dir(out_dir)
         out_dir.mkdir()
-    _remove_stale(out_dir)
-
     paths = [str(p) for p in products]
     failed: dict[int, str] = {}
-    while True:
+    import rasterio
+
+    with contextlib.ExitStack() as locks:
+        locks.enter_context(rasterio.Env(GDAL_CACHEMAX=GDAL_CACHE_MB))  # bounded block cache
+        locks.enter_context(_locked(out_dir))
+        if source is not None and source.path.resolve() != out_dir.resolve():
+            locks.enter_context(_locked(source.path))
+        _remove_stale(out_dir)
+        while True:
+            try:
+                return _build(paths, out_dir, source, algorithm, tuple(bands), grid, crs,
+                              pixel_size, dems, elevation, sampling, reject_bright, tile,
+                              progress, failed)
+            except _ProductFailed as exc:  # a product broke mid-way: rebuild without it
+                failed[exc.index] = exc.message
+                log.warning("%s: %s; restarting the synthesis without it", paths[exc.index],
+                            exc.message)
+
+
+@contextlib.contextmanager
+def _locked(directory: Path) -> Iterator[None]:
+    """Exclusive advisory lock on ``directory/.lock`` (released by the OS if the run dies)."""
+    try:
+        import fcntl
+    except ImportError:  # pragma: no cover - no advisory locks (Windows): unguarded
+        yield
+        return
+    try:
+        fh = open(directory / LOCK, "a+b")  # held for the whole run
+    except OSError as exc:
+        raise OutputError(f"{directory}: cannot write in the synthesis directory ({exc})"
+                          ) from exc
+    try:
         try:
-            return _build(paths, out_dir, source, algorithm, tuple(bands), grid, crs, pixel_size,
-                          dems, elevation, sampling, reject_bright, tile, progress, failed)
-        except _ProductFailed as exc:  # a product broke mid-way: rebuild without it
-            failed[exc.index] = exc.message
-            log.warning("%s: %s; restarting the synthesis without it", paths[exc.index],
-                        exc.message)
+            fcntl.flock(fh.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            raise OptionsError(f"{directory}: another synthesis run is using it") from None
+        yield
+    finally:
+        fh.close()
 
 
 def _check_ortho_options(dems: Sequence[Any], elevation: str, sampling: str) -> None:
@@ -417,6 +461,10 @@ def _check_options(products: Sequence[Any], out_dir: Path, algorithm: str | None
             raise OptionsError(f"bands {list(bands)}: MERIS bands are 1..15")
     if pixel_size is not None and not pixel_size > 0:
         raise OptionsError(f"pixel size {pixel_size}: must be positive")
+    if crs is not None:
+        from .engine.grid import parse_crs
+
+        parse_crs(crs)
     _check_ortho_options(dems, elevation, sampling)
     if input is None:
         if is_synthesis(out_dir):
@@ -522,12 +570,12 @@ def _build(paths: list[str], out_dir: Path, source: SynthesisStore | None, algor
             layers.close()
         if not any(r.error is None for r in reports):
             shutil.rmtree(work, ignore_errors=True)
-            return _report(SynthesisResult(out_dir, None, grid, algorithm, bands, reports))
+            return SynthesisResult(out_dir, None, grid, algorithm, bands, reports)
         _commit(work, out_dir, generation, source, algorithm, bands, grid, reports)
     except BaseException:
         shutil.rmtree(work, ignore_errors=True)
         raise
-    return _report(SynthesisResult(out_dir, generation, grid, algorithm, bands, reports))
+    return SynthesisResult(out_dir, generation, grid, algorithm, bands, reports)
 
 
 def _report(result: SynthesisResult) -> SynthesisResult:
@@ -545,25 +593,28 @@ def _merge_product(index: int, path: str, product: Any, grid: Any, layers: _Laye
                    tile: int, report: ProductReport, failed: dict[int, str]) -> None:
     """Merge one product tile by tile; a read failure before any write skips it, a failure
     after some tiles were written aborts this attempt (the caller rebuilds without it)."""
+    from .engine.boundary import row_spans, segment_boundary
+
     try:
         product = product if product is not None else _open_product(path)
         window = footprint_window(product, grid)
+        boundary = segment_boundary(product.tie_points["latitude"],
+                                    product.tie_points["longitude"])
     except (MerisOrthoError, OSError) as exc:
         failed[index] = report.error = _message(exc)
         return
     if window is None:
         return
-    from .engine.boundary import row_spans, segment_boundary
-
-    boundary = segment_boundary(product.tie_points["latitude"], product.tie_points["longitude"])
     written = False
     for win in tiles(window, tile):
         tile_grid = grid_window(grid, *win)
         if row_spans(boundary, tile_grid).count == 0:  # orthorectify() refuses such a tile
             continue
+        state = layers.read(win)
         try:
-            state = layers.read(win)
             merge(product, tile_grid, state, report)
+        except DemError:  # not the product's fault: stop the run (exit 2)
+            raise
         except (MerisOrthoError, OSError) as exc:
             if not written:
                 failed[index] = report.error = _message(exc)

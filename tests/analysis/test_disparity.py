@@ -92,12 +92,20 @@ def test_background_is_not_image_pixels():
     assert s["image_pixels"] == 100 * 120
     assert not r.candidate[:, :42].any() and not r.candidate[98:, :].any()
     assert r.global_displacement == pytest.approx((-0.7, 0.4), abs=0.05)
+    mask = np.ones(a.shape, dtype=bool)
+    mask[:60] = False
+    masked = disparity(a, b, mask=mask)
+    assert masked.stats["image_pixels"] == 40 * 120
+    assert not masked.candidate[:62].any()
 
 
 def test_step_and_statistics_consistency():
     a = textured(seed=6)
     b = fourier_shift(a, dy=1.0, dx=0.5)
-    r = disparity(a, b, step=3, pixel_size_m=(260.0, 250.0))
+    calls = []
+    r = disparity(a, b, step=3, pixel_size_m=(260.0, 250.0),
+                  progress=lambda done, total: calls.append((done, total)))
+    assert calls[-1] == (40, 40) and all(d <= t for d, t in calls)
     s = r.stats
     assert s["total_pixels"] == 40 * 54
     assert not r.image[1::3].any() and not r.image[:, 2::3].any()

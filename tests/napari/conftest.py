@@ -52,7 +52,8 @@ def tiny_dem(tmp_path_factory):
     n_lat, n_lon = 240, 360
     lat = lat0 - (np.arange(n_lat) + 0.5) * step
     lon = lon0 + (np.arange(n_lon) + 0.5) * step
-    h = 1500 + 1000 * np.sin(np.radians(lon[None, :] * 400)) * np.cos(np.radians(lat[:, None] * 300))
+    h = 1500 + 1000 * (np.sin(np.radians(lon[None, :] * 400))
+                       * np.cos(np.radians(lat[:, None] * 300)))
     with rasterio.open(path, "w", driver="GTiff", width=n_lon, height=n_lat, count=1,
                        dtype="float32", crs="EPSG:4326",
                        transform=Affine(step, 0, lon0, 0, -step, lat0)) as ds:

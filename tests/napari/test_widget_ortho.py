@@ -23,8 +23,8 @@ from napari_meris_ortho.io.n1 import read_product
 def _run(widget, qtbot, timeout=60_000):
     worker = widget.start()
     assert worker is not None, widget.status.value
-    with qtbot.waitSignal(worker.finished, timeout=timeout):
-        pass
+    assert widget.running
+    qtbot.waitUntil(lambda: not widget.running, timeout=timeout)
     return worker
 
 
@@ -164,14 +164,24 @@ def test_geographic_and_epsg_output(make_napari_viewer, qtbot, tiny_n1, tmp_path
 
     widget.crs.value = CRS_EPSG
     widget.epsg.value = 3035
-    widget.output.value = ""
+    widget.output.value = None
     widget.pixel_size.value = 1000.0
     _run(widget, qtbot)
-    frame = GeoFrame.from_transform(**viewer.layers[-1].metadata["geo"])
-    assert frame.dx == 1000.0
+    assert widget.status.value.startswith("done"), widget.status.value
     from pyproj import CRS
 
-    assert CRS.from_wkt(frame.crs).to_epsg() == 3035
+    grid = widget.last_run.items[0]["grid"]
+    assert grid.dx == 1000.0 and grid.crs.to_epsg() == 3035
+    # the viewer's world frame is geographic: the LAEA result is reprojected onto it
+    second = viewer.layers[-1]
+    assert second.metadata["reprojected_from"]["transform"][0] == 1000.0
+    frame2 = GeoFrame.from_transform(**second.metadata["geo"])
+    assert frame2 == frame and CRS.from_wkt(frame2.crs).to_epsg() == 4326
+    both = (layer.data > 0) & (second.data > 0)
+    assert both.sum() > 0.5 * (layer.data > 0).sum()
+    # same radiances, 1 km pixels against 260 m ones: close on average
+    ratio = np.median(second.data[both] / layer.data[both])
+    assert ratio == pytest.approx(1.0, abs=0.05)
 
 
 def test_dem_list_order(make_napari_viewer, tiny_dem, tmp_path):
@@ -221,11 +231,10 @@ def test_cancel_stops_the_worker(make_napari_viewer, qtbot, tiny_n1):
     widget.elevation.value = "tiepoints"
     widget.cancel()  # a cancel before the start is forgotten
     widget._cancel.set()
-    worker = widget.start()
+    assert widget.start() is not None
     assert not widget._cancel.is_set()
     widget.cancel()
-    with qtbot.waitSignal(worker.finished, timeout=60_000):
-        pass
+    qtbot.waitUntil(lambda: not widget.running, timeout=60_000)
     assert widget.status.value == "cancelled by the user"
     assert len(viewer.layers) == 0
 
@@ -237,3 +246,20 @@ def test_parse_bands():
         parse_bands("0")
     with pytest.raises(OptionsError):
         parse_bands("x")
+
+
+def test_widgets_dock_through_the_manifest(make_napari_viewer, qtbot, tiny_n1):
+    from napari_meris_ortho._widget_flicker import FlickerWidget
+
+    viewer = make_napari_viewer()
+    _, ortho = viewer.window.add_plugin_dock_widget("napari-meris-ortho", "Orthorectify")
+    _, flicker = viewer.window.add_plugin_dock_widget("napari-meris-ortho", "Flicker")
+    assert isinstance(ortho, OrthorectifyWidget) and isinstance(flicker, FlickerWidget)
+    ortho.products.value = [tiny_n1]
+    ortho.elevation.value = "none"
+    ortho.geometry.value = False
+    _run(ortho, qtbot)
+    assert ortho.status.value.startswith("done"), ortho.status.value
+    # the flicker widget sees the new layers (two top-most images pre-selected)
+    assert flicker.layer_a.value is not None and flicker.layer_b.value is not None
+    assert flicker.layer_a.value.name != flicker.layer_b.value.name

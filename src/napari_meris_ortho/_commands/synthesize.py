@@ -39,14 +39,16 @@ def register(subparsers: Any) -> None:
                    help="synthesis to update (may equal --out); grid and bands come from it")
     p.add_argument("--dem", action="append", default=[], metavar="PATH",
                    help="DEM (repeatable; the first holding a point wins)")
-    p.add_argument("--elevation", default="dem",
-                   help="elevation source: dem (default), tiepoints or none")
-    p.add_argument("--sampling", default="nearest", help="resampling: nearest (default) ...")
+    p.add_argument("--elevation", choices=("none", "tiepoints", "dem"), default="dem",
+                   help="heights: the DEMs then the tie points (default), tie points only, "
+                   "or none (no orthorectification)")
+    p.add_argument("--sampling", choices=("nearest", "bilinear", "bicubic"), default="nearest",
+                   help="resampling of the radiances (MERSYN: nearest)")
     p.add_argument("--bands", type=_bands, default=None, metavar="LIST",
                    help="bands of a new synthesis, e.g. 3,5,7,13 (default all 15)")
     p.add_argument("--reject-bright", action="store_true",
                    help="keep BRIGHT-flagged pixels (clouds) out as well")
-    p.add_argument("--tile", type=int, default=512, metavar="PX",
+    p.add_argument("--tile", type=int, default=1024, metavar="PX",
                    help="tile size in pixels, multiple of 256 (bounds the memory)")
     grid = p.add_argument_group("grid of a new synthesis (refused with --input)")
     grid.add_argument("--crs", default=None, help="output CRS (default EPSG:4326)")

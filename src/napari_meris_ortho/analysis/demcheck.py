@@ -115,7 +115,7 @@ class DemCheckResult:
         rows = [("", [METHOD_TITLES[n] for n in names])]
         for label, key, signed in _STAT_ROWS:
             values = [getattr(self.methods[n].statistics, key) for n in names]
-            rows.append((label, [f"{v:+.3f}" if signed else f"{v:.3f}" for v in values]))
+            rows.append((label, [_number(v, signed) for v in values]))
         return "\n".join(f"{label:<20}" + "".join(f"{v:>20}" for v in vals) for label, vals in rows)
 
 
@@ -123,6 +123,13 @@ _STAT_ROWS = (("ARITHMETIC MEAN", "arithmetic_mean", True),
               ("QUADRATIC MEAN", "quadratic_mean", False),
               ("STANDARD DEVIATION", "standard_deviation", False),
               ("MINIMUM", "minimum", True), ("MAXIMUM", "maximum", True))
+
+
+def _number(value: float, signed: bool) -> str:
+    """3 decimals as Appendix F ('-' when no point was processed)."""
+    if not math.isfinite(value):
+        return "-"
+    return f"{value:+.3f}" if signed else f"{value:.3f}"
 
 
 def elevation_statistics(gcp_heights, dem_heights) -> ElevationStatistics:
@@ -294,7 +301,7 @@ def _method_report(result: DemCheckResult, check: MethodCheck, listing: bool) ->
         "ELEVATION DIFFERENCES :",
     ]
     for label, key, _signed in _STAT_ROWS:
-        lines.append(f". {label} : {getattr(s, key):.3f}")
+        lines.append(f". {label} : {_number(getattr(s, key), False)}")
     if listing:
         lines += ["", "GCP #\tEASTING\tNORTHING\tGCP ELEVAT.\tDEM ELEVAT.\tDIFFERENCE"]
         for k, i in enumerate(np.flatnonzero(check.inside), start=1):

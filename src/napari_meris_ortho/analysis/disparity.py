@@ -2,10 +2,18 @@
 
 DISPAR searches, for every pixel of the first image, the homologous point of the second image in an
 exploration window (default 9 lines x 19 columns) by the zero-mean normalised cross-correlation
-(ZNCC) of a statistical window (default 5 x 5). The integer peak is refined to 0.1 px by a parabola
-through the peak and its two neighbours on each axis, then rounded to 0.1 px (the handbook's "pixel
-sampling of 0.1 pixels"). Pixels whose confidence reaches the threshold (default 95 %) are the
-candidate pixels (the tie-points).
+(ZNCC) of a statistical window (default 5 x 5). Pixels whose confidence reaches the threshold
+(default 95 %) are the candidate pixels (the tie-points, "pixel sampling of 0.1 pixels").
+
+Algorithm (numba, parallel over blocks of lines)
+1. Whole-pixel search: for each displacement, running 5-line column sums of A x B(displaced)
+   (two products per pixel and displacement), then ZNCC = (S/n - mean_A mean_B) / (sd_A sd_B).
+2. Parabola through the peak and its two neighbours on each axis: a first sub-pixel estimate
+   and a forecast of the sub-pixel peak's value.
+3. ``subpixel="grid"`` (default): every pixel whose forecast may reach the threshold climbs the
+   ZNCC on the 0.1-px grid (8-neighbour moves), B being shifted by bicubic interpolation; this
+   removes the parabola's bias towards whole pixels (up to 0.1 px on sharp textures).
+   ``subpixel="parabola"``: the parabola's vertex rounded to 0.1 px.
 
 Conventions
 - The displacement is that of the **second image relative to the first**: a feature at
@@ -16,7 +24,8 @@ Conventions
 - The exploration window height bounds dY (|dY| <= 4 for 9 lines), its width bounds dX
   (|dX| <= 9 for 19 columns). A best match on that border is "on limit"; it is never a candidate.
   (DISPAR's own logs print the +-4 range under "X" and the +-9 range under "Y".)
-- Confidence index = 100 x ZNCC of the integer peak, clipped at 0 (the logs' minimum is 0).
+- Confidence index = 100 x ZNCC of the peak (the refined one where refined), clipped at 0 (the
+  logs' minimum is 0).
 - Background pixels (0, NaN) are not image pixels; a window touching background or the image border
   is not correlated. Image pixels whose statistical window cannot be matched get confidence 0.
 """
@@ -38,8 +47,8 @@ __all__ = ["DisparityResult", "disparity", "displacement_statistics", "format_re
 _ROW_CHUNK = 256
 #: consecutive lines sharing running column sums in the whole-pixel search
 _BLOCK = 32
-#: pixels whose whole-pixel confidence is within this many % below the threshold are refined
-_REFINE_MARGIN = 25.0
+#: pixels whose parabola vertex forecasts a confidence above (threshold - this, in %) are refined
+_REFINE_MARGIN = 10.0
 
 
 @dataclass
@@ -133,6 +142,7 @@ def disparity(
     rows = np.arange(0, height, step, dtype=np.int64)
     dx, dy, conf = (np.full((height, width), np.nan, dtype=np.float32) for _ in range(3))
     limit = np.zeros((height, width), dtype=np.uint8)
+    vertex = np.zeros((height, width), dtype=np.float32)
     for start in range(0, len(rows), _ROW_CHUNK):
         chunk = rows[start : start + _ROW_CHUNK]
         best_val = np.full((len(chunk), width), -np.inf)
@@ -140,13 +150,13 @@ def disparity(
         _integer_search(a64, b64, mean_a, isd_a, mean_b, isd_b, chunk, half, hy, hx,
                         best_val, best_idx)
         _peaks(a64, b64, mean_a, isd_a, mean_b, isd_b, image, chunk, half, hy, hx, step,
-               best_val, best_idx, dx, dy, conf, limit)
+               best_val, best_idx, dx, dy, conf, limit, vertex)
         if subpixel == "grid":
             ii, jj = np.nonzero(image[chunk[0] : chunk[-1] + 1])
             ii += chunk[0]
-            keep = (conf[ii, jj] >= threshold - _REFINE_MARGIN) & (limit[ii, jj] == 0)
-            _refine_on_grid(a64, b64, invalid_sum, ii[keep], jj[keep], half, hy, hx,
-                            float(resolution), dx, dy, conf)
+            keep = (vertex[ii, jj] >= threshold - _REFINE_MARGIN) & (limit[ii, jj] == 0)
+            _refine_on_grid((a64, b64, mean_a, isd_a, invalid_sum), ii[keep], jj[keep], half,
+                            hy, hx, float(resolution), dx, dy, conf)
         if progress is not None:
             progress(min(start + _ROW_CHUNK, len(rows)), len(rows))
     if resolution > 0:
@@ -409,8 +419,10 @@ def _keep_best(bs, inv_n, ma, ia, mb, ib, best_val, best_idx, d):
 
 
 @njit(cache=True)
-def _zncc_direct(a, b, mean_a, isd_a, mean_b, isd_b, i, j, v, u, half):
-    """ZNCC of A's window at (i, j) with B's window at (i + v, j + u); NaN off the image."""
+def _zncc_direct(stats, i, j, v, u, half):
+    """ZNCC of A's window at (i, j) with B's window at (i + v, j + u); NaN off the image.
+    ``stats`` = (A, B, mean and 1/sd of A's windows, mean and 1/sd of B's windows)."""
+    a, b, mean_a, isd_a, mean_b, isd_b = stats
     height, width = a.shape
     ib, jb = i + v, j + u
     if ib - half < 0 or ib + half >= height or jb - half < 0 or jb + half >= width:
@@ -425,10 +437,12 @@ def _zncc_direct(a, b, mean_a, isd_a, mean_b, isd_b, i, j, v, u, half):
 
 @njit(cache=True, parallel=True)
 def _peaks(a, b, mean_a, isd_a, mean_b, isd_b, image, rows, half, hy, hx, step,
-           best_val, best_idx, dx, dy, conf, limit):
-    """Parabola refinement of each whole-pixel peak, confidence (%), on-limit bits (1 X, 2 Y)."""
+           best_val, best_idx, dx, dy, conf, limit, vertex):
+    """Parabola refinement of each whole-pixel peak, confidence (%), on-limit bits (1 X, 2 Y),
+    and the parabolas' vertex value (%), a forecast of the sub-pixel peak's confidence."""
     width = a.shape[1]
-    nx, ny = 2 * hx + 1, 2 * hy + 1
+    nx = 2 * hx + 1
+    stats = (a, b, mean_a, isd_a, mean_b, isd_b)
     for k in prange(rows.shape[0]):
         i = rows[k]
         for j in range(0, width, step):
@@ -436,56 +450,49 @@ def _peaks(a, b, mean_a, isd_a, mean_b, isd_b, image, rows, half, hy, hx, step,
                 continue
             c0 = best_val[k, j]
             if not c0 > -2.0:  # no matchable window: zero displacement, zero confidence
-                dx[i, j], dy[i, j], conf[i, j], limit[i, j] = 0.0, 0.0, 0.0, 0
+                dx[i, j], dy[i, j], conf[i, j], limit[i, j], vertex[i, j] = 0.0, 0.0, 0.0, 0, 0.0
                 continue
             v, u = best_idx[k, j] // nx - hy, best_idx[k, j] % nx - hx
             bits = 0
-            fx = fy = 0.0
-            if u == -hx or u == hx:
+            fx = fy = gx = gy = 0.0
+            if hx > 0 and (u == -hx or u == hx):
                 bits += 1
-            else:
-                fx = _parabola(_zncc_direct(a, b, mean_a, isd_a, mean_b, isd_b, i, j, v, u - 1,
-                                            half), c0,
-                               _zncc_direct(a, b, mean_a, isd_a, mean_b, isd_b, i, j, v, u + 1,
-                                            half))
-            if v == -hy or v == hy or ny == 1:
-                bits += 2 if ny > 1 else 0
-            else:
-                fy = _parabola(_zncc_direct(a, b, mean_a, isd_a, mean_b, isd_b, i, j, v - 1, u,
-                                            half), c0,
-                               _zncc_direct(a, b, mean_a, isd_a, mean_b, isd_b, i, j, v + 1, u,
-                                            half))
+            elif hx > 0:
+                fx, gx = _parabola(_zncc_direct(stats, i, j, v, u - 1, half), c0,
+                                   _zncc_direct(stats, i, j, v, u + 1, half))
+            if hy > 0 and (v == -hy or v == hy):
+                bits += 2
+            elif hy > 0:
+                fy, gy = _parabola(_zncc_direct(stats, i, j, v - 1, u, half), c0,
+                                   _zncc_direct(stats, i, j, v + 1, u, half))
             dx[i, j] = u + fx
             dy[i, j] = v + fy
             conf[i, j] = min(max(c0, 0.0), 1.0) * 100.0
+            vertex[i, j] = min(max(c0 + gx + gy, 0.0), 1.0) * 100.0
             limit[i, j] = bits
 
 
 @njit(cache=True)
 def _parabola(cm, c0, cp):
-    """Vertex offset of the parabola through (-1, cm), (0, c0), (1, cp), within [-0.5, 0.5]."""
+    """Vertex (offset within [-0.5, 0.5], value gain over c0) of the parabola through
+    (-1, cm), (0, c0), (1, cp)."""
     if not (cm > -2.0 and cp > -2.0):
-        return 0.0
+        return 0.0, 0.0
     den = cm - 2.0 * c0 + cp
     if den >= 0.0:
-        return 0.0
-    return min(max(0.5 * (cm - cp) / den, -0.5), 0.5)
+        return 0.0, 0.0
+    return min(max(0.5 * (cm - cp) / den, -0.5), 0.5), -(cp - cm) ** 2 / (8.0 * den)
 
 
 @njit(cache=True)
-def _cubic(f, m):
-    """Keys bicubic convolution weight (a = -0.5) of tap m in (-1, 0, 1, 2) at fraction f."""
-    if m == -1:
-        return ((-0.5 * f + 1.0) * f - 0.5) * f
-    if m == 0:
-        return (1.5 * f - 2.5) * f * f + 1.0
-    if m == 1:
-        return ((-1.5 * f + 2.0) * f + 0.5) * f
-    return (0.5 * f - 0.5) * f * f
+def _cubic(f):
+    """Keys bicubic convolution weights (a = -0.5) of taps -1, 0, 1, 2 at fraction f."""
+    return (((-0.5 * f + 1.0) * f - 0.5) * f, (1.5 * f - 2.5) * f * f + 1.0,
+            ((-1.5 * f + 2.0) * f + 0.5) * f, (0.5 * f - 0.5) * f * f)
 
 
 @njit(cache=True)
-def _zncc_at(a, b, invalid_sum, i, j, sy, sx, half, tmp):
+def _zncc_at(a, b, mean_a, isd_a, invalid_sum, i, j, sy, sx, half, tmp):
     """ZNCC of A's window at (i, j) with B's window displaced by (sy, sx) px, B sampled by
     bicubic interpolation; NaN when a tap leaves the image or touches background.
     ``invalid_sum`` is the summed-area table of background pixels; ``tmp`` a scratch array."""
@@ -493,42 +500,45 @@ def _zncc_at(a, b, invalid_sum, i, j, sy, sx, half, tmp):
     size = 2 * half + 1
     by, bx = int(math.floor(sy + 1e-9)), int(math.floor(sx + 1e-9))
     fy, fx = max(sy - by, 0.0), max(sx - bx, 0.0)
-    ly, hy_ = (-1, 2) if fy > 1e-9 else (0, 0)  # taps with a zero weight are not read
-    lx, hx_ = (-1, 2) if fx > 1e-9 else (0, 0)
-    r0, r1 = i + by - half + ly, i + by + half + hy_ + 1
-    c0, c1 = j + bx - half + lx, j + bx + half + hx_ + 1
+    iy, ix = fy > 1e-9, fx > 1e-9  # interpolate along y / x (taps -1..2), else copy
+    r0, r1 = i + by - half - (1 if iy else 0), i + by + half + (3 if iy else 1)
+    cb = j + bx - half
+    c0, c1 = cb - (1 if ix else 0), cb + size + (2 if ix else 0)
     if r0 < 0 or c0 < 0 or r1 > height or c1 > width:
         return np.nan
     if invalid_sum[r1, c1] - invalid_sum[r0, c1] - invalid_sum[r1, c0] + invalid_sum[r0, c0] > 0:
         return np.nan
-    nrow = r1 - r0
-    for r in range(nrow):
+    w0, w1, w2, w3 = _cubic(fx)
+    for r in range(r1 - r0):
+        row = b[r0 + r]
         for c in range(size):
-            s = 0.0
-            for m in range(lx, hx_ + 1):
-                s += _cubic(fx, m) * b[r0 + r, j + bx - half + c + m]
-            tmp[r, c] = s
-    sa = sb = saa = sbb = sab = 0.0
+            x = cb + c
+            if ix:
+                tmp[r, c] = w0 * row[x - 1] + w1 * row[x] + w2 * row[x + 1] + w3 * row[x + 2]
+            else:
+                tmp[r, c] = row[x]
+    w0, w1, w2, w3 = _cubic(fy)
+    sb = sbb = sab = 0.0
     for r in range(size):
+        arow = a[i - half + r]
         for c in range(size):
-            vb = 0.0
-            for m in range(ly, hy_ + 1):
-                vb += _cubic(fy, m) * tmp[r + m - ly, c]
-            va = a[i - half + r, j - half + c]
-            sa += va
+            if iy:
+                vb = w0 * tmp[r, c] + w1 * tmp[r + 1, c] + w2 * tmp[r + 2, c] + w3 * tmp[r + 3, c]
+            else:
+                vb = tmp[r, c]
             sb += vb
-            saa += va * va
             sbb += vb * vb
-            sab += va * vb
+            sab += arow[j - half + c] * vb
     n = size * size
-    var_a, var_b = saa / n - (sa / n) ** 2, sbb / n - (sb / n) ** 2
-    if var_a <= 1e-12 * (saa / n + 1e-300) or var_b <= 1e-12 * (sbb / n + 1e-300):
+    mb = sb / n
+    var_b = sbb / n - mb * mb
+    if not var_b > 1e-12 * (sbb / n + 1e-300):
         return 0.0
-    return (sab / n - sa * sb / (n * n)) / math.sqrt(var_a * var_b)
+    return (sab / n - mean_a[i, j] * mb) * isd_a[i, j] / math.sqrt(var_b)
 
 
 @njit(cache=True, parallel=True)
-def _refine_on_grid(a, b, invalid_sum, ii, jj, half, hy, hx, res, dx, dy, conf):
+def _refine_on_grid(data, ii, jj, half, hy, hx, res, dx, dy, conf):
     """Climb the ZNCC on the ``res`` grid (8-neighbour moves, within 0.5 px of the parabola's
     estimate and inside the exploration window); write the refined peak and its confidence."""
     span = max(int(round(0.5 / res)), 1)
@@ -538,18 +548,19 @@ def _refine_on_grid(a, b, invalid_sum, ii, jj, half, hy, hx, res, dx, dy, conf):
         tmp = np.empty((2 * half + 4, 2 * half + 1))
         seen = np.empty((2 * span + 1, 2 * span + 1))
         for k in range(q * n // nchunks, (q + 1) * n // nchunks):
-            _climb(a, b, invalid_sum, ii[k], jj[k], half, hy, hx, res, span, tmp, seen,
-                   dx, dy, conf)
+            _climb(data, ii[k], jj[k], half, hy, hx, res, span, tmp, seen, dx, dy, conf)
 
 
 @njit(cache=True)
-def _climb(a, b, invalid_sum, i, j, half, hy, hx, res, span, tmp, seen, dx, dy, conf):
-    """Hill climbing of one pixel on the sub-pixel grid, memoised in ``seen``."""
+def _climb(data, i, j, half, hy, hx, res, span, tmp, seen, dx, dy, conf):
+    """Hill climbing of one pixel on the sub-pixel grid, memoised in ``seen``;
+    ``data`` = (A, B, mean of A's windows, 1/sd of A's windows, background summed-area table)."""
+    a, b, mean_a, isd_a, invalid_sum = data
     ty0, tx0 = int(round(dy[i, j] / res)), int(round(dx[i, j] / res))
-    best = _zncc_at(a, b, invalid_sum, i, j, ty0 * res, tx0 * res, half, tmp)
+    best = _zncc_at(a, b, mean_a, isd_a, invalid_sum, i, j, ty0 * res, tx0 * res, half, tmp)
     if not best > -2.0:  # taps off the image: start from the whole-pixel peak
         ty0, tx0 = int(round(round(dy[i, j]) / res)), int(round(round(dx[i, j]) / res))
-        best = _zncc_at(a, b, invalid_sum, i, j, ty0 * res, tx0 * res, half, tmp)
+        best = _zncc_at(a, b, mean_a, isd_a, invalid_sum, i, j, ty0 * res, tx0 * res, half, tmp)
         if not best > -2.0:
             return
     seen[:, :] = -3.0
@@ -565,8 +576,8 @@ def _climb(a, b, invalid_sum, i, j, half, hy, hx, res, span, tmp, seen, dx, dy, 
                 continue
             c = seen[ny + span, nx + span]
             if c < -2.5:
-                c = _zncc_at(a, b, invalid_sum, i, j, (ty0 + ny) * res, (tx0 + nx) * res,
-                             half, tmp)
+                c = _zncc_at(a, b, mean_a, isd_a, invalid_sum, i, j, (ty0 + ny) * res,
+                             (tx0 + nx) * res, half, tmp)
                 seen[ny + span, nx + span] = c
             if c > mbest:
                 my, mx, mbest = ny, nx, c

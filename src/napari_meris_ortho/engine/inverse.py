@@ -190,7 +190,7 @@ def inverse_location(grid: TiePointGrid, lon: np.ndarray, lat: np.ndarray
     Returns (line, col) — NaN where no facet holds the point — and the facet-search counts.
     """
     lon_a, lat_a = np.broadcast_arrays(np.asarray(lon, np.float64), np.asarray(lat, np.float64))
-    lat_tp, lon_tp, *_, df, dj = grid.kernel_args()
+    lat_tp, lon_tp, _, df, dj = grid.kernel_args()
     line, col, paths = _inverse_many(np.ascontiguousarray(lon_a.ravel()),
                                      np.ascontiguousarray(lat_a.ravel()), lat_tp, lon_tp, df, dj)
     counts = {"not found": int(paths[0])}

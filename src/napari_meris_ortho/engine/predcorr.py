@@ -36,19 +36,21 @@ _FAR = 256.0
 
 
 @njit(cache=True)
-def _newton(tlon, tlat, line, col, h, lat_tp, lon_tp, le, ln, dem, df, dj, model, tol, max_iter):
+def _newton(tlon, tlat, line, col, h, coef, df, dj, model, geo, tol, max_iter):
     """Correct (line, col) until f(line, col, h) = (tlon, tlat); returns (line, col, iterations)."""
     it = 0
     while it < max_iter:
         it += 1
-        r = direct_point(line, col, h, lat_tp, lon_tp, le, ln, dem, df, dj, model)
-        rx = wrap180(tlon - r[0])
+        r = direct_point(line, col, h, coef, df, dj, model, geo)
+        rx = tlon - r[0]
+        if rx > 180.0 or rx < -180.0:
+            rx = wrap180(rx)
         ry = tlat - r[1]
-        det = r[3] * r[6] - r[4] * r[5]
+        det = r[5] * r[8] - r[6] * r[7]
         if det == 0.0 or math.isnan(det):
             return math.nan, math.nan, it
-        dl = (rx * r[6] - ry * r[4]) / det
-        dp = (r[3] * ry - r[5] * rx) / det
+        dl = (rx * r[8] - ry * r[6]) / det
+        dp = (r[5] * ry - r[7] * rx) / det
         line += dl
         col += dp
         if abs(dl) <= tol and abs(dp) <= tol:
@@ -57,7 +59,7 @@ def _newton(tlon, tlat, line, col, h, lat_tp, lon_tp, le, ln, dem, df, dj, model
 
 
 @njit(cache=True)
-def primary_grid(lon, lat, lat_tp, lon_tp, le, ln, dem, df, dj):
+def primary_grid(lon, lat, lat_tp, lon_tp, coef, df, dj, geo):
     """Exact zero-height inverse (section 3.4) at the primary-grid nodes (2-D lon/lat arrays).
 
     Nodes held by a facet come from the handbook search (warm-started from the previous node);
@@ -83,9 +85,15 @@ def primary_grid(lon, lat, lat_tp, lon_tp, le, ln, dem, df, dj):
                 j = j2
                 line[r, c] = (f + u) * df
                 col[r, c] = (j + v) * dj
+                if geo != 0:  # the search inverts the bilinear lon/lat facet: polish
+                    l2, p2, it = _newton(lon[r, c], lat[r, c], line[r, c], col[r, c], 0.0, coef,
+                                         df, dj, 0, geo, 1e-6, 10)
+                    if not math.isnan(l2):
+                        line[r, c] = l2
+                        col[r, c] = p2
             else:
-                l2, p2, it = _newton(lon[r, c], lat[r, c], last_l, last_p, 0.0, lat_tp, lon_tp,
-                                     le, ln, dem, df, dj, 0, 1e-6, 30)
+                l2, p2, it = _newton(lon[r, c], lat[r, c], last_l, last_p, 0.0, coef, df, dj,
+                                     0, geo, 1e-6, 30)
                 if it < 30 and not math.isnan(l2):
                     line[r, c] = l2
                     col[r, c] = p2
@@ -140,8 +148,7 @@ def full_spans(n_rows: int, width: int) -> tuple[np.ndarray, np.ndarray, np.ndar
 
 @njit(cache=True, parallel=True)
 def find_antecedents(lon, lat, height, hmode, ptr, start, stop, cl, cp, step,
-                     lat_tp, lon_tp, le, ln, dem, df, dj, n_lines, n_cols, model, tol, max_iter,
-                     diagnostics):
+                     coef, df, dj, n_lines, n_cols, model, geo, tol, max_iter, diagnostics):
     """Antecedents of output points: rows in parallel, row i over the column spans
     ``[start[k], stop[k])`` for k in ``ptr[i]:ptr[i + 1]`` (``boundary.RowSpans``).
 
@@ -156,7 +163,6 @@ def find_antecedents(lon, lat, height, hmode, ptr, start, stop, cl, cp, step,
     h_used = np.full(dshape, np.nan, np.float32)
     sh_e = np.full(dshape, np.nan, np.float32)
     sh_n = np.full(dshape, np.nan, np.float32)
-    nt_l, nt_c = lat_tp.shape
     for i in prange(nr):
         for j in _columns(ptr, start, stop, i):
             tlon = lon[i, j]
@@ -174,33 +180,23 @@ def find_antecedents(lon, lat, height, hmode, ptr, start, stop, cl, cp, step,
                 h = math.nan
             else:
                 h = height[i, j]
-            l2, p2, it = _newton(tlon, tlat, gl, gp, h, lat_tp, lon_tp, le, ln, dem, df, dj,
-                                 model, tol, max_iter)
+            l2, p2, it = _newton(tlon, tlat, gl, gp, h, coef, df, dj, model, geo, tol, max_iter)
             if not (-0.5 <= l2 < n_lines - 0.5 and -0.5 <= p2 < n_cols - 0.5):
                 continue
             out_l[i, j] = l2
             out_p[i, j] = p2
             iters[i, j] = it
             if diagnostics:
-                r = direct_point(l2, p2, h, lat_tp, lon_tp, le, ln, dem, df, dj, model)
-                hh = r[2]
-                h_used[i, j] = hh
-                f = min(max(int(math.floor(l2 / df)), 0), nt_l - 2)
-                g = min(max(int(math.floor(p2 / dj)), 0), nt_c - 2)
-                u = l2 / df - f
-                v = p2 / dj - g
-                e = ((1 - u) * ((1 - v) * le[f, g] + v * le[f, g + 1])
-                     + u * ((1 - v) * le[f + 1, g] + v * le[f + 1, g + 1]))
-                n = ((1 - u) * ((1 - v) * ln[f, g] + v * ln[f, g + 1])
-                     + u * ((1 - v) * ln[f + 1, g] + v * ln[f + 1, g + 1]))
-                sh_e[i, j] = hh * e
-                sh_n[i, j] = hh * n
+                r = direct_point(l2, p2, h, coef, df, dj, model, geo)
+                h_used[i, j] = r[2]
+                sh_e[i, j] = r[2] * r[3]
+                sh_n[i, j] = r[2] * r[4]
     return out_l, out_p, iters, h_used, sh_e, sh_n
 
 
 @njit(cache=True, parallel=True)
-def find_antecedents_handbook(lon, lat, height, hmode, ptr, start, stop, lat_tp, lon_tp, le,
-                              ln, dem, df, dj, n_lines, n_cols, model, tol, max_iter):
+def find_antecedents_handbook(lon, lat, height, hmode, ptr, start, stop, lat_tp, lon_tp, coef,
+                              df, dj, n_lines, n_cols, model, geo, tol, max_iter):
     """MERSYN's prediction/correction loop (Appendix C) with the handbook facet search.
 
     Rows run in parallel, each keeping its last facet. Returns line, col (float32), iterations
@@ -231,10 +227,10 @@ def find_antecedents_handbook(lon, lat, height, hmode, ptr, start, stop, lat_tp,
             y = p0
             it = 0
             ok = True
-            while hmode != 0 and it < max_iter:
+            while (hmode != 0 or geo != 0) and it < max_iter:
                 it += 1
                 h = math.nan if hmode == 1 else height[i, j]
-                r = direct_point(x, y, h, lat_tp, lon_tp, le, ln, dem, df, dj, model)
+                r = direct_point(x, y, h, coef, df, dj, model, geo)
                 f3, g3, u3, v3, path3 = search_facet(r[0], r[1], f, g, lat_tp, lon_tp)
                 paths[i, path3 + 1] += 1
                 if path3 < 0:
@@ -255,6 +251,33 @@ def find_antecedents_handbook(lon, lat, height, hmode, ptr, start, stop, lat_tp,
     for i in range(nr):
         total += paths[i]
     return out_l, out_p, iters, total
+
+
+@njit(cache=True, parallel=True)
+def nearest_pixel(line: np.ndarray, col: np.ndarray, n_lines: int, n_cols: int) -> np.ndarray:
+    """Flat index of the antecedent pixel, ``round(l) * W + round(p)`` (Appendix C: iline_segment
+    = TimRound(mer_x0)), -1 where the point was dropped; rows in parallel."""
+    nr, nc = line.shape
+    out = np.full((nr, nc), -1, np.int32)
+    for i in prange(nr):
+        for j in range(nc):
+            x = line[i, j]
+            y = col[i, j]
+            if x >= -0.5 and x < n_lines - 0.5 and y >= -0.5 and y < n_cols - 0.5:
+                out[i, j] = int(math.floor(x + 0.5)) * n_cols + int(math.floor(y + 0.5))
+    return out
+
+
+@njit(cache=True, parallel=True)
+def gather(image: np.ndarray, index: np.ndarray, factor: float, out: np.ndarray) -> None:
+    """out = image[antecedent pixel] * factor (nearest neighbour), 0 where index is -1."""
+    flat = image.ravel()
+    nr, nc = index.shape
+    f = np.float32(factor)
+    for i in prange(nr):
+        for j in range(nc):
+            k = index[i, j]
+            out[i, j] = flat[k] * f if k >= 0 else np.float32(0.0)
 
 
 def iteration_histogram(iters: np.ndarray, max_iter: int = MAX_ITERATIONS) -> np.ndarray:
@@ -282,17 +305,19 @@ def _node_lonlat(grid, rows: np.ndarray, cols: np.ndarray) -> tuple[np.ndarray, 
 def solve(tp, grid, lon: np.ndarray, lat: np.ndarray, height: np.ndarray | None, hmode: int,
           spans: tuple[np.ndarray, np.ndarray, np.ndarray], *, row_start: int = 0,
           tolerance: float = 0.01, max_iter: int = MAX_ITERATIONS, model: int = 0,
-          method: str = "primary", step: int = 16, diagnostics: bool = False) -> dict:
+          geo: int = 0, method: str = "primary", step: int = 16,
+          diagnostics: bool = False) -> dict:
     """Antecedents of output rows [row_start, row_start + lon.shape[0]) of ``grid`` (section 3.2).
 
     ``tp``: ``TiePointGrid``; ``lon``/``lat``: WGS84 degrees of the pixel centres of those rows;
     ``height``: per-point heights for ``hmode=HEIGHT_GIVEN`` (NaN: tie points); ``spans``: CSR
-    (ptr, start, stop) of the columns to process per row. ``method``: "primary" (primary grid +
+    (ptr, start, stop) of the columns to process per row; ``model``/``geo``: parallax and
+    geolocation codes (``location``). ``method``: "primary" (primary grid +
     Newton) or "handbook" (MERSYN's loop and facet search). Returns a dict with "line", "col",
     "iterations" and, with ``diagnostics``, "elevation", "shift_east_m", "shift_north_m"; plus
     "search" (facet-search counts by path).
     """
-    lat_tp, lon_tp, le, ln, dem, df, dj = tp.kernel_args()
+    lat_tp, lon_tp, coef, df, dj = tp.kernel_args()
     lon = np.ascontiguousarray(lon, dtype=np.float64)
     lat = np.ascontiguousarray(lat, dtype=np.float64)
     h = (np.zeros((1, 1), np.float32) if height is None
@@ -301,8 +326,8 @@ def solve(tp, grid, lon: np.ndarray, lat: np.ndarray, height: np.ndarray | None,
     names = ("not found", "same", "4-connex", "8-connex", "all")
     if method == "handbook":
         line, col, iters, paths = find_antecedents_handbook(
-            lon, lat, h, hmode, ptr, start, stop, lat_tp, lon_tp, le, ln, dem, df, dj,
-            tp.height, tp.width, model, tolerance, max_iter)
+            lon, lat, h, hmode, ptr, start, stop, lat_tp, lon_tp, coef, df, dj,
+            tp.height, tp.width, model, geo, tolerance, max_iter)
         out = {"line": line, "col": col, "iterations": iters}
         out["search"] = {n: int(c) for n, c in zip(names, paths, strict=True)}
         return out
@@ -316,10 +341,10 @@ def solve(tp, grid, lon: np.ndarray, lat: np.ndarray, height: np.ndarray | None,
     if cols.size < 2:
         cols = np.r_[cols, cols[-1] + step]
     nlon, nlat = _node_lonlat(grid, rows, cols)
-    cl, cp, paths = primary_grid(nlon, nlat, lat_tp, lon_tp, le, ln, dem, df, dj)
+    cl, cp, paths = primary_grid(nlon, nlat, lat_tp, lon_tp, coef, df, dj, geo)
     line, col, iters, h_used, sh_e, sh_n = find_antecedents(
-        lon, lat, h, hmode, ptr, start, stop, cl, cp, float(step), lat_tp, lon_tp, le, ln, dem,
-        df, dj, tp.height, tp.width, model, tolerance, max_iter, diagnostics)
+        lon, lat, h, hmode, ptr, start, stop, cl, cp, float(step), coef, df, dj, tp.height,
+        tp.width, model, geo, tolerance, max_iter, diagnostics)
     out = {"line": line, "col": col, "iterations": iters}
     if diagnostics:
         out.update(elevation=h_used, shift_east_m=sh_e, shift_north_m=sh_n)

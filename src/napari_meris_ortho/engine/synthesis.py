@@ -92,8 +92,12 @@ def merge_minimum_radiance(synthesis: np.ndarray, count: np.ndarray, segment: np
                            valid: np.ndarray) -> int:
     """Use case 1: band by band, S_n = R when R < S_{n-1} or S_{n-1} is background (0).
 
-    ``synthesis``/``count`` are updated in place; returns the number of added points
-    (pixels where at least one band was replaced, as MERSYN's ``added_point_number``).
+    A new value of 0 (background) never enters. Appendix C prints the test as
+    ``radiance_new == background || radiance_new < radiance_old``; the prose (section 3.1:
+    "replace ... only if MERIS pixel is inferior") and the background meaning of 0 read it as
+    ``radiance_old == background``. ``synthesis``/``count`` are updated in place; returns the
+    number of added points (pixels where at least one band was replaced, MERSYN's
+    ``added_point_number``).
     """
     n_bands, rows, cols = synthesis.shape
     added = np.zeros(rows, dtype=np.int64)

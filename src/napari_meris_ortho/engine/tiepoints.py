@@ -2,9 +2,11 @@
 
 Tie point (i, k) sits on product pixel (line i*DF, column k*DJ) in the stored column order
 (ARCHITECTURE.md). Longitudes are unwrapped so that every facet is continuous across +-180 deg,
-and the viewing direction is kept as a *look vector* ``(tan(vz) sin(va), tan(vz) cos(va))``:
-interpolating its two components bilinearly (instead of vz and va separately, eq. 5a-5b) keeps
-the parallax vector continuous through nadir, where the azimuth is undefined and jumps by 180 deg.
+the positions are also kept as unit vectors (x, y, z) of their geodetic latitude and longitude
+for the "ecef" interpolation (``location``), and the viewing direction as a *look vector*
+``(tan(vz) sin(va), tan(vz) cos(va))``: interpolating its two components bilinearly (instead
+of vz and va separately, eq. 5a-5b) keeps the parallax vector continuous through nadir, where
+the azimuth is undefined and jumps by 180 deg.
 Away from nadir the two agree to far below a metre of parallax.
 """
 
@@ -31,6 +33,23 @@ def unwrap_longitudes(lon: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(out)
 
 
+#: order of the quantities in ``facet_coefficients`` (4 coefficients each)
+COEFFICIENTS = ("latitude", "longitude", "look_east", "look_north", "dem_alt", "x", "y", "z")
+
+
+def facet_coefficients(arrays: tuple[np.ndarray, ...]) -> np.ndarray:
+    """Bilinear coefficients (a, b, c, d) of every facet (eq. 1): X = a + b u + c v + d u v.
+
+    Shape (n_tie_lines - 1, n_tie_cols - 1, 4 * len(arrays)); u along lines, v along columns.
+    One contiguous record per facet keeps the direct model's memory reads together.
+    """
+    parts = []
+    for a in arrays:
+        a00, a10, a01, a11 = a[:-1, :-1], a[1:, :-1], a[:-1, 1:], a[1:, 1:]
+        parts += [a00, a10 - a00, a01 - a00, a11 - a10 - a01 + a00]
+    return np.ascontiguousarray(np.stack(parts, axis=-1))
+
+
 @dataclass
 class TiePointGrid:
     """Tie-point arrays (n_tie_lines, n_tie_cols) plus DF, DJ and the product size H x W."""
@@ -47,6 +66,7 @@ class TiePointGrid:
     lon_unwrapped: np.ndarray = field(init=False, repr=False)
     look_east: np.ndarray = field(init=False, repr=False)
     look_north: np.ndarray = field(init=False, repr=False)
+    coefficients: np.ndarray = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
         arrays = [np.ascontiguousarray(a, dtype=np.float64) for a in (
@@ -68,6 +88,11 @@ class TiePointGrid:
         va = np.radians(self.view_azimuth)
         self.look_east = np.ascontiguousarray(tz * np.sin(va))
         self.look_north = np.ascontiguousarray(tz * np.cos(va))
+        phi = np.radians(self.latitude)
+        lam = np.radians(self.longitude)
+        self.coefficients = facet_coefficients(
+            (self.latitude, self.lon_unwrapped, self.look_east, self.look_north, self.dem_alt,
+             np.cos(phi) * np.cos(lam), np.cos(phi) * np.sin(lam), np.sin(phi)))
 
     @classmethod
     def from_product(cls, product: Any) -> TiePointGrid:
@@ -86,8 +111,8 @@ class TiePointGrid:
         return self.latitude.shape  # type: ignore[return-value]
 
     def kernel_args(self) -> tuple:
-        """Arrays and spacings in the order the numba kernels take them."""
-        return (self.latitude, self.lon_unwrapped, self.look_east, self.look_north, self.dem_alt,
+        """(latitude, unwrapped longitude, facet coefficients, DF, DJ) as the kernels take them."""
+        return (self.latitude, self.lon_unwrapped, self.coefficients,
                 float(self.lines_per_tie_point), float(self.samples_per_tie_point))
 
     def inside(self, line: np.ndarray, col: np.ndarray) -> np.ndarray:

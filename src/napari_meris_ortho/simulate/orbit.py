@@ -119,7 +119,7 @@ def orbit_state(p: np.ndarray, t: float, pos: np.ndarray, vel: np.ndarray) -> No
 
 @njit(cache=True)
 def ecef_to_geodetic(x: float, y: float, z: float) -> tuple[float, float, float]:
-    """WGS84 geodetic (lon deg, lat deg, h m) of an ECEF point (Bowring start, 3 iterations)."""
+    """WGS84 geodetic (lon deg, lat deg, h m) of an ECEF point (Bowring start, 2 iterations)."""
     a = WGS84_A
     e2 = WGS84_E2
     b = WGS84_B
@@ -129,7 +129,7 @@ def ecef_to_geodetic(x: float, y: float, z: float) -> tuple[float, float, float]
     th = math.atan2(z * a, p * b)
     lat = math.atan2(z + ep2 * b * math.sin(th) ** 3, p - e2 * a * math.cos(th) ** 3)
     h = 0.0
-    for _ in range(3):
+    for _ in range(2):
         sl = math.sin(lat)
         nrad = a / math.sqrt(1.0 - e2 * sl * sl)
         cl = math.cos(lat)

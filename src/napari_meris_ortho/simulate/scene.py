@@ -17,7 +17,7 @@ import numpy as np
 from numba import njit, prange
 
 from .._atomic import atomic_path
-from ..errors import OptionsError
+from ..errors import OptionsError, OutputError
 from ..progress import ProgressCallback
 from . import sensor
 from .orbit import Orbit, solve_pass
@@ -222,18 +222,18 @@ def scene_geometry(cfg: dict) -> SceneGeometry:
 
 
 _EMPTY_DEM = (np.zeros((2, 2), np.float32), np.array([0.0, 90.0, 1, 1, 8, 100.0, 0, 0]),
-              np.zeros((1, 1)))
+              np.zeros((1, 1)), np.zeros((1, 1)))
 
 
 def locate(geom: SceneGeometry, lines: np.ndarray, cols: np.ndarray,
-           dem: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> np.ndarray:
+           dem: tuple[np.ndarray, ...] | None = None) -> np.ndarray:
     """(len(lines), len(cols), 7): E lon, E lat, view zenith, view azimuth, T lon, lat, h."""
     lines = np.ascontiguousarray(lines, dtype=np.float64)
     cols = np.ascontiguousarray(cols, dtype=np.float64)
     out = np.empty((lines.size, cols.size, 7))
     d = dem if dem is not None else _EMPTY_DEM
-    sensor.locate_pixels(geom.orb, geom.grid, lines, cols, d[0], d[1], d[2], dem is not None,
-                         geom.side, out)
+    sensor.locate_pixels(geom.orb, geom.grid, lines, cols, d[0], d[1], d[2], d[3],
+                         dem is not None, geom.side, out)
     return out
 
 
@@ -268,11 +268,11 @@ class SimulatedScene:
     dem: np.ndarray
     truth: GroundTruth
     _geo: np.ndarray = field(repr=False, default=None)  # type: ignore[assignment]
-    _bmax: np.ndarray = field(repr=False, default=None)  # type: ignore[assignment]
+    _model: tuple = field(repr=False, default=())
 
     def __post_init__(self) -> None:
-        self._geo = self.dem_grid.geo_vector(self.dem, BLOCK)
-        self._bmax = block_max(self.dem, BLOCK)
+        self._model = terrain_model(self.dem, self.dem_grid)
+        self._geo = self._model[1]
 
     @property
     def name(self) -> str:
@@ -321,7 +321,7 @@ class SimulatedScene:
         """Direct model at product pixels (grid of ``lines`` x ``cols``): ellipsoid point E,
         view angles at E and terrain point T (first intersection of the line of sight)."""
         out = locate(self.geometry, np.atleast_1d(lines), np.atleast_1d(cols),
-                     (self.dem, self._geo, self._bmax))
+                     self._model)
         keys = ("e_lon", "e_lat", "view_zenith", "view_azimuth", "t_lon", "t_lat", "t_h")
         return {k: out[..., i] for i, k in enumerate(keys)}
 
@@ -333,7 +333,13 @@ class SimulatedScene:
         return self.truth_radiance(lon2, lat2, band).astype(np.float32)
 
 
-BLOCK = 8
+BLOCK = 16
+
+
+def terrain_model(dem: np.ndarray, grid: DemGrid) -> tuple[np.ndarray, ...]:
+    """(dem, geo vector, coarse and fine block maxima): the terrain of the numba kernels."""
+    return (dem, grid.geo_vector(dem, BLOCK), block_max(dem, BLOCK),
+            block_max(dem, BLOCK // sensor.FINE_DIV))
 
 
 def _sample_dem(dem: np.ndarray, geo: np.ndarray, lon: np.ndarray,
@@ -384,8 +390,9 @@ def tie_point_values(geom: SceneGeometry, grid: DemGrid, dem: np.ndarray) -> dic
     flat_lat = np.ascontiguousarray(lat.ravel())
     dem_alt = _sample_dem(alt.astype(np.float32), geo, flat_lon, flat_lat).reshape(lon.shape)
     dem_rough = _sample_dem(rough.astype(np.float32), geo, flat_lon, flat_lat).reshape(lon.shape)
-    dem_alt = np.nan_to_num(dem_alt)
-    dem_rough = np.nan_to_num(dem_rough)
+    # stored as integers (altitude and roughness factors 1.0, Appendix A): eq. 2 uses those
+    dem_alt = np.round(np.nan_to_num(dem_alt))
+    dem_rough = np.round(np.nan_to_num(dem_rough))
     times = geom.line_time(geom.tie_lines)[:, None] * np.ones_like(lon)
     sz, sa = solar_angles(times, lon, lat)
     # eq. 2 with the sign convention of real products (Appendix E): lon_corr has the minus sign
@@ -439,15 +446,15 @@ def render_product(cfg: dict, geom: SceneGeometry, grid: DemGrid, dem: np.ndarra
     from ..io.n1 import ScalingFactors
 
     sf = np.array(ScalingFactors.appendix_a().radiance, dtype=np.float64)
-    geo = grid.geo_vector(dem, BLOCK)
-    bmax = block_max(dem, BLOCK)
+    model = terrain_model(dem, grid)
+    geo = model[1]
     h, w = geom.lines, geom.columns
     counts = np.empty((15, h, w), np.uint16)
     flags = np.empty((h, w), np.uint8)
     cols = np.arange(w, dtype=np.float64)
     for start in range(0, h, chunk):
         lines = np.arange(start, min(start + chunk, h), dtype=np.float64)
-        out = locate(geom, lines, cols, (dem, geo, bmax))
+        out = locate(geom, lines, cols, model)
         sz, sa = _chunk_sun(geom, lines, out)
         glint = _glint(out[..., 2], out[..., 3], sz, sa, float(cfg["glint_angle_deg"]))
         sl = slice(start, start + lines.size)
@@ -532,7 +539,11 @@ def generate_scene(name_or_config: str | dict, out_dir: str | os.PathLike[str] |
         if progress is not None:
             progress(100, 100)
         return cached
-    target.mkdir(parents=True, exist_ok=True)
+    try:
+        target.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise OutputError(f"{target}: cannot create the output directory "
+                          f"({exc.strerror or exc})") from None
     geom = scene_geometry(cfg)
     grid, terrain, truth = build_truth(cfg, geom)
     dem = terrain.height

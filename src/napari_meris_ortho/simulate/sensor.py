@@ -40,6 +40,8 @@ G_T0, G_DT, G_SPACING, G_FIRST = 0, 1, 2, 3
 # DEM geo vector: lon of first (west) post, lat of first (north) post, dlon, dlat,
 #                 block size of the max grid, minimum post spacing (m), h_min, h_max
 D_LON0, D_LAT0, D_DLON, D_DLAT, D_BLOCK, D_SPMIN, D_HMIN, D_HMAX = range(8)
+#: ratio of the coarse to the fine block size of the block-maximum grids
+FINE_DIV = 4
 
 
 @njit(cache=True)
@@ -227,10 +229,9 @@ def dem_bilinear(dem: np.ndarray, geo: np.ndarray, lon: float, lat: float) -> fl
 
 
 @njit(cache=True)
-def _block_max(bmax: np.ndarray, geo: np.ndarray, lon: float, lat: float) -> float:
+def _block_max(bmax: np.ndarray, geo: np.ndarray, lon: float, lat: float, b: float) -> float:
     x = ((lon - geo[D_LON0]) % 360.0) / geo[D_DLON]
     y = (geo[D_LAT0] - lat) / geo[D_DLAT]
-    b = geo[D_BLOCK]
     bj = int(math.floor(x / b))
     bi = int(math.floor(y / b))
     if bi < 0 or bj < 0 or bi >= bmax.shape[0] or bj >= bmax.shape[1]:
@@ -279,11 +280,13 @@ def _refine_crossing(s0: np.ndarray, d: np.ndarray, dem: np.ndarray, geo: np.nda
 
 @njit(cache=True)
 def terrain_intersection(s0: np.ndarray, d: np.ndarray, dem: np.ndarray, geo: np.ndarray,
-                         bmax: np.ndarray, sin_zenith: float, out: np.ndarray) -> None:
+                         bmax: np.ndarray, bmax_fine: np.ndarray, sin_zenith: float,
+                         out: np.ndarray) -> None:
     """First intersection T of the ray S + s d with the bilinear DEM surface (look-point method).
 
-    March from above the highest post, skipping safely over blocks whose maximum lies below the
-    ray, with fine steps of half a post elsewhere; refine the first sign change by bisection.
+    March from above the highest post, skipping safely over blocks whose (dilated) maximum lies
+    below the ray (blocks of D_BLOCK posts, then of D_BLOCK / FINE_DIV posts), with steps of
+    half a post elsewhere; refine the first sign change by false position (Illinois).
     ``out`` receives lon, lat, h of T.
     """
     p = np.empty(3)
@@ -292,27 +295,38 @@ def terrain_intersection(s0: np.ndarray, d: np.ndarray, dem: np.ndarray, geo: np
     sz = max(sin_zenith, 1e-3)
     fine = 0.5 * geo[D_SPMIN] / sz
     jump_lim = 0.75 * geo[D_BLOCK] * geo[D_SPMIN] / sz
-    f_prev = np.inf
-    while s < s_end:
+    b_fine = geo[D_BLOCK] / FINE_DIV
+    jump_fine = 0.75 * b_fine * geo[D_SPMIN] / sz
+    have_prev = False
+    s_prev = s
+    f_prev = 0.0
+    while True:
         for k in range(3):
             p[k] = s0[k] + s * d[k]
         lon, lat, h = ecef_to_geodetic(p[0], p[1], p[2])
-        room = h - _block_max(bmax, geo, lon, lat)
-        if room > fine:
-            s = min(s + min(room, jump_lim), s_end)
-            f_prev = np.inf
-            continue
-        if f_prev == np.inf:
-            f_prev = _height_above_dem(dem, geo, p)
-        s_new = min(s + fine, s_end)
-        for k in range(3):
-            p[k] = s0[k] + s_new * d[k]
-        f_new = _height_above_dem(dem, geo, p)
-        if f_new <= 0.0:
-            s = _refine_crossing(s0, d, dem, geo, s, f_prev, s_new, f_new)
+        if s < s_end:
+            room = h - _block_max(bmax, geo, lon, lat, geo[D_BLOCK])
+            if room > fine:
+                s = min(s + min(room, jump_lim), s_end)
+                have_prev = False
+                continue
+            room = h - _block_max(bmax_fine, geo, lon, lat, b_fine)
+            if room > fine:
+                s = min(s + min(room, jump_fine), s_end)
+                have_prev = False
+                continue
+        z = dem_bilinear(dem, geo, lon, lat)
+        f = h - (0.0 if z != z else z)
+        if f <= 0.0:
+            if have_prev:
+                s = _refine_crossing(s0, d, dem, geo, s_prev, f_prev, s, f)
             break
-        f_prev = f_new
-        s = s_new
+        if s >= s_end:
+            break
+        have_prev = True
+        s_prev = s
+        f_prev = f
+        s = min(s + fine, s_end)
     for k in range(3):
         p[k] = s0[k] + s * d[k]
     lon, lat, h = ecef_to_geodetic(p[0], p[1], p[2])
@@ -391,7 +405,8 @@ NODE_STEP = 16
 
 @njit(cache=True, parallel=True)
 def locate_pixels(orb: np.ndarray, grid: np.ndarray, lines: np.ndarray, cols: np.ndarray,
-                  dem: np.ndarray, geo: np.ndarray, bmax: np.ndarray, terrain: bool,
+                  dem: np.ndarray, geo: np.ndarray, bmax: np.ndarray, bmax_fine: np.ndarray,
+                  terrain: bool,
                   side: float, out: np.ndarray) -> None:
     """Direct model of the simulator for product pixels (lines x cols, cols increasing).
 
@@ -430,7 +445,8 @@ def locate_pixels(orb: np.ndarray, grid: np.ndarray, lines: np.ndarray, cols: np
             out[i, j, 2] = vz
             out[i, j, 3] = va
             if terrain:
-                terrain_intersection(s0, d, dem, geo, bmax, math.sin(math.radians(vz)), tpt)
+                terrain_intersection(s0, d, dem, geo, bmax, bmax_fine,
+                                     math.sin(math.radians(vz)), tpt)
                 out[i, j, 4] = tpt[0]
                 out[i, j, 5] = tpt[1]
                 out[i, j, 6] = tpt[2]

@@ -1,0 +1,114 @@
+"""Screenshots and flicker GIFs of the napari plugin for the README tour (docs/images/).
+
+A real run: the sample scene is generated (or taken from the cache), mapped without and with
+terrain correction, shown in a napari viewer, and captured. Needs an X display with OpenGL;
+without one the script re-runs itself under ``xvfb-run`` (never Qt's offscreen platform:
+NOTES.md). Usage::
+
+    python scripts/make_screenshots.py [--scene fr-alps] [--out docs/images]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import shutil
+import sys
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+SIZE = (1280, 900)
+
+
+def _ensure_display() -> None:
+    if os.environ.get("DISPLAY"):
+        return
+    xvfb = shutil.which("xvfb-run")
+    if xvfb is None:
+        sys.exit("make_screenshots: no DISPLAY and no xvfb-run (apt-get install xvfb)")
+    os.environ.pop("QT_QPA_PLATFORM", None)
+    os.execv(xvfb, [xvfb, "-a", "-s", "-screen 0 1600x1200x24", sys.executable, *sys.argv])
+
+
+def _only(viewer, *names: str) -> None:
+    for layer in viewer.layers:
+        layer.visible = layer.name in names
+
+
+def _zoom_on_peak(viewer, half_width_px: int = 70) -> tuple[float, float]:
+    """Centre the camera on the highest DEM pixel, showing about 2 x half_width_px pixels."""
+    dem = viewer.layers["DEM"]
+    valid = viewer.layers["orthorectified band 7"].data > 0
+    heights = np.where(valid, dem.data, -np.inf)
+    row, col = np.unravel_index(np.argmax(heights), heights.shape)
+    centre = np.asarray(dem.translate) + np.asarray(dem.scale) * (row, col)
+    viewer.camera.center = tuple(centre)
+    canvas_px = min(viewer.window._qt_viewer.canvas.size)
+    viewer.camera.zoom = canvas_px / (2 * half_width_px * dem.scale[0])
+    return float(heights[row, col]), float(dem.scale[0])
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--scene", default="fr-alps", choices=["fr-alps", "fr-small"])
+    parser.add_argument("--out", type=Path, default=ROOT / "docs" / "images")
+    args = parser.parse_args(argv)
+    _ensure_display()
+
+    import napari
+    from napari_meris_ortho._widget_flicker import FlickerWidget, export_flicker_gif
+
+    args.out.mkdir(parents=True, exist_ok=True)
+    viewer = napari.Viewer(title=f"napari-meris-ortho: {args.scene}")
+    viewer.window.resize(*SIZE)
+    viewer.window.show()
+    viewer.open_sample("napari-meris-ortho", args.scene)
+    wrote = []
+
+    _only(viewer, "orthorectified RGB 7-5-2", "footprint", "tie-point facets")
+    viewer.layers["tie-point facets"].visible = True
+    viewer.reset_view()
+    viewer.screenshot(str(args.out / "ortho_rgb_footprint.png"), flash=False)
+    wrote.append("ortho_rgb_footprint.png")
+
+    _only(viewer, "DEM", "parallax shift", "footprint")
+    viewer.reset_view()
+    viewer.screenshot(str(args.out / "parallax_vectors.png"), flash=False)
+    wrote.append("parallax_vectors.png")
+
+    peak, pixel = _zoom_on_peak(viewer)
+    for name, pair in (("flicker_uncorrected_vs_reference.gif",
+                        ("uncorrected band 7", "reference band 7")),
+                       ("flicker_ortho_vs_reference.gif",
+                        ("orthorectified band 7", "reference band 7"))):
+        _only(viewer, *pair)
+        a, b = (viewer.layers[n] for n in pair)
+        b.contrast_limits = a.contrast_limits
+        export_flicker_gif(viewer, a, b, args.out / name, rate=2.0, cycles=2)
+        wrote.append(name)
+
+    viewer.reset_view()
+    _only(viewer, "orthorectified RGB 7-5-2", "footprint")
+    viewer.window.add_plugin_dock_widget("napari-meris-ortho", "Orthorectify")
+    _, flicker = viewer.window.add_plugin_dock_widget("napari-meris-ortho", "Flicker")
+    assert isinstance(flicker, FlickerWidget)
+    flicker.layer_a.value = viewer.layers["reference band 7"]
+    flicker.layer_b.value = viewer.layers["orthorectified band 7"]
+    result = flicker.measure_disparity()
+    viewer.layers[-1].visible = False
+    viewer.screenshot(str(args.out / "widgets.png"), canvas_only=False, flash=False)
+    wrote.append("widgets.png")
+
+    dx, dy = result.global_displacement
+    print(f"scene {args.scene}: highest point {peak:.0f} m, pixel {pixel:.0f} m")
+    print(f"disparity orthorectified vs reference: dX {dx:+.2f} px, dY {dy:+.2f} px "
+          f"({int(result.candidate.sum())} points)")
+    print("wrote", ", ".join(str(args.out / w) for w in wrote))
+    viewer.close()
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

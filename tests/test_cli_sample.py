@@ -1,0 +1,53 @@
+"""``meris-ortho sample``: generate a named scene, print where everything is; bad input -> 2."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from napari_meris_ortho.cli import main
+from napari_meris_ortho.io.n1 import read_product
+
+SMALL = {"lines": 40, "columns": 65,
+         "exports": {"getasse30": False, "getasse30_beam": True, "srtm30": False,
+                     "geotiff_utm": False, "reference": True}}
+
+
+def test_sample_writes_the_scene_and_prints_the_paths(tmp_path, capsys):
+    out = tmp_path / "scene"
+    code = main(["-q", "sample", "fr-small", "--out", str(out), "--set", json.dumps(SMALL)])
+    assert code == 0
+    text = capsys.readouterr().out
+    lines = dict(line.split(None, 1) for line in text.splitlines() if line.strip())
+    product = Path(lines["product"])
+    assert product.parent == out and product.name.startswith("MER_FR__1PNSIM20030921")
+    p = read_product(product)
+    assert (p.height, p.width) == (40, 65)
+    assert "geotiff" in text and "getasse30_beam" in text
+    assert (out / "getasse30_beam" / "45N000E.GETASSE30").stat().st_size == 6_480_000
+    assert Path(lines["reference"]).exists()
+    # a second run reuses the complete output
+    stamp = product.stat().st_mtime_ns
+    assert main(["-q", "sample", "fr-small", "--out", str(out), "--set", json.dumps(SMALL)]) == 0
+    assert product.stat().st_mtime_ns == stamp
+
+
+def test_sample_list(capsys):
+    assert main(["sample", "--list"]) == 0
+    names = capsys.readouterr().out.split()
+    assert {"fr-alps", "fr-small", "rr-segment", "rr-antimeridian",
+            "fr-south-ascending"} <= set(names)
+
+
+def test_sample_bad_input_exits_2(tmp_path, capsys):
+    assert main(["sample", "no-such-scene", "--out", str(tmp_path)]) == 2
+    assert "unknown scene 'no-such-scene'" in capsys.readouterr().err
+    assert main(["sample", "fr-small", "--out", str(tmp_path), "--set", "{lines: 3"]) == 2
+    assert "--set: not valid JSON" in capsys.readouterr().err
+    assert main(["sample", "fr-small", "--out", str(tmp_path), "--set", '{"columns": 70}']) == 2
+    assert "64 k + 1" in capsys.readouterr().err
+    blocker = tmp_path / "file.txt"
+    blocker.write_text("")
+    code = main(["sample", "fr-small", "--out", str(blocker / "x"), "--set", json.dumps(SMALL)])
+    assert code == 2
+    assert "cannot create the output directory" in capsys.readouterr().err
