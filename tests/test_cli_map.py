@@ -63,9 +63,11 @@ def test_map_explicit_extent_and_options(files, tmp_path, caplog):
     rc = main(["-q", "map", str(prod), "-o", str(out), "--elevation", "tiepoints",
                "--ul", f"{lon - 0.1}", f"{lat + 0.1}", "--lr", f"{lon + 0.1}", f"{lat - 0.1}",
                "--pixel-size", "0.005", "--bands", "2", "--sampling", "bilinear",
-               "--tolerance", "0.1", "--parallax", "ellipsoid", "--search", "handbook"])
+               "--tolerance", "0.1", "--parallax", "ellipsoid", "--search", "handbook",
+               "--geolocation", "bilinear"])
     assert rc == 0
-    arrays, grid, _ = read_geotiff(out)
+    arrays, grid, meta = read_geotiff(out)
+    assert meta["tags"]["geolocation"] == "bilinear" and meta["tags"]["parallax"] == "ellipsoid"
     assert arrays[0].shape == (40, 40)
     assert grid.x0 == pytest.approx(lon - 0.1)
     assert np.count_nonzero(arrays[0]) > 800

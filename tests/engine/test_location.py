@@ -116,3 +116,20 @@ def test_tie_point_grid_rejects_bad_shapes():
     with pytest.raises(N1FormatError):
         TiePointGrid(np.zeros((1, 3)), np.zeros((1, 3)), np.zeros((1, 3)), np.zeros((1, 3)),
                      np.zeros((1, 3)), 64, 64, 1, 129)
+
+
+def test_ecef_geolocation_agrees_at_tie_points_and_differs_little_inside():
+    g = analytic_swath(lat0=70.0)
+    line = np.array([0.0, 64.0, 128.0, 32.0, 96.0])
+    col = np.array([0.0, 640.0, 2240.0, 1000.0, 1500.0])
+    lo_b, la_b = direct_location(g, line, col, 0.0, geolocation="bilinear")
+    lo_e, la_e = direct_location(g, line, col, 0.0, geolocation="ecef")
+    assert np.max(np.abs(lo_b[:3] - lo_e[:3])) < 1e-9 and np.max(np.abs(la_b[:3] - la_e[:3])) < 1e-9
+    # inside facets the two models differ by metres, not by pixels (260 m)
+    d_m = np.hypot((lo_b - lo_e) * 111320 * np.cos(np.radians(la_b)), (la_b - la_e) * 111320)
+    assert 0.01 < d_m[3:].max() < 50.0
+    # the ellipsoid parallax implies the ecef interpolation unless told otherwise
+    lo_p, _ = direct_location(g, line, col, 0.0, parallax="ellipsoid")
+    assert np.array_equal(lo_p, lo_e)
+    with pytest.raises(OptionsError, match="geolocation"):
+        direct_location(g, line, col, 0.0, geolocation="spline")

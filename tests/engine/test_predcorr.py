@@ -128,3 +128,20 @@ def test_nadir_and_antimeridian_swath():
     hit = np.zeros((300, 1025), bool)
     hit[np.round(res["line"][ok]).astype(int), np.round(res["col"][ok]).astype(int)] = True
     assert hit.mean() > 0.95
+
+
+def test_ecef_geolocation_converges_on_both_paths(scene):
+    tp, grid, lon, lat, spans = scene
+    h = _terrain(lon, lat).astype(np.float32)
+    fast = solve(tp, grid, lon, lat, h, HEIGHT_GIVEN, spans, tolerance=1e-4, model=1, geo=1)
+    ref = solve(tp, grid, lon, lat, h, HEIGHT_GIVEN, spans, tolerance=1e-4, model=1, geo=1,
+                method="handbook")
+    ok = fast["iterations"] >= 0
+    line = fast["line"][ok].astype(np.float64)
+    col = fast["col"][ok].astype(np.float64)
+    lon2, lat2 = direct_location(tp, line, col, h[ok].astype(np.float64), parallax="ellipsoid")
+    dx = ((lon2 - lon[ok] + 180) % 360 - 180) * 111320 * np.cos(np.radians(lat[ok])) / 260.0
+    assert np.max(np.hypot(dx, (lat2 - lat[ok]) * 111320 / 260.0)) < 1e-3
+    both = ok & (ref["iterations"] >= 0)
+    assert np.max(np.abs(fast["col"][both] - ref["col"][both])) < 1e-3
+    assert np.max(np.abs(fast["line"][both] - ref["line"][both])) < 1e-3

@@ -95,3 +95,12 @@ def test_clouds_only_change_the_cloudy_pixels(tmp_path):
     assert 0.2 < changed1.mean() < 0.7
     assert np.all(r1[changed1] > r0[changed1])  # clouds are brighter than the ground
     assert not np.array_equal(changed1, r2 != r0)
+
+
+def test_progress_is_reported_up_to_the_total(tmp_path):
+    calls = []
+    generate_scene({**TINY, "seed": 5}, out_dir=tmp_path / "p",
+                   progress=lambda done, total: calls.append((done, total)))
+    done = [d for d, _ in calls]
+    assert len(calls) > 3 and all(t == 100 for _, t in calls)
+    assert done == sorted(done) and done[-1] == 100

@@ -55,6 +55,10 @@ def register(subparsers: Any) -> None:
                    help="prediction/correction tolerance in product pixels (MERSYN: 0.1)")
     p.add_argument("--parallax", choices=("handbook", "ellipsoid"), default="handbook",
                    help="parallax model: handbook sphere R=6370997 m or WGS84 radii")
+    p.add_argument("--geolocation", choices=("bilinear", "ecef"), default=None,
+                   help="tie-point position interpolation: bilinear lon/lat (eq. 4a-4b) or "
+                   "ecef unit vectors (default: bilinear with --parallax handbook, ecef with "
+                   "ellipsoid)")
     p.add_argument("--search", choices=("primary", "handbook"), default="primary",
                    help="antecedent search: primary grid + Newton (fast) or MERSYN's facet "
                    "search in the loop")
@@ -155,7 +159,9 @@ def _write(args: argparse.Namespace, result: Any) -> None:
     write_geotiff(args.output, [result.bands[b] for b in bands], result.grid,
                   descriptions=[meris_band_description(b, wl.get(b)) for b in bands],
                   metadata={"product": result.stats["product"], "elevation": args.elevation,
-                            "parallax": args.parallax, "tolerance_px": args.tolerance,
+                            "parallax": args.parallax,
+                            "geolocation": result.stats["geolocation"],
+                            "tolerance_px": args.tolerance,
                             "sampling": args.sampling, "software": "napari-meris-ortho map"})
     if args.diagnostics:
         names = ("line", "col", "elevation", "elevation_source", "iterations", "shift_east_m",
@@ -180,7 +186,8 @@ def run(args: argparse.Namespace) -> int:
                               sampling=args.sampling, bands=args.bands,
                               tolerance=args.tolerance, parallax=args.parallax,
                               diagnostics=args.diagnostics, progress=progress,
-                              method=args.search, crs=args.crs, pixel_size=args.pixel_size)
+                              method=args.search, crs=args.crs, pixel_size=args.pixel_size,
+                              geolocation=args.geolocation)
     _write(args, result)
     if args.stats_json:
         with atomic_path(args.stats_json) as tmp:

@@ -350,7 +350,9 @@ def _sample_dem(dem: np.ndarray, geo: np.ndarray, lon: np.ndarray,
 
 
 @njit(cache=True, parallel=True)
-def _sample_dem_kernel(dem, geo, lon, lat, out):  # pragma: no cover - numba
+def _sample_dem_kernel(dem: np.ndarray, geo: np.ndarray, lon: np.ndarray, lat: np.ndarray,
+                       out: np.ndarray) -> None:
+    """Bilinear DEM heights at many points (NaN outside the grid)."""
     for i in prange(lon.size):
         out[i] = sensor.dem_bilinear(dem, geo, lon[i], lat[i])
 
