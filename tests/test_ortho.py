@@ -222,6 +222,7 @@ def fr_small():
     return generate_scene("fr-small")
 
 
+@pytest.mark.slow
 def test_accuracy_against_the_simulator_truth(fr_small):
     """fr-small (20-30 deg view zenith over a 4.5 km range): DEM mode within 0.05 px RMS."""
     s = fr_small
@@ -232,11 +233,14 @@ def test_accuracy_against_the_simulator_truth(fr_small):
     e_hb = _truth_error(s, orthorectify(s.product_path, dems=[dem], bands=[7],
                                         diagnostics=True))
     assert np.sqrt(np.mean(e_hb ** 2)) <= 0.05 and e_hb.max() <= 0.25
+    # the ellipsoid model (WGS84 radii + ecef interpolation) gains over the handbook's
+    assert np.sqrt(np.mean(e ** 2)) < 0.5 * np.sqrt(np.mean(e_hb ** 2))
     e_none = _truth_error(s, orthorectify(s.product_path, elevation="none", bands=[7],
                                           diagnostics=True))
     assert np.sqrt(np.mean(e_none ** 2)) > 1.0 and e_none.max() > 5.0
 
 
+@pytest.mark.slow
 def test_accuracy_across_the_antimeridian():
     """rr-antimeridian, a box across 180 deg: no seam, DEM mode within 0.05 px RMS."""
     from napari_meris_ortho.simulate.scene import generate_scene

@@ -11,6 +11,10 @@ output point's lon/lat, ``f(l, p, h) = (lon, lat)``:
 * ``find_antecedents_handbook`` (reference): MERSYN's loop verbatim — inverse by facet search,
   then ``x <- x + (x_origin - f^-1(f(x, h)))`` until the correction is below the tolerance.
 
+Iterations count direct-model evaluations that moved the point (MERSYN's loop passes); the
+fast path's prediction is not exact, so even without heights it reports one correction where
+MERSYN reports ITERATION[0]. The primary grid extends the edge facets, so it also keeps terrain
+points whose zero-height position lies outside the swath (MERSYN's first inverse loses them).
 Both stop after ``max_iter`` iterations (histogram like Appendix B) and drop points whose
 antecedent leaves the product (-0.5 <= l < H-0.5, -0.5 <= p < W-0.5). Heights (``hmode``):
 0 none (MERSYN ``-ort NO``), 1 tie-point dem_alt at the antecedent, 2 the given per-point height
