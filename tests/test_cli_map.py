@@ -74,6 +74,34 @@ def test_map_explicit_extent_and_options(files, tmp_path, caplog):
     assert not [r for r in caplog.records if r.levelno < logging.WARNING]  # -q: warnings only
 
 
+def test_map_geotiff_carries_band_and_scaling_metadata(files, tmp_path):
+    """Issue 4 item 9: band descriptions (number, wavelength) and the radiance scale factors."""
+    import rasterio
+
+    _, prod, _ = files
+    product = read_product(prod)
+    out = tmp_path / "meta.tif"
+    assert main(["-q", "map", str(prod), "-o", str(out), "--elevation", "none",
+                 "--bands", "13,7"]) == 0
+    with rasterio.open(out) as ds:
+        tags, band_tags = ds.tags(), [ds.tags(1), ds.tags(2)]
+        assert ds.descriptions == (f"MERIS band 7 ({product.wavelengths[6]:.1f} nm)",
+                                   f"MERIS band 13 ({product.wavelengths[12]:.1f} nm)")
+        assert ds.scales == (1.0, 1.0) and ds.offsets == (0.0, 0.0)  # values are radiances
+        band7 = ds.read(1)
+    assert tags["product_name"] == product.product_name != ""
+    assert tags["product"] == str(prod) and "sf_rad" in tags["radiance"]
+    for tag, b in zip(band_tags, (7, 13), strict=True):
+        assert tag["meris_band"] == str(b) and tag["units"] == "W m-2 sr-1 um-1"
+        assert float(tag["sf_rad"]) == product.scaling.radiance[b - 1]
+        assert float(tag["wavelength_nm"]) == pytest.approx(product.wavelengths[b - 1])
+        assert float(tag["bandwidth_nm"]) == pytest.approx(product.bandwidths[b - 1])
+    # radiance / sf_rad gives back the stored integer counts
+    counts = band7[band7 > 0] / np.float64(band_tags[0]["sf_rad"])
+    assert counts.size > 10000
+    assert np.max(np.abs(counts - np.round(counts))) < 1e-3 * counts.max()
+
+
 def _bad(args, tmp_path, capsys, match):
     rc = main(args)
     err = capsys.readouterr().err.strip().splitlines()

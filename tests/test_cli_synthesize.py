@@ -133,3 +133,26 @@ def test_synthesis_with_a_dem(products, tmp_path) -> None:
     # the DEM moves the pixels of the relief the tie-point heights miss (39 % measured)
     moved = (with_dem != tiepoints) & both
     assert 0.2 < moved.sum() / both.sum() < 0.6
+
+
+@pytest.mark.parametrize("command", ["map", "synthesize"])
+def test_shared_grid_and_height_options_refused_alike(products, tmp_path, capsys,
+                                                      command) -> None:
+    """map and synthesize parse the grid/height/band options in one place (_options.py)."""
+    out = ["-o", str(tmp_path / "o.tif")] if command == "map" else ["--out", str(tmp_path / "s")]
+    cases = [
+        (["--ul", "13", "47"], "--ul and --lr need each other"),
+        (["--ul", "13", "47", "--lr", "14", "46"], "--ul/--lr need --pixel-size"),
+        (["--pixel-size", "-0.5"], "--pixel-size must be > 0, got -0.5"),
+        (["--crs", "EPSG:999999"], "unknown CRS"),
+        (["--dem", str(tmp_path / "d.tif"), "--elevation", "none"], "DEMs need --elevation dem"),
+        (["--ul", "14", "46", "--lr", "13", "47", "--pixel-size", "0.01"], "upper-left"),
+    ]
+    for extra, message in cases:
+        assert main(["-q", command, products[0], *out, *extra]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and err[0].startswith("meris-ortho: error:") and message in err[0]
+    with pytest.raises(SystemExit) as exc:
+        main(["-q", command, products[0], *out, "--bands", "7,16"])
+    assert exc.value.code == 2 and "MERIS bands are 1..15" in capsys.readouterr().err
+    assert not any(tmp_path.iterdir())

@@ -175,6 +175,65 @@ def test_antimeridian_product_has_no_holes(tmp_path):
     assert r.valid[near].mean() > 0.3
 
 
+@pytest.fixture(scope="module")
+def wide_run(files, dem_run):
+    """dem_run's grid widened by 30 pixels on each side: terrain points beyond the boundary."""
+    _, prod, dem, _ = files
+    g = dem_run.grid
+    wide = OutputGrid(g.crs, g.x0 - 30 * g.dx, g.y0 + 30 * g.dy, g.dx, g.dy, g.width + 60,
+                      g.height + 60)
+    return orthorectify(prod, grid=wide, dems=[dem], bands=[1, 2], diagnostics=True)
+
+
+@pytest.mark.parametrize("sampling", ["nearest", "bicubic"])
+def test_tile_reads_only_the_antecedent_lines(files, wide_run, sampling):
+    """A tile reads min..max antecedent line plus the kernel margin, and samples it right."""
+    _, prod, dem, _ = files
+    tile = wide_run.grid.window(150, 190, 200, 600)
+    r = orthorectify(prod, grid=tile, dems=[dem], bands=[1, 2], sampling=sampling,
+                     diagnostics=True)
+    f1, f2 = read_product(prod).scaling.radiance[:2]
+    ok = r.valid
+    line, col = r.diagnostics["line"][ok], r.diagnostics["col"][ok]
+    pad = 1 if sampling == "bicubic" else 0
+    first, stop = r.stats["product_lines_read"]
+    assert first == max(int(np.floor(line.min())) - pad, 0) > 0
+    assert stop == int(np.floor(line.max())) + 2 + pad < 200
+    assert stop - first <= 100  # at most half of the 200 product lines
+    if sampling == "nearest":  # band 1 counts the product line, band 2 the column
+        np.testing.assert_array_equal(np.round(r.bands[1][ok] / f1), np.floor(line + 0.5))
+        np.testing.assert_array_equal(np.round(r.bands[2][ok] / f2), np.floor(col + 0.5))
+        np.testing.assert_array_equal(r.flags, wide_run.flags[150:190, 200:600])
+    else:  # Keys cubic reproduces the linear line/column ramps
+        inner = (col > 1) & (col < 511)
+        assert np.max(np.abs(r.bands[1][ok] / f1 - line)) < 2e-3
+        assert np.max(np.abs(r.bands[2][ok][inner] / f2 - col[inner])) < 2e-3
+
+
+def test_allow_empty_keeps_terrain_points_beyond_the_boundary(files, wide_run):
+    """East of the zero-height boundary (no pixel centre inside it) terrain points shifted
+    towards the satellite are still mapped with allow_empty; a far tile is all background."""
+    _, prod, dem, _ = files
+    wide = wide_run.grid
+    east = wide.window(0, wide.height, 885, wide.width)  # the boundary ends at column 884
+    with pytest.raises(OptionsError, match="misses"):
+        orthorectify(prod, grid=east, dems=[dem], bands=[1])
+    r = orthorectify(prod, grid=east, dems=[dem], bands=[1, 2], allow_empty=True,
+                     diagnostics=True)
+    assert r.stats["points_in_boundary"] == 0
+    assert r.valid.sum() == wide_run.valid[:, 885:].sum() > 100
+    np.testing.assert_array_equal(r.valid, wide_run.valid[:, 885:])
+    np.testing.assert_array_equal(r.bands[1], wide_run.bands[1][:, 885:])
+    assert np.nanmin(r.diagnostics["elevation"]) > 500.0  # mountains seen obliquely
+    far = wide.window(0, 20, 0, 20)
+    e = orthorectify(prod, grid=far, dems=[dem], bands=[1, 2], allow_empty=True,
+                     diagnostics=True)
+    assert e.valid.sum() == 0 and e.bands[1].max() == 0.0 and e.bands[2].shape == (20, 20)
+    assert e.stats["processed_points"] == 0 and e.stats["product_lines_read"] == [0, 0]
+    assert e.stats["elevation_sources"] == {"tiepoints": 0, "0:dem.tif": 0}
+    assert (e.diagnostics["iterations"] == -1).all()
+
+
 def test_bad_inputs(files, tmp_path):
     d, prod, dem, _ = files
     with pytest.raises(N1FormatError):

@@ -12,7 +12,7 @@ import pytest
 import rasterio
 
 from napari_meris_ortho.engine.grid import OutputGrid
-from napari_meris_ortho.engine.synthesis import ndvi_encode
+from napari_meris_ortho.engine.synthesis import ndvi_encode, validated_pixels
 from napari_meris_ortho.errors import OptionsError
 from napari_meris_ortho.ortho import orthorectify
 from napari_meris_ortho.simulate.radiometry import CLOUD_SPECTRUM
@@ -20,7 +20,6 @@ from napari_meris_ortho.synthesis import (
     _commit,
     _create_layers,
     _Layers,
-    grid_window,
     open_synthesis,
     synthesize,
     tiles,
@@ -89,15 +88,6 @@ def test_tiles_cover_window_once_aligned() -> None:
         assert (r0 // 256) == ((r1 - 1) // 256) and (c0 // 256) == ((c1 - 1) // 256)
         seen[r0:r1, c0:c1] += 1
     assert seen[100:700, 30:530].min() == 1 and seen.sum() == 600 * 500
-
-
-def test_grid_window_geolocation() -> None:
-    grid = _grid()
-    sub = grid_window(grid, 50, 120, 30, 90)
-    assert (sub.height, sub.width) == (70, 60)
-    x, y = grid.xy(np.array([55.0]), np.array([33.0]))
-    xs, ys = sub.xy(np.array([5.0]), np.array([3.0]))
-    assert abs(x[0] - xs[0]) < 1e-12 and abs(y[0] - ys[0]) < 1e-12
 
 
 def test_layers_round_trip_and_manifest(tmp_path) -> None:
@@ -353,3 +343,63 @@ def test_bright_pixels_kept_out_on_request(products, tmp_path) -> None:
     count = open_synthesis(tmp_path / "o").read("count")
     expected = direct.valid & (direct.flags & (4 | 32 | 128) == 0)
     assert (count.astype(bool) == expected).mean() > 0.999
+
+
+def test_tile_beyond_the_zero_height_boundary_keeps_terrain_pixels(tmp_path) -> None:
+    """Mountains seen from the west (view azimuth ~102 deg) are mapped up to 3 pixels east of
+    the zero-height segment boundary (22 pixels here); with the tile edge right after the
+    boundary, the east tiles hold no boundary pixel, yet the synthesis keeps those pixels
+    (ortho allow_empty)."""
+    from napari_meris_ortho.simulate.scene import generate_scene
+    from napari_meris_ortho.synthesis import terrain_margin_px
+
+    scene = generate_scene({"base": "fr-small", "lines": 128, "columns": 193,
+                            "first_column": 1150, "exports": NO_EXPORTS, "clouds": None})
+    dem = scene.dem_paths["geotiff"]
+    # GRID's boundary ends at its column 531: make that the last column of the west tiles
+    grid = OutputGrid("EPSG:4326", GRID.x0 + 276 * GRID.dx, GRID.y0, GRID.dx, GRID.dy, 512,
+                      GRID.height)
+    with pytest.raises(OptionsError, match="misses"):
+        orthorectify(scene.product_path, grid=grid.window(0, 256, 256, 512), dems=[dem])
+    synthesize([scene.product_path], tmp_path / "s", grid=grid, bands=(7,), tile=256,
+               dems=[dem])
+    count = open_synthesis(tmp_path / "s").read("count")
+    direct = orthorectify(scene.product_path, grid=grid, dems=[dem], bands=[7])
+    valid = validated_pixels(direct.valid, direct.flags, False)
+    np.testing.assert_array_equal(count > 0, valid)
+    assert 20 <= count[:, 256:].sum() == valid[:, 256:].sum()
+    # the cheap tile skip leaves a margin for 9000 m seen at 45 deg: 9 km over pixels of
+    # 0.0015 deg x cos(46.6 deg) = 115 m (the narrower pixel side), 79 pixels, plus 2
+    from napari_meris_ortho.io.n1 import read_product
+
+    product = read_product(scene.product_path)
+    lat = float(np.max(np.abs(product.tie_points["latitude"])))
+    assert 46.5 < lat < 46.8
+    pixel_m = 0.0015 * np.cos(np.radians(lat)) * 111320.0
+    assert terrain_margin_px(product, grid) == int(np.ceil(9000.0 / pixel_m)) + 2 == 81
+
+
+def test_band_layers_carry_band_and_scaling_metadata(products, tmp_path) -> None:
+    """Issue 4 item 9: band description (number, wavelength) and radiance factors sf_rad."""
+    from napari_meris_ortho.io.n1 import read_product
+
+    clear, cloudy = read_product(products["clear"]), read_product(products["cloudy1"])
+    synthesize([products["clear"]], tmp_path / "s", grid=GRID, bands=BANDS, tile=256,
+               elevation="tiepoints")
+    synthesize([products["cloudy1"]], tmp_path / "s", input=tmp_path / "s", tile=256,
+               elevation="tiepoints")
+    store = open_synthesis(tmp_path / "s")
+    for b in BANDS:
+        with rasterio.open(store.files()[f"band_{b:02d}"]) as ds:
+            tags, band_tags, description = ds.tags(), ds.tags(1), ds.descriptions[0]
+        assert description == f"MERIS band {b} ({clear.wavelengths[b - 1]:.1f} nm)"
+        assert float(band_tags["wavelength_nm"]) == pytest.approx(clear.wavelengths[b - 1])
+        assert float(band_tags["bandwidth_nm"]) == pytest.approx(clear.bandwidths[b - 1])
+        assert band_tags["meris_band"] == str(b) and band_tags["units"] == "W m-2 sr-1 um-1"
+        # both simulated products carry the Appendix A factors: one value
+        assert cloudy.scaling.radiance[b - 1] == clear.scaling.radiance[b - 1]
+        assert float(band_tags["sf_rad"]) == clear.scaling.radiance[b - 1]
+        assert tags["products"].split() == [clear.product_name, cloudy.product_name]
+    manifest = store.manifest["products"]
+    assert [p["product_name"] for p in manifest] == [clear.product_name, cloudy.product_name]
+    assert manifest[1]["sf_rad"] == {str(b): cloudy.scaling.radiance[b - 1] for b in BANDS}

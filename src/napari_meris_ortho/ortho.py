@@ -36,6 +36,8 @@ SOURCE_NONE = -2
 #: highest terrain expected (m); sets how far beyond the zero-height boundary points are tried
 MAX_TERRAIN_M = 9000.0
 _BLOCK_ROWS = 256
+#: unit of the radiances of the output bands (counts x sf_rad, Scaling Factor GADS)
+RADIANCE_UNITS = "W m-2 sr-1 um-1"
 
 
 @dataclass
@@ -61,6 +63,21 @@ class OrthoResult:
     @property
     def transform(self) -> Any:
         return self.grid.transform
+
+    def band_metadata(self) -> list[dict[str, Any]]:
+        """Per output band (sorted band numbers): MERIS band number, central wavelength and
+        bandwidth (nm), radiance unit and ``sf_rad``, the source product's counts-to-radiance
+        factor (Scaling Factor GADS, Appendix A); the band values are already radiances."""
+        out = []
+        for b in sorted(self.bands):
+            meta: dict[str, Any] = {"meris_band": b, "units": RADIANCE_UNITS}
+            for key, name in (("wavelengths", "wavelength_nm"), ("bandwidths", "bandwidth_nm"),
+                              ("scale_factors", "sf_rad")):
+                value = self.stats.get(key, {}).get(b)
+                if value is not None:
+                    meta[name] = value
+            out.append(meta)
+        return out
 
 
 def _check_options(elevation: str, dems: Sequence[Any], bands: Sequence[int] | None,
@@ -140,7 +157,7 @@ def orthorectify(product: Any, grid: OutputGrid | None = None, dems: Sequence[An
                  parallax: str = "handbook", diagnostics: bool = False,
                  progress: ProgressCallback | None = None, *, method: str = "primary",
                  crs: Any = "EPSG:4326", pixel_size: float | None = None,
-                 geolocation: str | None = None) -> OrthoResult:
+                 geolocation: str | None = None, allow_empty: bool = False) -> OrthoResult:
     """Map a MERIS L1b product onto ``grid`` with terrain correction (sections 3.1-3.4).
 
     ``product``: path or ``MerisL1bProduct``; ``grid``: ``OutputGrid`` (default: the smallest
@@ -152,7 +169,9 @@ def orthorectify(product: Any, grid: OutputGrid | None = None, dems: Sequence[An
     "handbook" (sphere) or "ellipsoid" (WGS84 radii); ``geolocation``: "bilinear" lon/lat
     (eq. 4a-4b) or "ecef" (default: bilinear with the handbook parallax, ecef with the
     ellipsoid one); ``method``: "primary" (primary grid + Newton) or "handbook" (MERSYN's
-    facet search in the loop).
+    facet search in the loop); ``allow_empty``: a ``grid`` holding no pixel centre inside the
+    zero-height segment boundary gives an all-background result instead of an OptionsError
+    (synthesis tiles: terrain points may still lie there, section 3.1).
     """
     t_start = time.perf_counter()
     band_list = _check_options(elevation, dems, bands, tolerance, parallax, sampling, method)
@@ -174,18 +193,21 @@ def orthorectify(product: Any, grid: OutputGrid | None = None, dems: Sequence[An
     inner = row_spans(boundary, grid)
     spans = row_spans(boundary, grid, margin=margin) if margin else inner
     in_boundary = inner.count
-    if in_boundary == 0:
-        raise OptionsError(f"the output extent {grid.bounds} misses the product footprint")
     hmode = {"none": predcorr.HEIGHT_NONE, "tiepoints": predcorr.HEIGHT_TIEPOINTS,
              "dem": predcorr.HEIGHT_GIVEN if stack is not None else predcorr.HEIGHT_TIEPOINTS}[
         elevation]
+    options = dict(elevation=elevation, parallax=parallax, sampling=sampling,
+                   geolocation=("bilinear", "ecef")[geo], tolerance=tolerance, method=method,
+                   margin_px=margin, dems=[str(d) for d in dems], points_in_boundary=in_boundary)
     try:
+        if in_boundary == 0 and not allow_empty:
+            raise OptionsError(f"the output extent {grid.bounds} misses the product footprint")
+        if spans.count == 0:  # nothing to search: every point is background
+            return _empty_result(prod, grid, band_list, hmode, stack, diagnostics, t_start,
+                                 options)
         return _run(prod, tp, grid, spans, stack, hmode, band_list, sampling, tolerance,
                     (parallax_code(parallax), geo), method, diagnostics, progress, t_start,
-                    dict(elevation=elevation, parallax=parallax, sampling=sampling,
-                         geolocation=("bilinear", "ecef")[geo],
-                         tolerance=tolerance, method=method, margin_px=margin,
-                         dems=[str(d) for d in dems], points_in_boundary=in_boundary))
+                    options)
     finally:
         if stack is not None:
             stack.close()
@@ -193,7 +215,6 @@ def orthorectify(product: Any, grid: OutputGrid | None = None, dems: Sequence[An
 
 def _run(prod, tp, grid, spans, stack, hmode, band_list, sampling, tolerance, models, method,
          diagnostics, progress, t_start, options) -> OrthoResult:
-    from .engine.resample import resample_bands
 
     nr, nc = grid.shape
     line = np.full((nr, nc), np.nan, np.float32)
@@ -248,39 +269,8 @@ def _run(prod, tp, grid, spans, stack, hmode, band_list, sampling, tolerance, mo
             diag["elevation_source"][r0:r1] = np.where(ok, code, SOURCE_NONE)
         if progress is not None:
             progress(r1, total)
-    t_read = 0.0
-    t0 = time.perf_counter()
-    radiance = {}
-    if sampling == "nearest":
-        index = predcorr.nearest_pixel(line, col, tp.height, tp.width)
-        t_resample += time.perf_counter() - t0
-        for b in band_list:
-            t1 = time.perf_counter()
-            image = np.ascontiguousarray(prod.counts(b), dtype=np.uint16)
-            t2 = time.perf_counter()
-            t_read += t2 - t1
-            radiance[b] = np.empty((nr, nc), np.float32)
-            predcorr.gather(image, index, float(prod.scaling.radiance[b - 1]), radiance[b])
-            t_resample += time.perf_counter() - t2
-        t1 = time.perf_counter()
-        image = np.ascontiguousarray(prod.flags, dtype=np.uint8)
-        t_read += time.perf_counter() - t1
-        t1 = time.perf_counter()
-        flags = np.empty((nr, nc), np.float32)
-        predcorr.gather(image, index, 1.0, flags)
-        flags = flags.astype(np.uint8)
-        t_resample += time.perf_counter() - t1
-    else:
-        images = [np.ascontiguousarray(prod.counts(b), dtype=np.uint16) for b in band_list]
-        fl = np.ascontiguousarray(prod.flags, dtype=np.uint8)
-        t_read = time.perf_counter() - t0
-        t0 = time.perf_counter()
-        out = resample_bands(images, line, col, sampling)
-        flags = resample_bands([fl], line, col, "nearest")[0].astype(np.uint8)
-        for b, o in zip(band_list, out, strict=True):
-            o *= np.float32(prod.scaling.radiance[b - 1])
-            radiance[b] = o
-        t_resample += time.perf_counter() - t0
+    radiance, flags, window, t_read, t_res = _sample_bands(prod, line, col, band_list, sampling)
+    t_resample += t_res
     if progress is not None:
         progress(total, total)
     valid = iters >= 0
@@ -291,8 +281,24 @@ def _run(prod, tp, grid, spans, stack, hmode, band_list, sampling, tolerance, mo
             diag["elevation"] = np.where(valid, np.float32(0), np.float32(np.nan))
             diag["shift_east_m"] = diag["elevation"].copy()
             diag["shift_north_m"] = diag["elevation"].copy()
-    stats = {
+    seconds = {"lonlat": t_lonlat, "dem": t_dem, "prediction_correction": t_engine,
+               "read_bands": t_read, "resample": t_resample, "engine": t_engine + t_resample,
+               "total": time.perf_counter() - t_start}
+    stats = _stats(prod, grid, hmode, band_list, options, search=search, hist=hist,
+                   processed=int(valid.sum()), window=window,
+                   sources=_source_counts(sources, stack, hmode), seconds=seconds)
+    return OrthoResult(radiance, grid, valid, flags, stats, diag)
+
+
+def _stats(prod: Any, grid: OutputGrid, hmode: int, band_list: list[int],
+           options: dict[str, Any], *, search: dict[str, int], hist: np.ndarray,
+           processed: int, window: tuple[int, int], sources: dict[str, int],
+           seconds: dict[str, float]) -> dict[str, Any]:
+    """What the Appendix B log prints, plus the options and timings of the run."""
+    nr, nc = grid.shape
+    return {
         "product": str(getattr(prod, "path", "")),
+        "product_name": str(getattr(prod, "product_name", "")),
         "output_lines": nr, "output_columns": nc,
         "crs": grid.crs.to_string(), "ul_x": grid.x0, "ul_y": grid.y0,
         "lr_x": grid.x0 + nc * grid.dx, "lr_y": grid.y0 - nr * grid.dy,
@@ -300,22 +306,107 @@ def _run(prod, tp, grid, spans, stack, hmode, band_list, sampling, tolerance, mo
         "orthorectification": hmode != predcorr.HEIGHT_NONE,
         "facet_search": search,
         "iterations_histogram": [int(v) for v in hist],
-        "processed_points": int(valid.sum()),
+        "processed_points": processed,
+        "product_lines_read": list(window),
         "output_points": nr * nc,
-        "elevation_sources": _source_counts(sources, stack, hmode),
-        "seconds": {"lonlat": t_lonlat, "dem": t_dem, "prediction_correction": t_engine,
-                    "read_bands": t_read, "resample": t_resample,
-                    "engine": t_engine + t_resample,
-                    "total": time.perf_counter() - t_start},
-        "bands": band_list, "wavelengths": _wavelengths(prod, band_list), **options,
+        "elevation_sources": sources,
+        "seconds": seconds,
+        "bands": band_list, "wavelengths": _per_band(prod, "wavelengths", band_list),
+        "bandwidths": _per_band(prod, "bandwidths", band_list),
+        "scale_factors": _per_band(getattr(prod, "scaling", None), "radiance", band_list),
+        **options,
     }
-    return OrthoResult(radiance, grid, valid, flags, stats, diag)
 
 
-def _wavelengths(prod: Any, band_list: list[int]) -> dict[int, float]:
+def _empty_result(prod: Any, grid: OutputGrid, band_list: list[int], hmode: int, stack: Any,
+                  diagnostics: bool, t_start: float, options: dict[str, Any]) -> OrthoResult:
+    """All-background result of a grid no antecedent search can reach (``allow_empty``)."""
+    nr, nc = grid.shape
+    bands = {b: np.zeros((nr, nc), np.float32) for b in band_list}
+    diag: dict[str, np.ndarray] = {}
+    if diagnostics:
+        nan = np.full((nr, nc), np.nan, np.float32)
+        diag = {"line": nan, "col": nan.copy(), "elevation": nan.copy(),
+                "elevation_source": np.full((nr, nc), SOURCE_NONE, np.int8),
+                "iterations": np.full((nr, nc), -1, np.int8),
+                "shift_east_m": nan.copy(), "shift_north_m": nan.copy()}
+    hist = np.zeros(predcorr.MAX_ITERATIONS + 1, np.int64)
+    sources = np.zeros(len(stack.sources) + 1 if stack is not None else 1, np.int64)
+    seconds = {"lonlat": 0.0, "dem": 0.0, "prediction_correction": 0.0, "read_bands": 0.0,
+               "resample": 0.0, "engine": 0.0, "total": time.perf_counter() - t_start}
+    stats = _stats(prod, grid, hmode, band_list, options, search={}, hist=hist, processed=0,
+                   window=(0, 0), sources=_source_counts(sources, stack, hmode),
+                   seconds=seconds)
+    return OrthoResult(bands, grid, np.zeros((nr, nc), bool), np.zeros((nr, nc), np.uint8),
+                       stats, diag)
+
+
+def antecedent_line_window(line: np.ndarray, col: np.ndarray, n_lines: int, n_cols: int,
+                           sampling: str = "nearest") -> tuple[int, int]:
+    """Product lines ``[first, stop)`` holding every pixel the resampling of the antecedents
+    inside the product reads (section 3.1 "Retrieve the antecedent"): min..max antecedent line
+    plus the kernel margin (nearest/bilinear: 0 and +1 line, bicubic: -1 and +2); (0, 0) when
+    no antecedent is inside."""
+    inside = (line >= -0.5) & (line < n_lines - 0.5) & (col >= -0.5) & (col < n_cols - 0.5)
+    if not inside.any():
+        return 0, 0
+    lines = line[inside]
+    pad = 1 if sampling == "bicubic" else 0
+    first = int(math.floor(float(lines.min()))) - pad
+    stop = int(math.floor(float(lines.max()))) + 2 + pad
+    return max(first, 0), min(stop, n_lines)
+
+
+def _sample_bands(prod: Any, line: np.ndarray, col: np.ndarray, band_list: list[int],
+                  sampling: str) -> tuple[dict[int, np.ndarray], np.ndarray, tuple[int, int],
+                                          float, float]:
+    """Radiances and flags at the antecedents, reading only the product lines they need
+    (``antecedent_line_window``): (bands, flags, window, read seconds, resample seconds)."""
+    from .engine.resample import resample_bands
+
+    t0 = time.perf_counter()
+    n_lines, n_cols = int(prod.height), int(prod.width)
+    first, stop = antecedent_line_window(line, col, n_lines, n_cols, sampling)
+    nr, nc = line.shape
+    radiance = {b: np.zeros((nr, nc), np.float32) for b in band_list}
+    if stop <= first:
+        return radiance, np.zeros((nr, nc), np.uint8), (first, stop), 0.0, \
+            time.perf_counter() - t0
+    rows = slice(first, stop)
+    # antecedents relative to the first line read; a point outside the product stays outside
+    sub_line = line.astype(np.float64) - first
+    t_read = 0.0
+    if sampling == "nearest":
+        index = predcorr.nearest_pixel(sub_line, col, stop - first, n_cols)
+        for b in band_list:
+            t1 = time.perf_counter()
+            image = np.ascontiguousarray(prod.counts(b)[rows], dtype=np.uint16)
+            t_read += time.perf_counter() - t1
+            predcorr.gather(image, index, float(prod.scaling.radiance[b - 1]), radiance[b])
+        t1 = time.perf_counter()
+        image = np.ascontiguousarray(prod.flags[rows], dtype=np.uint8)
+        t_read += time.perf_counter() - t1
+        out = np.empty((nr, nc), np.float32)
+        predcorr.gather(image, index, 1.0, out)
+        flags = out.astype(np.uint8)
+    else:
+        images = [np.ascontiguousarray(prod.counts(b)[rows], dtype=np.uint16)
+                  for b in band_list]
+        fl = np.ascontiguousarray(prod.flags[rows], dtype=np.uint8)
+        t_read = time.perf_counter() - t0
+        out_bands = resample_bands(images, sub_line, col, sampling)
+        flags = resample_bands([fl], sub_line, col, "nearest")[0].astype(np.uint8)
+        for b, o in zip(band_list, out_bands, strict=True):
+            o *= np.float32(prod.scaling.radiance[b - 1])
+            radiance[b] = o
+    return radiance, flags, (first, stop), t_read, time.perf_counter() - t0 - t_read
+
+
+def _per_band(source: Any, name: str, band_list: list[int]) -> dict[int, float]:
+    """``{band: source.<name>[band - 1]}`` (wavelengths, bandwidths, radiance factors)."""
     try:
-        wl = list(prod.wavelengths)
-        return {b: float(wl[b - 1]) for b in band_list}
+        values = list(getattr(source, name))
+        return {b: float(values[b - 1]) for b in band_list}
     except (AttributeError, IndexError, TypeError, ValueError):
         return {}
 

@@ -54,6 +54,10 @@ DEFAULT_TILE = 1024
 GDAL_CACHE_MB = 64
 ALL_BANDS = tuple(range(1, 16))
 _GENERATION = re.compile(r"^gen-(\d{6})$")
+#: dataset tag of the band layers explaining their values and the ``sf_rad`` band tag
+RADIANCE_NOTE = ("TOA radiance (float32, 0 = background) = counts x sf_rad of the merged "
+                 "products (Scaling Factor GADS; several values: products differ); no further "
+                 "scaling applies")
 
 
 # --------------------------------------------------------------------------- grid helpers
@@ -76,20 +80,32 @@ def grid_from_dict(values: dict[str, Any]) -> Any:
                       int(values["width"]), int(values["height"]))
 
 
-def grid_window(grid: Any, row0: int, row1: int, col0: int, col1: int) -> Any:
-    """The sub-grid of rows [row0, row1) and columns [col0, col1) (same CRS and pixel size)."""
-    if hasattr(grid, "window"):
-        return grid.window(row0, row1, col0, col1)
-    return type(grid)(grid.crs, grid.x0 + col0 * grid.dx, grid.y0 - row0 * grid.dy, grid.dx,
-                      grid.dy, col1 - col0, row1 - row0, tolerance=grid.tolerance)
+#: terrain parallax a tile must be within to be orthorectified: ``ortho.MAX_TERRAIN_M`` seen at
+#: 45 deg view zenith or the product's largest one if larger (section 3.1)
+SKIP_VIEW_ZENITH_DEG = 45.0
 
 
-def footprint_window(product: Any, grid: Any) -> tuple[int, int, int, int] | None:
-    """Rows/columns ``(row0, row1, col0, col1)`` of ``grid`` that the product may reach: its
-    tie points widened by the largest terrain parallax (``ortho.MAX_TERRAIN_M`` seen at the
-    largest view zenith) plus 2 pixels; None when disjoint."""
+def terrain_margin_px(product: Any, grid: Any) -> int:
+    """Output pixels beyond the zero-height segment boundary that a terrain point of the
+    product may reach: ``ortho.MAX_TERRAIN_M`` x tan(max(45 deg, largest view zenith)), + 2."""
     from .ortho import MAX_TERRAIN_M
 
+    tp = product.tie_points
+    zenith = max(SKIP_VIEW_ZENITH_DEG, float(np.nanmax(tp["view_zenith"])))
+    shift_m = MAX_TERRAIN_M * np.tan(np.radians(zenith))
+    if grid.is_geographic:
+        lat = min(float(np.nanmax(np.abs(tp["latitude"]))), 89.0)
+        pixel_m = min(grid.dx * np.cos(np.radians(lat)), grid.dy) * 111320.0
+    else:
+        pixel_m = min(grid.dx, grid.dy)
+    return int(np.ceil(shift_m / max(pixel_m, 1e-9))) + 2
+
+
+def footprint_window(product: Any, grid: Any, margin: int | None = None
+                     ) -> tuple[int, int, int, int] | None:
+    """Rows/columns ``(row0, row1, col0, col1)`` of ``grid`` that the product may reach: its
+    tie points widened by ``margin`` pixels (default ``terrain_margin_px``); None when
+    disjoint."""
     tp = product.tie_points
     lat = np.asarray(tp["latitude"], dtype=np.float64).ravel()
     lon = np.asarray(tp["longitude"], dtype=np.float64).ravel()
@@ -98,13 +114,7 @@ def footprint_window(product: Any, grid: Any) -> tuple[int, int, int, int] | Non
     if not ok.any():
         return None
     rows, cols = rows[ok], cols[ok]
-    shift_m = MAX_TERRAIN_M * np.tan(np.radians(np.nanmax(tp["view_zenith"])))
-    if grid.is_geographic:
-        cos_lat = np.cos(np.radians(min(float(np.nanmax(np.abs(lat))), 89.0)))
-        pixel_m = min(grid.dx * cos_lat, grid.dy) * 111320.0
-    else:
-        pixel_m = min(grid.dx, grid.dy)
-    margin = float(np.ceil(shift_m / max(pixel_m, 1e-9))) + 2.0
+    margin = terrain_margin_px(product, grid) if margin is None else int(margin)
     row0 = max(0, int(np.floor(rows.min() - margin)))
     row1 = min(grid.height, int(np.ceil(rows.max() + margin)) + 1)
     col0 = max(0, int(np.floor(cols.min() - margin)))
@@ -232,8 +242,13 @@ def _profile(grid: Any, dtype: str, nodata: float | None) -> dict[str, Any]:
 
 
 def _create_layers(directory: Path, grid: Any, bands: Sequence[int], algorithm: str) -> None:
-    """Empty (background) layers of a new synthesis; sparse, so unwritten blocks cost nothing."""
+    """Empty (background) layers of a new synthesis; sparse, so unwritten blocks cost nothing.
+    Band layers are described with the MERIS band number and its nominal wavelength."""
     import rasterio
+
+    from .io.geotiff import meris_band_description
+    from .io.n1_format import APPENDIX_A_BANDWIDTHS, APPENDIX_A_WAVELENGTHS
+    from .ortho import RADIANCE_UNITS
 
     for name in _layer_names(bands, algorithm):
         dtype, nodata = ("float32", 0.0) if name.startswith("band_") else ("uint16", None)
@@ -241,7 +256,12 @@ def _create_layers(directory: Path, grid: Any, bands: Sequence[int], algorithm: 
             nodata = 0
         with rasterio.open(directory / f"{name}.tif", "w", **_profile(grid, dtype, nodata)) as ds:
             if name.startswith("band_"):
-                ds.update_tags(1, band=name[5:])
+                b = int(name[5:])
+                ds.set_band_description(
+                    1, meris_band_description(b, APPENDIX_A_WAVELENGTHS[b - 1]))
+                ds.update_tags(1, band=name[5:], meris_band=b, units=RADIANCE_UNITS,
+                               wavelength_nm=APPENDIX_A_WAVELENGTHS[b - 1],
+                               bandwidth_nm=APPENDIX_A_BANDWIDTHS[b - 1])
 
 
 class _Layers:
@@ -281,6 +301,17 @@ class _Layers:
             self._ds["ndvi"].write(tile["ndvi"], 1, window=win)
         self._ds["count"].write(tile["count"], 1, window=win)
 
+    def tag_sources(self, products: Sequence[dict[str, Any]]) -> None:
+        """Record the merged products' names and radiance factors ``sf_rad`` (Scaling Factor
+        GADS; the layers hold radiances, so no further scaling applies) in the band layers."""
+        names = " ".join(str(p.get("product_name") or p.get("product", "")) for p in products)
+        for b in self.bands:
+            factors = sorted({float(p["sf_rad"][str(b)]) for p in products
+                              if str(b) in p.get("sf_rad", {})})
+            ds = self._ds[band_file(b)[:-4]]
+            ds.update_tags(products=names, radiance=RADIANCE_NOTE)
+            ds.update_tags(1, sf_rad=" ".join(repr(f) for f in factors))
+
     def close(self) -> None:
         for ds in self._ds.values():
             ds.close()
@@ -299,6 +330,8 @@ class ProductReport:
     validated: int = 0  # ... whose flags allow them into the synthesis
     added: int = 0  # ... that replaced the synthesis value (MERSYN added_point_number)
     error: str | None = None
+    product_name: str = ""
+    sf_rad: dict[int, float] = field(default_factory=dict)  # radiance factor per band
 
     def lines(self, synthesis_pixels: int) -> list[str]:
         """The log of Appendix B (processed/validated points, share of the synthesis)."""
@@ -318,8 +351,9 @@ class ProductReport:
         ]
 
     def as_dict(self) -> dict[str, Any]:
-        return {"product": Path(self.path).name, "processed": self.processed,
-                "validated": self.validated, "added": self.added}
+        return {"product": Path(self.path).name, "product_name": self.product_name,
+                "processed": self.processed, "validated": self.validated, "added": self.added,
+                "sf_rad": {str(b): v for b, v in self.sf_rad.items()}}
 
 
 @dataclass
@@ -566,6 +600,8 @@ def _build(paths: list[str], out_dir: Path, source: SynthesisStore | None, algor
                     (log.warning if reports[i].error else log.info)(line)
             if progress is not None:
                 progress(len(paths), len(paths))
+            history = source.products if source is not None else []
+            layers.tag_sources(history + [r.as_dict() for r in reports if r.error is None])
         finally:
             layers.close()
         if not any(r.error is None for r in reports):
@@ -597,7 +633,10 @@ def _merge_product(index: int, path: str, product: Any, grid: Any, layers: _Laye
 
     try:
         product = product if product is not None else _open_product(path)
-        window = footprint_window(product, grid)
+        report.product_name = str(getattr(product, "product_name", ""))
+        report.sf_rad = {b: float(product.scaling.radiance[b - 1]) for b in layers.bands}
+        margin = terrain_margin_px(product, grid)
+        window = footprint_window(product, grid, margin)
         boundary = segment_boundary(product.tie_points["latitude"],
                                     product.tie_points["longitude"])
     except (MerisOrthoError, OSError) as exc:
@@ -607,8 +646,8 @@ def _merge_product(index: int, path: str, product: Any, grid: Any, layers: _Laye
         return
     written = False
     for win in tiles(window, tile):
-        tile_grid = grid_window(grid, *win)
-        if row_spans(boundary, tile_grid).count == 0:  # orthorectify() refuses such a tile
+        tile_grid = grid.window(*win)
+        if row_spans(boundary, tile_grid, margin=margin).count == 0:  # beyond any terrain
             continue
         state = layers.read(win)
         try:
@@ -636,7 +675,7 @@ def _merger(algorithm: str, bands: tuple[int, ...], dems: Sequence[Any], elevati
     def merge(product: Any, tile_grid: Any, state: dict[str, np.ndarray],
               report: ProductReport) -> None:
         result = orthorectify(product, grid=tile_grid, dems=dems, elevation=elevation,
-                              sampling=sampling, bands=needed)
+                              sampling=sampling, bands=needed, allow_empty=True)
         inside = np.ascontiguousarray(result.valid, dtype=np.bool_)
         flags = np.ascontiguousarray(result.flags, dtype=np.uint8)
         valid = validated_pixels(inside, flags, reject_bright)

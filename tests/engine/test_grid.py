@@ -7,6 +7,7 @@ import math
 import numpy as np
 import pyproj
 import pytest
+from affine import Affine
 
 from napari_meris_ortho.engine.boundary import segment_boundary
 from napari_meris_ortho.engine.grid import (
@@ -196,3 +197,26 @@ def test_grid_rejects_bad_size():
         OutputGrid("EPSG:4326", 0, 0, 0.1, 0.1, 0, 10)
     with pytest.raises(OptionsError):
         OutputGrid("EPSG:4326", 0, 0, 0.1, float("nan"), 10, 10)
+
+
+def test_window_is_the_same_pixels_of_a_sub_grid():
+    grid = OutputGrid("EPSG:32633", 300000.0, 5300000.0, 260.0, 260.0, 800, 600,
+                      tolerance=0.005)
+    sub = grid.window(50, 120, 30, 90)
+    assert (sub.height, sub.width) == (70, 60) and sub.crs == grid.crs
+    assert (sub.dx, sub.dy, sub.tolerance) == (260.0, 260.0, 0.005)
+    assert (sub.x0, sub.y0) == (300000.0 + 30 * 260.0, 5300000.0 - 50 * 260.0)
+    assert sub.transform == grid.transform @ Affine.translation(30, 50)
+    # pixel (5, 3) of the window is pixel (55, 33) of the grid, also in lon/lat
+    x, y = grid.xy(np.array([55.0]), np.array([33.0]))
+    xs, ys = sub.xy(np.array([5.0]), np.array([3.0]))
+    assert abs(x[0] - xs[0]) < 1e-9 and abs(y[0] - ys[0]) < 1e-9
+    lon, lat = grid.lonlat(50, 120)
+    slon, slat = sub.lonlat()
+    deg_px = 260.0 / 111320.0
+    assert np.max(np.abs(slon - lon[:, 30:90])) < 0.01 * deg_px / math.cos(math.radians(48))
+    assert np.max(np.abs(slat - lat[:, 30:90])) < 0.01 * deg_px
+    assert grid.window(0, 600, 0, 800) == grid
+    for bad in [(10, 10, 0, 5), (0, 601, 0, 5), (-1, 5, 0, 5), (0, 5, 790, 801)]:
+        with pytest.raises(OptionsError, match="window"):
+            grid.window(*bad)

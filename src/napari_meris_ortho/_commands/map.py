@@ -14,18 +14,19 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import OptionsError
+from ._options import (
+    add_bands_option,
+    add_grid_options,
+    add_height_options,
+    add_sampling_option,
+    check_heights,
+    grid_from_args,
+)
 
 log = logging.getLogger("napari_meris_ortho")
-
-
-def _bands(text: str) -> list[int]:
-    try:
-        values = [int(v) for v in text.replace(",", " ").split()]
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"bands {text!r}: expected e.g. 3,5,7") from None
-    if not values or any(not 1 <= v <= 15 for v in values):
-        raise argparse.ArgumentTypeError(f"bands {text!r}: MERIS bands are 1..15")
-    return values
+#: dataset tag explaining the band values and the per-band ``sf_rad`` tags
+RADIANCE_NOTE = ("TOA radiance (float32, 0 = background) = counts x sf_rad of the source "
+                 "product (Scaling Factor GADS); no further scaling applies")
 
 
 def register(subparsers: Any) -> None:
@@ -36,21 +37,12 @@ def register(subparsers: Any) -> None:
         "MERSYN use case 3) and write the radiances as a GeoTIFF.")
     p.add_argument("product", metavar="PRODUCT.N1", help="MERIS L1b product")
     p.add_argument("-o", "--output", required=True, metavar="OUT.tif", help="output GeoTIFF")
-    p.add_argument("--dem", action="append", default=[], metavar="PATH",
-                   help="DEM (repeatable; tried in order at each point, then the tie points)")
-    p.add_argument("--elevation", choices=("none", "tiepoints", "dem"), default="dem",
-                   help="elevation source (default dem; without --dem: the tie points)")
-    p.add_argument("--crs", default="EPSG:4326", help="output CRS (default EPSG:4326)")
-    p.add_argument("--pixel-size", type=float, default=None, metavar="SIZE",
-                   help="pixel size in CRS units (default: 260 m FR / 1040 m RR)")
-    p.add_argument("--ul", type=float, nargs=2, default=None, metavar=("X", "Y"),
-                   help="upper-left corner of the output (CRS units)")
-    p.add_argument("--lr", type=float, nargs=2, default=None, metavar=("X", "Y"),
-                   help="lower-right corner of the output (CRS units)")
-    p.add_argument("--bands", type=_bands, default=None, metavar="LIST",
-                   help="bands to map, e.g. 3,5,7 (default all 15)")
-    p.add_argument("--sampling", choices=("nearest", "bilinear", "bicubic"), default="nearest",
-                   help="resampling (default nearest, as MERSYN)")
+    add_height_options(
+        p, dem_help="DEM (repeatable; tried in order at each point, then the tie points)",
+        elevation_help="elevation source (default dem; without --dem: the tie points)")
+    add_grid_options(p, "EPSG:4326", "output CRS (default EPSG:4326)")
+    add_bands_option(p, "bands to map, e.g. 3,5,7 (default all 15)")
+    add_sampling_option(p, "resampling (default nearest, as MERSYN)")
     p.add_argument("--tolerance", type=float, default=0.01, metavar="PX",
                    help="prediction/correction tolerance in product pixels (MERSYN: 0.1)")
     p.add_argument("--parallax", choices=("handbook", "ellipsoid"), default="handbook",
@@ -76,7 +68,6 @@ def _diagnostics_path(out: Path) -> Path:
 def _check(args: argparse.Namespace) -> Any:
     """Every check that needs no product read, before any work (Appendix C parameter checks)."""
     from .._atomic import check_writable_dir
-    from ..engine.grid import OutputGrid, parse_crs
 
     outputs = [Path(args.output)]
     if args.diagnostics:
@@ -87,22 +78,10 @@ def _check(args: argparse.Namespace) -> Any:
         check_writable_dir(out)
         if out.is_dir():
             raise OptionsError(f"{out}: output is a directory")
-    if args.dem and args.elevation != "dem":
-        raise OptionsError(f"--dem given with --elevation {args.elevation}: DEMs need "
-                           "--elevation dem (MERSYN refuses -dem with -ort NO)")
-    if args.pixel_size is not None and not (math.isfinite(args.pixel_size)
-                                            and args.pixel_size > 0):
-        raise OptionsError(f"--pixel-size must be > 0, got {args.pixel_size}")
+    check_heights(args)
     if not (math.isfinite(args.tolerance) and args.tolerance > 0):
         raise OptionsError(f"--tolerance must be > 0 product pixels, got {args.tolerance}")
-    crs = parse_crs(args.crs)
-    if (args.ul is None) != (args.lr is None):
-        raise OptionsError("--ul and --lr need each other")
-    if args.ul is None:
-        return None
-    if args.pixel_size is None:
-        raise OptionsError("--ul/--lr need --pixel-size")
-    return OutputGrid.from_extent(crs, args.ul, args.lr, args.pixel_size)
+    return grid_from_args(args)
 
 
 def log_lines(stats: dict[str, Any], default_pixel: bool) -> list[str]:
@@ -158,7 +137,10 @@ def _write(args: argparse.Namespace, result: Any) -> None:
     wl = result.stats.get("wavelengths", {})
     write_geotiff(args.output, [result.bands[b] for b in bands], result.grid,
                   descriptions=[meris_band_description(b, wl.get(b)) for b in bands],
-                  metadata={"product": result.stats["product"], "elevation": args.elevation,
+                  band_metadata=result.band_metadata(),
+                  metadata={"product": result.stats["product"],
+                            "product_name": result.stats.get("product_name", ""),
+                            "radiance": RADIANCE_NOTE, "elevation": args.elevation,
                             "parallax": args.parallax,
                             "geolocation": result.stats["geolocation"],
                             "tolerance_px": args.tolerance,

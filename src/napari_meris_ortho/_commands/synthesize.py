@@ -11,18 +11,16 @@ import logging
 from typing import Any
 
 from ..errors import OptionsError
+from ._options import (
+    add_bands_option,
+    add_grid_options,
+    add_height_options,
+    add_sampling_option,
+    check_heights,
+    grid_from_args,
+)
 
 log = logging.getLogger("napari_meris_ortho")
-
-
-def _bands(text: str) -> list[int]:
-    try:
-        values = [int(v) for v in text.replace(",", " ").split()]
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"bands {text!r}: expected e.g. 3,5,7") from None
-    if not values or any(not 1 <= v <= 15 for v in values):
-        raise argparse.ArgumentTypeError(f"bands {text!r}: MERIS bands are 1..15")
-    return values
 
 
 def register(subparsers: Any) -> None:
@@ -37,39 +35,19 @@ def register(subparsers: Any) -> None:
     p.add_argument("--out", required=True, metavar="DIR", help="output synthesis directory")
     p.add_argument("--input", metavar="DIR", default=None,
                    help="synthesis to update (may equal --out); grid and bands come from it")
-    p.add_argument("--dem", action="append", default=[], metavar="PATH",
-                   help="DEM (repeatable; the first holding a point wins)")
-    p.add_argument("--elevation", choices=("none", "tiepoints", "dem"), default="dem",
-                   help="heights: the DEMs then the tie points (default), tie points only, "
-                   "or none (no orthorectification)")
-    p.add_argument("--sampling", choices=("nearest", "bilinear", "bicubic"), default="nearest",
-                   help="resampling of the radiances (MERSYN: nearest)")
-    p.add_argument("--bands", type=_bands, default=None, metavar="LIST",
-                   help="bands of a new synthesis, e.g. 3,5,7,13 (default all 15)")
+    add_height_options(
+        p, dem_help="DEM (repeatable; the first holding a point wins)",
+        elevation_help="heights: the DEMs then the tie points (default), tie points only, "
+        "or none (no orthorectification)")
+    add_sampling_option(p, "resampling of the radiances (MERSYN: nearest)")
+    add_bands_option(p, "bands of a new synthesis, e.g. 3,5,7,13 (default all 15)")
     p.add_argument("--reject-bright", action="store_true",
                    help="keep BRIGHT-flagged pixels (clouds) out as well")
     p.add_argument("--tile", type=int, default=1024, metavar="PX",
                    help="tile size in pixels, multiple of 256 (bounds the memory)")
     grid = p.add_argument_group("grid of a new synthesis (refused with --input)")
-    grid.add_argument("--crs", default=None, help="output CRS (default EPSG:4326)")
-    grid.add_argument("--pixel-size", type=float, default=None, metavar="SIZE",
-                      help="pixel size in CRS units (default: 260 m FR / 1040 m RR)")
-    grid.add_argument("--ul", type=float, nargs=2, default=None, metavar=("X", "Y"),
-                      help="upper-left corner")
-    grid.add_argument("--lr", type=float, nargs=2, default=None, metavar=("X", "Y"),
-                      help="lower-right corner")
+    add_grid_options(grid, None, "output CRS (default EPSG:4326)")
     p.set_defaults(func=run)
-
-
-def _grid(args: argparse.Namespace) -> Any:
-    """An explicit grid from --ul/--lr (with --crs and --pixel-size), else None."""
-    if args.ul is None and args.lr is None:
-        return None
-    if args.ul is None or args.lr is None or args.pixel_size is None:
-        raise OptionsError("--ul and --lr need each other and --pixel-size")
-    from ..engine.grid import OutputGrid
-
-    return OutputGrid.from_extent(args.crs or "EPSG:4326", args.ul, args.lr, args.pixel_size)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -80,7 +58,8 @@ def run(args: argparse.Namespace) -> int:
                                    or args.bands):
         raise OptionsError("when --input is given, --crs, --pixel-size, --ul, --lr and --bands "
                            "come from the input synthesis and shall not be given")
-    grid = _grid(args)
+    check_heights(args)
+    grid = grid_from_args(args)
     with tqdm_progress("products", enabled=not args.quiet, unit="product") as progress:
         result = synthesize(
             args.products, args.out, algorithm=args.algorithm, input=args.input, grid=grid,

@@ -151,6 +151,19 @@ class OutputGrid:
         height = max(1, math.ceil((uly - lry) / dy - 1e-9))
         return cls(crs, ulx, uly, dx, dy, width, height)
 
+    def window(self, row0: int, row1: int, col0: int, col1: int) -> OutputGrid:
+        """The sub-grid of rows [row0, row1) and columns [col0, col1): same CRS, pixel size and
+        interpolation tolerance; its pixel (i, j) is pixel (row0 + i, col0 + j) of this grid.
+
+        Raises OptionsError when the window is empty or leaves the grid.
+        """
+        row0, row1, col0, col1 = int(row0), int(row1), int(col0), int(col1)
+        if not (0 <= row0 < row1 <= self.height and 0 <= col0 < col1 <= self.width):
+            raise OptionsError(f"window rows [{row0}, {row1}) x columns [{col0}, {col1}) is "
+                               f"empty or outside the {self.height} x {self.width} grid")
+        return OutputGrid(self.crs, self.x0 + col0 * self.dx, self.y0 - row0 * self.dy,
+                          self.dx, self.dy, col1 - col0, row1 - row0, tolerance=self.tolerance)
+
     # ------------------------------------------------------------------ properties
     @property
     def transform(self) -> Affine:

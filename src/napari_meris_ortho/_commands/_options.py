@@ -1,0 +1,79 @@
+"""Options shared by ``meris-ortho map`` and ``synthesize``: output grid, heights, sampling, bands.
+
+The output grid (CRS, pixel size, upper-left/lower-right corners: Appendix C "SETTING PIXEL SIZE",
+"COMPUTING IMAGE SIZE AND ORIGIN"), the elevation source and DEMs (section 3.4), the resampling
+and the band list are defined and checked here once, before any product is read (Appendix C
+parameter checks); a bad value raises ``OptionsError`` (exit code 2, one line).
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+from typing import Any
+
+from ..errors import OptionsError
+
+ELEVATIONS = ("none", "tiepoints", "dem")
+SAMPLINGS = ("nearest", "bilinear", "bicubic")
+
+
+def parse_bands(text: str) -> list[int]:
+    """argparse type of ``--bands``: "3,5,7" or "3 5 7" -> [3, 5, 7] (MERIS bands 1..15)."""
+    try:
+        values = [int(v) for v in text.replace(",", " ").split()]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"bands {text!r}: expected e.g. 3,5,7") from None
+    if not values or any(not 1 <= v <= 15 for v in values):
+        raise argparse.ArgumentTypeError(f"bands {text!r}: MERIS bands are 1..15")
+    return values
+
+
+def add_bands_option(p: Any, help: str) -> None:
+    p.add_argument("--bands", type=parse_bands, default=None, metavar="LIST", help=help)
+
+
+def add_height_options(p: Any, dem_help: str, elevation_help: str) -> None:
+    """``--dem`` (repeatable) and ``--elevation none|tiepoints|dem`` (default dem)."""
+    p.add_argument("--dem", action="append", default=[], metavar="PATH", help=dem_help)
+    p.add_argument("--elevation", choices=ELEVATIONS, default="dem", help=elevation_help)
+
+
+def add_sampling_option(p: Any, help: str) -> None:
+    p.add_argument("--sampling", choices=SAMPLINGS, default="nearest", help=help)
+
+
+def add_grid_options(p: Any, crs_default: str | None, crs_help: str) -> None:
+    """``--crs``, ``--pixel-size``, ``--ul X Y``, ``--lr X Y`` (a parser or argument group)."""
+    p.add_argument("--crs", default=crs_default, help=crs_help)
+    p.add_argument("--pixel-size", type=float, default=None, metavar="SIZE",
+                   help="pixel size in CRS units (default: 260 m FR / 1040 m RR)")
+    p.add_argument("--ul", type=float, nargs=2, default=None, metavar=("X", "Y"),
+                   help="upper-left corner of the output (CRS units)")
+    p.add_argument("--lr", type=float, nargs=2, default=None, metavar=("X", "Y"),
+                   help="lower-right corner of the output (CRS units)")
+
+
+def check_heights(args: argparse.Namespace) -> None:
+    """DEMs are only used with ``--elevation dem`` (MERSYN refuses -dem with -ort NO)."""
+    if args.dem and args.elevation != "dem":
+        raise OptionsError(f"--dem given with --elevation {args.elevation}: DEMs need "
+                           "--elevation dem (MERSYN refuses -dem with -ort NO)")
+
+
+def grid_from_args(args: argparse.Namespace, default_crs: str = "EPSG:4326") -> Any:
+    """The ``OutputGrid`` of ``--ul``/``--lr``/``--pixel-size``/``--crs``, or None without
+    corners (then the product footprint sets the extent); checks the pixel size and the CRS."""
+    from ..engine.grid import OutputGrid, parse_crs
+
+    if args.pixel_size is not None and not (math.isfinite(args.pixel_size)
+                                            and args.pixel_size > 0):
+        raise OptionsError(f"--pixel-size must be > 0, got {args.pixel_size}")
+    crs = parse_crs(args.crs or default_crs)
+    if (args.ul is None) != (args.lr is None):
+        raise OptionsError("--ul and --lr need each other")
+    if args.ul is None:
+        return None
+    if args.pixel_size is None:
+        raise OptionsError("--ul/--lr need --pixel-size")
+    return OutputGrid.from_extent(crs, args.ul, args.lr, args.pixel_size)
