@@ -94,7 +94,7 @@ def run_case(case: str, paths: list[str], bands: int, tile: int) -> dict:
     if case == "untiled":
         return run_untiled(paths, band_list)
     rss0 = peak_rss_mb()
-    with tempfile.TemporaryDirectory(dir=".") as tmp:
+    with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "syn"
         t0 = time.perf_counter()
         synthesize(paths[:1], out, grid=grid, bands=band_list, algorithm="max-ndvi", tile=tile,

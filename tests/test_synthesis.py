@@ -403,3 +403,16 @@ def test_band_layers_carry_band_and_scaling_metadata(products, tmp_path) -> None
     manifest = store.manifest["products"]
     assert [p["product_name"] for p in manifest] == [clear.product_name, cloudy.product_name]
     assert manifest[1]["sf_rad"] == {str(b): cloudy.scaling.radiance[b - 1] for b in BANDS}
+
+
+def test_changed_window_is_block_aligned_inside_the_tile() -> None:
+    from napari_meris_ortho.synthesis import _changed_window
+
+    win = (1024, 2048, 300, 1024)  # a tile clipped on the left by the footprint window
+    valid = np.zeros((1024, 724), bool)
+    assert _changed_window(win, valid) is None
+    valid[300, 10] = valid[700, 500] = True  # grid rows 1324, 1724; columns 310, 800
+    assert _changed_window(win, valid) == (1280, 1792, 300, 1024)
+    valid[:] = False
+    valid[0, 0] = True
+    assert _changed_window(win, valid) == (1024, 1280, 300, 512)

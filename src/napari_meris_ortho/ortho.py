@@ -370,8 +370,8 @@ def _sample_bands(prod: Any, line: np.ndarray, col: np.ndarray, band_list: list[
     nr, nc = line.shape
     radiance = {b: np.zeros((nr, nc), np.float32) for b in band_list}
     if stop <= first:
-        return radiance, np.zeros((nr, nc), np.uint8), (first, stop), 0.0, \
-            time.perf_counter() - t0
+        empty = np.zeros((nr, nc), np.uint8)
+        return radiance, empty, (first, stop), 0.0, time.perf_counter() - t0
     rows = slice(first, stop)
     # antecedents relative to the first line read; a point outside the product stays outside
     sub_line = line.astype(np.float64) - first

@@ -625,7 +625,8 @@ def _message(exc: BaseException) -> str:
 
 
 def _merge_product(index: int, path: str, product: Any, grid: Any, layers: _Layers,
-                   merge: Callable[[Any, Any, dict[str, np.ndarray], ProductReport], None],
+                   merge: Callable[[Any, Any, dict[str, np.ndarray], ProductReport],
+                                   np.ndarray],
                    tile: int, report: ProductReport, failed: dict[int, str]) -> None:
     """Merge one product tile by tile; a read failure before any write skips it, a failure
     after some tiles were written aborts this attempt (the caller rebuilds without it)."""
@@ -651,7 +652,7 @@ def _merge_product(index: int, path: str, product: Any, grid: Any, layers: _Laye
             continue
         state = layers.read(win)
         try:
-            merge(product, tile_grid, state, report)
+            valid = merge(product, tile_grid, state, report)
         except DemError:  # not the product's fault: stop the run (exit 2)
             raise
         except (MerisOrthoError, OSError) as exc:
@@ -659,13 +660,34 @@ def _merge_product(index: int, path: str, product: Any, grid: Any, layers: _Laye
                 failed[index] = report.error = _message(exc)
                 return
             raise _ProductFailed(index, _message(exc)) from exc
-        layers.write(win, state)
+        changed = _changed_window(win, valid)
+        if changed is None:  # no validated pixel in this tile: nothing changed
+            continue
+        r0, r1, c0, c1 = (changed[0] - win[0], changed[1] - win[0], changed[2] - win[2],
+                          changed[3] - win[2])
+        layers.write(changed, {k: np.ascontiguousarray(v[..., r0:r1, c0:c1])
+                               for k, v in state.items()})
         written = True
+
+
+def _changed_window(win: tuple[int, int, int, int], valid: np.ndarray
+                    ) -> tuple[int, int, int, int] | None:
+    """The part of tile ``win`` holding the ``valid`` pixels, widened to whole GeoTIFF blocks
+    (so untouched blocks stay unwritten: sparse); None when no pixel is valid."""
+    rows = np.flatnonzero(valid.any(axis=1))
+    cols = np.flatnonzero(valid.any(axis=0))
+    if rows.size == 0:
+        return None
+    r0 = max(win[0], (win[0] + int(rows[0])) // BLOCK * BLOCK)
+    r1 = min(win[1], -(-(win[0] + int(rows[-1]) + 1) // BLOCK) * BLOCK)
+    c0 = max(win[2], (win[2] + int(cols[0])) // BLOCK * BLOCK)
+    c1 = min(win[3], -(-(win[2] + int(cols[-1]) + 1) // BLOCK) * BLOCK)
+    return r0, r1, c0, c1
 
 
 def _merger(algorithm: str, bands: tuple[int, ...], dems: Sequence[Any], elevation: str,
             sampling: str, reject_bright: bool,
-            ) -> Callable[[Any, Any, dict[str, np.ndarray], ProductReport], None]:
+            ) -> Callable[[Any, Any, dict[str, np.ndarray], ProductReport], np.ndarray]:
     """The per-tile step: orthorectify the product on the tile grid and apply the merge rule."""
     from .ortho import orthorectify
 
@@ -673,7 +695,7 @@ def _merger(algorithm: str, bands: tuple[int, ...], dems: Sequence[Any], elevati
                                         if algorithm == "max-ndvi" else set())))
 
     def merge(product: Any, tile_grid: Any, state: dict[str, np.ndarray],
-              report: ProductReport) -> None:
+              report: ProductReport) -> np.ndarray:
         result = orthorectify(product, grid=tile_grid, dems=dems, elevation=elevation,
                               sampling=sampling, bands=needed, allow_empty=True)
         inside = np.ascontiguousarray(result.valid, dtype=np.bool_)
@@ -690,6 +712,7 @@ def _merger(algorithm: str, bands: tuple[int, ...], dems: Sequence[Any], elevati
         else:
             report.added += int(merge_minimum_radiance(state["synthesis"], state["count"],
                                                        segment, valid))
+        return valid
 
     return merge
 
