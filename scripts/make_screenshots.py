@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
-SIZE = (1280, 900)
+SIZE = (1500, 1000)
 
 
 def _ensure_display() -> None:
@@ -29,7 +29,7 @@ def _ensure_display() -> None:
     if xvfb is None:
         sys.exit("make_screenshots: no DISPLAY and no xvfb-run (apt-get install xvfb)")
     os.environ.pop("QT_QPA_PLATFORM", None)
-    os.execv(xvfb, [xvfb, "-a", "-s", "-screen 0 1600x1200x24", sys.executable, *sys.argv])
+    os.execv(xvfb, [xvfb, "-a", "-s", "-screen 0 2000x1300x24", sys.executable, *sys.argv])
 
 
 def _only(viewer, *names: str) -> None:
@@ -44,9 +44,10 @@ def _zoom_on_peak(viewer, half_width_px: int = 70) -> tuple[float, float]:
     heights = np.where(valid, dem.data, -np.inf)
     row, col = np.unravel_index(np.argmax(heights), heights.shape)
     centre = np.asarray(dem.translate) + np.asarray(dem.scale) * (row, col)
-    viewer.camera.center = tuple(centre)
+    camera = viewer.scene.camera if hasattr(viewer, "scene") else viewer.camera
+    camera.center = tuple(centre)
     canvas_px = min(viewer.window._qt_viewer.canvas.size)
-    viewer.camera.zoom = canvas_px / (2 * half_width_px * dem.scale[0])
+    camera.zoom = canvas_px / (2 * half_width_px * dem.scale[0])
     return float(heights[row, col]), float(dem.scale[0])
 
 
@@ -62,8 +63,8 @@ def main(argv: list[str] | None = None) -> int:
 
     args.out.mkdir(parents=True, exist_ok=True)
     viewer = napari.Viewer(title=f"napari-meris-ortho: {args.scene}")
-    viewer.window.resize(*SIZE)
     viewer.window.show()
+    viewer.window.resize(*SIZE)
     viewer.open_sample("napari-meris-ortho", args.scene)
     wrote = []
 
@@ -74,7 +75,9 @@ def main(argv: list[str] | None = None) -> int:
     wrote.append("ortho_rgb_footprint.png")
 
     _only(viewer, "DEM", "parallax shift", "footprint")
-    viewer.reset_view()
+    viewer.layers["DEM"].colormap = "gray"
+    viewer.layers["parallax shift"].opacity = 1.0
+    _zoom_on_peak(viewer, half_width_px=600)
     viewer.screenshot(str(args.out / "parallax_vectors.png"), flash=False)
     wrote.append("parallax_vectors.png")
 
@@ -98,6 +101,14 @@ def main(argv: list[str] | None = None) -> int:
     flicker.layer_b.value = viewer.layers["orthorectified band 7"]
     result = flicker.measure_disparity()
     viewer.layers[-1].visible = False
+    viewer.window.resize(1900, 1150)
+    viewer.reset_view()
+    from napari.utils.notifications import notification_manager
+    from qtpy.QtWidgets import QApplication
+
+    notification_manager.records.clear()
+    for _ in range(20):
+        QApplication.processEvents()
     viewer.screenshot(str(args.out / "widgets.png"), canvas_only=False, flash=False)
     wrote.append("widgets.png")
 

@@ -305,7 +305,7 @@ def parallax_layer_data(frame: GeoFrame, shift_east: np.ndarray, shift_north: np
     vectors, h = parallax_vectors(frame, shift_east, shift_north, height, step=step,
                                   exaggeration=exaggeration, valid=valid)
     kwargs = {
-        "name": name, "edge_width": max(frame.dx, frame.dy) * step / 12.0,
+        "name": name, "edge_width": max(frame.dx, frame.dy) * step / 5.0,
         "features": {"height": h}, "edge_color": "height", "edge_colormap": "viridis",
         "vector_style": "arrow", "length": 1.0,
         "metadata": {"exaggeration": exaggeration, "step": step},

@@ -121,7 +121,8 @@ def sample_layers(sample: SampleScene) -> list[LayerData]:
     layers += band_layers(sample.orthorectified, frame, "orthorectified",
                           {"elevation": "dem"}, sample.valid)
     layers += geometry_layers(sample.tie_points, frame, "", sample.diagnostics,
-                              valid=sample.valid, exaggeration=10.0, step=24)
+                              valid=sample.valid, exaggeration=10.0,
+                              step=max(8, max(frame.width, frame.height) // 60))
     return [(d, dict(k, name=k["name"].strip()), t) for d, k, t in layers]
 
 
