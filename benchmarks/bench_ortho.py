@@ -82,9 +82,9 @@ def run_pyresample(scene) -> dict:
     from pyresample import geometry, kd_tree
 
     from napari_meris_ortho.engine.boundary import segment_boundary
-    from napari_meris_ortho.engine.grid import default_grid
     from napari_meris_ortho.engine.location import direct_location
-    from napari_meris_ortho.engine.tiepoints import TiePointGrid
+    from napari_meris_ortho.geometry.grid import default_grid
+    from napari_meris_ortho.geometry.tiepoints import TiePointGrid
     from napari_meris_ortho.io.n1 import read_product
 
     prod = read_product(scene.product_path)

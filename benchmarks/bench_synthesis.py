@@ -78,7 +78,7 @@ def run_untiled(paths: list[str], band_list: list[int]) -> dict:
 
 def run_case(case: str, paths: list[str], bands: int, tile: int) -> dict:
     """One case in this process: new synthesis of the first product, update with the others."""
-    from napari_meris_ortho.engine.grid import OutputGrid
+    from napari_meris_ortho.geometry.grid import OutputGrid
     from napari_meris_ortho.synthesis import open_synthesis, synthesize
 
     if CASES[case] is None:  # the first product's footprint

@@ -59,7 +59,7 @@ def main(argv: list[str] | None = None) -> int:
     _ensure_display()
 
     import napari
-    from napari_meris_ortho._widget_flicker import FlickerWidget, export_flicker_gif
+    from napari_meris_ortho._napari.widget_flicker import FlickerWidget, export_flicker_gif
 
     args.out.mkdir(parents=True, exist_ok=True)
     viewer = napari.Viewer(title=f"napari-meris-ortho: {args.scene}")

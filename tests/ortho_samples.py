@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from napari_meris_ortho.engine.tiepoints import analytic_swath
+from napari_meris_ortho.geometry.tiepoints import analytic_swath
 from napari_meris_ortho.io.n1 import write_product
 
 

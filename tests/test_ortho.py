@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 
 from napari_meris_ortho import orthorectify
-from napari_meris_ortho.engine.grid import OutputGrid
 from napari_meris_ortho.engine.location import direct_location
-from napari_meris_ortho.engine.tiepoints import TiePointGrid
 from napari_meris_ortho.errors import DemError, N1FormatError, OptionsError
+from napari_meris_ortho.geometry.grid import OutputGrid
+from napari_meris_ortho.geometry.tiepoints import TiePointGrid
 from napari_meris_ortho.io.n1 import read_product
 from ortho_samples import make_dem, make_product, terrain
 

@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 import rasterio
 
-from napari_meris_ortho.engine.grid import OutputGrid
 from napari_meris_ortho.engine.synthesis import ndvi_encode, validated_pixels
 from napari_meris_ortho.errors import OptionsError
+from napari_meris_ortho.geometry.grid import OutputGrid
 from napari_meris_ortho.ortho import orthorectify
 from napari_meris_ortho.simulate.radiometry import CLOUD_SPECTRUM
 from napari_meris_ortho.synthesis import (
@@ -302,7 +302,7 @@ def test_failed_product_is_skipped_and_reported(products, tmp_path, caplog) -> N
 
 def test_new_synthesis_takes_the_first_footprint(products, tmp_path) -> None:
     from napari_meris_ortho.engine.boundary import segment_boundary
-    from napari_meris_ortho.engine.grid import default_grid
+    from napari_meris_ortho.geometry.grid import default_grid
     from napari_meris_ortho.io.n1 import read_product
 
     result = synthesize([products["clear"]], tmp_path / "s", bands=(7,), elevation="tiepoints")

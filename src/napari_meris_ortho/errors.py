@@ -16,6 +16,11 @@ class N1FormatError(MerisOrthoError, ValueError):
         super().__init__(f"{self.path}: {problem}")
 
 
+class GeometryError(MerisOrthoError, ValueError):
+    """Geometry the location models cannot use (a tie-point grid too small or not covering the
+    product, inconsistent tie-point arrays)."""
+
+
 class DemError(MerisOrthoError):
     """A DEM that cannot be opened or read."""
 

@@ -15,26 +15,34 @@ import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 
 from .engine import predcorr
 from .engine.boundary import row_spans, segment_boundary
-from .engine.grid import OutputGrid, default_grid, parse_crs
-from .engine.location import geolocation_code, parallax_code
-from .engine.tiepoints import TiePointGrid
 from .errors import DemError, OptionsError
+from .geometry.grid import OutputGrid, default_grid, parse_crs, terrain_margin_px
+from .geometry.tiepoints import ProductGeometry, TiePointGrid
+from .options import Elevation, OrthoOptions, Sampling, SearchMethod
 from .progress import ProgressCallback
 
 log = logging.getLogger(__name__)
 
-ELEVATIONS = ("none", "tiepoints", "dem")
+
+class MerisProduct(ProductGeometry, Protocol):
+    """What ``orthorectify`` reads of a product (``io.n1.MerisL1bProduct``): the geometry, the
+    counts of each band, the flags and the radiance scaling factors (Appendix A)."""
+
+    def counts(self, band: int) -> np.ndarray: ...
+    @property
+    def flags(self) -> np.ndarray: ...
+    @property
+    def scaling(self) -> Any: ...
+
 #: elevation source codes of the diagnostics (0..n-1: index of the DEM in the list)
 SOURCE_TIEPOINTS = -1
 SOURCE_NONE = -2
-#: highest terrain expected (m); sets how far beyond the zero-height boundary points are tried
-MAX_TERRAIN_M = 9000.0
 _BLOCK_ROWS = 256
 #: unit of the radiances of the output bands (counts x sf_rad, Scaling Factor GADS)
 RADIANCE_UNITS = "W m-2 sr-1 um-1"
@@ -80,32 +88,7 @@ class OrthoResult:
         return out
 
 
-def _check_options(elevation: str, dems: Sequence[Any], bands: Sequence[int] | None,
-                   tolerance: float, parallax: str, sampling: str, method: str) -> list[int]:
-    """Refuse inconsistent options early (MERSYN checks parameters first, section 3.1)."""
-    from .engine.resample import METHODS
-
-    if elevation not in ELEVATIONS:
-        raise OptionsError(f"unknown elevation source {elevation!r}: choose none, tiepoints or dem")
-    if elevation != "dem" and len(dems) > 0:
-        raise OptionsError(
-            f"DEMs given with elevation {elevation!r}: DEMs are only used with elevation 'dem'")
-    if not (isinstance(tolerance, (int, float)) and math.isfinite(tolerance) and tolerance > 0):
-        raise OptionsError(f"tolerance must be > 0 product pixels, got {tolerance!r}")
-    parallax_code(parallax)
-    if sampling not in METHODS:
-        raise OptionsError(
-            f"unknown sampling method {sampling!r}: choose one of {', '.join(METHODS)}")
-    if method not in ("primary", "handbook"):
-        raise OptionsError(f"unknown search method {method!r}: choose primary or handbook")
-    chosen = list(range(1, 16)) if bands is None else [int(b) for b in bands]
-    bad = [b for b in chosen if not 1 <= b <= 15]
-    if bad or not chosen:
-        raise OptionsError(f"bands must be 1..15, got {list(bands or [])}")
-    return sorted(set(chosen))
-
-
-def _open_product(product: Any) -> Any:
+def _open_product(product: Any) -> MerisProduct:
     from .io.n1 import read_product
 
     if isinstance(product, (str, os.PathLike)):
@@ -130,13 +113,8 @@ def _open_dems(dems: Sequence[Any]) -> Any:
 
 def _margin_px(tp: TiePointGrid, grid: OutputGrid) -> int:
     """Output pixels beyond the zero-height boundary that a terrain point may reach."""
-    shift_m = MAX_TERRAIN_M * math.tan(math.radians(float(np.nanmax(tp.view_zenith))))
-    if grid.is_geographic:
-        lat = min(float(np.nanmax(np.abs(tp.latitude))), 89.0)
-        pix_m = min(grid.dx * math.cos(math.radians(lat)), grid.dy) * 111320.0
-    else:
-        pix_m = min(grid.dx, grid.dy)
-    return int(math.ceil(shift_m / max(pix_m, 1e-9))) + 2
+    return terrain_margin_px(grid, float(np.nanmax(tp.view_zenith)),
+                             float(np.nanmax(np.abs(tp.latitude))))
 
 
 def _heights(stack: Any, lon: np.ndarray, lat: np.ndarray, mask: np.ndarray
@@ -174,14 +152,57 @@ def orthorectify(product: Any, grid: OutputGrid | None = None, dems: Sequence[An
     (synthesis tiles: terrain points may still lie there, section 3.1).
     """
     t_start = time.perf_counter()
-    band_list = _check_options(elevation, dems, bands, tolerance, parallax, sampling, method)
-    geo = geolocation_code(geolocation, parallax)
+    opts = OrthoOptions.parse(elevation=elevation, sampling=sampling, parallax=parallax,
+                              geolocation=geolocation, method=method, tolerance=tolerance,
+                              bands=bands, diagnostics=diagnostics, n_dems=len(dems))
     if grid is None:
         crs = parse_crs(crs)
         if pixel_size is not None and not (math.isfinite(pixel_size) and pixel_size > 0):
             raise OptionsError(f"pixel size must be > 0, got {pixel_size}")
     prod = _open_product(product)
-    stack = _open_dems(dems) if elevation == "dem" else None
+    stack = _open_dems(dems) if opts.elevation is Elevation.DEM else None
+    try:
+        job = _prepare(prod, grid, stack, opts, crs, pixel_size, t_start)
+        job.stats["dems"] = [str(d) for d in dems]
+        if job.stats["points_in_boundary"] == 0 and not allow_empty:
+            raise OptionsError(
+                f"the output extent {job.grid.bounds} misses the product footprint")
+        if job.spans.count == 0:  # nothing to search: every point is background
+            return _empty_result(job)
+        return _run(job, progress)
+    finally:
+        if stack is not None:
+            stack.close()
+
+
+@dataclass
+class _Job:
+    """One orthorectification, everything checked: product, tie points, grid, the CSR spans of
+    the output points to search, the DEM stack, the kernel height mode and the options."""
+
+    prod: MerisProduct
+    tp: TiePointGrid
+    grid: OutputGrid
+    spans: Any
+    stack: Any
+    hmode: int
+    options: OrthoOptions
+    stats: dict[str, Any]
+    t_start: float
+
+
+def _height_mode(elevation: Elevation, has_dems: bool) -> int:
+    """Kernel height mode (``engine.predcorr``) of an elevation source."""
+    if elevation is Elevation.NONE:
+        return predcorr.HEIGHT_NONE
+    if elevation is Elevation.DEM and has_dems:
+        return predcorr.HEIGHT_GIVEN
+    return predcorr.HEIGHT_TIEPOINTS
+
+
+def _prepare(prod: MerisProduct, grid: OutputGrid | None, stack: Any, opts: OrthoOptions,
+             crs: Any, pixel_size: float | None, t_start: float) -> _Job:
+    """Segment boundary, default grid and the spans to search (section 3.1)."""
     tp = TiePointGrid.from_product(prod)
     boundary = segment_boundary(tp.latitude, tp.longitude)
     if grid is None:
@@ -189,33 +210,24 @@ def orthorectify(product: Any, grid: OutputGrid | None = None, dems: Sequence[An
         grid = default_grid(boundary, res_m, crs, pixel_size=pixel_size)
     # MERSYN processes the points inside the segment boundary; the primary-grid path also tries
     # a margin where terrain seen obliquely can lie outside the zero-height boundary
-    margin = _margin_px(tp, grid) if elevation != "none" and method == "primary" else 0
+    margin = (_margin_px(tp, grid) if opts.elevation is not Elevation.NONE
+              and opts.method is SearchMethod.PRIMARY else 0)
     inner = row_spans(boundary, grid)
     spans = row_spans(boundary, grid, margin=margin) if margin else inner
-    in_boundary = inner.count
-    hmode = {"none": predcorr.HEIGHT_NONE, "tiepoints": predcorr.HEIGHT_TIEPOINTS,
-             "dem": predcorr.HEIGHT_GIVEN if stack is not None else predcorr.HEIGHT_TIEPOINTS}[
-        elevation]
-    options = dict(elevation=elevation, parallax=parallax, sampling=sampling,
-                   geolocation=("bilinear", "ecef")[geo], tolerance=tolerance, method=method,
-                   margin_px=margin, dems=[str(d) for d in dems], points_in_boundary=in_boundary)
-    try:
-        if in_boundary == 0 and not allow_empty:
-            raise OptionsError(f"the output extent {grid.bounds} misses the product footprint")
-        if spans.count == 0:  # nothing to search: every point is background
-            return _empty_result(prod, grid, band_list, hmode, stack, diagnostics, t_start,
-                                 options)
-        return _run(prod, tp, grid, spans, stack, hmode, band_list, sampling, tolerance,
-                    (parallax_code(parallax), geo), method, diagnostics, progress, t_start,
-                    options)
-    finally:
-        if stack is not None:
-            stack.close()
+    stats = dict(elevation=opts.elevation.value, parallax=opts.parallax.value,
+                 sampling=opts.sampling.value, geolocation=opts.geolocation.value,
+                 tolerance=opts.tolerance, method=opts.method.value, margin_px=margin,
+                 points_in_boundary=inner.count)
+    return _Job(prod, tp, grid, spans, stack, _height_mode(opts.elevation, stack is not None),
+                opts, stats, t_start)
 
 
-def _run(prod, tp, grid, spans, stack, hmode, band_list, sampling, tolerance, models, method,
-         diagnostics, progress, t_start, options) -> OrthoResult:
-
+def _run(job: _Job, progress: ProgressCallback | None) -> OrthoResult:
+    """Prediction/correction by blocks of output rows, then the resampling (section 3.2)."""
+    prod, tp, grid, spans, stack, hmode = (job.prod, job.tp, job.grid, job.spans, job.stack,
+                                           job.hmode)
+    opts = job.options
+    band_list, diagnostics = list(opts.bands), opts.diagnostics
     nr, nc = grid.shape
     line = np.full((nr, nc), np.nan, np.float32)
     col = np.full((nr, nc), np.nan, np.float32)
@@ -248,8 +260,9 @@ def _run(prod, tp, grid, spans, stack, hmode, band_list, sampling, tolerance, mo
             t_dem += time.perf_counter() - t0
         t0 = time.perf_counter()
         res = predcorr.solve(tp, grid, lon, lat, h, hmode, (ptr, start, stop), row_start=r0,
-                             tolerance=tolerance, model=models[0], geo=models[1],
-                             method=method, diagnostics=diagnostics)
+                             tolerance=opts.tolerance, model=opts.parallax.code,
+                             geo=opts.geolocation.code, method=opts.method.value,
+                             diagnostics=diagnostics)
         t_engine += time.perf_counter() - t0
         line[r0:r1], col[r0:r1], iters[r0:r1] = res["line"], res["col"], res["iterations"]
         for k, v in res["search"].items():
@@ -269,7 +282,8 @@ def _run(prod, tp, grid, spans, stack, hmode, band_list, sampling, tolerance, mo
             diag["elevation_source"][r0:r1] = np.where(ok, code, SOURCE_NONE)
         if progress is not None:
             progress(r1, total)
-    radiance, flags, window, t_read, t_res = _sample_bands(prod, line, col, band_list, sampling)
+    radiance, flags, window, t_read, t_res = _sample_bands(prod, line, col, band_list,
+                                                           opts.sampling)
     t_resample += t_res
     if progress is not None:
         progress(total, total)
@@ -283,18 +297,17 @@ def _run(prod, tp, grid, spans, stack, hmode, band_list, sampling, tolerance, mo
             diag["shift_north_m"] = diag["elevation"].copy()
     seconds = {"lonlat": t_lonlat, "dem": t_dem, "prediction_correction": t_engine,
                "read_bands": t_read, "resample": t_resample, "engine": t_engine + t_resample,
-               "total": time.perf_counter() - t_start}
-    stats = _stats(prod, grid, hmode, band_list, options, search=search, hist=hist,
-                   processed=int(valid.sum()), window=window,
+               "total": time.perf_counter() - job.t_start}
+    stats = _stats(job, search=search, hist=hist, processed=int(valid.sum()), window=window,
                    sources=_source_counts(sources, stack, hmode), seconds=seconds)
     return OrthoResult(radiance, grid, valid, flags, stats, diag)
 
 
-def _stats(prod: Any, grid: OutputGrid, hmode: int, band_list: list[int],
-           options: dict[str, Any], *, search: dict[str, int], hist: np.ndarray,
-           processed: int, window: tuple[int, int], sources: dict[str, int],
-           seconds: dict[str, float]) -> dict[str, Any]:
+def _stats(job: _Job, *, search: dict[str, int], hist: np.ndarray, processed: int,
+           window: tuple[int, int], sources: dict[str, int], seconds: dict[str, float]
+           ) -> dict[str, Any]:
     """What the Appendix B log prints, plus the options and timings of the run."""
+    prod, grid, band_list = job.prod, job.grid, list(job.options.bands)
     nr, nc = grid.shape
     return {
         "product": str(getattr(prod, "path", "")),
@@ -303,7 +316,7 @@ def _stats(prod: Any, grid: OutputGrid, hmode: int, band_list: list[int],
         "crs": grid.crs.to_string(), "ul_x": grid.x0, "ul_y": grid.y0,
         "lr_x": grid.x0 + nc * grid.dx, "lr_y": grid.y0 - nr * grid.dy,
         "pixel_width": grid.dx, "pixel_height": grid.dy,
-        "orthorectification": hmode != predcorr.HEIGHT_NONE,
+        "orthorectification": job.hmode != predcorr.HEIGHT_NONE,
         "facet_search": search,
         "iterations_histogram": [int(v) for v in hist],
         "processed_points": processed,
@@ -314,17 +327,17 @@ def _stats(prod: Any, grid: OutputGrid, hmode: int, band_list: list[int],
         "bands": band_list, "wavelengths": _per_band(prod, "wavelengths", band_list),
         "bandwidths": _per_band(prod, "bandwidths", band_list),
         "scale_factors": _per_band(getattr(prod, "scaling", None), "radiance", band_list),
-        **options,
+        **job.stats,
     }
 
 
-def _empty_result(prod: Any, grid: OutputGrid, band_list: list[int], hmode: int, stack: Any,
-                  diagnostics: bool, t_start: float, options: dict[str, Any]) -> OrthoResult:
+def _empty_result(job: _Job) -> OrthoResult:
     """All-background result of a grid no antecedent search can reach (``allow_empty``)."""
+    grid, band_list, stack = job.grid, job.options.bands, job.stack
     nr, nc = grid.shape
     bands = {b: np.zeros((nr, nc), np.float32) for b in band_list}
     diag: dict[str, np.ndarray] = {}
-    if diagnostics:
+    if job.options.diagnostics:
         nan = np.full((nr, nc), np.nan, np.float32)
         diag = {"line": nan, "col": nan.copy(), "elevation": nan.copy(),
                 "elevation_source": np.full((nr, nc), SOURCE_NONE, np.int8),
@@ -333,10 +346,9 @@ def _empty_result(prod: Any, grid: OutputGrid, band_list: list[int], hmode: int,
     hist = np.zeros(predcorr.MAX_ITERATIONS + 1, np.int64)
     sources = np.zeros(len(stack.sources) + 1 if stack is not None else 1, np.int64)
     seconds = {"lonlat": 0.0, "dem": 0.0, "prediction_correction": 0.0, "read_bands": 0.0,
-               "resample": 0.0, "engine": 0.0, "total": time.perf_counter() - t_start}
-    stats = _stats(prod, grid, hmode, band_list, options, search={}, hist=hist, processed=0,
-                   window=(0, 0), sources=_source_counts(sources, stack, hmode),
-                   seconds=seconds)
+               "resample": 0.0, "engine": 0.0, "total": time.perf_counter() - job.t_start}
+    stats = _stats(job, search={}, hist=hist, processed=0, window=(0, 0),
+                   sources=_source_counts(sources, stack, job.hmode), seconds=seconds)
     return OrthoResult(bands, grid, np.zeros((nr, nc), bool), np.zeros((nr, nc), np.uint8),
                        stats, diag)
 
@@ -351,18 +363,18 @@ def antecedent_line_window(line: np.ndarray, col: np.ndarray, n_lines: int, n_co
     if not inside.any():
         return 0, 0
     lines = line[inside]
-    pad = 1 if sampling == "bicubic" else 0
-    first = int(math.floor(float(lines.min()))) - pad
-    stop = int(math.floor(float(lines.max()))) + 2 + pad
+    before, after = Sampling(sampling).margin
+    first = int(math.floor(float(lines.min()))) - before
+    stop = int(math.floor(float(lines.max()))) + 1 + after
     return max(first, 0), min(stop, n_lines)
 
 
-def _sample_bands(prod: Any, line: np.ndarray, col: np.ndarray, band_list: list[int],
+def _sample_bands(prod: MerisProduct, line: np.ndarray, col: np.ndarray, band_list: list[int],
                   sampling: str) -> tuple[dict[int, np.ndarray], np.ndarray, tuple[int, int],
                                           float, float]:
     """Radiances and flags at the antecedents, reading only the product lines they need
     (``antecedent_line_window``): (bands, flags, window, read seconds, resample seconds)."""
-    from .engine.resample import resample_bands
+    from .engine.resample import gather, nearest_pixel, resample_bands
 
     t0 = time.perf_counter()
     n_lines, n_cols = int(prod.height), int(prod.width)
@@ -377,17 +389,17 @@ def _sample_bands(prod: Any, line: np.ndarray, col: np.ndarray, band_list: list[
     sub_line = line.astype(np.float64) - first
     t_read = 0.0
     if sampling == "nearest":
-        index = predcorr.nearest_pixel(sub_line, col, stop - first, n_cols)
+        index = nearest_pixel(sub_line, col, stop - first, n_cols)
         for b in band_list:
             t1 = time.perf_counter()
             image = np.ascontiguousarray(prod.counts(b)[rows], dtype=np.uint16)
             t_read += time.perf_counter() - t1
-            predcorr.gather(image, index, float(prod.scaling.radiance[b - 1]), radiance[b])
+            gather(image, index, float(prod.scaling.radiance[b - 1]), radiance[b].reshape(-1))
         t1 = time.perf_counter()
         image = np.ascontiguousarray(prod.flags[rows], dtype=np.uint8)
         t_read += time.perf_counter() - t1
         out = np.empty((nr, nc), np.float32)
-        predcorr.gather(image, index, 1.0, out)
+        gather(image, index, 1.0, out.reshape(-1))
         flags = out.astype(np.uint8)
     else:
         images = [np.ascontiguousarray(prod.counts(b)[rows], dtype=np.uint16)

@@ -41,11 +41,12 @@ from .engine.synthesis import (
     validated_pixels,
 )
 from .errors import DemError, MerisOrthoError, OptionsError, OutputError
+from .options import Elevation, MergeRule, Sampling, choices, parse
 from .progress import ProgressCallback
 
 log = logging.getLogger("napari_meris_ortho.synthesis")
 
-ALGORITHMS = ("min-radiance", "max-ndvi")
+ALGORITHMS = tuple(choices(MergeRule))
 MANIFEST = "synthesis.json"
 LOCK = ".lock"
 FORMAT = "napari-meris-ortho synthesis"
@@ -65,7 +66,7 @@ RADIANCE_NOTE = ("TOA radiance (float32, 0 = background) = counts x sf_rad of th
 
 def grid_to_dict(grid: Any) -> dict[str, Any]:
     """The output grid as JSON-able values (CRS as WKT)."""
-    from .engine.grid import parse_crs
+    from .geometry.grid import parse_crs
 
     return {"crs": parse_crs(grid.crs).to_wkt(), "x0": float(grid.x0),
             "y0": float(grid.y0), "dx": float(grid.dx), "dy": float(grid.dy),
@@ -74,31 +75,26 @@ def grid_to_dict(grid: Any) -> dict[str, Any]:
 
 def grid_from_dict(values: dict[str, Any]) -> Any:
     """Rebuild an ``engine.grid.OutputGrid`` from :func:`grid_to_dict` values."""
-    from .engine.grid import OutputGrid
+    from .geometry.grid import OutputGrid
 
     return OutputGrid(values["crs"], values["x0"], values["y0"], values["dx"], values["dy"],
                       int(values["width"]), int(values["height"]))
 
 
-#: terrain parallax a tile must be within to be orthorectified: ``ortho.MAX_TERRAIN_M`` seen at
-#: 45 deg view zenith or the product's largest one if larger (section 3.1)
+#: terrain parallax a tile must be within to be orthorectified: ``geometry.earth.MAX_TERRAIN_M``
+#: seen at 45 deg view zenith or the product's largest one if larger (section 3.1)
 SKIP_VIEW_ZENITH_DEG = 45.0
 
 
 def terrain_margin_px(product: Any, grid: Any) -> int:
     """Output pixels beyond the zero-height segment boundary that a terrain point of the
-    product may reach: ``ortho.MAX_TERRAIN_M`` x tan(max(45 deg, largest view zenith)), + 2."""
-    from .ortho import MAX_TERRAIN_M
+    product may reach: ``geometry.earth.MAX_TERRAIN_M`` x tan(max(45 deg, largest view
+    zenith)), + 2."""
+    from .geometry.grid import terrain_margin_px as margin_px
 
     tp = product.tie_points
     zenith = max(SKIP_VIEW_ZENITH_DEG, float(np.nanmax(tp["view_zenith"])))
-    shift_m = MAX_TERRAIN_M * np.tan(np.radians(zenith))
-    if grid.is_geographic:
-        lat = min(float(np.nanmax(np.abs(tp["latitude"]))), 89.0)
-        pixel_m = min(grid.dx * np.cos(np.radians(lat)), grid.dy) * 111320.0
-    else:
-        pixel_m = min(grid.dx, grid.dy)
-    return int(np.ceil(shift_m / max(pixel_m, 1e-9))) + 2
+    return margin_px(grid, zenith, float(np.nanmax(np.abs(tp["latitude"]))))
 
 
 def footprint_window(product: Any, grid: Any, margin: int | None = None
@@ -461,15 +457,8 @@ def _locked(directory: Path) -> Iterator[None]:
 def _check_ortho_options(dems: Sequence[Any], elevation: str, sampling: str) -> None:
     """Refuse bad orthorectification options before any product is read (exit code 2, not a
     failure of every product)."""
-    from .engine.resample import METHODS
-    from .ortho import ELEVATIONS
-
-    if elevation not in ELEVATIONS:
-        raise OptionsError(f"unknown elevation source {elevation!r}: choose one of "
-                           f"{', '.join(ELEVATIONS)}")
-    if sampling not in METHODS:
-        raise OptionsError(f"unknown sampling method {sampling!r}: choose one of "
-                           f"{', '.join(METHODS)}")
+    parse(Elevation, elevation)
+    parse(Sampling, sampling)
     if dems and elevation != "dem":
         raise OptionsError(f"DEMs given with elevation {elevation!r}: DEMs need elevation 'dem'")
     if dems:
@@ -496,7 +485,7 @@ def _check_options(products: Sequence[Any], out_dir: Path, algorithm: str | None
     if pixel_size is not None and not pixel_size > 0:
         raise OptionsError(f"pixel size {pixel_size}: must be positive")
     if crs is not None:
-        from .engine.grid import parse_crs
+        from .geometry.grid import parse_crs
 
         parse_crs(crs)
     _check_ortho_options(dems, elevation, sampling)
@@ -548,7 +537,7 @@ def _new_grid(product: Any, crs: Any, pixel_size: float | None) -> Any:
     """Grid of a new synthesis: the smallest rectangle holding the first product's segment
     boundary (section 3.1, fig. 19), nominal FR/RR pixel size unless ``pixel_size``."""
     from .engine.boundary import segment_boundary
-    from .engine.grid import FR_PIXEL_SIZE_M, RR_PIXEL_SIZE_M, default_grid
+    from .geometry.grid import FR_PIXEL_SIZE_M, RR_PIXEL_SIZE_M, default_grid
 
     boundary = segment_boundary(product.tie_points["latitude"], product.tie_points["longitude"])
     resolution = FR_PIXEL_SIZE_M if product.samples_per_tie_point >= 64 else RR_PIXEL_SIZE_M

@@ -14,7 +14,7 @@ import rasterio
 from scipy.spatial import cKDTree
 
 from napari_meris_ortho.analysis.disparity import disparity
-from napari_meris_ortho.engine.grid import OutputGrid
+from napari_meris_ortho.geometry.grid import OutputGrid
 from napari_meris_ortho.ortho import orthorectify
 
 BAND = 5  # the reference image holds bands 5, 7, 13

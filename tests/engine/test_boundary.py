@@ -9,7 +9,7 @@ from matplotlib.path import Path as MplPath
 from scipy.ndimage import binary_dilation
 
 from napari_meris_ortho.engine.boundary import Boundary, row_spans, segment_boundary
-from napari_meris_ortho.engine.grid import OutputGrid, default_grid
+from napari_meris_ortho.geometry.grid import OutputGrid, default_grid
 
 
 def shoelace(x, y):

@@ -7,7 +7,7 @@ import pytest
 
 from napari_meris_ortho.engine.inverse import facet_offsets, inverse_location, search_facet
 from napari_meris_ortho.engine.location import direct_location
-from napari_meris_ortho.engine.tiepoints import analytic_swath
+from napari_meris_ortho.geometry.tiepoints import analytic_swath
 
 
 @pytest.fixture(scope="module")

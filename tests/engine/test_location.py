@@ -10,8 +10,8 @@ import pytest
 
 from napari_meris_ortho import geodetic_correction
 from napari_meris_ortho.engine.location import direct_location
-from napari_meris_ortho.engine.tiepoints import TiePointGrid, analytic_swath
 from napari_meris_ortho.errors import OptionsError
+from napari_meris_ortho.geometry.tiepoints import TiePointGrid, analytic_swath
 
 FIXTURE = Path(__file__).parents[1] / "fixtures" / "appendix_d.csv"
 
@@ -112,8 +112,8 @@ def test_direct_location_across_the_antimeridian():
 
 
 def test_tie_point_grid_rejects_bad_shapes():
-    from napari_meris_ortho.errors import N1FormatError
-    with pytest.raises(N1FormatError):
+    from napari_meris_ortho.errors import GeometryError
+    with pytest.raises(GeometryError):
         TiePointGrid(np.zeros((1, 3)), np.zeros((1, 3)), np.zeros((1, 3)), np.zeros((1, 3)),
                      np.zeros((1, 3)), 64, 64, 1, 129)
 

@@ -6,7 +6,6 @@ import numpy as np
 import pytest
 
 from napari_meris_ortho.engine.boundary import row_spans, segment_boundary
-from napari_meris_ortho.engine.grid import OutputGrid
 from napari_meris_ortho.engine.location import direct_location
 from napari_meris_ortho.engine.predcorr import (
     HEIGHT_GIVEN,
@@ -16,7 +15,8 @@ from napari_meris_ortho.engine.predcorr import (
     iteration_histogram,
     solve,
 )
-from napari_meris_ortho.engine.tiepoints import analytic_swath
+from napari_meris_ortho.geometry.grid import OutputGrid
+from napari_meris_ortho.geometry.tiepoints import analytic_swath
 
 
 def _terrain(lon, lat):

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 import rasterio
 
-from napari_meris_ortho.engine.grid import OutputGrid
 from napari_meris_ortho.errors import OutputError
+from napari_meris_ortho.geometry.grid import OutputGrid
 from napari_meris_ortho.io.geotiff import meris_band_description, read_geotiff, write_geotiff
 
 

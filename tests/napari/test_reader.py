@@ -9,9 +9,10 @@ import pytest
 import rasterio
 from rasterio.transform import Affine
 
-from napari_meris_ortho._layers import GeoFrame
-from napari_meris_ortho._reader import get_reader, read_layers
+from napari_meris_ortho._napari.reader import get_reader, read_layers
+from napari_meris_ortho._napari.world import layer_scale, layer_translate
 from napari_meris_ortho.errors import MerisOrthoError, N1FormatError
+from napari_meris_ortho.geometry.grid import OutputGrid
 from napari_meris_ortho.io.n1 import tie_columns, tie_lines, write_product
 
 H, W = 70, 2241
@@ -95,25 +96,25 @@ def test_geotiff_layers_in_world_frame(tmp_path):
     assert kw["scale"] == (300.0, 300.0)
     # centre of pixel (0, 0): x = 400150, y = 5099850 -> world (-5099850, 400150)
     assert kw["translate"] == (-5_099_850.0, 400_150.0)
-    frame = GeoFrame.from_transform(**{k: kw["metadata"]["geo"][k]
-                                       for k in ("crs", "transform", "shape")})
+    frame = OutputGrid.from_transform(**{k: kw["metadata"]["geo"][k]
+                                         for k in ("crs", "transform", "shape")})
     assert frame.x0 == 400_000.0 and frame.y0 == 5_100_000.0 and frame.width == 30
     np.testing.assert_array_equal(layers[1][0], 2 * a[0])
 
 
 def test_geotiff_other_crs_reprojected_onto_frame(tmp_path):
     # frame: UTM 32N, 1 km pixels; reference: lon/lat grid with a value = 1000 * column index
-    frame = GeoFrame.from_transform("EPSG:32632", (1000.0, 0, 300_000.0, 0, -1000.0, 5_000_000.0),
-                                    (40, 50))
+    frame = OutputGrid.from_transform(
+        "EPSG:32632", (1000.0, 0, 300_000.0, 0, -1000.0, 5_000_000.0), (40, 50))
     lon0, lat0 = 5.0, 45.3
     ref = np.tile(np.arange(1, 301, dtype=np.float32), (200, 1))
     path = _write_tif(tmp_path / "ref.tif", ref, "EPSG:4326",
                       Affine(0.01, 0, lon0, 0, -0.01, lat0))
-    from napari_meris_ortho._reader import geotiff_layers
+    from napari_meris_ortho._napari.reader import geotiff_layers
 
     (data, kw, _), = geotiff_layers(path, frame)
     assert data.shape == (40, 50)
-    assert kw["scale"] == frame.scale and kw["translate"] == frame.translate
+    assert kw["scale"] == layer_scale(frame) and kw["translate"] == layer_translate(frame)
     assert kw["metadata"]["reprojected"]
     # check one pixel centre: its lon gives the expected column value of the reference
     from pyproj import Transformer
@@ -126,7 +127,7 @@ def test_geotiff_other_crs_reprojected_onto_frame(tmp_path):
 
 def test_geotiff_same_crs_other_pixel_size_overlays(tmp_path):
     """Two rasters of the same CRS and different pixel sizes cover the same world area."""
-    from napari_meris_ortho._reader import geotiff_layers
+    from napari_meris_ortho._napari.reader import geotiff_layers
 
     fine = _write_tif(tmp_path / "fine.tif", np.ones((40, 60), np.float32), "EPSG:32632",
                       Affine(250.0, 0, 500_000.0, 0, -250.0, 5_000_000.0))

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from napari_meris_ortho._layers import GeoFrame
+from napari_meris_ortho.geometry.grid import OutputGrid
 
 
 def test_sample_small_in_viewer(make_napari_viewer):
@@ -18,14 +18,13 @@ def test_sample_small_in_viewer(make_napari_viewer):
                  "tie-point facets", "parallax shift"):
         assert name in names, name
     ref = viewer.layers["reference band 7"]
-    frame = GeoFrame.from_transform(**ref.metadata["geo"])
-    from pyproj import CRS
+    frame = OutputGrid.from_transform(**ref.metadata["geo"])
 
-    assert CRS.from_wkt(frame.crs).to_epsg() == 32633  # UTM zone of the footprint (~15 E)
+    assert frame.crs.to_epsg() == 32633  # UTM zone of the footprint (~15 E)
     assert frame.dx == 260.0
     for name in ("DEM", "uncorrected band 7", "orthorectified band 7", "orthorectified RGB 7-5-2"):
         layer = viewer.layers[name]
-        assert GeoFrame.from_transform(**layer.metadata["geo"]) == frame
+        assert OutputGrid.from_transform(**layer.metadata["geo"]) == frame
         np.testing.assert_allclose(layer.scale[-2:], ref.scale)
         np.testing.assert_allclose(layer.translate[-2:], ref.translate)
     r = ref.data
@@ -48,7 +47,7 @@ def test_sample_small_in_viewer(make_napari_viewer):
 
 
 def test_disparity_of_sample_ortho_against_reference(make_napari_viewer):
-    from napari_meris_ortho._widget_flicker import FlickerWidget
+    from napari_meris_ortho._napari.widget_flicker import FlickerWidget
 
     viewer = make_napari_viewer()
     viewer.open_sample("napari-meris-ortho", "fr-small")

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from napari_meris_ortho._widget_flicker import FlickerWidget, show_viewer
+from napari_meris_ortho._napari.widget_flicker import FlickerWidget, show_viewer
 
 
 def test_screenshot_of_shown_viewer_has_content(make_napari_viewer):

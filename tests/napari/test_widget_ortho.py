@@ -7,16 +7,15 @@ import pytest
 from napari.layers import Image, Labels, Shapes, Vectors
 from pyproj import Transformer
 
-from napari_meris_ortho._layers import GeoFrame
-from napari_meris_ortho._widget_ortho import (
+from napari_meris_ortho._napari.widget_ortho import (
     CRS_EPSG,
     CRS_GEOGRAPHIC,
     OrthorectifyWidget,
     parse_bands,
 )
 from napari_meris_ortho.engine.boundary import segment_boundary
-from napari_meris_ortho.engine.grid import default_grid
 from napari_meris_ortho.errors import OptionsError
+from napari_meris_ortho.geometry.grid import OutputGrid, default_grid
 from napari_meris_ortho.io.n1 import read_product
 
 
@@ -49,8 +48,8 @@ def test_widget_runs_end_to_end(make_napari_viewer, qtbot, tiny_n1, tiny_dem):
     tp = product.tie_points
     expected = default_grid(segment_boundary(tp["latitude"], tp["longitude"]),
                             crs="EPSG:32632", pixel_size=260.0)
-    frame = GeoFrame.from_transform(**rgb.metadata["geo"])
-    assert frame.same_grid(GeoFrame.from_grid(expected))
+    frame = OutputGrid.from_transform(**rgb.metadata["geo"])
+    assert frame.same_grid(expected)
     assert (frame.x0, frame.y0, frame.width, frame.height) == pytest.approx(
         (expected.x0, expected.y0, expected.width, expected.height))
     # world extent of the pixel corners = the grid bounds, north up
@@ -150,11 +149,11 @@ def test_geographic_and_epsg_output(make_napari_viewer, qtbot, tiny_n1, tmp_path
     widget.output.value = out
     _run(widget, qtbot)
     layer = viewer.layers[f"{tiny_n1.stem} band 13"]
-    frame = GeoFrame.from_transform(**layer.metadata["geo"])
+    frame = OutputGrid.from_transform(**layer.metadata["geo"])
     assert frame.is_geographic
     assert frame.dx == pytest.approx(np.degrees(260.0 / 6_370_997.0))
     assert out.is_file()
-    from napari_meris_ortho._reader import read_layers
+    from napari_meris_ortho._napari.reader import read_layers
 
     (data, kwargs, _), = read_layers(str(out))
     np.testing.assert_array_equal(data, layer.data)
@@ -168,15 +167,14 @@ def test_geographic_and_epsg_output(make_napari_viewer, qtbot, tiny_n1, tmp_path
     widget.pixel_size.value = 1000.0
     _run(widget, qtbot)
     assert widget.status.value.startswith("done"), widget.status.value
-    from pyproj import CRS
 
     grid = widget.last_run.items[0]["grid"]
     assert grid.dx == 1000.0 and grid.crs.to_epsg() == 3035
     # the viewer's world frame is geographic: the LAEA result is reprojected onto it
     second = viewer.layers[-1]
     assert second.metadata["reprojected_from"]["transform"][0] == 1000.0
-    frame2 = GeoFrame.from_transform(**second.metadata["geo"])
-    assert frame2 == frame and CRS.from_wkt(frame2.crs).to_epsg() == 4326
+    frame2 = OutputGrid.from_transform(**second.metadata["geo"])
+    assert frame2 == frame and frame2.crs.to_epsg() == 4326
     both = (layer.data > 0) & (second.data > 0)
     assert both.sum() > 0.5 * (layer.data > 0).sum()
     # same radiances, 1 km pixels against 260 m ones: close on average
@@ -249,7 +247,7 @@ def test_parse_bands():
 
 
 def test_widgets_dock_through_the_manifest(make_napari_viewer, qtbot, tiny_n1):
-    from napari_meris_ortho._widget_flicker import FlickerWidget
+    from napari_meris_ortho._napari.widget_flicker import FlickerWidget
 
     viewer = make_napari_viewer()
     _, ortho = viewer.window.add_plugin_dock_widget("napari-meris-ortho", "Orthorectify")

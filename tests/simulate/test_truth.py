@@ -3,8 +3,8 @@
 from __future__ import annotations
 
 import numpy as np
-import pytest
 
+from napari_meris_ortho.geometry.earth import MEAN_EARTH_RADIUS
 from napari_meris_ortho.io.n1 import (
     FLAG_BRIGHT,
     FLAG_COASTLINE,
@@ -13,7 +13,6 @@ from napari_meris_ortho.io.n1 import (
     FLAG_LAND_OCEAN,
     read_product,
 )
-from napari_meris_ortho.simulate.scene import EQ2_RADIUS
 
 
 def _random_pixels(scene, n, seed):
@@ -120,9 +119,9 @@ def test_stored_corrections_follow_eq2_with_the_real_sign_convention(fr_small):
     """lat_corr = +h tan(vz) cos(va) / R, lon_corr = -h tan(vz) sin(va) / (R cos lat)."""
     tp = read_product(fr_small.product_path).tie_points
     h, vz, va = tp["dem_alt"], np.radians(tp["view_zenith"]), np.radians(tp["view_azimuth"])
-    lat_corr = np.degrees(h * np.tan(vz) * np.cos(va) / EQ2_RADIUS)
+    lat_corr = np.degrees(h * np.tan(vz) * np.cos(va) / MEAN_EARTH_RADIUS)
     lon_corr = np.degrees(-h * np.tan(vz) * np.sin(va)
-                          / (EQ2_RADIUS * np.cos(np.radians(tp["latitude"]))))
+                          / (MEAN_EARTH_RADIUS * np.cos(np.radians(tp["latitude"]))))
     assert np.max(np.abs(tp["lat_corr"] - lat_corr)) < 2e-6
     assert np.max(np.abs(tp["lon_corr"] - lon_corr)) < 2e-6
     assert tp["lon_corr"].min() < -0.01  # west side of a descending pass: negative lon_corr
@@ -147,7 +146,8 @@ def test_sun_and_ecmwf_fields_are_plausible(fr_small):
 
 
 def test_pyepr_reads_every_generated_product(fr_small, tiny_rr):
-    epr = pytest.importorskip("epr")
+    import epr
+
     for scene in (fr_small, tiny_rr):
         ours = read_product(scene.product_path)
         with epr.open(str(scene.product_path)) as prod:

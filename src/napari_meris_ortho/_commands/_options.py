@@ -13,9 +13,7 @@ import math
 from typing import Any
 
 from ..errors import OptionsError
-
-ELEVATIONS = ("none", "tiepoints", "dem")
-SAMPLINGS = ("nearest", "bilinear", "bicubic")
+from ..options import Elevation, Sampling, choices
 
 
 def parse_bands(text: str) -> list[int]:
@@ -36,11 +34,11 @@ def add_bands_option(p: Any, help: str) -> None:
 def add_height_options(p: Any, dem_help: str, elevation_help: str) -> None:
     """``--dem`` (repeatable) and ``--elevation none|tiepoints|dem`` (default dem)."""
     p.add_argument("--dem", action="append", default=[], metavar="PATH", help=dem_help)
-    p.add_argument("--elevation", choices=ELEVATIONS, default="dem", help=elevation_help)
+    p.add_argument("--elevation", choices=choices(Elevation), default="dem", help=elevation_help)
 
 
 def add_sampling_option(p: Any, help: str) -> None:
-    p.add_argument("--sampling", choices=SAMPLINGS, default="nearest", help=help)
+    p.add_argument("--sampling", choices=choices(Sampling), default="nearest", help=help)
 
 
 def add_grid_options(p: Any, crs_default: str | None, crs_help: str) -> None:
@@ -64,7 +62,7 @@ def check_heights(args: argparse.Namespace) -> None:
 def grid_from_args(args: argparse.Namespace, default_crs: str = "EPSG:4326") -> Any:
     """The ``OutputGrid`` of ``--ul``/``--lr``/``--pixel-size``/``--crs``, or None without
     corners (then the product footprint sets the extent); checks the pixel size and the CRS."""
-    from ..engine.grid import OutputGrid, parse_crs
+    from ..geometry.grid import OutputGrid, parse_crs
 
     if args.pixel_size is not None and not (math.isfinite(args.pixel_size)
                                             and args.pixel_size > 0):

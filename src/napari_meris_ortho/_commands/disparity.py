@@ -15,11 +15,11 @@ from typing import Any
 import numpy as np
 
 from ..errors import OptionsError
+from ..geometry.earth import MEAN_EARTH_RADIUS
 
 log = logging.getLogger("napari_meris_ortho")
 
 #: sphere radius of the handbook (eq. 2) to turn degrees into metres for geographic grids
-EARTH_RADIUS_M = 6_370_997.0
 
 
 def register(subparsers: Any) -> None:
@@ -80,7 +80,7 @@ def pixel_size_metres(transform: Any, crs: Any, height: int) -> tuple[float, flo
     dx, dy = abs(transform.a), abs(transform.e)
     if crs.is_geographic:
         lat = transform.f + transform.e * height / 2.0
-        k = math.pi / 180.0 * EARTH_RADIUS_M
+        k = math.pi / 180.0 * MEAN_EARTH_RADIUS
         return dx * k * math.cos(math.radians(lat)), dy * k
     factor = crs.linear_units_factor[1] if crs.linear_units_factor else 1.0
     return dx * factor, dy * factor

@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import OptionsError
+from ..options import PARALLAX_CHOICES, Geolocation, SearchMethod, choices
 from ._options import (
     add_bands_option,
     add_grid_options,
@@ -45,13 +46,13 @@ def register(subparsers: Any) -> None:
     add_sampling_option(p, "resampling (default nearest, as MERSYN)")
     p.add_argument("--tolerance", type=float, default=0.01, metavar="PX",
                    help="prediction/correction tolerance in product pixels (MERSYN: 0.1)")
-    p.add_argument("--parallax", choices=("handbook", "ellipsoid"), default="handbook",
+    p.add_argument("--parallax", choices=choices(PARALLAX_CHOICES), default="handbook",
                    help="parallax model: handbook sphere R=6370997 m or WGS84 radii")
-    p.add_argument("--geolocation", choices=("bilinear", "ecef"), default=None,
+    p.add_argument("--geolocation", choices=choices(Geolocation), default=None,
                    help="tie-point position interpolation: bilinear lon/lat (eq. 4a-4b) or "
                    "ecef unit vectors (default: bilinear with --parallax handbook, ecef with "
                    "ellipsoid)")
-    p.add_argument("--search", choices=("primary", "handbook"), default="primary",
+    p.add_argument("--search", choices=choices(SearchMethod), default="primary",
                    help="antecedent search: primary grid + Newton (fast) or MERSYN's facet "
                    "search in the loop")
     p.add_argument("--diagnostics", action="store_true",

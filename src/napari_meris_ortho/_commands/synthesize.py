@@ -11,6 +11,7 @@ import logging
 from typing import Any
 
 from ..errors import OptionsError
+from ..options import MergeRule, choices
 from ._options import (
     add_bands_option,
     add_grid_options,
@@ -30,7 +31,7 @@ def register(subparsers: Any) -> None:
         description="Orthorectify MERIS L1b products onto a synthesis grid and merge them by "
         "minimum radiance or maximum NDVI (handbook section 3.1, Appendix C).")
     p.add_argument("products", nargs="+", metavar="PRODUCT.N1", help="MERIS L1b products")
-    p.add_argument("--algorithm", choices=("min-radiance", "max-ndvi"), default=None,
+    p.add_argument("--algorithm", choices=choices(MergeRule), default=None,
                    help="selection algorithm (new synthesis: min-radiance; update: the input's)")
     p.add_argument("--out", required=True, metavar="DIR", help="output synthesis directory")
     p.add_argument("--input", metavar="DIR", default=None,

@@ -24,7 +24,7 @@ import numpy as np
 import pyproj
 from numba import njit, prange
 
-from .grid import OutputGrid, parse_crs
+from ..geometry.grid import OutputGrid, parse_crs
 
 _WGS84 = pyproj.CRS.from_epsg(4326)
 

@@ -15,7 +15,7 @@ import math
 import numpy as np
 from numba import njit
 
-from .tiepoints import TiePointGrid
+from ..geometry.tiepoints import TiePointGrid
 
 #: facet-search paths, counted in the statistics (Appendix B: "same / neighbour / all")
 PATH_NAMES = ("same", "4-connex", "8-connex", "all")

@@ -20,28 +20,14 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from ..errors import OptionsError
-from .tiepoints import TiePointGrid
-
-#: mean Earth radius of MERSYN and BEAM (handbook eq. 2, 6a)
-MEAN_EARTH_RADIUS = 6370997.0
-WGS84_A = 6378137.0
-WGS84_E2 = 6.69437999014e-3
-
-#: parallax model codes used by the kernels; "ellipsoid_h" (radii M+h, N+h) is for measurements
-PARALLAX_MODELS = {"handbook": 0, "ellipsoid": 1, "ellipsoid_h": 2}
+from ..geometry.earth import MEAN_EARTH_RADIUS, WGS84_A, WGS84_E2
+from ..geometry.tiepoints import TiePointGrid
+from ..options import Geolocation, Parallax, parse
 
 
 def parallax_code(model: str) -> int:
-    """Kernel code of a parallax model name, or OptionsError."""
-    try:
-        return PARALLAX_MODELS[model]
-    except KeyError:
-        raise OptionsError(
-            f"unknown parallax model {model!r}: choose handbook or ellipsoid") from None
-
-
-GEOLOCATIONS = {"bilinear": 0, "ecef": 1}
+    """Kernel code of a parallax model (``options.Parallax``), or OptionsError."""
+    return parse(Parallax, model).code
 
 
 def geolocation_code(geolocation: str | None, parallax: str = "handbook") -> int:
@@ -53,12 +39,8 @@ def geolocation_code(geolocation: str | None, parallax: str = "handbook") -> int
     "ecef" unless told otherwise.
     """
     if geolocation is None:
-        geolocation = "ecef" if parallax != "handbook" else "bilinear"
-    try:
-        return GEOLOCATIONS[geolocation]
-    except KeyError:
-        raise OptionsError(
-            f"unknown geolocation interpolation {geolocation!r}: choose bilinear or ecef") from None
+        return Geolocation.default_for(parse(Parallax, parallax)).code
+    return parse(Geolocation, geolocation).code
 
 
 @njit(cache=True, inline="always")

@@ -257,33 +257,6 @@ def find_antecedents_handbook(lon, lat, height, hmode, ptr, start, stop, lat_tp,
     return out_l, out_p, iters, total
 
 
-@njit(cache=True, parallel=True)
-def nearest_pixel(line: np.ndarray, col: np.ndarray, n_lines: int, n_cols: int) -> np.ndarray:
-    """Flat index of the antecedent pixel, ``round(l) * W + round(p)`` (Appendix C: iline_segment
-    = TimRound(mer_x0)), -1 where the point was dropped; rows in parallel."""
-    nr, nc = line.shape
-    out = np.full((nr, nc), -1, np.int32)
-    for i in prange(nr):
-        for j in range(nc):
-            x = line[i, j]
-            y = col[i, j]
-            if x >= -0.5 and x < n_lines - 0.5 and y >= -0.5 and y < n_cols - 0.5:
-                out[i, j] = int(math.floor(x + 0.5)) * n_cols + int(math.floor(y + 0.5))
-    return out
-
-
-@njit(cache=True, parallel=True)
-def gather(image: np.ndarray, index: np.ndarray, factor: float, out: np.ndarray) -> None:
-    """out = image[antecedent pixel] * factor (nearest neighbour), 0 where index is -1."""
-    flat = image.ravel()
-    nr, nc = index.shape
-    f = np.float32(factor)
-    for i in prange(nr):
-        for j in range(nc):
-            k = index[i, j]
-            out[i, j] = flat[k] * f if k >= 0 else np.float32(0.0)
-
-
 def iteration_histogram(iters: np.ndarray, max_iter: int = MAX_ITERATIONS) -> np.ndarray:
     """Counts of points per number of prediction/correction iterations (0..max_iter), Appendix B."""
     valid = iters[iters >= 0]

@@ -23,18 +23,15 @@ from collections.abc import Sequence
 import numpy as np
 from numba import njit, prange
 
-from ..errors import OptionsError
+from ..geometry.interpolation import keys_weights
+from ..options import Sampling, parse
 
-METHODS = {"nearest": 1, "bilinear": 2, "bicubic": 4}
 _CHUNK = 1 << 18
 
 
 def _check_method(method: str) -> int:
-    try:
-        return METHODS[method]
-    except KeyError:
-        raise OptionsError(
-            f"unknown sampling method {method!r}: choose one of {', '.join(METHODS)}") from None
+    """Pixels per axis of a sampling method (``options.Sampling``), or OptionsError."""
+    return parse(Sampling, method).taps
 
 
 def _native(image: np.ndarray) -> np.ndarray:
@@ -75,6 +72,13 @@ def resample_bands(images: Sequence[np.ndarray], lines: np.ndarray, cols: np.nda
     for o in outs:
         if o.shape != lines.shape:
             raise ValueError(f"output shape {o.shape} differs from {lines.shape}")
+    if k == 1:
+        index = nearest_pixel(fl, fc, shape[0], shape[1])
+        for im, o in zip(images, outs, strict=True):
+            flat = np.empty(fl.size, np.float32)
+            gather(im, index, 1.0, flat)
+            o.flat[:] = flat
+        return outs
     for a in range(0, fl.size, _CHUNK):
         b = min(a + _CHUNK, fl.size)
         il, wl, ip, wp, valid = _weights(np.asarray(fl[a:b], dtype=np.float64),
@@ -87,25 +91,48 @@ def resample_bands(images: Sequence[np.ndarray], lines: np.ndarray, cols: np.nda
     return outs
 
 
-@njit(cache=True)
-def _keys(t: float) -> float:  # pragma: no cover
-    """Keys cubic convolution kernel, a = -0.5."""
-    a = -0.5
-    t = abs(t)
-    if t <= 1.0:
-        return (a + 2.0) * t * t * t - (a + 3.0) * t * t + 1.0
-    if t < 2.0:
-        return a * t * t * t - 5.0 * a * t * t + 8.0 * a * t - 4.0 * a
-    return 0.0
+_keys_weights = njit(cache=True, inline="always")(keys_weights)
+
+
+def nearest_pixel(lines: np.ndarray, cols: np.ndarray, n_lines: int, n_cols: int
+                  ) -> np.ndarray:
+    """Flat index ``round(l) * W + round(p)`` of the antecedent pixel of every point (Appendix C:
+    iline_segment = TimRound(mer_x0), ties rounded up), -1 where the point is NaN or outside
+    the product; any shape in, 1-D int64 out."""
+    return _nearest_pixel(np.ascontiguousarray(lines, dtype=np.float64).reshape(-1),
+                          np.ascontiguousarray(cols, dtype=np.float64).reshape(-1),
+                          int(n_lines), int(n_cols))
+
+
+@njit(cache=True, parallel=True)
+def _nearest_pixel(line, col, n_lines, n_cols):  # pragma: no cover
+    out = np.full(line.size, -1, np.int64)
+    for i in prange(line.size):
+        x = line[i]
+        y = col[i]
+        if x >= -0.5 and x < n_lines - 0.5 and y >= -0.5 and y < n_cols - 0.5:
+            out[i] = int(math.floor(x + 0.5)) * n_cols + int(math.floor(y + 0.5))
+    return out
+
+
+@njit(cache=True, parallel=True)
+def gather(image, index, factor, out):  # pragma: no cover
+    """Nearest neighbour: ``out[i] = image[pixel index[i]] * factor`` (float32), 0 where the
+    index is -1; ``image`` 2-D of any strides (memmaps stay lazy), ``index``/``out`` 1-D."""
+    n_cols = image.shape[1]
+    f = np.float32(factor)
+    for i in prange(index.size):
+        k = index[i]
+        if k < 0:
+            out[i] = np.float32(0.0)
+        else:
+            r = k // n_cols
+            out[i] = np.float32(image[r, k - r * n_cols]) * f
 
 
 @njit(cache=True)
 def _axis(x: float, n: int, k: int, idx, w, i) -> None:  # pragma: no cover
-    """Indices (clamped to [0, n-1]) and weights of the k neighbours of coordinate x."""
-    if k == 1:
-        idx[i, 0] = min(max(int(math.floor(x + 0.5)), 0), n - 1)
-        w[i, 0] = 1.0
-        return
+    """Indices (clamped to [0, n-1]) and weights of the k = 2 or 4 neighbours of coordinate x."""
     base = int(math.floor(x))
     f = x - base
     if k == 2:
@@ -114,9 +141,10 @@ def _axis(x: float, n: int, k: int, idx, w, i) -> None:  # pragma: no cover
         w[i, 0] = 1.0 - f
         w[i, 1] = f
         return
+    weights = _keys_weights(f)
     for m in range(4):
         idx[i, m] = min(max(base - 1 + m, 0), n - 1)
-        w[i, m] = _keys(f - (m - 1))
+        w[i, m] = weights[m]
 
 
 @njit(cache=True, parallel=True)

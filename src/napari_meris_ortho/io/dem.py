@@ -34,8 +34,10 @@ import numpy as np
 import pyproj
 
 from ..errors import DemError
+from ..geometry.interpolation import keys_weights
+from ..options import Sampling, choices
 
-METHODS = ("nearest", "bilinear", "bicubic")
+METHODS = tuple(choices(Sampling))
 _CHUNK = 1 << 18
 GETASSE_POSTS = 1800
 GETASSE_TILE_DEG = 15
@@ -61,11 +63,7 @@ def _kernel(frac: np.ndarray, method: str) -> tuple[np.ndarray, np.ndarray]:
         return off, np.ones_like(frac)[:, None]
     if method == "bilinear":
         return np.array([[0, 1]]), np.stack([1.0 - frac, frac], axis=1)
-    a = -0.5
-    t = np.abs(frac[:, None] - np.array([-1.0, 0.0, 1.0, 2.0]))
-    w = np.where(t <= 1.0, (a + 2) * t**3 - (a + 3) * t**2 + 1.0,
-                 np.where(t < 2.0, a * t**3 - 5 * a * t**2 + 8 * a * t - 4 * a, 0.0))
-    return np.array([[-1, 0, 1, 2]]), w
+    return np.array([[-1, 0, 1, 2]]), np.stack(keys_weights(frac), axis=1)
 
 
 class DemSource:

@@ -19,8 +19,8 @@ import numpy as np
 import pyproj
 
 from .._atomic import atomic_path
-from ..engine.grid import OutputGrid
 from ..errors import OutputError
+from ..geometry.grid import OutputGrid
 from ..progress import ProgressCallback
 
 TILE = 256

@@ -16,12 +16,9 @@ import numpy as np
 from numba import njit
 
 from ..errors import OptionsError
+from ..geometry.earth import WGS84_A, WGS84_B, WGS84_E2
 
 #: WGS84 ellipsoid
-WGS84_A = 6378137.0
-WGS84_F = 1.0 / 298.257223563
-WGS84_B = WGS84_A * (1.0 - WGS84_F)
-WGS84_E2 = WGS84_F * (2.0 - WGS84_F)
 GM = 3.986004418e14
 OMEGA_EARTH = 7.2921158553e-5  # rad/s
 #: Envisat orbit (issue 3)

@@ -18,6 +18,7 @@ from numba import njit, prange
 
 from .._atomic import atomic_path
 from ..errors import OptionsError, OutputError
+from ..geometry.earth import MEAN_EARTH_RADIUS
 from ..progress import ProgressCallback
 from . import sensor
 from .orbit import Orbit, solve_pass
@@ -36,7 +37,6 @@ from .terrain import DemGrid, Terrain, auxiliary_dem, block_max, make_terrain
 #: bump when the generator changes its output for a given config (part of the cache key)
 GENERATOR_VERSION = 1
 #: mean Earth radius of eq. 2 (handbook section 2.2)
-EQ2_RADIUS = 6370997.0
 RESOLUTIONS = {
     # frame time (s), column spacing (m), tie-point spacing DF = DJ, product type
     "FR": (0.044, 260.0, 64, "MER_FR__1P"),
@@ -399,9 +399,9 @@ def tie_point_values(geom: SceneGeometry, grid: DemGrid, dem: np.ndarray) -> dic
     sz, sa = solar_angles(times, lon, lat)
     # eq. 2 with the sign convention of real products (Appendix E): lon_corr has the minus sign
     dx = dem_alt * np.tan(np.radians(vz))
-    lat_corr = np.degrees(dx * np.cos(np.radians(va)) / EQ2_RADIUS)
+    lat_corr = np.degrees(dx * np.cos(np.radians(va)) / MEAN_EARTH_RADIUS)
     lon_corr = np.degrees(-dx * np.sin(np.radians(va))
-                          / (EQ2_RADIUS * np.cos(np.radians(lat))))
+                          / (MEAN_EARTH_RADIUS * np.cos(np.radians(lat))))
     tp = {"latitude": lat, "longitude": lon, "dem_alt": dem_alt, "dem_rough": dem_rough,
           "lat_corr": lat_corr, "lon_corr": lon_corr, "sun_zenith": sz, "sun_azimuth": sa,
           "view_zenith": vz, "view_azimuth": va}

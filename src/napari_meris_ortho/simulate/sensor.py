@@ -20,9 +20,8 @@ import math
 import numpy as np
 from numba import njit, prange
 
+from ..geometry.earth import WGS84_A, WGS84_B
 from .orbit import (
-    WGS84_A,
-    WGS84_B,
     ecef_to_geodetic,
     geodetic_to_ecef,
     orbit_state,

@@ -17,16 +17,10 @@ from typing import Any
 
 import numpy as np
 
-from ._layers import (
-    QUICKLOOK_BANDS,
-    GeoFrame,
-    contrast_limits,
-    geo_image_kwargs,
-    place_on_frame,
-    stretch_rgb,
-    viewer_frame,
-)
-from .errors import MerisOrthoError, N1FormatError
+from ..errors import MerisOrthoError, N1FormatError
+from ..geometry.grid import OutputGrid
+from .product_layers import QUICKLOOK_BANDS, contrast_limits, stretch_rgb
+from .world import geo_image_kwargs, place_on_frame, viewer_frame
 
 LayerData = tuple[Any, dict[str, Any], str]
 N1_SUFFIXES = (".n1",)
@@ -56,7 +50,7 @@ def read_layers(path: str | list[str]) -> list[LayerData]:
             new = geotiff_layers(p, frame)
             layers.extend(new)
             if frame is None and new:
-                frame = GeoFrame.from_transform(**_frame_args(new[0][1]))
+                frame = OutputGrid.from_transform(**_frame_args(new[0][1]))
     return layers
 
 
@@ -65,7 +59,7 @@ def _frame_args(kwargs: dict[str, Any]) -> dict[str, Any]:
     return {"crs": geo["crs"], "transform": geo["transform"], "shape": geo["shape"]}
 
 
-def _current_frame() -> GeoFrame | None:
+def _current_frame() -> OutputGrid | None:
     """The world frame of the current napari viewer (None without viewer or geocoded layer)."""
     try:
         import napari
@@ -79,7 +73,7 @@ def _current_frame() -> GeoFrame | None:
 # --------------------------------------------------------------------------------------------
 # GeoTIFF
 # --------------------------------------------------------------------------------------------
-def geotiff_layers(path: str | Path, frame: GeoFrame | None = None) -> list[LayerData]:
+def geotiff_layers(path: str | Path, frame: OutputGrid | None = None) -> list[LayerData]:
     """Image layers of a geocoded GeoTIFF placed in the world frame ``frame`` (or its own)."""
     import rasterio
     from rasterio.errors import RasterioIOError
@@ -90,7 +84,7 @@ def geotiff_layers(path: str | Path, frame: GeoFrame | None = None) -> list[Laye
             if ds.crs is None:
                 raise MerisOrthoError(f"{path}: GeoTIFF has no CRS (not geocoded)")
             data = ds.read()
-            source = GeoFrame.from_transform(ds.crs, tuple(ds.transform), (ds.height, ds.width))
+            source = OutputGrid.from_transform(ds.crs, tuple(ds.transform), (ds.height, ds.width))
             names = [d or f"band {i + 1}" for i, d in enumerate(ds.descriptions)]
             tags = ds.tags()
             nodata = ds.nodata
@@ -124,7 +118,7 @@ def _contrast_limits(band: np.ndarray, nodata: float | None) -> tuple[float, flo
 # --------------------------------------------------------------------------------------------
 def n1_layers(path: str | Path) -> list[LayerData]:
     """Radiance stack, RGB quick-look (bands 7, 5, 2) and flags of a MERIS L1b product."""
-    from .io.n1 import read_product
+    from ..io.n1 import read_product
 
     try:
         product = read_product(path)

@@ -35,11 +35,10 @@ from typing import Any, Protocol
 import numpy as np
 import pyproj
 from affine import Affine
-from numba import njit, prange
 
 from ..errors import OptionsError
+from .earth import MAX_TERRAIN_M, MEAN_EARTH_RADIUS, METRES_PER_DEGREE
 
-MEAN_EARTH_RADIUS = 6_370_997.0
 FR_PIXEL_SIZE_M = 260.0
 RR_PIXEL_SIZE_M = 1040.0
 INTERPOLATION_TOLERANCE_PX = 0.01
@@ -151,6 +150,16 @@ class OutputGrid:
         height = max(1, math.ceil((uly - lry) / dy - 1e-9))
         return cls(crs, ulx, uly, dx, dy, width, height)
 
+    @classmethod
+    def from_transform(cls, crs: Any, transform: Sequence[float], shape: Sequence[int]
+                       ) -> OutputGrid:
+        """Grid of a north-up raster: rasterio/affine transform (a, b, c, d, e, f) and
+        (..., rows, cols). Raises OptionsError for a rotated or south-up transform."""
+        a, b, c, d, e, f = (float(v) for v in tuple(transform)[:6])
+        if b != 0.0 or d != 0.0 or a <= 0.0 or e >= 0.0:
+            raise OptionsError(f"raster is not north-up (transform {a, b, c, d, e, f})")
+        return cls(crs, c, f, a, -e, int(shape[-1]), int(shape[-2]))
+
     def window(self, row0: int, row1: int, col0: int, col1: int) -> OutputGrid:
         """The sub-grid of rows [row0, row1) and columns [col0, col1): same CRS, pixel size and
         interpolation tolerance; its pixel (i, j) is pixel (row0 + i, col0 + j) of this grid.
@@ -196,6 +205,11 @@ class OutputGrid:
             rtol=1e-12, atol=0.0))
 
     __hash__ = None  # type: ignore[assignment]
+
+    def same_grid(self, other: OutputGrid, rtol: float = 1e-9) -> bool:
+        """True when both grids have the same CRS and pixel size (origins and sizes may differ)."""
+        return bool(self.crs == other.crs and np.allclose(
+            (self.dx, self.dy), (other.dx, other.dy), rtol=rtol, atol=0.0))
 
     # ------------------------------------------------------------------ coordinates
     def xy(self, rows: np.ndarray, cols: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -371,40 +385,50 @@ def _bilinear_cells(corners: tuple[np.ndarray, ...], fr: float, fc: float) -> np
             + c11 * fr * fc)
 
 
-@njit(cache=True, parallel=True)
-def _interpolate_primary(rows, cols, nlon, nlat, bad, row_start, lon, lat):  # pragma: no cover
+def _cell_index(x: np.ndarray, nodes: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Primary cell (k, k1) holding each x (edge cells extended) and the offset in it."""
+    k = np.clip(np.searchsorted(nodes, x, side="right") - 1, 0, max(nodes.size - 2, 0))
+    k1 = np.minimum(k + 1, nodes.size - 1)
+    span = (nodes[k1] - nodes[k]).astype(np.float64)
+    f = np.where(k1 == k, 0.0, (x - nodes[k]) / np.where(span == 0.0, 1.0, span))
+    return k, k1, f
+
+
+def _interpolate_primary(rows: np.ndarray, cols: np.ndarray, nlon: np.ndarray, nlat: np.ndarray,
+                         bad: np.ndarray, row_start: int, lon: np.ndarray, lat: np.ndarray
+                         ) -> None:
     """Bilinear interpolation of lon/lat between primary-grid nodes (terrain-correction paper);
     NaN in cells marked bad (computed exactly by the caller)."""
     n_rows, width = lon.shape
-    col_cell = np.empty(width, np.int64)
-    k = 0
-    for j in range(width):
-        while k < cols.size - 2 and j >= cols[k + 1]:
-            k += 1
-        col_cell[j] = k
-    for ii in prange(n_rows):
-        i = ii + row_start
-        r = 0
-        while r < rows.size - 2 and i >= rows[r + 1]:
-            r += 1
-        r1 = min(r + 1, rows.size - 1)
-        fr = 0.0 if r1 == r else (i - rows[r]) / (rows[r1] - rows[r])
-        for j in range(width):
-            c = col_cell[j]
-            c1 = min(c + 1, cols.size - 1)
-            if bad[min(r, bad.shape[0] - 1), min(c, bad.shape[1] - 1)]:
-                lon[ii, j] = np.nan
-                lat[ii, j] = np.nan
-                continue
-            fc = 0.0 if c1 == c else (j - cols[c]) / (cols[c1] - cols[c])
-            a = nlon[r, c]
-            b = a + ((nlon[r, c1] - a + 180.0) % 360.0 - 180.0)
-            d = a + ((nlon[r1, c] - a + 180.0) % 360.0 - 180.0)
-            e = a + ((nlon[r1, c1] - a + 180.0) % 360.0 - 180.0)
-            v = (a * (1 - fr) * (1 - fc) + b * (1 - fr) * fc + d * fr * (1 - fc) + e * fr * fc)
-            lon[ii, j] = ((v + 180.0) % 360.0) - 180.0
-            lat[ii, j] = (nlat[r, c] * (1 - fr) * (1 - fc) + nlat[r, c1] * (1 - fr) * fc
-                          + nlat[r1, c] * fr * (1 - fc) + nlat[r1, c1] * fr * fc)
+    r, r1, fr = _cell_index(np.arange(row_start, row_start + n_rows), rows)
+    c, c1, fc = _cell_index(np.arange(width), cols)
+    r, r1, fr = r[:, None], r1[:, None], fr[:, None]
+    c, c1, fc = c[None, :], c1[None, :], fc[None, :]
+    a = nlon[r, c]
+    b = a + ((nlon[r, c1] - a + 180.0) % 360.0 - 180.0)
+    d = a + ((nlon[r1, c] - a + 180.0) % 360.0 - 180.0)
+    e = a + ((nlon[r1, c1] - a + 180.0) % 360.0 - 180.0)
+    v = a * (1 - fr) * (1 - fc) + b * (1 - fr) * fc + d * fr * (1 - fc) + e * fr * fc
+    lon[:] = _wrap_lon(v)
+    lat[:] = (nlat[r, c] * (1 - fr) * (1 - fc) + nlat[r, c1] * (1 - fr) * fc
+              + nlat[r1, c] * fr * (1 - fc) + nlat[r1, c1] * fr * fc)
+    cell_bad = bad[np.minimum(r, bad.shape[0] - 1), np.minimum(c, bad.shape[1] - 1)]
+    lon[cell_bad] = np.nan
+    lat[cell_bad] = np.nan
+
+
+def terrain_margin_px(grid: OutputGrid, view_zenith_deg: float, max_abs_lat_deg: float,
+                      max_terrain_m: float = MAX_TERRAIN_M) -> int:
+    """Output pixels beyond the zero-height segment boundary that a terrain point may reach
+    (section 3.1): the parallax ``max_terrain_m x tan(view_zenith_deg)`` over the narrower pixel
+    side (geographic grids: at ``max_abs_lat_deg``, at most 89 deg), plus 2."""
+    shift_m = max_terrain_m * math.tan(math.radians(view_zenith_deg))
+    if grid.is_geographic:
+        lat = min(max_abs_lat_deg, 89.0)
+        pixel_m = min(grid.dx * math.cos(math.radians(lat)), grid.dy) * METRES_PER_DEGREE
+    else:
+        pixel_m = min(grid.dx, grid.dy)
+    return int(math.ceil(shift_m / max(pixel_m, 1e-9))) + 2
 
 
 def default_grid(

@@ -30,24 +30,19 @@ from magicgui.widgets import (
     SpinBox,
 )
 
-from ._layers import (
-    GeoFrame,
-    band_layers,
-    diagnostic_layers,
-    geometry_layers,
-    move_to_frame,
-    same_crs,
-    viewer_frame,
-)
-from .errors import MerisOrthoError, OptionsError
-from .progress import ProgressCallback
+from ..errors import MerisOrthoError, OptionsError
+from ..geometry.grid import OutputGrid
+from ..options import Elevation, MergeRule, Sampling, choices
+from ..progress import ProgressCallback
+from .geometry_layers import geometry_layers
+from .product_layers import band_layers, diagnostic_layers
+from .world import move_to_frame, same_crs, viewer_frame
 
 if TYPE_CHECKING:
     import napari
 
-ELEVATIONS = ("dem", "tiepoints", "none")
-ALGORITHMS = ("mapping", "min-radiance", "max-ndvi")
-SAMPLINGS = ("nearest", "bilinear", "bicubic")
+#: "mapping" orthorectifies every product on its own; the merge rules build a synthesis
+ALGORITHMS = ("mapping", *choices(MergeRule))
 CRS_UTM = "UTM zone of the footprint"
 CRS_GEOGRAPHIC = "geographic (EPSG:4326)"
 CRS_EPSG = "EPSG code"
@@ -95,7 +90,7 @@ def parse_bands(text: str) -> tuple[int, ...] | None:
 
 def output_crs(options: OrthoOptions, tie_points: dict[str, np.ndarray]) -> Any:
     """The output CRS: the UTM zone of the footprint centre, EPSG:4326 or the given EPSG code."""
-    from .engine.grid import parse_crs, utm_crs_for
+    from ..geometry.grid import parse_crs, utm_crs_for
 
     if options.crs == CRS_GEOGRAPHIC:
         return parse_crs("EPSG:4326")
@@ -109,7 +104,7 @@ def output_crs(options: OrthoOptions, tie_points: dict[str, np.ndarray]) -> Any:
 
 
 def _pixel_size(options: OrthoOptions, product: Any, crs: Any) -> float:
-    from .engine.grid import pixel_size_for
+    from ..geometry.grid import pixel_size_for
 
     metres = options.pixel_size_m or float(
         getattr(getattr(product, "resolution", None), "column_spacing_m", 260.0))
@@ -127,7 +122,7 @@ class OrthoRun:
 
 def run_orthorectify(options: OrthoOptions, progress: ProgressCallback | None = None) -> OrthoRun:
     """Run the chosen algorithm (no Qt): mapping of every product, or a synthesis."""
-    from .io.n1 import read_product
+    from ..io.n1 import read_product
 
     if not options.products:
         raise OptionsError("choose at least one N1 product")
@@ -142,7 +137,7 @@ def run_orthorectify(options: OrthoOptions, progress: ProgressCallback | None = 
 
 def _run_mapping(products: list[Any], crs: Any, options: OrthoOptions,
                  progress: ProgressCallback | None) -> OrthoRun:
-    from .ortho import orthorectify
+    from ..ortho import orthorectify
 
     items, written = [], []
     n = len(products)
@@ -165,15 +160,15 @@ def _run_mapping(products: list[Any], crs: Any, options: OrthoOptions,
 
 def _grid_for(product: Any, crs: Any, options: OrthoOptions) -> Any:
     """The default grid (smallest rectangle holding the segment boundary, section 3.1)."""
-    from .engine.boundary import segment_boundary
-    from .engine.grid import default_grid
+    from ..engine.boundary import segment_boundary
+    from ..geometry.grid import default_grid
 
     boundary = segment_boundary(product.tie_points["latitude"], product.tie_points["longitude"])
     return default_grid(boundary, crs=crs, pixel_size=_pixel_size(options, product, crs))
 
 
 def _write_mapping(result: Any, product: Any, output: Path, k: int, n: int) -> Path:
-    from .io.geotiff import meris_band_description, write_geotiff
+    from ..io.geotiff import meris_band_description, write_geotiff
 
     path = Path(output)
     if n > 1:
@@ -186,7 +181,7 @@ def _write_mapping(result: Any, product: Any, output: Path, k: int, n: int) -> P
 
 def _run_synthesis(products: list[Any], crs: Any, options: OrthoOptions,
                    progress: ProgressCallback | None) -> OrthoRun:
-    from .synthesis import open_synthesis, synthesize
+    from ..synthesis import open_synthesis, synthesize
 
     out = Path(options.output) if options.output else Path(tempfile.mkdtemp(prefix="synthesis-"))
     result = synthesize(
@@ -208,14 +203,14 @@ def _run_synthesis(products: list[Any], crs: Any, options: OrthoOptions,
     return OrthoRun(items, options, [out])
 
 
-def run_layers(run: OrthoRun, world: GeoFrame | None = None) -> list[LayerData]:
+def run_layers(run: OrthoRun, world: OutputGrid | None = None) -> list[LayerData]:
     """napari layer tuples of a run: bands, diagnostics and geometry, in the world frame.
 
     ``world``: the viewer's frame; results in another CRS are moved into it (reprojected).
     """
     layers: list[LayerData] = []
     for item in run.items:
-        frame = GeoFrame.from_grid(item["grid"])
+        frame = item["grid"]
         item_layers = _item_layers(item, frame, run.options)
         if world is not None and not same_crs(world.crs, frame.crs):
             item_layers = [move_to_frame(layer, frame, world) for layer in item_layers]
@@ -223,7 +218,7 @@ def run_layers(run: OrthoRun, world: GeoFrame | None = None) -> list[LayerData]:
     return layers
 
 
-def _item_layers(item: dict[str, Any], frame: GeoFrame, opts: OrthoOptions) -> list[LayerData]:
+def _item_layers(item: dict[str, Any], frame: OutputGrid, opts: OrthoOptions) -> list[LayerData]:
     """Layers of one product (or of the synthesis) on its own grid."""
     layers: list[LayerData] = []
     meta = {"stats": item["stats"], "algorithm": opts.algorithm, "elevation": opts.elevation}
@@ -241,9 +236,10 @@ def _item_layers(item: dict[str, Any], frame: GeoFrame, opts: OrthoOptions) -> l
 
 def _import_engine() -> None:
     """Import the engine in the main thread (module-level pyproj objects made here)."""
-    from . import ortho, synthesis  # noqa: F401
-    from .engine import boundary, grid  # noqa: F401
-    from .io import dem, geotiff, n1  # noqa: F401
+    from .. import ortho, synthesis  # noqa: F401
+    from ..engine import boundary  # noqa: F401
+    from ..geometry import grid  # noqa: F401
+    from ..io import dem, geotiff, n1  # noqa: F401
 
 
 def in_python_thread(func: Any, *args: Any) -> Any:
@@ -285,9 +281,11 @@ class OrthorectifyWidget(Container):
         self.dem_down = PushButton(text="Down")
         dem_buttons = Container(widgets=[self.dem_remove, self.dem_up, self.dem_down],
                                 layout="horizontal", labels=False)
-        self.elevation = ComboBox(label="elevation", choices=list(ELEVATIONS), value="dem")
+        self.elevation = ComboBox(label="elevation", choices=choices(Elevation),
+                                  value=Elevation.DEM.value)
         self.algorithm = ComboBox(label="selection", choices=list(ALGORITHMS), value="mapping")
-        self.sampling = ComboBox(label="sampling", choices=list(SAMPLINGS), value="nearest")
+        self.sampling = ComboBox(label="sampling", choices=choices(Sampling),
+                                 value=Sampling.NEAREST.value)
         self.crs = ComboBox(label="output CRS", choices=[CRS_UTM, CRS_GEOGRAPHIC, CRS_EPSG],
                             value=CRS_UTM)
         self.epsg = SpinBox(label="EPSG code", value=4326, min=1024, max=999999, visible=False)
@@ -339,7 +337,7 @@ class OrthorectifyWidget(Container):
 
     def add_dem(self, path: str | Path) -> None:
         """Append a DEM (GeoTIFF, SRTM30 tile or GETASSE30 directory) after checking it opens."""
-        from .io.dem import open_dem
+        from ..io.dem import open_dem
 
         p = Path(path)
         if str(path) in ("", ".") or not p.exists():

@@ -15,9 +15,10 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from magicgui.widgets import ComboBox, Container, FileEdit, FloatSpinBox, Label, PushButton, SpinBox
 
-from ._atomic import atomic_path
-from ._layers import GeoFrame, layer_frame, reproject_onto
-from .errors import MerisOrthoError, OptionsError
+from .._atomic import atomic_path
+from ..errors import MerisOrthoError, OptionsError
+from ..geometry.grid import OutputGrid
+from .world import layer_frame, layer_scale, layer_translate, reproject_onto
 
 if TYPE_CHECKING:
     import napari
@@ -213,7 +214,7 @@ class FlickerWidget(Container):
         Layer B is reprojected onto layer A's grid when they differ. Adds a Vectors layer of the
         matched points (displacements exaggerated x10) and returns the DisparityResult.
         """
-        from .analysis.disparity import disparity
+        from ..analysis.disparity import disparity
 
         a, b = self._pair()
         frame_a, frame_b = layer_frame(a), layer_frame(b)
@@ -232,7 +233,7 @@ class FlickerWidget(Container):
         self.disparity_label.value = _disparity_summary(result)
         return result
 
-    def _add_disparity_vectors(self, result: Any, layer_a: Any, frame: GeoFrame | None) -> None:
+    def _add_disparity_vectors(self, result: Any, layer_a: Any, frame: OutputGrid | None) -> None:
         vectors = result.napari_vectors(scale=DISPARITY_EXAGGERATION)
         if len(vectors) == 0:
             return
@@ -241,15 +242,13 @@ class FlickerWidget(Container):
             "vector_style": "arrow", "metadata": {"exaggeration": DISPARITY_EXAGGERATION},
         }
         if frame is not None:
-            kwargs.update(scale=frame.scale, translate=frame.translate)
+            kwargs.update(scale=layer_scale(frame), translate=layer_translate(frame))
             kwargs["edge_width"] = max(frame.dx, frame.dy)
         self.viewer.add_vectors(vectors, **kwargs)
 
     def _disparity_clicked(self, _value: Any = None) -> None:
         try:
             self.measure_disparity()
-        except ImportError:
-            self.disparity_label.value = "disparity analysis not available"
         except MerisOrthoError as exc:
             self.disparity_label.value = str(exc)
 

@@ -10,14 +10,14 @@ import pytest
 from affine import Affine
 
 from napari_meris_ortho.engine.boundary import segment_boundary
-from napari_meris_ortho.engine.grid import (
+from napari_meris_ortho.errors import OptionsError
+from napari_meris_ortho.geometry.grid import (
     MEAN_EARTH_RADIUS,
     OutputGrid,
     default_grid,
     pixel_size_for,
     utm_crs_for,
 )
-from napari_meris_ortho.errors import OptionsError
 
 
 def fr_footprint(lon0: float = 12.0, lat0: float = 47.5, n_lines: int = 50, azimuth=-167.0):

@@ -17,15 +17,11 @@ from typing import Any
 
 import numpy as np
 
-from ._layers import (
-    GeoFrame,
-    band_layers,
-    contrast_limits,
-    geo_image_kwargs,
-    geometry_layers,
-    reproject_onto,
-)
-from .progress import ProgressCallback
+from ..geometry.grid import OutputGrid
+from ..progress import ProgressCallback
+from .geometry_layers import geometry_layers
+from .product_layers import band_layers, contrast_limits
+from .world import geo_image_kwargs, reproject_onto
 
 SAMPLE_BANDS = (2, 5, 7)
 REFERENCE_BAND = 7
@@ -38,7 +34,7 @@ class SampleScene:
 
     name: str
     scene: Any
-    frame: GeoFrame
+    frame: OutputGrid
     uncorrected: dict[int, np.ndarray]
     orthorectified: dict[int, np.ndarray]
     valid: np.ndarray
@@ -56,11 +52,11 @@ def _stage(progress: ProgressCallback | None, start: int, span: int) -> Progress
 def build_sample(name: str, progress: ProgressCallback | None = None,
                  out_dir: str | Path | None = None) -> SampleScene:
     """Generate (or load) scene ``name`` and its uncorrected and orthorectified mappings."""
-    from .engine.boundary import segment_boundary
-    from .engine.grid import default_grid, utm_crs_for
-    from .io.n1 import read_product
-    from .ortho import orthorectify
-    from .simulate.scene import generate_scene
+    from ..engine.boundary import segment_boundary
+    from ..geometry.grid import default_grid, utm_crs_for
+    from ..io.n1 import read_product
+    from ..ortho import orthorectify
+    from ..simulate.scene import generate_scene
 
     scene = generate_scene(name, out_dir=out_dir, progress=_stage(progress, 0, 50))
     product = read_product(scene.product_path)
@@ -75,17 +71,17 @@ def build_sample(name: str, progress: ProgressCallback | None = None,
                          diagnostics=True, progress=_stage(progress, 65, 35))
     if progress is not None:
         progress(100, 100)
-    return SampleScene(name, scene, GeoFrame.from_grid(grid), flat.bands, ortho.bands,
+    return SampleScene(name, scene, grid, flat.bands, ortho.bands,
                        ortho.valid, ortho.diagnostics, tp)
 
 
-def _raster_on_frame(path: Path, band: int, frame: GeoFrame) -> np.ndarray:
+def _raster_on_frame(path: Path, band: int, frame: OutputGrid) -> np.ndarray:
     """One band of a GeoTIFF reprojected onto the frame's grid (bilinear)."""
     import rasterio
 
     with rasterio.open(path) as ds:
         data = ds.read(band)
-        source = GeoFrame.from_transform(ds.crs, tuple(ds.transform), (ds.height, ds.width))
+        source = OutputGrid.from_transform(ds.crs, tuple(ds.transform), (ds.height, ds.width))
     return reproject_onto(data.astype(np.float32), source, frame)
 
 

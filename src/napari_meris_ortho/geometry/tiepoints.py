@@ -13,11 +13,31 @@ Away from nadir the two agree to far below a metre of parallax.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Protocol
 
 import numpy as np
 
-from ..errors import N1FormatError
+from ..errors import GeometryError
+from .earth import MEAN_EARTH_RADIUS
+
+
+class ProductGeometry(Protocol):
+    """What a MERIS L1b product offers the location models (``io.n1.MerisL1bProduct``, the
+    per-pixel geolocated products): tie points in physical units, DF, DJ and the size H x W."""
+
+    @property
+    def path(self) -> object: ...
+    @property
+    def tie_points(self) -> dict[str, np.ndarray]: ...
+    @property
+    def lines_per_tie_point(self) -> int: ...
+    @property
+    def samples_per_tie_point(self) -> int: ...
+    @property
+    def height(self) -> int: ...
+    @property
+    def width(self) -> int: ...
+
 
 _NEEDED = ("latitude", "longitude", "view_zenith", "view_azimuth", "dem_alt")
 
@@ -74,15 +94,15 @@ class TiePointGrid:
         self.latitude, self.longitude, self.view_zenith, self.view_azimuth, self.dem_alt = arrays
         shape = self.latitude.shape
         if len(shape) != 2 or shape[0] < 2 or shape[1] < 2:
-            raise N1FormatError("tie points", f"tie-point grid of shape {shape}: need at least 2x2")
+            raise GeometryError(f"tie-point grid of shape {shape}: need at least 2x2")
         if any(a.shape != shape for a in arrays):
-            raise N1FormatError("tie points", "tie-point arrays of different shapes")
+            raise GeometryError("tie-point arrays of different shapes")
         if self.lines_per_tie_point < 1 or self.samples_per_tie_point < 1:
-            raise N1FormatError("tie points", "tie-point spacing must be positive")
+            raise GeometryError("tie-point spacing must be positive")
         if (shape[1] - 1) * self.samples_per_tie_point < self.width - 1:
-            raise N1FormatError("tie points", "tie-point columns do not cover the product width")
+            raise GeometryError("tie-point columns do not cover the product width")
         if (shape[0] - 1) * self.lines_per_tie_point < self.height - 1:
-            raise N1FormatError("tie points", "tie-point lines do not cover the product height")
+            raise GeometryError("tie-point lines do not cover the product height")
         self.lon_unwrapped = unwrap_longitudes(self.longitude)
         tz = np.tan(np.radians(self.view_zenith))
         va = np.radians(self.view_azimuth)
@@ -95,12 +115,12 @@ class TiePointGrid:
              np.cos(phi) * np.cos(lam), np.cos(phi) * np.sin(lam), np.sin(phi)))
 
     @classmethod
-    def from_product(cls, product: Any) -> TiePointGrid:
+    def from_product(cls, product: ProductGeometry) -> TiePointGrid:
         """Build the grid from an ``io.n1.MerisL1bProduct`` (tie points in physical units)."""
         tp = product.tie_points
         missing = [name for name in _NEEDED if name not in tp]
         if missing:
-            raise N1FormatError(product.path, f"tie points lack {', '.join(missing)}")
+            raise GeometryError(f"{product.path}: tie points lack {', '.join(missing)}")
         return cls(tp["latitude"], tp["longitude"], tp["view_zenith"], tp["view_azimuth"],
                    tp["dem_alt"], int(product.lines_per_tie_point),
                    int(product.samples_per_tie_point), int(product.height), int(product.width))
@@ -143,8 +163,8 @@ def analytic_swath(height: int = 600, width: int = 2241, df: int = 64, dj: int =
     # along-track unit vector (east, north) and its right-hand normal
     east = along * np.sin(t) + across * np.cos(t)
     north = along * np.cos(t) - across * np.sin(t)
-    lat = lat0 + np.degrees(north / 6371e3)
-    lon = lon0 + np.degrees(east / (6371e3 * np.cos(np.radians(lat))))
+    lat = lat0 + np.degrees(north / MEAN_EARTH_RADIUS)
+    lon = lon0 + np.degrees(east / (MEAN_EARTH_RADIUS * np.cos(np.radians(lat))))
     vz = np.degrees(np.arctan(np.abs(across) / orbit_alt_m)) + 0.0 * line
     # towards the track: opposite to the across-track direction of the pixel
     side = np.where(across >= 0.0, 1.0, -1.0)

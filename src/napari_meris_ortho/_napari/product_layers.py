@@ -1,0 +1,88 @@
+"""Product layers of the napari front end: radiance bands (an RGB 7-5-2 quick-look and one grey
+layer per band) and the diagnostics of an orthorectification (iterations, elevation and its
+source), all placed in the world frame (``world``)."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+from ..geometry.grid import OutputGrid
+from .world import geo_image_kwargs
+
+QUICKLOOK_BANDS = (7, 5, 2)
+
+
+def contrast_limits(values: np.ndarray, background: float | None = 0.0) -> tuple[float, float]:
+    """Contrast limits from the 1-99 percentiles of the valid pixels (background excluded)."""
+    v = np.asarray(values, np.float64)
+    good = np.isfinite(v)
+    if background is not None:
+        good &= v != background
+    if not good.any():
+        return (0.0, 1.0)
+    lo, hi = np.percentile(v[good], [1.0, 99.0])
+    return (float(lo), float(hi if hi > lo else lo + 1.0))
+
+
+def stretch_rgb(channels: Sequence[np.ndarray], valid: np.ndarray | None = None) -> np.ndarray:
+    """An RGB (H, W, 3) uint8 quick-look, 1-99 % stretch per channel, background black."""
+    out = []
+    for c in channels:
+        c = np.asarray(c, np.float32)
+        lo, hi = contrast_limits(c)
+        out.append(np.clip((c - lo) / (hi - lo) * 255.0, 0, 255).astype(np.uint8))
+    rgb = np.stack(out, axis=-1)
+    if valid is not None:
+        rgb[~np.asarray(valid, bool)] = 0
+    return rgb
+
+
+def band_layers(bands: dict[int, np.ndarray], frame: OutputGrid, name: str,
+                meta: dict[str, Any] | None = None, valid: np.ndarray | None = None
+                ) -> list[tuple[Any, dict, str]]:
+    """Image layers of radiance bands on ``frame``: an RGB 7-5-2 quick-look when those bands
+    are present, then one grey layer per band (background 0)."""
+    layers: list[tuple[Any, dict, str]] = []
+    base = dict(meta or {})
+    if all(b in bands for b in QUICKLOOK_BANDS):
+        rgb = stretch_rgb([bands[b] for b in QUICKLOOK_BANDS], valid)
+        layers.append((rgb, geo_image_kwargs(frame, name=f"{name} RGB 7-5-2", rgb=True,
+                                             metadata=dict(base, bands=QUICKLOOK_BANDS)),
+                       "image"))
+    for b in sorted(bands):
+        data = np.asarray(bands[b])
+        kwargs = geo_image_kwargs(frame, name=f"{name} band {b}", colormap="gray",
+                                  contrast_limits=contrast_limits(data),
+                                  metadata=dict(base, band=b), visible=False)
+        layers.append((data, kwargs, "image"))
+    return layers
+
+
+def diagnostic_layers(diagnostics: dict[str, np.ndarray], frame: OutputGrid, name: str,
+                      dem_names: Sequence[str] = ()) -> list[tuple[Any, dict, str]]:
+    """Iteration-count, elevation and elevation-source images of an OrthoResult (section 3.2,
+    Appendix B statistics). Elevation source codes: 0..n-1 DEM index, -1 tie points, -2 none;
+    shown as labels 1..n for the DEMs, n+1 tie points, 0 none."""
+    layers: list[tuple[Any, dict, str]] = []
+    if "iterations" in diagnostics:
+        it = np.asarray(diagnostics["iterations"]).astype(np.int16)
+        layers.append((it, geo_image_kwargs(
+            frame, name=f"{name} iterations", colormap="turbo", visible=False,
+            contrast_limits=(-1.0, float(max(int(it.max()), 1)))), "image"))
+    if "elevation" in diagnostics:
+        h = np.asarray(diagnostics["elevation"], np.float32)
+        layers.append((h, geo_image_kwargs(
+            frame, name=f"{name} elevation", colormap="gist_earth", visible=False,
+            contrast_limits=contrast_limits(h, None)), "image"))
+    if "elevation_source" in diagnostics:
+        src = np.asarray(diagnostics["elevation_source"]).astype(np.int16)
+        n = len(dem_names)
+        labels = np.where(src >= 0, src + 1, np.where(src == -1, n + 1, 0)).astype(np.uint8)
+        legend = {i + 1: str(d) for i, d in enumerate(dem_names)} | {n + 1: "tie points"}
+        layers.append((labels, geo_image_kwargs(
+            frame, name=f"{name} elevation source", visible=False, opacity=0.5,
+            metadata={"legend": legend}), "labels"))
+    return layers

@@ -1,0 +1,194 @@
+"""The world frame of the napari front end: where every geocoded layer sits.
+
+World frame (one for every geocoded layer)
+------------------------------------------
+napari's world axes are (row, column) = (y, x) with y growing downwards. Every geocoded layer
+(orthorectified outputs, DEMs, reference images) is placed in the coordinates of the output CRS
+with **north up**::
+
+    world y = -northing          world x = easting          (geographic CRS: -lat, lon)
+
+A raster with the rasterio transform ``Affine(dx, 0, x0, 0, -dy, y0)`` (``OutputGrid`` convention,
+(x0, y0) = upper-left corner) is shown with ``scale = (dy, dx)`` and
+``translate = (-y0 + dy/2, x0 + dx/2)``: napari puts data pixel (i, j) centre at
+``translate + scale * (i, j)``, which is the world position of the pixel centre
+(x0 + (j + 0.5) dx, y0 - (i + 0.5) dy). Layers of different pixel sizes in the same CRS therefore
+overlay exactly. A raster in another CRS is reprojected onto the frame's grid on load.
+
+The georeference of a layer lives in ``layer.metadata["geo"]``: ``{"crs": WKT, "transform":
+(a, b, c, d, e, f), "shape": (rows, cols)}``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from typing import Any
+
+import numpy as np
+
+from ..errors import OptionsError
+from ..geometry.grid import OutputGrid
+
+GEO_KEY = "geo"
+
+
+def crs_wkt(crs: Any) -> str:
+    """WKT of any CRS input (EPSG int, 'EPSG:32632', pyproj/rasterio CRS, WKT)."""
+    from pyproj import CRS
+
+    if hasattr(crs, "to_wkt"):
+        return str(crs.to_wkt())
+    try:
+        return CRS.from_user_input(crs).to_wkt()
+    except Exception as exc:  # pyproj.exceptions.CRSError
+        raise OptionsError(f"unknown CRS {crs!r}: {exc}") from None
+
+
+def same_crs(a: Any, b: Any) -> bool:
+    """True when two CRS inputs describe the same coordinate system."""
+    from pyproj import CRS
+
+    return bool(CRS.from_user_input(crs_wkt(a)) == CRS.from_user_input(crs_wkt(b)))
+
+
+def to_world(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """CRS (x, y) -> napari world (row, col) = (-y, x), shape (..., 2)."""
+    return np.stack([-np.asarray(y, dtype=np.float64), np.asarray(x, dtype=np.float64)], axis=-1)
+
+
+def from_world(world: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """napari world (row, col) -> CRS (x, y)."""
+    world = np.asarray(world, dtype=np.float64)
+    return world[..., 1], -world[..., 0]
+
+
+def lonlat_to_crs(lon: np.ndarray, lat: np.ndarray, crs: Any) -> tuple[np.ndarray, np.ndarray]:
+    """Project WGS84 lon/lat (degrees) into ``crs`` (always x = easting/lon, y = northing/lat)."""
+    from pyproj import CRS, Transformer
+
+    target = CRS.from_user_input(crs_wkt(crs))
+    transformer = Transformer.from_crs("EPSG:4326", target, always_xy=True)
+    x, y = transformer.transform(np.asarray(lon, np.float64), np.asarray(lat, np.float64))
+    return np.asarray(x, np.float64), np.asarray(y, np.float64)
+
+
+# --------------------------------------------------------------------------------------------
+# Frames of the layers in a viewer
+# --------------------------------------------------------------------------------------------
+def layer_frame(layer: Any) -> OutputGrid | None:
+    """The grid of a geocoded layer (from ``metadata["geo"]``), else None."""
+    geo = getattr(layer, "metadata", {}).get(GEO_KEY)
+    if not geo:
+        return None
+    return OutputGrid.from_transform(geo["crs"], geo["transform"], geo["shape"])
+
+
+def viewer_frame(layers: Iterable[Any]) -> OutputGrid | None:
+    """The world frame of a viewer: the grid of its first (bottom-most) geocoded layer."""
+    for layer in layers:
+        frame = layer_frame(layer)
+        if frame is not None:
+            return frame
+    return None
+
+
+def layer_scale(frame: OutputGrid) -> tuple[float, float]:
+    """napari ``scale`` of a layer on this grid."""
+    return (frame.dy, frame.dx)
+
+
+def layer_translate(frame: OutputGrid) -> tuple[float, float]:
+    """napari ``translate``: world position of the centre of pixel (0, 0)."""
+    return (-frame.y0 + 0.5 * frame.dy, frame.x0 + 0.5 * frame.dx)
+
+
+def geo_metadata(frame: OutputGrid) -> dict[str, Any]:
+    """The ``layer.metadata["geo"]`` entry of a layer on this grid: CRS WKT, the rasterio
+    transform as a 6-tuple and (rows, cols)."""
+    return {"crs": frame.crs.to_wkt(), "transform": tuple(frame.transform)[:6],
+            "shape": (frame.height, frame.width)}
+
+
+def geo_image_kwargs(frame: OutputGrid, **extra: Any) -> dict[str, Any]:
+    """napari layer kwargs placing an image of ``frame`` in the world frame (see module doc)."""
+    metadata = dict(extra.pop("metadata", {}) or {})
+    metadata[GEO_KEY] = geo_metadata(frame)
+    return {"scale": layer_scale(frame), "translate": layer_translate(frame),
+            "metadata": metadata, **extra}
+
+
+def reproject_onto(data: np.ndarray, source: OutputGrid, target: OutputGrid, *,
+                   nearest: bool = False, nodata: float = 0.0) -> np.ndarray:
+    """Reproject a (rows, cols) or (bands, rows, cols) raster onto ``target``'s grid (rasterio)."""
+    from rasterio.crs import CRS as RioCRS
+    from rasterio.warp import Resampling, reproject
+
+    arr = np.asarray(data)
+    squeeze = arr.ndim == 2
+    src = arr[None] if squeeze else arr
+    dtype = src.dtype if src.dtype.kind in "fiu" and src.dtype.itemsize <= 8 else np.float32
+    out = np.full((src.shape[0], target.height, target.width), nodata, dtype=dtype)
+    method = Resampling.nearest if nearest or src.dtype.kind in "iu" else Resampling.bilinear
+    for k in range(src.shape[0]):
+        reproject(
+            np.ascontiguousarray(src[k], dtype=dtype), out[k],
+            src_transform=source.transform, src_crs=RioCRS.from_wkt(crs_wkt(source.crs)),
+            dst_transform=target.transform, dst_crs=RioCRS.from_wkt(crs_wkt(target.crs)),
+            resampling=method, src_nodata=nodata, dst_nodata=nodata,
+        )
+    return out[0] if squeeze else out
+
+
+def place_on_frame(data: np.ndarray, source: OutputGrid, frame: OutputGrid | None,
+                   *, nearest: bool = False) -> tuple[np.ndarray, OutputGrid]:
+    """Data and grid of a raster placed in the world frame.
+
+    Same CRS and pixel size: kept as is (scale/translate place it). Another CRS or pixel size:
+    reprojected onto the frame's grid.
+    """
+    if frame is None or source.same_grid(frame):
+        return data, source
+    return reproject_onto(data, source, frame, nearest=nearest), frame
+
+
+# --------------------------------------------------------------------------------------------
+# Moving layers into another world frame (another CRS)
+# --------------------------------------------------------------------------------------------
+def transform_world(points: np.ndarray, source_crs: Any, target_crs: Any) -> np.ndarray:
+    """World (row, col) points of ``source_crs`` -> world points of ``target_crs``."""
+    from pyproj import Transformer
+
+    x, y = from_world(points)
+    tr = Transformer.from_crs(crs_wkt(source_crs), crs_wkt(target_crs), always_xy=True)
+    tx, ty = tr.transform(x, y)
+    return to_world(np.asarray(tx), np.asarray(ty))
+
+
+def move_to_frame(layer: tuple[Any, dict, str], source: OutputGrid, target: OutputGrid
+                  ) -> tuple[Any, dict, str]:
+    """A layer tuple built on ``source`` placed in the world frame ``target``.
+
+    Rasters (images, labels) are reprojected onto the target grid (nearest for labels and
+    integer images, bilinear otherwise); shapes and vectors have their vertices projected.
+    """
+    data, kwargs, kind = layer
+    kwargs = dict(kwargs)
+    if kind in ("image", "labels"):
+        rgb = bool(kwargs.get("rgb"))
+        arr = np.moveaxis(np.asarray(data), -1, 0) if rgb else np.asarray(data)
+        nearest = kind == "labels" or arr.dtype.kind in "iu" and not rgb
+        out = reproject_onto(arr, source, target, nearest=nearest)
+        if rgb:
+            out = np.moveaxis(out, 0, -1).astype(np.asarray(data).dtype)
+        meta = dict(kwargs.pop("metadata", {}) or {})
+        meta["reprojected_from"] = geo_metadata(source)
+        kwargs.update(geo_image_kwargs(target, metadata=meta))
+        return out, kwargs, kind
+    if kind == "shapes":
+        return [transform_world(p, source.crs, target.crs) for p in data], kwargs, kind
+    if kind == "vectors":
+        vec = np.asarray(data, np.float64)
+        start = transform_world(vec[:, 0], source.crs, target.crs)
+        end = transform_world(vec[:, 0] + vec[:, 1], source.crs, target.crs)
+        return np.stack([start, end - start], axis=1), kwargs, kind
+    return layer

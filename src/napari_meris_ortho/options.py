@@ -1,0 +1,157 @@
+"""The modes of orthorectification and synthesis, one definition each (handbook sections 3.1-3.4).
+
+Every mode is a ``StrEnum``: the API keeps accepting the plain strings ("dem", "bicubic", ...),
+the CLI offers ``choices(Enum)`` and the napari widget lists the same values; the numba kernels get
+the integer ``code`` at the boundary. ``OrthoOptions`` gathers the checked options of one
+``orthorectify`` run. This module is a bottom room: it imports nothing of the package but
+``errors``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+from enum import StrEnum
+from typing import TypeVar
+
+from .errors import OptionsError
+
+
+class Elevation(StrEnum):
+    """Heights of the output points (section 3.1 "Digital elevation data", MERSYN ``-ort``)."""
+
+    NONE = "none"  # no orthorectification (MERSYN -ort NO)
+    TIEPOINTS = "tiepoints"  # tie-point dem_alt at the antecedent
+    DEM = "dem"  # the DEMs at the output point, tried in order, then the tie points
+
+
+class Parallax(StrEnum):
+    """Radii of the parallax (geodetic) correction (eq. 6a, 2c', 6b')."""
+
+    HANDBOOK = "handbook"  # sphere R = 6 370 997 m (MERSYN, BEAM)
+    ELLIPSOID = "ellipsoid"  # WGS84 meridian M and prime-vertical N radii
+    ELLIPSOID_H = "ellipsoid_h"  # M + h and N + h (measurements only, not offered to users)
+
+    @property
+    def code(self) -> int:
+        """Kernel code (``engine.location.parallax_factors``)."""
+        return _PARALLAX_CODES[self]
+
+
+class Geolocation(StrEnum):
+    """Interpolation of the tie-point positions (eq. 4a-4b or unit vectors)."""
+
+    BILINEAR = "bilinear"  # latitude and longitude bilinearly (MERSYN, BEAM)
+    ECEF = "ecef"  # the tie points' unit vectors bilinearly
+
+    @property
+    def code(self) -> int:
+        return 0 if self is Geolocation.BILINEAR else 1
+
+    @classmethod
+    def default_for(cls, parallax: Parallax) -> Geolocation:
+        """Bilinear with the handbook parallax, ecef with the ellipsoid ones."""
+        return cls.BILINEAR if parallax is Parallax.HANDBOOK else cls.ECEF
+
+
+class SearchMethod(StrEnum):
+    """How the prediction/correction finds the antecedents (section 3.2, ``engine.predcorr``)."""
+
+    PRIMARY = "primary"  # primary grid of exact inverses + Newton steps (fast)
+    HANDBOOK = "handbook"  # MERSYN's facet search inside the loop (reference)
+
+
+class Sampling(StrEnum):
+    """Resampling of the product at the antecedents (section 3.1 "Retrieve the antecedent")."""
+
+    NEAREST = "nearest"  # MERSYN
+    BILINEAR = "bilinear"  # 2 x 2 pixels
+    BICUBIC = "bicubic"  # 4 x 4 pixels, Keys kernel a = -0.5
+
+    @property
+    def taps(self) -> int:
+        """Pixels per axis the kernel reads (kernel code of ``engine.resample``)."""
+        return {"nearest": 1, "bilinear": 2, "bicubic": 4}[self.value]
+
+    @property
+    def margin(self) -> tuple[int, int]:
+        """Product lines the kernel reads before floor(l) and after it."""
+        return (1, 2) if self is Sampling.BICUBIC else (0, 1)
+
+
+class MergeRule(StrEnum):
+    """Selection algorithm of a synthesis (section 3.1, MERSYN use cases 1 and 2)."""
+
+    MIN_RADIANCE = "min-radiance"
+    MAX_NDVI = "max-ndvi"
+
+
+_PARALLAX_CODES = {Parallax.HANDBOOK: 0, Parallax.ELLIPSOID: 1, Parallax.ELLIPSOID_H: 2}
+#: what users are offered (CLI ``--parallax``, widget)
+PARALLAX_CHOICES = (Parallax.HANDBOOK, Parallax.ELLIPSOID)
+
+E = TypeVar("E", bound=StrEnum)
+
+_WHAT = {Elevation: "elevation source", Parallax: "parallax model",
+         Geolocation: "geolocation interpolation", SearchMethod: "search method",
+         Sampling: "sampling method", MergeRule: "algorithm"}
+
+
+def choices(enum: Iterable[E]) -> list[str]:
+    """The string values of an enum (CLI ``choices=``, widget combo boxes)."""
+    return [str(m.value) for m in enum]
+
+
+def parse(enum: type[E], value: object) -> E:
+    """``enum(value)`` or an OptionsError naming the mode and its choices."""
+    try:
+        return enum(value)
+    except ValueError:
+        names = choices(enum)
+        raise OptionsError(f"unknown {_WHAT.get(enum, enum.__name__)} {value!r}: choose "
+                           f"{', '.join(names[:-1])} or {names[-1]}") from None
+
+
+@dataclass(frozen=True)
+class OrthoOptions:
+    """The checked options of one ``orthorectify`` run (MERSYN checks parameters first, 3.1)."""
+
+    elevation: Elevation = Elevation.DEM
+    sampling: Sampling = Sampling.NEAREST
+    parallax: Parallax = Parallax.HANDBOOK
+    geolocation: Geolocation = Geolocation.BILINEAR
+    method: SearchMethod = SearchMethod.PRIMARY
+    tolerance: float = 0.01
+    bands: tuple[int, ...] = tuple(range(1, 16))
+    diagnostics: bool = False
+
+    @classmethod
+    def parse(cls, *, elevation: object = "dem", sampling: object = "nearest",
+              parallax: object = "handbook", geolocation: object | None = None,
+              method: object = "primary", tolerance: object = 0.01,
+              bands: Sequence[int] | None = None, diagnostics: bool = False,
+              n_dems: int = 0) -> OrthoOptions:
+        """Options from user values; OptionsError on the first inconsistent one."""
+        elev = parse(Elevation, elevation)
+        if elev is not Elevation.DEM and n_dems > 0:
+            raise OptionsError(
+                f"DEMs given with elevation {elev.value!r}: DEMs are only used with elevation "
+                "'dem'")
+        if not (isinstance(tolerance, (int, float)) and math.isfinite(tolerance)
+                and tolerance > 0):
+            raise OptionsError(f"tolerance must be > 0 product pixels, got {tolerance!r}")
+        par = parse(Parallax, parallax)
+        geo = (Geolocation.default_for(par) if geolocation is None
+               else parse(Geolocation, geolocation))
+        return cls(elev, parse(Sampling, sampling), par, geo, parse(SearchMethod, method),
+                   float(tolerance), check_bands(bands), bool(diagnostics))
+
+
+def check_bands(bands: Sequence[int] | None) -> tuple[int, ...]:
+    """Sorted distinct MERIS bands 1..15 (None: all 15); OptionsError otherwise."""
+    chosen = list(range(1, 16)) if bands is None else [int(b) for b in bands]
+    bad = [b for b in chosen if not 1 <= b <= 15]
+    if bad or not chosen:
+        raise OptionsError(f"bands must be 1..15, got {list(bands or [])}")
+    return tuple(sorted(set(chosen)))
