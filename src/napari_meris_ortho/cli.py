@@ -40,13 +40,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
     sub.required = True
     for name in COMMANDS:
-        try:
-            module = import_module(f"napari_meris_ortho._commands.{name}")
-        except ModuleNotFoundError as exc:  # a subcommand not built yet
-            if exc.name != f"napari_meris_ortho._commands.{name}":
-                raise
-            continue
-        module.register(sub)
+        import_module(f"napari_meris_ortho._commands.{name}").register(sub)
     return parser
 
 

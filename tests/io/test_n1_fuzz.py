@@ -3,7 +3,6 @@ headers, the DSDs and the records) never raise anything but N1FormatError, and n
 
 from __future__ import annotations
 
-import time
 import warnings
 
 import numpy as np
@@ -74,7 +73,6 @@ def test_mutations_only_raise_n1formaterror(tmp_path):
     rng = np.random.default_rng(20030921)
     path = tmp_path / "mutant.N1"
     outcomes = {"ok": 0, "error": 0}
-    start = time.perf_counter()
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # no RuntimeWarning (overflow, invalid value) either
         for i in range(MUTATIONS):
@@ -89,6 +87,4 @@ def test_mutations_only_raise_n1formaterror(tmp_path):
                 raise AssertionError(f"mutation {i} raised {exc!r}") from exc
             else:
                 outcomes["ok"] += 1
-    elapsed = time.perf_counter() - start
     assert outcomes["error"] > MUTATIONS // 4 and outcomes["ok"] > MUTATIONS // 10, outcomes
-    assert elapsed < 20, f"{MUTATIONS} mutations took {elapsed:.1f} s"

@@ -3,15 +3,14 @@ pyepr (EPR-API, as BEAM/SNAP read them) and GDAL's ESAT driver (through rasterio
 
 from __future__ import annotations
 
+import epr
 import numpy as np
 import pytest
+import rasterio
 from n1_samples import sample_inputs
 
 from napari_meris_ortho.io.n1 import read_product, write_product
 from napari_meris_ortho.io.n1_format import TIE_POINT_FIELDS
-
-epr = pytest.importorskip("epr")
-rasterio = pytest.importorskip("rasterio")
 
 CASES = {
     # standard widths; line counts that are not a multiple of the tie-point spacing
