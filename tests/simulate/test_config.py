@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+import napari_meris_ortho
 from napari_meris_ortho.errors import OptionsError
 from napari_meris_ortho.io.n1 import read_product
 from napari_meris_ortho.simulate import (
@@ -17,17 +18,24 @@ from napari_meris_ortho.simulate import (
     resolve_config,
     scene_names,
 )
+from napari_meris_ortho.simulate.scene import scene_dirs
 
 OFF = {"getasse30": False, "getasse30_beam": False, "srtm30": False, "geotiff_utm": False,
        "reference": False}
 TINY = {"base": "fr-small", "lines": 40, "columns": 65, "exports": OFF}
 
 
-def test_named_scenes_and_sample_data_size():
-    assert {"fr-alps", "fr-small", "rr-segment", "rr-antimeridian",
-            "fr-south-ascending"} <= set(scene_names())
-    root = Path(__file__).resolve().parents[2] / "sample_data"
-    assert sum(p.stat().st_size for p in root.rglob("*") if p.is_file()) < 5_000_000
+def test_named_scenes_are_package_data(tmp_path, monkeypatch):
+    names = {"fr-alps", "fr-small", "rr-segment", "rr-antimeridian", "fr-south-ascending"}
+    assert names <= set(scene_names())
+    package = scene_dirs()[-1]
+    assert package == Path(napari_meris_ortho.__file__).parent / "scenes"
+    assert {p.stem for p in package.glob("*.json")} == names
+    # $MERIS_ORTHO_SCENES comes first and adds names
+    (tmp_path / "mine.json").write_text(json.dumps({"base": "fr-small", "lines": 64}))
+    monkeypatch.setenv("MERIS_ORTHO_SCENES", str(tmp_path))
+    assert scene_dirs()[0] == tmp_path and "mine" in scene_names()
+    assert resolve_config("mine")["lines"] == 64
 
 
 def test_overrides_merge_recursively():

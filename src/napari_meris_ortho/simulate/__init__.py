@@ -7,8 +7,8 @@ product (via ``io.n1.write_product``), DEM exports and a reference image, and re
 
 Configs
 -------
-A scene is a small JSON dict; named scenes live in ``sample_data/scenes/<name>.json`` (also looked
-up in ``$MERIS_ORTHO_SCENES`` and the package data ``napari_meris_ortho/scenes``). Resolution:
+A scene is a small JSON dict; named scenes are package data,
+``napari_meris_ortho/scenes/<name>.json`` (``$MERIS_ORTHO_SCENES`` is looked up first). Resolution:
 ``DEFAULTS`` <- the ``base`` scene (recursively) <- the given keys, merged recursively for dicts
 and replaced otherwise. So overrides are written as::
 

@@ -66,16 +66,12 @@ DEFAULTS: dict[str, Any] = {
 
 
 def scene_dirs() -> list[Path]:
-    """Where named scene configs are looked up: $MERIS_ORTHO_SCENES, the repository's
-    ``sample_data/scenes`` and the package data ``napari_meris_ortho/scenes``."""
+    """Where named scene configs are looked up: $MERIS_ORTHO_SCENES, then the package data
+    ``napari_meris_ortho/scenes`` (installed with the package, found by importlib.resources)."""
     dirs = []
     if os.environ.get("MERIS_ORTHO_SCENES"):
         dirs.append(Path(os.environ["MERIS_ORTHO_SCENES"]))
-    dirs.append(Path(__file__).resolve().parents[3] / "sample_data" / "scenes")
-    try:
-        dirs.append(Path(str(resources.files("napari_meris_ortho") / "scenes")))
-    except (ModuleNotFoundError, TypeError):  # pragma: no cover
-        pass
+    dirs.append(Path(str(resources.files("napari_meris_ortho") / "scenes")))
     return dirs
 
 
@@ -529,7 +525,7 @@ def generate_scene(name_or_config: str | dict, out_dir: str | os.PathLike[str] |
                    progress: ProgressCallback | None = None) -> SimulatedScene:
     """Generate (or load from the cache) a simulated MERIS L1b scene with its truth.
 
-    ``name_or_config``: a scene name (``sample_data/scenes/<name>.json``) or a config dict,
+    ``name_or_config``: a scene name (``napari_meris_ortho/scenes/<name>.json``) or a config dict,
     possibly ``{"base": "<name>", ...overrides}``. Outputs go to ``out_dir`` (default: the
     cache, see :func:`default_out_dir`); an existing complete output of the same config is
     reused, a missing or incomplete one regenerated.
