@@ -202,9 +202,16 @@ def test_report_layout_reproduces_handbook_log():
     assert ours[:-1] == _tokens(text)
 
 
-def test_handbook_numbers_are_population_statistics():
-    """The logs' STANDARD DEVIATION = sqrt(RMS^2 - MEAN^2); metres = pixels x 260 m; the SRTM
-    synthesis' global displacement (-0.724138, 2.591379) px has a modulus of 699.569 m."""
+def test_moments_are_population_statistics_like_the_handbook():
+    """The logs' STANDARD DEVIATION = sqrt(RMS^2 - MEAN^2) (population statistics), and so is
+    ours; metres = pixels x 260 m; the SRTM synthesis' global displacement
+    (-0.724138, 2.591379) px has a modulus of 699.569 m."""
+    from napari_meris_ortho.analysis.disparity import _moments
+
+    ours = _moments(np.random.default_rng(7).normal(0.4, 1.3, 50))
+    assert math.sqrt(ours["rms"] ** 2 - ours["mean"] ** 2) == pytest.approx(ours["std"],
+                                                                              rel=1e-12)
+    assert ours["variance"] == pytest.approx(ours["std"] ** 2, rel=1e-12)
     stats = _handbook_stats((FIXTURES / "synthesis_no-ortho.sta.3").read_text())
     for axis in ("x", "y"):
         for sel in ("image", "candidates"):
