@@ -1,9 +1,11 @@
 #!/usr/bin/env bash
-# Whole test suite: install (with Xvfb for the napari tests), lint, then pytest under Xvfb.
+# Whole test suite: install (with Xvfb for the napari tests), lint (ruff, mypy), then pytest
+# under Xvfb.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh --gui
 export PATH="$PWD/.venv/bin:$PATH"
 unset QT_QPA_PLATFORM
 ruff check src tests benchmarks
+mypy  # configuration and files in pyproject.toml [tool.mypy]
 python -m pytest "$@"

@@ -106,11 +106,13 @@ def choices(enum: Iterable[E]) -> list[str]:
 def parse(enum: type[E], value: object) -> E:
     """``enum(value)`` or an OptionsError naming the mode and its choices."""
     try:
-        return enum(value)
+        if isinstance(value, str):
+            return enum(value)
     except ValueError:
-        names = choices(enum)
-        raise OptionsError(f"unknown {_WHAT.get(enum, enum.__name__)} {value!r}: choose "
-                           f"{', '.join(names[:-1])} or {names[-1]}") from None
+        pass
+    names = choices(enum)
+    raise OptionsError(f"unknown {_WHAT.get(enum, enum.__name__)} {value!r}: choose "
+                       f"{', '.join(names[:-1])} or {names[-1]}")
 
 
 @dataclass(frozen=True)

@@ -15,17 +15,22 @@ import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Protocol
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
+import pyproj
+from affine import Affine
 
 from .engine import predcorr
-from .engine.boundary import row_spans, segment_boundary
+from .engine.boundary import RowSpans, row_spans, segment_boundary
 from .errors import DemError, OptionsError
 from .geometry.grid import OutputGrid, default_grid, parse_crs, terrain_margin_px
 from .geometry.tiepoints import ProductGeometry, TiePointGrid
 from .options import Elevation, OrthoOptions, Sampling, SearchMethod
 from .progress import ProgressCallback
+
+if TYPE_CHECKING:
+    from .io.dem import DemSource, DemStack
 
 log = logging.getLogger(__name__)
 
@@ -65,11 +70,11 @@ class OrthoResult:
     diagnostics: dict[str, np.ndarray] = field(default_factory=dict)
 
     @property
-    def crs(self) -> Any:
+    def crs(self) -> pyproj.CRS:
         return self.grid.crs
 
     @property
-    def transform(self) -> Any:
+    def transform(self) -> Affine:
         return self.grid.transform
 
     def band_metadata(self) -> list[dict[str, Any]]:
@@ -88,7 +93,7 @@ class OrthoResult:
         return out
 
 
-def _open_product(product: Any) -> MerisProduct:
+def _open_product(product: str | os.PathLike[str] | MerisProduct) -> MerisProduct:
     from .io.n1 import read_product
 
     if isinstance(product, (str, os.PathLike)):
@@ -98,7 +103,7 @@ def _open_product(product: Any) -> MerisProduct:
     return product
 
 
-def _open_dems(dems: Sequence[Any]) -> Any:
+def _open_dems(dems: Sequence[DemSource | str | os.PathLike[str]]) -> DemStack | None:
     if not dems:
         return None
     from .io.dem import DemStack
@@ -117,7 +122,7 @@ def _margin_px(tp: TiePointGrid, grid: OutputGrid) -> int:
                              float(np.nanmax(np.abs(tp.latitude))))
 
 
-def _heights(stack: Any, lon: np.ndarray, lat: np.ndarray, mask: np.ndarray
+def _heights(stack: DemStack, lon: np.ndarray, lat: np.ndarray, mask: np.ndarray
              ) -> tuple[np.ndarray, np.ndarray]:
     """DEM heights at the output points in ``mask`` (NaN elsewhere or without data: tie points)."""
     h = np.full(lon.shape, np.nan, np.float32)
@@ -129,7 +134,9 @@ def _heights(stack: Any, lon: np.ndarray, lat: np.ndarray, mask: np.ndarray
     return h, src
 
 
-def orthorectify(product: Any, grid: OutputGrid | None = None, dems: Sequence[Any] = (),
+def orthorectify(product: str | os.PathLike[str] | MerisProduct,
+                 grid: OutputGrid | None = None,
+                 dems: Sequence[DemSource | str | os.PathLike[str]] = (),
                  elevation: str = "dem", sampling: str = "nearest",
                  bands: Sequence[int] | None = None, tolerance: float = 0.01,
                  parallax: str = "handbook", diagnostics: bool = False,
@@ -183,8 +190,8 @@ class _Job:
     prod: MerisProduct
     tp: TiePointGrid
     grid: OutputGrid
-    spans: Any
-    stack: Any
+    spans: RowSpans
+    stack: DemStack | None
     hmode: int
     options: OrthoOptions
     stats: dict[str, Any]
@@ -200,8 +207,8 @@ def _height_mode(elevation: Elevation, has_dems: bool) -> int:
     return predcorr.HEIGHT_TIEPOINTS
 
 
-def _prepare(prod: MerisProduct, grid: OutputGrid | None, stack: Any, opts: OrthoOptions,
-             crs: Any, pixel_size: float | None, t_start: float) -> _Job:
+def _prepare(prod: MerisProduct, grid: OutputGrid | None, stack: DemStack | None,
+             opts: OrthoOptions, crs: Any, pixel_size: float | None, t_start: float) -> _Job:
     """Segment boundary, default grid and the spans to search (section 3.1)."""
     tp = TiePointGrid.from_product(prod)
     boundary = segment_boundary(tp.latitude, tp.longitude)
@@ -256,6 +263,7 @@ def _run(job: _Job, progress: ProgressCallback | None) -> OrthoResult:
             t0 = time.perf_counter()
             mask = np.zeros(lon.shape, bool)
             _mark(mask, ptr, start, stop)
+            assert stack is not None
             h, src = _heights(stack, lon, lat, mask)
             t_dem += time.perf_counter() - t0
         t0 = time.perf_counter()
@@ -423,7 +431,7 @@ def _per_band(source: Any, name: str, band_list: list[int]) -> dict[int, float]:
         return {}
 
 
-def _source_counts(sources: np.ndarray, stack: Any, hmode: int) -> dict[str, int]:
+def _source_counts(sources: np.ndarray, stack: DemStack | None, hmode: int) -> dict[str, int]:
     if hmode == predcorr.HEIGHT_NONE:
         return {}
     if stack is None:

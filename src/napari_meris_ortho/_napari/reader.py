@@ -13,7 +13,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -21,6 +21,9 @@ from ..errors import MerisOrthoError, N1FormatError
 from ..geometry.grid import OutputGrid
 from .product_layers import QUICKLOOK_BANDS, contrast_limits, stretch_rgb
 from .world import geo_image_kwargs, place_on_frame, viewer_frame
+
+if TYPE_CHECKING:
+    from ..io.n1 import MerisL1bProduct
 
 LayerData = tuple[Any, dict[str, Any], str]
 N1_SUFFIXES = (".n1",)
@@ -140,7 +143,7 @@ def n1_layers(path: str | Path) -> list[LayerData]:
     ]
 
 
-def n1_metadata(product: Any) -> dict[str, Any]:
+def n1_metadata(product: MerisL1bProduct) -> dict[str, Any]:
     """Tie points and headers of a product, for the layer metadata."""
     return {
         "path": str(product.path), "product_type": product.product_type,
@@ -153,7 +156,7 @@ def n1_metadata(product: Any) -> dict[str, Any]:
     }
 
 
-def radiance_stack(product: Any) -> Any:
+def radiance_stack(product: MerisL1bProduct) -> Any:
     """The 15 radiance bands as a lazy (15, H, W) float32 dask array."""
     import dask
     import dask.array as da
@@ -164,6 +167,7 @@ def radiance_stack(product: Any) -> Any:
     return da.stack(bands)
 
 
-def quicklook_rgb(product: Any, bands: tuple[int, int, int] = QUICKLOOK_BANDS) -> np.ndarray:
+def quicklook_rgb(product: MerisL1bProduct,
+                  bands: tuple[int, int, int] = QUICKLOOK_BANDS) -> np.ndarray:
     """An RGB quick-look (H, W, 3) uint8 from three radiance bands, 1-99 % stretch each."""
     return stretch_rgb([product.radiance(b) for b in bands])

@@ -13,6 +13,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from magicgui.types import FileDialogMode
 from magicgui.widgets import ComboBox, Container, FileEdit, FloatSpinBox, Label, PushButton, SpinBox
 
 from .._atomic import atomic_path
@@ -78,8 +79,8 @@ class FlickerWidget(Container):
         self.start_button = PushButton(text=f"Start ({FLICKER_KEY})")
         self.stop_button = PushButton(text="Stop")
         self.cycles = SpinBox(label="GIF cycles", value=2, min=1, max=50)
-        self.gif_path = FileEdit(label="GIF file", mode="w", filter="*.gif",
-                                 value=Path("flicker_anim.gif"))
+        self.gif_path = FileEdit(label="GIF file", mode=FileDialogMode.OPTIONAL_FILE,
+                                 filter="*.gif", value=Path("flicker_anim.gif"))
         self.export_button = PushButton(text="Export GIF")
         self.disparity_button = PushButton(text="Measure disparity")
         self.status = Label(value="stopped")
@@ -193,7 +194,10 @@ class FlickerWidget(Container):
         was_running = self.running
         if was_running:
             self.stop()
-        out = export_flicker_gif(self.viewer, a, b, path or self.gif_path.value,
+        chosen = path or self.gif_path.value
+        if not isinstance(chosen, str | Path):
+            raise OptionsError("choose one GIF file to write")
+        out = export_flicker_gif(self.viewer, a, b, chosen,
                                  rate=float(self.rate.value), cycles=int(self.cycles.value))
         if was_running:
             self.start()

@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from magicgui.types import FileDialogMode
 from magicgui.widgets import (
     CheckBox,
     ComboBox,
@@ -41,6 +42,9 @@ from .world import move_to_frame, same_crs, viewer_frame
 if TYPE_CHECKING:
     import napari
 
+    from ..io.n1 import MerisL1bProduct
+    from ..ortho import OrthoResult
+
 #: "mapping" orthorectifies every product on its own; the merge rules build a synthesis
 ALGORITHMS = ("mapping", *choices(MergeRule))
 CRS_UTM = "UTM zone of the footprint"
@@ -55,7 +59,7 @@ class Cancelled(MerisOrthoError):
 
 
 @dataclass
-class OrthoOptions:
+class RunSettings:
     """Everything the Orthorectify widget asks for (defaults = MERSYN's)."""
 
     products: list[Path]
@@ -88,7 +92,7 @@ def parse_bands(text: str) -> tuple[int, ...] | None:
     return bands
 
 
-def output_crs(options: OrthoOptions, tie_points: dict[str, np.ndarray]) -> Any:
+def output_crs(options: RunSettings, tie_points: dict[str, np.ndarray]) -> Any:
     """The output CRS: the UTM zone of the footprint centre, EPSG:4326 or the given EPSG code."""
     from ..geometry.grid import parse_crs, utm_crs_for
 
@@ -103,7 +107,7 @@ def output_crs(options: OrthoOptions, tie_points: dict[str, np.ndarray]) -> Any:
     return utm_crs_for(centre_lon, float(np.mean(lat)))
 
 
-def _pixel_size(options: OrthoOptions, product: Any, crs: Any) -> float:
+def _pixel_size(options: RunSettings, product: MerisL1bProduct, crs: Any) -> float:
     from ..geometry.grid import pixel_size_for
 
     metres = options.pixel_size_m or float(
@@ -116,11 +120,11 @@ class OrthoRun:
     """What a run produced: per product, its name, tie points, OrthoResult-like values."""
 
     items: list[dict[str, Any]]
-    options: OrthoOptions
+    options: RunSettings
     written: list[Path] = field(default_factory=list)
 
 
-def run_orthorectify(options: OrthoOptions, progress: ProgressCallback | None = None) -> OrthoRun:
+def run_orthorectify(options: RunSettings, progress: ProgressCallback | None = None) -> OrthoRun:
     """Run the chosen algorithm (no Qt): mapping of every product, or a synthesis."""
     from ..io.n1 import read_product
 
@@ -135,7 +139,7 @@ def run_orthorectify(options: OrthoOptions, progress: ProgressCallback | None = 
     return _run_synthesis(products, crs, options, progress)
 
 
-def _run_mapping(products: list[Any], crs: Any, options: OrthoOptions,
+def _run_mapping(products: list[Any], crs: Any, options: RunSettings,
                  progress: ProgressCallback | None) -> OrthoRun:
     from ..ortho import orthorectify
 
@@ -158,7 +162,7 @@ def _run_mapping(products: list[Any], crs: Any, options: OrthoOptions,
     return OrthoRun(items, options, written)
 
 
-def _grid_for(product: Any, crs: Any, options: OrthoOptions) -> Any:
+def _grid_for(product: MerisL1bProduct, crs: Any, options: RunSettings) -> OutputGrid:
     """The default grid (smallest rectangle holding the segment boundary, section 3.1)."""
     from ..engine.boundary import segment_boundary
     from ..geometry.grid import default_grid
@@ -167,7 +171,8 @@ def _grid_for(product: Any, crs: Any, options: OrthoOptions) -> Any:
     return default_grid(boundary, crs=crs, pixel_size=_pixel_size(options, product, crs))
 
 
-def _write_mapping(result: Any, product: Any, output: Path, k: int, n: int) -> Path:
+def _write_mapping(result: OrthoResult, product: MerisL1bProduct, output: Path, k: int,
+                   n: int) -> Path:
     from ..io.geotiff import meris_band_description, write_geotiff
 
     path = Path(output)
@@ -179,7 +184,7 @@ def _write_mapping(result: Any, product: Any, output: Path, k: int, n: int) -> P
                                        for b in bands])
 
 
-def _run_synthesis(products: list[Any], crs: Any, options: OrthoOptions,
+def _run_synthesis(products: list[Any], crs: Any, options: RunSettings,
                    progress: ProgressCallback | None) -> OrthoRun:
     from ..synthesis import open_synthesis, synthesize
 
@@ -190,7 +195,7 @@ def _run_synthesis(products: list[Any], crs: Any, options: OrthoOptions,
         elevation=options.elevation, sampling=options.sampling, bands=options.bands,
         progress=progress)
     if not result.merged:
-        reasons = "; ".join(f"{r.product}: {r.error}" for r in result.failed)
+        reasons = "; ".join(f"{r.path}: {r.error}" for r in result.failed)
         raise OptionsError(f"no product could be merged into the synthesis ({reasons})")
     store = open_synthesis(out)
     bands = {b: store.read(f"band_{b:02d}") for b in store.bands}
@@ -218,7 +223,7 @@ def run_layers(run: OrthoRun, world: OutputGrid | None = None) -> list[LayerData
     return layers
 
 
-def _item_layers(item: dict[str, Any], frame: OutputGrid, opts: OrthoOptions) -> list[LayerData]:
+def _item_layers(item: dict[str, Any], frame: OutputGrid, opts: RunSettings) -> list[LayerData]:
     """Layers of one product (or of the synthesis) on its own grid."""
     layers: list[LayerData] = []
     meta = {"stats": item["stats"], "algorithm": opts.algorithm, "elevation": opts.elevation}
@@ -271,9 +276,10 @@ class OrthorectifyWidget(Container):
 
     def __init__(self, viewer: napari.viewer.Viewer) -> None:
         self.viewer = viewer
-        self.products = FileEdit(label="N1 products", mode="rm", filter="*.N1")
+        self.products = FileEdit(label="N1 products", mode=FileDialogMode.EXISTING_FILES,
+                                 filter="*.N1")
         self.dem_kind = ComboBox(label="DEM type", choices=[DEM_FILE, DEM_DIR], value=DEM_FILE)
-        self.dem_path = FileEdit(label="DEM", mode="r")
+        self.dem_path = FileEdit(label="DEM", mode=FileDialogMode.EXISTING_FILE)
         self.dem_add = PushButton(text="Add DEM")
         self.dem_list = Select(label="DEMs (in order)", choices=[])
         self.dem_remove = PushButton(text="Remove")
@@ -296,7 +302,8 @@ class OrthorectifyWidget(Container):
         self.exaggeration = FloatSpinBox(label="parallax exaggeration", value=10.0, min=0.1,
                                          max=1000.0)
         self.vector_step = SpinBox(label="vector every (px)", value=16, min=1, max=512)
-        self.output = FileEdit(label="output (optional)", mode="w", nullable=True)
+        self.output = FileEdit(label="output (optional)", mode=FileDialogMode.OPTIONAL_FILE,
+                               nullable=True)
         self.run_button = PushButton(text="Run")
         self.cancel_button = PushButton(text="Cancel", enabled=False)
         self.status = Label(value="")
@@ -333,14 +340,15 @@ class OrthorectifyWidget(Container):
         self.dem_list.value = [p for p in (selected or []) if p in self._dems]
 
     def _dem_kind_changed(self, kind: str) -> None:
-        self.dem_path.mode = "d" if kind == DEM_DIR else "r"
+        self.dem_path.mode = (FileDialogMode.EXISTING_DIRECTORY if kind == DEM_DIR
+                              else FileDialogMode.EXISTING_FILE)
 
-    def add_dem(self, path: str | Path) -> None:
+    def add_dem(self, path: str | Path | tuple[Path, ...] | None) -> None:
         """Append a DEM (GeoTIFF, SRTM30 tile or GETASSE30 directory) after checking it opens."""
         from ..io.dem import open_dem
 
-        p = Path(path)
-        if str(path) in ("", ".") or not p.exists():
+        p = Path(path) if isinstance(path, str | Path) else Path()
+        if str(p) in ("", ".") or not p.exists():
             self.status.value = f"DEM not found: {path}"
             return
         try:
@@ -374,11 +382,13 @@ class OrthorectifyWidget(Container):
         self._sync_dem_list(selected)
 
     # ---------------------------------------------------------------- options
-    def options(self) -> OrthoOptions:
-        """The widget's values as OrthoOptions (raises OptionsError on bad input)."""
-        products = [Path(p) for p in (self.products.value or ()) if Path(p).is_file()]
-        output = None if self.output.value is None else Path(self.output.value)
-        return OrthoOptions(
+    def settings(self) -> RunSettings:
+        """The widget's values as RunSettings (raises OptionsError on bad input)."""
+        chosen = self.products.value
+        paths = chosen if isinstance(chosen, tuple) else () if chosen is None else (chosen,)
+        products = [Path(p) for p in paths if Path(p).is_file()]
+        output = self.output.value if isinstance(self.output.value, Path) else None
+        return RunSettings(
             products=products, dems=self.dems, elevation=self.elevation.value,
             algorithm=self.algorithm.value, sampling=self.sampling.value, crs=self.crs.value,
             epsg=int(self.epsg.value), pixel_size_m=float(self.pixel_size.value),
@@ -399,7 +409,7 @@ class OrthorectifyWidget(Container):
         from qtpy.QtCore import QTimer
 
         try:
-            options = self.options()
+            options = self.settings()
             if not options.products:
                 raise OptionsError("choose at least one N1 product")
         except MerisOrthoError as exc:

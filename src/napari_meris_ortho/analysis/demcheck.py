@@ -169,7 +169,7 @@ def demcheck(
         dems = [dems]
     if not dems:
         raise OptionsError("no DEM given to control")
-    stack = DemStack(list(dems))
+    stack = DemStack([d if isinstance(d, DemSource) else Path(d) for d in dems])
     undulation = _geoid_undulation(geoid, points)
     result = DemCheckResult(points, ", ".join(_label(d) for d in dems),
                             geoid_label=None if geoid is None else _label(geoid))

@@ -82,6 +82,14 @@ def pixel_size_for(resolution_m: float, crs: Any) -> float:
     return resolution_m / (factor or 1.0)
 
 
+def pixel_pair(size: float | Sequence[float] | np.ndarray) -> tuple[float, float]:
+    """(dx, dy) of a pixel size given as one number or as a pair."""
+    if isinstance(size, Sequence | np.ndarray):
+        dx, dy = size
+        return float(dx), float(dy)
+    return float(size), float(size)
+
+
 def _is_lonlat_identity(crs: pyproj.CRS) -> bool:
     """True when (x, y) of the CRS are WGS84 (lon, lat) in degrees (no datum shift, no scaling)."""
     if not crs.is_geographic:
@@ -136,8 +144,7 @@ class OutputGrid:
         pixel size is <= 0, upper-left is not left of and above lower-right, or the CRS is unknown.
         """
         crs = parse_crs(crs)
-        dx, dy = (pixel_size, pixel_size) if np.isscalar(pixel_size) else tuple(pixel_size)
-        dx, dy = float(dx), float(dy)
+        dx, dy = pixel_pair(pixel_size)
         if not (dx > 0 and dy > 0 and math.isfinite(dx) and math.isfinite(dy)):
             raise OptionsError(f"pixel size must be > 0, got {pixel_size}")
         (ulx, uly), (lrx, lry) = (map(float, ul), map(float, lr))
@@ -253,6 +260,7 @@ class OutputGrid:
             x = lon + 360.0 * np.round((xc - lon) / 360.0)
             y = lat
         else:
+            assert self._from_lonlat is not None
             x, y = self._from_lonlat.transform(lon, lat)
             x, y = np.asarray(x, dtype=np.float64), np.asarray(y, dtype=np.float64)
             bad = ~(np.isfinite(x) & np.isfinite(y))
@@ -271,6 +279,7 @@ class OutputGrid:
     def _xy_to_lonlat(self, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         if self.is_lonlat:
             return _wrap_lon(np.array(x, dtype=np.float64)), np.array(y, dtype=np.float64)
+        assert self._to_lonlat is not None
         lon, lat = self._to_lonlat.transform(x, y, errcheck=False)
         lon = np.asarray(lon, dtype=np.float64)
         lat = np.asarray(lat, dtype=np.float64)
@@ -447,8 +456,7 @@ def default_grid(
     if pixel_size is None:
         dx = dy = pixel_size_for(resolution_m, crs)
     else:
-        dx, dy = (pixel_size, pixel_size) if np.isscalar(pixel_size) else tuple(pixel_size)
-    dx, dy = float(dx), float(dy)
+        dx, dy = pixel_pair(pixel_size)
     if not (dx > 0 and dy > 0 and math.isfinite(dx) and math.isfinite(dy)):
         raise OptionsError(f"pixel size must be > 0, got {dx}, {dy}")
     pts = [p for p in boundary.polygons(crs) if p[0].size]

@@ -128,7 +128,7 @@ class TiePointGrid:
     @property
     def shape(self) -> tuple[int, int]:
         """(n_tie_lines, n_tie_cols)."""
-        return self.latitude.shape  # type: ignore[return-value]
+        return (int(self.latitude.shape[0]), int(self.latitude.shape[1]))
 
     def kernel_args(self) -> tuple:
         """(latitude, unwrapped longitude, facet coefficients, DF, DJ) as the kernels take them."""

@@ -24,6 +24,7 @@ index -1 (and NaN) where none has data (the caller then falls back to the tie po
 
 from __future__ import annotations
 
+import os
 import re
 import zipfile
 from collections.abc import Sequence
@@ -166,6 +167,7 @@ class _GetasseTile:
 
     def _load(self) -> np.ndarray:
         try:
+            raw: np.ndarray
             if self.member is None:
                 raw = np.memmap(self.path, dtype=np.uint8, mode="r")
             else:
@@ -449,7 +451,7 @@ class CompositeSource(DemSource):
 class DemStack:
     """DEMs tried in order at each point (section 3.1: outside or background -> next DEM)."""
 
-    def __init__(self, sources: Sequence[DemSource | str | Path]) -> None:
+    def __init__(self, sources: Sequence[DemSource | str | os.PathLike[str]]) -> None:
         self.sources = [s if isinstance(s, DemSource) else open_dem(s) for s in sources]
 
     def sample(self, lon: Any, lat: Any, method: str = "bilinear"
@@ -476,7 +478,7 @@ class DemStack:
             s.close()
 
 
-def open_dem(path: str | Path) -> DemSource:
+def open_dem(path: str | os.PathLike[str]) -> DemSource:
     """Open a DEM, detecting its format (module docstring). Raises DemError."""
     p = Path(path)
     if not p.exists():

@@ -485,7 +485,7 @@ EPOCH_2000 = np.datetime64("2000-01-01T00:00:00", "us")
 
 def format_utc(t: np.datetime64) -> str:
     """``21-SEP-2003 09:23:41.714409`` (the 27-character ENVISAT UTC string)."""
-    s = str(np.datetime64(t, "us"))  # 2003-09-21T09:23:41.714409
+    s = str(np.asarray(t, dtype="datetime64[us]"))  # 2003-09-21T09:23:41.714409
     year, month, day = s[:4], int(s[5:7]), s[8:10]
     return f"{day}-{MONTHS[month - 1]}-{year} {s[11:26]}"
 

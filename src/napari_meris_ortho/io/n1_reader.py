@@ -252,7 +252,7 @@ class MerisL1bProduct:
         """The whole file, memory-mapped read-only on first use (nothing is read)."""
         return np.memmap(self.path, dtype=np.uint8, mode="r")
 
-    def _records(self, name: str, dtype: np.dtype) -> np.memmap:
+    def _records(self, name: str, dtype: np.dtype) -> np.ndarray:
         """Records of data set ``name`` as a structured memmap view (validated at open)."""
         d = self._datasets[name]
         return self._file_map[d.offset : d.offset + d.num_dsr * dtype.itemsize].view(dtype)
@@ -263,7 +263,7 @@ class MerisL1bProduct:
         if not 1 <= band <= NUM_BANDS:
             raise ValueError(f"band must be 1..15, got {band}")
 
-    def counts(self, band: int) -> np.memmap:
+    def counts(self, band: int) -> np.ndarray:
         """Raw counts of ``band`` (1..15): a read-only memory map (H, W) of big-endian uint16."""
         self._check_band(band)
         return self._records(radiance_mds(band), radiance_dtype(self.width))["counts"]
@@ -279,16 +279,16 @@ class MerisL1bProduct:
             return counts.astype(np.float32) * factor
 
     @cached_property
-    def _flags_records(self) -> np.memmap:
+    def _flags_records(self) -> np.ndarray:
         return self._records(FLAGS_MDS, flags_dtype(self.width))
 
     @property
-    def flags(self) -> np.memmap:
+    def flags(self) -> np.ndarray:
         """L1b flags (uint8 (H, W) memory map); bits as the ``FLAG_*`` constants."""
         return self._flags_records["flags"]
 
     @property
-    def detector_index(self) -> np.memmap:
+    def detector_index(self) -> np.ndarray:
         """Detector index (big-endian int16 (H, W) memory map), EPR layout of Flags MDS(16)."""
         return self._flags_records["detector_index"]
 

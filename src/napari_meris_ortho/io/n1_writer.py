@@ -153,7 +153,7 @@ def _as_datetime64(t: _dt.datetime | np.datetime64 | str) -> np.datetime64:
             t = t.astimezone(_dt.UTC).replace(tzinfo=None)
         return np.datetime64(t, "us")
     try:
-        return np.datetime64(t, "us")
+        return np.datetime64(str(np.asarray(t, dtype="datetime64[us]")), "us")
     except (ValueError, TypeError) as exc:
         raise OptionsError(f"first_line_time: {t!r} is not a UTC date and time") from exc
 
@@ -184,7 +184,8 @@ def _corners(lat: np.ndarray, lon: np.ndarray, height: int, width: int, df: int,
 def default_product_name(product_type: str, start: np.datetime64, duration_s: float) -> str:
     """An ENVISAT product file name (62 characters), e.g.
     ``MER_FR__1PNSIM20030921_092341_000000982020_00000_00000_0000.N1``."""
-    s = str(np.datetime64(start, "s")).replace("-", "").replace(":", "").replace("T", "_")
+    s = str(np.asarray(start, dtype="datetime64[s]"))
+    s = s.replace("-", "").replace(":", "").replace("T", "_")
     duration = min(int(round(duration_s)), 99_999_999)
     return f"{product_type}NSIM{s}_{duration:08d}0000_00000_00000_0000.N1"
 

@@ -132,7 +132,7 @@ def srtm30_tiles(bounds: tuple[float, float, float, float]) -> list[tuple[int, i
     """(left lon, top lat, width, height) in degrees of the GTOPO30/SRTM30 tiles under
     ``bounds``: 40 x 50 deg north of 60 S (W180N90 ... E140S10), 60 x 30 deg below."""
     lon_min, lat_min, lon_max, lat_max = bounds
-    out = []
+    out: list[tuple[int, int, int, int]] = []
     for top, height, width in ((90, 50, 40), (40, 50, 40), (-10, 50, 40), (-60, 30, 60)):
         if lat_max <= top - height or lat_min >= top:
             continue

@@ -263,7 +263,7 @@ class SimulatedScene:
     dem_grid: DemGrid
     dem: np.ndarray
     truth: GroundTruth
-    _geo: np.ndarray = field(repr=False, default=None)  # type: ignore[assignment]
+    _geo: np.ndarray = field(repr=False, default_factory=lambda: np.zeros(0))
     _model: tuple = field(repr=False, default=())
 
     def __post_init__(self) -> None:
@@ -614,9 +614,9 @@ def _write_exports(target: Path, cfg: dict, scene: SimulatedScene, terrain: Terr
     steps = [("geotiff", True), ("getasse30", ex.get("getasse30")),
              ("getasse30_beam", ex.get("getasse30_beam")), ("srtm30", ex.get("srtm30")),
              ("geotiff_utm", ex.get("geotiff_utm")), ("reference", ex.get("reference"))]
-    steps = [k for k, on in steps if on]
+    keys = [k for k, on in steps if on]
     reference = None
-    for i, key in enumerate(steps):
+    for i, key in enumerate(keys):
         if key == "geotiff":
             paths[key] = exports.write_geographic_geotiff(
                 target / "dem_truth.tif", grid, scene.dem, descriptions=["height above WGS84"])
@@ -637,5 +637,5 @@ def _write_exports(target: Path, cfg: dict, scene: SimulatedScene, terrain: Terr
                 target / "reference.tif", grid, np.nan_to_num(data), nodata=0.0,
                 descriptions=[f"band {b} radiance" for b in bands])
         if progress is not None:
-            progress(i + 1, len(steps))
+            progress(i + 1, len(keys))
     return paths, reference

@@ -159,8 +159,9 @@ def make_terrain(grid: DemGrid, cfg: dict, seed: int) -> Terrain:
     envelope = np.zeros(shape, np.float32)
     peak = np.zeros(shape, np.float32)
     for rng_cfg in cfg.get("ranges", []):
-        a = _to_km(*rng_cfg["from"], lon_c, lat_c)
-        b = _to_km(*rng_cfg["to"], lon_c, lat_c)
+        (lon_a, lat_a), (lon_b, lat_b) = rng_cfg["from"], rng_cfg["to"]
+        a = _to_km(lon_a, lat_a, lon_c, lat_c)
+        b = _to_km(lon_b, lat_b, lon_c, lat_c)
         d = _segment_distance(x, y, a, b)
         env = np.exp(-((d / float(rng_cfg["width_km"])) ** 2)).astype(np.float32)
         np.maximum(peak, np.where(env > envelope, float(rng_cfg["height"]), peak), out=peak)
