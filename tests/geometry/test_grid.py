@@ -15,7 +15,9 @@ from napari_meris_ortho.geometry.grid import (
     MEAN_EARTH_RADIUS,
     OutputGrid,
     default_grid,
+    pixel_pair,
     pixel_size_for,
+    terrain_margin_px,
     utm_crs_for,
 )
 
@@ -220,3 +222,38 @@ def test_window_is_the_same_pixels_of_a_sub_grid():
     for bad in [(10, 10, 0, 5), (0, 601, 0, 5), (-1, 5, 0, 5), (0, 5, 790, 801)]:
         with pytest.raises(OptionsError, match="window"):
             grid.window(*bad)
+
+
+def test_from_transform_is_the_rasterio_convention_and_refuses_rotation():
+    g = OutputGrid.from_transform("EPSG:32632", (250.0, 0.0, 300_000.0, 0.0, -500.0, 5e6),
+                                  (3, 40, 60))
+    assert (g.x0, g.y0, g.dx, g.dy, g.width, g.height) == (300_000.0, 5e6, 250.0, 500.0, 60, 40)
+    assert tuple(g.transform)[:6] == (250.0, 0.0, 300_000.0, 0.0, -500.0, 5e6)
+    for bad in [(250.0, 0.1, 0.0, 0.0, -500.0, 0.0), (250.0, 0.0, 0.0, 0.0, 500.0, 0.0)]:
+        with pytest.raises(OptionsError, match="north-up"):
+            OutputGrid.from_transform("EPSG:32632", bad, (40, 60))
+
+
+def test_same_grid_compares_crs_and_pixel_size_only():
+    a = OutputGrid("EPSG:4326", 10.0, 50.0, 0.01, 0.01, 100, 80)
+    assert a.same_grid(OutputGrid("EPSG:4326", -3.0, 40.0, 0.01, 0.01, 7, 9))
+    assert not a.same_grid(OutputGrid("EPSG:4326", 10.0, 50.0, 0.01, 0.02, 100, 80))
+    assert not a.same_grid(OutputGrid("EPSG:3035", 10.0, 50.0, 0.01, 0.01, 100, 80))
+
+
+def test_pixel_pair():
+    assert pixel_pair(260) == (260.0, 260.0)
+    assert pixel_pair((0.5, 0.25)) == (0.5, 0.25)
+    assert pixel_pair(np.array([2.0, 3.0])) == (2.0, 3.0)
+    assert pixel_pair(np.float32(1.5)) == (1.5, 1.5)
+
+
+def test_terrain_margin_is_the_parallax_of_the_highest_terrain_in_pixels():
+    utm = OutputGrid("EPSG:32632", 0.0, 0.0, 260.0, 300.0, 10, 10)
+    # 9000 m at 45 deg: 9000 m over the narrower 260 m side = 34.6 -> 35, + 2
+    assert terrain_margin_px(utm, 45.0, 46.0) == 37
+    geo = OutputGrid("EPSG:4326", 0.0, 0.0, 0.01, 0.01, 10, 10)
+    side = 0.01 * math.cos(math.radians(60.0)) * 111_320.0  # the east-west side at 60 N
+    assert terrain_margin_px(geo, 30.0, 60.0, 4000.0) == math.ceil(
+        4000.0 * math.tan(math.radians(30.0)) / side) + 2
+    assert terrain_margin_px(utm, 0.0, 0.0) == 2
