@@ -407,23 +407,28 @@ def _interpolate_primary(rows: np.ndarray, cols: np.ndarray, nlon: np.ndarray, n
                          bad: np.ndarray, row_start: int, lon: np.ndarray, lat: np.ndarray
                          ) -> None:
     """Bilinear interpolation of lon/lat between primary-grid nodes (terrain-correction paper);
-    NaN in cells marked bad (computed exactly by the caller)."""
+    NaN in cells marked bad (computed exactly by the caller). Longitudes are unwrapped relative
+    to each cell's first node. One band of output rows per row of primary cells: along the
+    columns on the two node rows, then between them."""
     n_rows, width = lon.shape
-    r, r1, fr = _cell_index(np.arange(row_start, row_start + n_rows), rows)
     c, c1, fc = _cell_index(np.arange(width), cols)
-    r, r1, fr = r[:, None], r1[:, None], fr[:, None]
-    c, c1, fc = c[None, :], c1[None, :], fc[None, :]
-    a = nlon[r, c]
-    b = a + ((nlon[r, c1] - a + 180.0) % 360.0 - 180.0)
-    d = a + ((nlon[r1, c] - a + 180.0) % 360.0 - 180.0)
-    e = a + ((nlon[r1, c1] - a + 180.0) % 360.0 - 180.0)
-    v = a * (1 - fr) * (1 - fc) + b * (1 - fr) * fc + d * fr * (1 - fc) + e * fr * fc
-    lon[:] = _wrap_lon(v)
-    lat[:] = (nlat[r, c] * (1 - fr) * (1 - fc) + nlat[r, c1] * (1 - fr) * fc
-              + nlat[r1, c] * fr * (1 - fc) + nlat[r1, c1] * fr * fc)
-    cell_bad = bad[np.minimum(r, bad.shape[0] - 1), np.minimum(c, bad.shape[1] - 1)]
-    lon[cell_bad] = np.nan
-    lat[cell_bad] = np.nan
+    r_of, r1_of, fr_of = _cell_index(np.arange(row_start, row_start + n_rows), rows)
+    bad_cols = np.minimum(c, bad.shape[1] - 1)
+    starts = np.flatnonzero(np.r_[True, r_of[1:] != r_of[:-1]])
+    for k, i0 in enumerate(starts):
+        i1 = starts[k + 1] if k + 1 < starts.size else n_rows
+        r, r1 = r_of[i0], r1_of[i0]
+        f = fr_of[i0:i1, None]
+        a = nlon[r, c]
+        top = a + fc * _wrap_lon(nlon[r, c1] - a)
+        bottom = a + (1.0 - fc) * _wrap_lon(nlon[r1, c] - a) + fc * _wrap_lon(nlon[r1, c1] - a)
+        lon[i0:i1] = _wrap_lon((1.0 - f) * top + f * bottom)
+        top = (1.0 - fc) * nlat[r, c] + fc * nlat[r, c1]
+        bottom = (1.0 - fc) * nlat[r1, c] + fc * nlat[r1, c1]
+        lat[i0:i1] = (1.0 - f) * top + f * bottom
+        cell_bad = bad[min(r, bad.shape[0] - 1), bad_cols]
+        lon[i0:i1, cell_bad] = np.nan
+        lat[i0:i1, cell_bad] = np.nan
 
 
 def terrain_margin_px(grid: OutputGrid, view_zenith_deg: float, max_abs_lat_deg: float,
