@@ -116,10 +116,17 @@ def _open_dems(dems: Sequence[DemSource | str | os.PathLike[str]]) -> DemStack |
         raise DemError(f"cannot open DEM: {exc}") from exc
 
 
-def _margin_px(tp: TiePointGrid, grid: OutputGrid) -> int:
-    """Output pixels beyond the zero-height boundary that a terrain point may reach."""
-    return terrain_margin_px(grid, float(np.nanmax(tp.view_zenith)),
-                             float(np.nanmax(np.abs(tp.latitude))))
+def _margin_px(tp: TiePointGrid, grid: OutputGrid, terrain: bool = True,
+               pixel_m: float = 260.0) -> int:
+    """Output pixels beyond the zero-height boundary that an antecedent inside the product
+    may reach: the outer half product pixel (the boundary joins the border tie points, which
+    sit on pixel centres; ``pixel_m``: the product's column spacing, taken twice for the
+    oblique pixels) plus, with ``terrain``, the parallax of the highest terrain."""
+    lat = float(np.nanmax(np.abs(tp.latitude)))
+    half_pixel = terrain_margin_px(grid, 45.0, lat, max_terrain_m=pixel_m)  # tan 45 deg = 1
+    if not terrain:
+        return half_pixel
+    return half_pixel + terrain_margin_px(grid, float(np.nanmax(tp.view_zenith)), lat)
 
 
 def _heights(stack: DemStack, lon: np.ndarray, lat: np.ndarray, mask: np.ndarray
@@ -212,13 +219,13 @@ def _prepare(prod: MerisProduct, grid: OutputGrid | None, stack: DemStack | None
     """Segment boundary, default grid and the spans to search (section 3.1)."""
     tp = TiePointGrid.from_product(prod)
     boundary = segment_boundary(tp.latitude, tp.longitude)
+    res_m = float(getattr(getattr(prod, "resolution", None), "column_spacing_m", 260.0))
     if grid is None:
-        res_m = float(getattr(getattr(prod, "resolution", None), "column_spacing_m", 260.0))
         grid = default_grid(boundary, res_m, crs, pixel_size=pixel_size)
     # MERSYN processes the points inside the segment boundary; the primary-grid path also tries
-    # a margin where terrain seen obliquely can lie outside the zero-height boundary
-    margin = (_margin_px(tp, grid) if opts.elevation is not Elevation.NONE
-              and opts.method is SearchMethod.PRIMARY else 0)
+    # a margin: the outer half pixel of the product and terrain seen obliquely beyond it
+    margin = (_margin_px(tp, grid, opts.elevation is not Elevation.NONE, res_m)
+              if opts.method is SearchMethod.PRIMARY else 0)
     inner = row_spans(boundary, grid)
     spans = row_spans(boundary, grid, margin=margin) if margin else inner
     stats = dict(elevation=opts.elevation.value, parallax=opts.parallax.value,

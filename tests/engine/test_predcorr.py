@@ -145,3 +145,34 @@ def test_ecef_geolocation_converges_on_both_paths(scene):
     both = ok & (ref["iterations"] >= 0)
     assert np.max(np.abs(fast["col"][both] - ref["col"][both])) < 1e-3
     assert np.max(np.abs(fast["line"][both] - ref["line"][both])) < 1e-3
+
+
+def test_handbook_loop_without_heights_reads_no_height(scene):
+    """Defect 1 (issue 11): with no height and the ecef geolocation the handbook loop runs at
+    h = 0; it once read height[i, j] out of a 1 x 1 placeholder (random antecedents)."""
+    tp, grid, lon, lat, spans = scene
+    fast = solve(tp, grid, lon, lat, None, HEIGHT_NONE, spans, model=1, geo=1, tolerance=1e-4)
+    ref = solve(tp, grid, lon, lat, None, HEIGHT_NONE, spans, model=1, geo=1, tolerance=1e-4,
+                method="handbook", diagnostics=True)
+    ok = fast["iterations"] >= 0
+    ok_ref = ref["iterations"] >= 0
+    assert ok_ref.sum() > 0.99 * ok.sum()
+    both = ok & ok_ref
+    assert np.max(np.abs(fast["line"][both] - ref["line"][both])) < 1e-3
+    assert np.max(np.abs(fast["col"][both] - ref["col"][both])) < 1e-3
+    assert np.all(ref["elevation"][ok_ref] == 0) and np.all(ref["shift_east_m"][ok_ref] == 0)
+    with pytest.raises(ValueError, match="heights"):
+        solve(tp, grid, lon, lat, None, HEIGHT_GIVEN, spans)
+
+
+def test_handbook_loop_returns_the_elevation_diagnostics(scene):
+    tp, grid, lon, lat, spans = scene
+    h = _terrain(lon, lat).astype(np.float32)
+    fast = solve(tp, grid, lon, lat, h, HEIGHT_GIVEN, spans, tolerance=1e-4, diagnostics=True)
+    ref = solve(tp, grid, lon, lat, h, HEIGHT_GIVEN, spans, tolerance=1e-4, method="handbook",
+                diagnostics=True)
+    both = (fast["iterations"] >= 0) & (ref["iterations"] >= 0)
+    assert np.array_equal(ref["elevation"][both], h[both])
+    for key in ("shift_east_m", "shift_north_m"):
+        assert np.max(np.abs(ref[key][both] - fast[key][both])) < 1.0
+    assert np.abs(ref["shift_east_m"][both]).max() > 200.0  # nadir swath: up to ~290 m

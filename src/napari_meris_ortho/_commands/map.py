@@ -53,8 +53,11 @@ def register(subparsers: Any) -> None:
                    "ecef unit vectors (default: bilinear with --parallax handbook, ecef with "
                    "ellipsoid)")
     p.add_argument("--search", choices=choices(SearchMethod), default="primary",
-                   help="antecedent search: primary grid + Newton (fast) or MERSYN's facet "
-                   "search in the loop")
+                   help="antecedent search: primary grid + Newton (fast, maps every output "
+                   "point seen by the product) or MERSYN's facet search in the loop (as "
+                   "MERSYN, it leaves background where the zero-height position or the first "
+                   "correction falls outside the tie-point grid: the outer half pixel and, on "
+                   "high relief, terrain within one parallax shift of the near-nadir edge)")
     p.add_argument("--diagnostics", action="store_true",
                    help="also write OUT_diagnostics.tif: antecedent line/column, elevation, its "
                    "source, iterations, parallax shift east/north (m)")

@@ -15,6 +15,11 @@ Iterations count direct-model evaluations that moved the point (MERSYN's loop pa
 fast path's prediction is not exact, so even without heights it reports one correction where
 MERSYN reports ITERATION[0]. The primary grid extends the edge facets, so it also keeps terrain
 points whose zero-height position lies outside the swath (MERSYN's first inverse loses them).
+The handbook path keeps MERSYN's behaviour: a point is lost when its zero-height inverse or the
+first correction ``f^-1(f(x0, h))`` (about one parallax shift further out) falls outside the
+tie-point facets — the outer half pixel of the product and, on high relief, terrain up to one
+shift (29 FR px for 9 km at 40 deg) inside the near-nadir edge. Both paths return the same
+diagnostics (``parallax_at``).
 Both stop after ``max_iter`` iterations (histogram like Appendix B) and drop points whose
 antecedent leaves the product (-0.5 <= l < H-0.5, -0.5 <= p < W-0.5). Heights (``hmode``):
 0 none (MERSYN ``-ort NO``), 1 tie-point dem_alt at the antecedent, 2 the given per-point height
@@ -233,7 +238,7 @@ def find_antecedents_handbook(lon, lat, height, hmode, ptr, start, stop, lat_tp,
             ok = True
             while (hmode != 0 or geo != 0) and it < max_iter:
                 it += 1
-                h = math.nan if hmode == 1 else height[i, j]
+                h = 0.0 if hmode == 0 else (math.nan if hmode == 1 else height[i, j])
                 r = direct_point(x, y, h, coef, df, dj, model, geo)
                 f3, g3, u3, v3, path3 = search_facet(r[0], r[1], f, g, lat_tp, lon_tp)
                 paths[i, path3 + 1] += 1
@@ -255,6 +260,26 @@ def find_antecedents_handbook(lon, lat, height, hmode, ptr, start, stop, lat_tp,
     for i in range(nr):
         total += paths[i]
     return out_l, out_p, iters, total
+
+
+@njit(cache=True, parallel=True)
+def parallax_at(line, col, height, hmode, coef, df, dj, model, geo):
+    """Elevation used (m) and parallax shift east/north (m) at the antecedents (NaN where
+    dropped): the diagnostics of ``find_antecedents`` for any path (eq. 6a, 2c')."""
+    nr, nc = line.shape
+    h_used = np.full((nr, nc), np.nan, np.float32)
+    sh_e = np.full((nr, nc), np.nan, np.float32)
+    sh_n = np.full((nr, nc), np.nan, np.float32)
+    for i in prange(nr):
+        for j in range(nc):
+            if math.isnan(line[i, j]):
+                continue
+            h = 0.0 if hmode == 0 else (math.nan if hmode == 1 else height[i, j])
+            r = direct_point(line[i, j], col[i, j], h, coef, df, dj, model, geo)
+            h_used[i, j] = r[2]
+            sh_e[i, j] = r[2] * r[3]
+            sh_n[i, j] = r[2] * r[4]
+    return h_used, sh_e, sh_n
 
 
 def iteration_histogram(iters: np.ndarray, max_iter: int = MAX_ITERATIONS) -> np.ndarray:
@@ -297,6 +322,9 @@ def solve(tp, grid, lon: np.ndarray, lat: np.ndarray, height: np.ndarray | None,
     lat_tp, lon_tp, coef, df, dj = tp.kernel_args()
     lon = np.ascontiguousarray(lon, dtype=np.float64)
     lat = np.ascontiguousarray(lat, dtype=np.float64)
+    if hmode == HEIGHT_GIVEN and (height is None or np.shape(height) != lon.shape):
+        raise ValueError("per-point heights of the output points' shape are needed "
+                         "with HEIGHT_GIVEN")
     h = (np.zeros((1, 1), np.float32) if height is None
          else np.ascontiguousarray(height, dtype=np.float32))
     ptr, start, stop = (np.ascontiguousarray(a, dtype=np.int64) for a in spans)
@@ -306,6 +334,9 @@ def solve(tp, grid, lon: np.ndarray, lat: np.ndarray, height: np.ndarray | None,
             lon, lat, h, hmode, ptr, start, stop, lat_tp, lon_tp, coef, df, dj,
             tp.height, tp.width, model, geo, tolerance, max_iter)
         out = {"line": line, "col": col, "iterations": iters}
+        if diagnostics:
+            h_used, sh_e, sh_n = parallax_at(line, col, h, hmode, coef, df, dj, model, geo)
+            out.update(elevation=h_used, shift_east_m=sh_e, shift_north_m=sh_n)
         out["search"] = {n: int(c) for n, c in zip(names, paths, strict=True)}
         return out
     if method != "primary":
