@@ -75,19 +75,26 @@ def test_map_explicit_extent_and_options(files, tmp_path, caplog):
 
 
 def test_map_geotiff_carries_band_and_scaling_metadata(files, tmp_path):
-    """Issue 4 item 9: band descriptions (number, wavelength) and the radiance scale factors."""
+    """Issue 4 item 9 / issue 12: band descriptions (number, wavelength); uint16 counts with
+    GDAL scale = sf_rad in a valid Cloud-Optimized GeoTIFF; nearest output = the counts."""
     import rasterio
+    from rio_cogeo.cogeo import cog_validate
+
+    from napari_meris_ortho import orthorectify
 
     _, prod, _ = files
     product = read_product(prod)
     out = tmp_path / "meta.tif"
     assert main(["-q", "map", str(prod), "-o", str(out), "--elevation", "none",
                  "--bands", "13,7"]) == 0
+    assert cog_validate(out, quiet=True)[0]
     with rasterio.open(out) as ds:
         tags, band_tags = ds.tags(), [ds.tags(1), ds.tags(2)]
         assert ds.descriptions == (f"MERIS band 7 ({product.wavelengths[6]:.1f} nm)",
                                    f"MERIS band 13 ({product.wavelengths[12]:.1f} nm)")
-        assert ds.scales == (1.0, 1.0) and ds.offsets == (0.0, 0.0)  # values are radiances
+        assert ds.dtypes == ("uint16", "uint16") and ds.nodata == 0 and ds.overviews(1)
+        assert ds.scales == (product.scaling.radiance[6], product.scaling.radiance[12])
+        assert ds.offsets == (0.0, 0.0)
         band7 = ds.read(1)
     assert tags["product_name"] == product.product_name != ""
     assert tags["product"] == str(prod) and "sf_rad" in tags["radiance"]
@@ -96,10 +103,21 @@ def test_map_geotiff_carries_band_and_scaling_metadata(files, tmp_path):
         assert float(tag["sf_rad"]) == product.scaling.radiance[b - 1]
         assert float(tag["wavelength_nm"]) == pytest.approx(product.wavelengths[b - 1])
         assert float(tag["bandwidth_nm"]) == pytest.approx(product.bandwidths[b - 1])
-    # radiance / sf_rad gives back the stored integer counts
-    counts = band7[band7 > 0] / np.float64(band_tags[0]["sf_rad"])
-    assert counts.size > 10000
-    assert np.max(np.abs(counts - np.round(counts))) < 1e-3 * counts.max()
+    # nearest neighbour: the written counts are the product's counts at the antecedents
+    res = orthorectify(prod, elevation="none", bands=[7], diagnostics=True)
+    ok = res.valid
+    line = np.floor(res.diagnostics["line"][ok] + 0.5).astype(int)
+    col = np.floor(res.diagnostics["col"][ok] + 0.5).astype(int)
+    assert ok.sum() > 10000
+    np.testing.assert_array_equal(band7[ok], product.counts(7)[line, col])
+    assert np.all(band7[~ok] == 0)
+    f32 = tmp_path / "f32.tif"
+    assert main(["-q", "map", str(prod), "-o", str(f32), "--elevation", "none", "--bands", "7",
+                 "--dtype", "float32", "--compress", "deflate"]) == 0
+    with rasterio.open(f32) as ds:
+        assert ds.dtypes == ("float32",) and ds.scales == (1.0,)
+        assert ds.compression.name.lower() == "deflate"
+        np.testing.assert_array_equal(ds.read(1), res.bands[7])
 
 
 def _bad(args, tmp_path, capsys, match):

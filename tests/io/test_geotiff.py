@@ -11,7 +11,13 @@ import rasterio
 
 from napari_meris_ortho.errors import OutputError
 from napari_meris_ortho.geometry.grid import OutputGrid
-from napari_meris_ortho.io.geotiff import meris_band_description, read_geotiff, write_geotiff
+from napari_meris_ortho.io.geotiff import (
+    meris_band_description,
+    radiance_to_counts,
+    read_geotiff,
+    write_cog,
+    write_geotiff,
+)
 
 
 def bands_for(grid, n=2):
@@ -91,3 +97,86 @@ def test_read_geotiff_errors(tmp_path):
     (tmp_path / "bad.tif").write_bytes(b"garbage")
     with pytest.raises(OutputError, match="cannot read"):
         read_geotiff(tmp_path / "bad.tif")
+
+
+# ---------------------------------------------------------------------- Cloud-Optimized GeoTIFF
+def radiances_for(grid, scales):
+    """Float32 radiances = integer counts x scale, with a background 0 border."""
+    rng = np.random.default_rng(3)
+    counts = rng.integers(1, 40000, size=(len(scales), *grid.shape)).astype(np.uint16)
+    counts[:, :5] = 0
+    return counts, [c.astype(np.float32) * np.float32(s) for c, s in zip(counts, scales,
+                                                                           strict=True)]
+
+
+def test_cog_of_counts_validates_with_overviews_and_scale(tmp_path):
+    from rio_cogeo.cogeo import cog_validate
+
+    g = OutputGrid("EPSG:4326", 10.0, 47.0, 0.002, 0.002, 1300, 1100)
+    scales = [0.0123, 0.00871]
+    counts, radiance = radiances_for(g, scales)
+    consumed = []
+
+    def stream():  # one band at a time, as map streams them
+        for s, r in zip(scales, radiance, strict=True):
+            consumed.append(s)
+            yield radiance_to_counts(r, s)
+
+    calls = []
+    out = write_cog(tmp_path / "c.tif", stream(), g, count=2, scales=scales, offsets=[0.0, 0.0],
+                    units=["W m-2 sr-1 um-1"] * 2, descriptions=["b7", "b13"],
+                    band_metadata=[{"sf_rad": s} for s in scales], metadata={"product": "p"},
+                    progress=lambda d, t: calls.append((d, t)))
+    assert calls == [(1, 3), (2, 3), (3, 3)] and consumed == scales
+    valid, errors, warnings = cog_validate(out, quiet=True)
+    assert valid and not errors, errors
+    with rasterio.open(out) as ds:
+        assert ds.dtypes == ("uint16", "uint16") and ds.nodata == 0
+        assert ds.overviews(1) == [2, 4] and ds.block_shapes[0] == (512, 512)
+        assert ds.compression.name.lower() == "zstd"
+        assert ds.scales == tuple(scales) and ds.offsets == (0.0, 0.0)
+        assert ds.units == ("W m-2 sr-1 um-1",) * 2 and ds.descriptions == ("b7", "b13")
+        assert ds.tags()["product"] == "p" and float(ds.tags(2)["sf_rad"]) == scales[1]
+        np.testing.assert_array_equal(ds.read(1), counts[0])  # counts given back exactly
+        phys = ds.read(2, masked=True).astype(np.float64) * ds.scales[1] + ds.offsets[1]
+        ov = ds.read(1, out_shape=(g.height // 2, g.width // 2))
+    # scale/offset give back the radiances within half a count; background is masked
+    ok = counts[1] > 0
+    assert np.all(phys.mask == ~ok)
+    assert np.max(np.abs(phys[ok] - radiance[1][ok])) <= 0.5 * scales[1]
+    # the first overview is the 2x2 average of the counts
+    assert abs(int(ov[100, 100]) - counts[0][200:202, 200:202].mean()) <= 1
+    assert [p.name for p in tmp_path.iterdir()] == ["c.tif"]
+    arrays, g2, meta = read_geotiff(out, scaled=True)
+    assert g2 == g and meta["scales"] == scales and arrays[0].dtype == np.float32
+    np.testing.assert_allclose(arrays[1], radiance[1], atol=0.5 * scales[1])
+
+
+def test_radiance_to_counts_rounds_half_up_and_keeps_background():
+    c = radiance_to_counts(np.array([0.0, 0.5, 1.49, 1.5, 2.0, -3.0, 1e9], np.float32), 1.0)
+    assert c.tolist() == [0, 1, 1, 2, 2, 0, 65535]
+
+
+def test_cog_float32_deflate_and_errors_leave_no_file(tmp_path):
+    from rio_cogeo.cogeo import cog_validate
+
+    g = OutputGrid("EPSG:32631", 500000.0, 5000000.0, 260.0, 260.0, 600, 520)
+    bands = bands_for(g)
+    out = write_cog(tmp_path / "f.tif", iter(bands), g, count=2, dtype="float32",
+                    nodata=None, compress="deflate", overview_resampling="nearest")
+    assert cog_validate(out, quiet=True)[0]
+    with rasterio.open(out) as ds:
+        assert ds.compression.name.lower() == "deflate" and ds.nodata is None
+        assert ds.overviews(1) == [2] and ds.crs.to_epsg() == 32631
+        np.testing.assert_array_equal(ds.read(2), bands[1])
+    before = out.read_bytes()
+    for kwargs, match in ((dict(count=3), "2 bands given, 3 expected"),
+                          (dict(count=1), "more than 1"),
+                          (dict(count=2, descriptions=["x"]), "descriptions"),
+                          (dict(count=2, compress="lzw"), "compression")):
+        with pytest.raises(OutputError, match=match):
+            write_cog(out, iter(bands), g, dtype="float32", **kwargs)
+    with pytest.raises(OutputError, match="shape"):
+        write_cog(out, [np.zeros((3, 3))], g, count=1)
+    assert out.read_bytes() == before
+    assert [p.name for p in tmp_path.iterdir()] == ["f.tif"]

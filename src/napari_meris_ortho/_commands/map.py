@@ -26,8 +26,12 @@ from ._options import (
 
 log = logging.getLogger("napari_meris_ortho")
 #: dataset tag explaining the band values and the per-band ``sf_rad`` tags
-RADIANCE_NOTE = ("TOA radiance (float32, 0 = background) = counts x sf_rad of the source "
-                 "product (Scaling Factor GADS); no further scaling applies")
+RADIANCE_NOTE = {
+    "uint16": "TOA radiance = counts x scale (GDAL scale = sf_rad of the source product, "
+              "Scaling Factor GADS); counts 0 = background (nodata)",
+    "float32": "TOA radiance (float32, 0 = background) = counts x sf_rad of the source "
+               "product (Scaling Factor GADS); no further scaling applies",
+}
 
 
 def register(subparsers: Any) -> None:
@@ -58,6 +62,11 @@ def register(subparsers: Any) -> None:
                    "MERSYN, it leaves background where the zero-height position or the first "
                    "correction falls outside the tie-point grid: the outer half pixel and, on "
                    "high relief, terrain within one parallax shift of the near-nadir edge)")
+    p.add_argument("--dtype", choices=("uint16", "float32"), default="uint16",
+                   help="band values: uint16 counts with GDAL scale = sf_rad (default; GDAL, "
+                   "QGIS, rasterio read radiances) or float32 radiances")
+    p.add_argument("--compress", choices=("zstd", "deflate"), default="zstd",
+                   help="Cloud-Optimized GeoTIFF compression, with a predictor (default zstd)")
     p.add_argument("--diagnostics", action="store_true",
                    help="also write OUT_diagnostics.tif: antecedent line/column, elevation, its "
                    "source, iterations, parallax shift east/north (m)")
@@ -135,28 +144,37 @@ def log_lines(stats: dict[str, Any], default_pixel: bool) -> list[str]:
 def _write(args: argparse.Namespace, result: Any) -> None:
     import numpy as np
 
-    from ..io.geotiff import meris_band_description, write_geotiff
+    from ..io.geotiff import meris_band_description, radiance_to_counts, write_cog
+    from ..ortho import RADIANCE_UNITS
 
     bands = sorted(result.bands)
     wl = result.stats.get("wavelengths", {})
-    write_geotiff(args.output, [result.bands[b] for b in bands], result.grid,
-                  descriptions=[meris_band_description(b, wl.get(b)) for b in bands],
-                  band_metadata=result.band_metadata(),
-                  metadata={"product": result.stats["product"],
-                            "product_name": result.stats.get("product_name", ""),
-                            "radiance": RADIANCE_NOTE, "elevation": args.elevation,
-                            "parallax": args.parallax,
-                            "geolocation": result.stats["geolocation"],
-                            "tolerance_px": args.tolerance,
-                            "sampling": args.sampling, "software": "napari-meris-ortho map"})
+    sf = result.stats.get("scale_factors", {})
+    counts = args.dtype == "uint16"
+    values = ((radiance_to_counts(result.bands[b], sf[b]) if counts else result.bands[b])
+              for b in bands)
+    write_cog(args.output, values, result.grid, count=len(bands), dtype=args.dtype,
+              scales=[sf[b] for b in bands] if counts else None,
+              offsets=[0.0] * len(bands) if counts else None,
+              units=[RADIANCE_UNITS] * len(bands),
+              descriptions=[meris_band_description(b, wl.get(b)) for b in bands],
+              band_metadata=result.band_metadata(), compress=args.compress,
+              metadata={"product": result.stats["product"],
+                        "product_name": result.stats.get("product_name", ""),
+                        "radiance": RADIANCE_NOTE[args.dtype], "elevation": args.elevation,
+                        "parallax": args.parallax,
+                        "geolocation": result.stats["geolocation"],
+                        "tolerance_px": args.tolerance,
+                        "sampling": args.sampling, "software": "napari-meris-ortho map"})
     if args.diagnostics:
         names = ("line", "col", "elevation", "elevation_source", "iterations", "shift_east_m",
                  "shift_north_m")
-        arrays = [np.nan_to_num(result.diagnostics[n].astype(np.float32), nan=0.0)
-                  for n in names]
-        write_geotiff(_diagnostics_path(Path(args.output)), arrays, result.grid, nodata=None,
-                      descriptions=list(names), dtype="float32",
-                      metadata={"elevation_source": "k >= 0: DEM k; -1: tie points; -2: none"})
+        arrays = (np.nan_to_num(result.diagnostics[n].astype(np.float32), nan=0.0)
+                  for n in names)
+        write_cog(_diagnostics_path(Path(args.output)), arrays, result.grid, count=len(names),
+                  nodata=None, descriptions=list(names), dtype="float32",
+                  compress=args.compress, overview_resampling="nearest",
+                  metadata={"elevation_source": "k >= 0: DEM k; -1: tie points; -2: none"})
 
 
 def run(args: argparse.Namespace) -> int:

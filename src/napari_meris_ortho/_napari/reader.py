@@ -86,7 +86,7 @@ def geotiff_layers(path: str | Path, frame: OutputGrid | None = None) -> list[La
         with rasterio.open(path) as ds:
             if ds.crs is None:
                 raise MerisOrthoError(f"{path}: GeoTIFF has no CRS (not geocoded)")
-            data = ds.read()
+            data = _physical(ds)
             source = OutputGrid.from_transform(ds.crs, tuple(ds.transform), (ds.height, ds.width))
             names = [d or f"band {i + 1}" for i, d in enumerate(ds.descriptions)]
             tags = ds.tags()
@@ -106,6 +106,19 @@ def geotiff_layers(path: str | Path, frame: OutputGrid | None = None) -> list[La
         kwargs["colormap"] = "gray"
         layers.append((band, kwargs, "image"))
     return layers
+
+
+def _physical(ds: Any) -> np.ndarray:
+    """All bands; bands with a GDAL scale/offset (our uint16 counts) as float32 physical
+    values (counts x scale + offset, nodata stays 0)."""
+    data = ds.read()
+    if all(s == 1.0 for s in ds.scales) and all(o == 0.0 for o in ds.offsets):
+        return data
+    mask = ds.read_masks() == 0
+    out = data.astype(np.float32) * np.asarray(ds.scales, np.float32)[:, None, None]
+    out += np.asarray(ds.offsets, np.float32)[:, None, None]
+    out[mask] = 0
+    return out
 
 
 def _contrast_limits(band: np.ndarray, nodata: float | None) -> tuple[float, float]:
