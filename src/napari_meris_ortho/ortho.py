@@ -129,6 +129,28 @@ def _margin_px(tp: TiePointGrid, grid: OutputGrid, terrain: bool = True,
     return half_pixel + terrain_margin_px(grid, float(np.nanmax(tp.view_zenith)), lat)
 
 
+def lonlat_bounds(grid: OutputGrid, n: int = 65) -> tuple[float, float, float, float] | None:
+    """WGS84 (lon_min, lat_min, lon_max, lat_max) of the grid's outline (``n`` points a side,
+    longitudes unwrapped around the first corner); None when the outline circles a pole."""
+    import pyproj
+
+    h, w = grid.shape
+    t = np.linspace(0.0, 1.0, n)
+    rows = np.concatenate([t * h, np.full(n, h), (1 - t) * h, np.zeros(n)]) - 0.5
+    cols = np.concatenate([np.zeros(n), t * w, np.full(n, w), (1 - t) * w]) - 0.5
+    x, y = grid.xy(rows, cols)
+    tr = pyproj.Transformer.from_crs(grid.crs, "EPSG:4326", always_xy=True)
+    lon, lat = (np.asarray(v, np.float64) for v in tr.transform(x, y, errcheck=False))
+    ok = np.isfinite(lon) & np.isfinite(lat)
+    if not ok.any():
+        return None
+    lon, lat = lon[ok], lat[ok]
+    lon = lon[0] + (lon - lon[0] + 180.0) % 360.0 - 180.0
+    if np.ptp(lon) > 300.0:
+        return None
+    return float(lon.min()), float(lat.min()), float(lon.max()), float(lat.max())
+
+
 def _heights(stack: DemStack, lon: np.ndarray, lat: np.ndarray, mask: np.ndarray
              ) -> tuple[np.ndarray, np.ndarray]:
     """DEM heights at the output points in ``mask`` (NaN elsewhere or without data: tie points)."""
@@ -222,6 +244,10 @@ def _prepare(prod: MerisProduct, grid: OutputGrid | None, stack: DemStack | None
     res_m = float(getattr(getattr(prod, "resolution", None), "column_spacing_m", 260.0))
     if grid is None:
         grid = default_grid(boundary, res_m, crs, pixel_size=pixel_size)
+    if stack is not None:  # the DEM window under the output grid, read once
+        bounds = lonlat_bounds(grid)
+        if bounds is not None:
+            stack.prepare(*bounds)
     # MERSYN processes the points inside the segment boundary; the primary-grid path also tries
     # a margin: the outer half pixel of the product and terrain seen obliquely beyond it
     margin = (_margin_px(tp, grid, opts.elevation is not Elevation.NONE, res_m)

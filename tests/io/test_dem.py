@@ -261,3 +261,31 @@ def test_reads_the_simulator_exports_at_their_posts():
         ok = np.isfinite(h)
         assert ok.mean() > 0.9, key
         assert np.max(np.abs(h[ok] - truth[ok])) <= tol, key
+
+
+def test_geotiff_prepared_window_read_once_same_heights(tmp_path):
+    """``prepare`` reads the footprint window once; lookups give the generic kernel's numbers."""
+    t = from_origin(10.0, 47.0, 0.01, 0.01)
+    rng = np.random.default_rng(8)
+    data = rng.uniform(0.0, 3000.0, (200, 300)).astype(np.float32)
+    data[50, 60] = -32768.0
+    path = write_geotiff_dem(tmp_path / "geo.tif", "EPSG:4326", t, data, -32768.0)
+    lazy, ready = open_dem(path), open_dem(path)
+    ready.prepare(10.5, 45.5, 12.5, 46.8)
+    window = ready._window
+    assert window[:2] == (17, 47) and window[2].shape == (136, 206)
+    lon = rng.uniform(10.5, 12.5, 5000)
+    lat = rng.uniform(45.5, 46.8, 5000)
+    lon[:3], lat[:3] = 10.605, 46.495  # on the nodata post (60, 50)
+    for method in ("bilinear", "nearest", "bicubic"):
+        np.testing.assert_allclose(ready.sample(lon, lat, method), lazy.sample(lon, lat, method),
+                                   rtol=1e-12, equal_nan=True)
+    assert np.isnan(ready.sample(lon[:1], lat[:1])[0])
+    assert ready._window is window  # nothing read again
+    # a point beyond the footprint is still found, without replacing the footprint window
+    far = ready.sample(np.array([10.015]), np.array([46.985]))
+    assert far[0] == pytest.approx(lazy.sample(np.array([10.015]), np.array([46.985]))[0])
+    assert ready._window is window
+    stack = DemStack([path])
+    stack.prepare(10.5, 45.5, 12.5, 46.8)
+    assert stack.sources[0]._window[2].shape == (136, 206)

@@ -20,6 +20,9 @@ used by the interpolation is no data (as MERSYN: a background post sends the poi
 DEM). Methods "nearest", "bilinear" (2x2 posts), "bicubic" (4x4 posts, Keys a = -0.5).
 ``DemStack(sources).sample(lon, lat)`` -> (heights, source index), trying each DEM in order;
 index -1 (and NaN) where none has data (the caller then falls back to the tie points).
+``prepare(lon_min, lat_min, lon_max, lat_max)`` (sources and stacks) reads once the window of
+a GDAL raster that covers a footprint, decoding its blocks on all cores; later lookups inside it
+read nothing more (bilinear: four flat gathers).
 """
 
 from __future__ import annotations
@@ -125,6 +128,9 @@ class DemSource:
         vals = self._fetch(rr.reshape(-1), cc.reshape(-1)).reshape(idx.size, kr, kc)
         out[idx] = np.einsum("nij,ni,nj->n", vals, rw, cw)
         return out
+
+    def prepare(self, lon_min: float, lat_min: float, lon_max: float, lat_max: float) -> None:
+        """Read what lookups inside these WGS84 bounds need, once (no-op: memmapped tiles)."""
 
     def close(self) -> None:
         """Release open files (memmaps, datasets)."""
@@ -385,6 +391,7 @@ class RasterSource(DemSource):
         left, bottom, right, top = ds.bounds
         self._x_centre = 0.5 * (left + right)
         self._window: tuple[int, int, np.ndarray] | None = None
+        self._prepared = False
 
     @property
     def bounds(self) -> tuple[float, float, float, float]:
@@ -404,24 +411,98 @@ class RasterSource(DemSource):
         inside = (r >= -0.5) & (r < self.n_rows - 0.5) & (c >= -0.5) & (c < self.n_cols - 0.5)
         return r, c, inside
 
-    def _fetch(self, rows, cols):
+    def _read(self, r0: int, r1: int, c0: int, c1: int) -> np.ndarray:
+        """Posts [r0, r1) x [c0, c1) as float heights (float32, float64 for float64 rasters;
+        NaN = no data), blocks decoded on all cores (``GDAL_NUM_THREADS``)."""
+        import rasterio
         from rasterio.errors import RasterioError
         from rasterio.windows import Window
 
-        r0, r1, c0, c1 = int(rows.min()), int(rows.max()) + 1, int(cols.min()), int(cols.max()) + 1
-        w = self._window
-        if w is None or not (w[0] <= r0 and w[1] <= c0 and r1 <= w[0] + w[2].shape[0]
-                             and c1 <= w[1] + w[2].shape[1]):
-            try:
+        try:
+            with rasterio.Env(GDAL_NUM_THREADS="ALL_CPUS"):
                 data = self._ds.read(self._band, window=Window(c0, r0, c1 - c0, r1 - r0))
-            except (RasterioError, OSError) as exc:
-                raise DemError(f"{self.name}: cannot read DEM ({exc})") from exc
-            data = data.astype(np.float64)
-            if self._nodata is not None:
-                data[data == self._nodata] = np.nan
+        except (RasterioError, OSError) as exc:
+            raise DemError(f"{self.name}: cannot read DEM ({exc})") from exc
+        nodata = np.isnan(data) if data.dtype.kind == "f" else np.zeros(data.shape, bool)
+        if self._nodata is not None:
+            nodata |= data == self._nodata
+        dtype = np.result_type(data.dtype, np.float32)
+        if self._scale != 1.0 or self._offset != 0.0:
             data = data * self._scale + self._offset
-            w = self._window = (r0, c0, data)
-        return w[2][rows - w[0], cols - w[1]]
+        data = data.astype(dtype)
+        data[nodata] = np.nan
+        return data
+
+    def _covers(self, r0: int, r1: int, c0: int, c1: int) -> bool:
+        w = self._window
+        return w is not None and (w[0] <= r0 and w[1] <= c0 and r1 <= w[0] + w[2].shape[0]
+                                  and c1 <= w[1] + w[2].shape[1])
+
+    def _fetch(self, rows, cols):
+        r0, r1, c0, c1 = int(rows.min()), int(rows.max()) + 1, int(cols.min()), int(cols.max()) + 1
+        if not self._covers(r0, r1, c0, c1):
+            data = self._read(r0, r1, c0, c1)
+            if self._prepared:  # a point beyond the prepared footprint: keep the footprint
+                return data[rows - r0, cols - c0].astype(np.float64)
+            self._window = (r0, c0, data)
+        w = self._window
+        assert w is not None
+        return w[2][rows - w[0], cols - w[1]].astype(np.float64)
+
+    def prepare(self, lon_min: float, lat_min: float, lon_max: float, lat_max: float) -> None:
+        """Read the posts under the WGS84 bounds (plus the bicubic margin) once."""
+        from rasterio.errors import RasterioError
+        from rasterio.warp import transform_bounds
+
+        if not (lon_max > lon_min and lat_max > lat_min and lon_max - lon_min < 360.0):
+            return
+        try:
+            x0, y0, x1, y1 = transform_bounds("EPSG:4326", self._ds.crs, lon_min, lat_min,
+                                              lon_max, lat_max, densify_pts=21)
+        except (RasterioError, ValueError):  # outside the DEM CRS's area: read lazily
+            return
+        if self._geographic:
+            shift = 360.0 * np.round((self._x_centre - 0.5 * (x0 + x1)) / 360.0)
+            x0, x1 = x0 + shift, x1 + shift
+        a = self._inv
+        cs = [a.a * x + a.b * y + a.c for x in (x0, x1) for y in (y0, y1)]
+        rs = [a.d * x + a.e * y + a.f for x in (x0, x1) for y in (y0, y1)]
+        r0 = max(int(np.floor(min(rs))) - 3, 0)
+        r1 = min(int(np.ceil(max(rs))) + 3, self.n_rows)
+        c0 = max(int(np.floor(min(cs))) - 3, 0)
+        c1 = min(int(np.ceil(max(cs))) + 3, self.n_cols)
+        if r1 <= r0 or c1 <= c0 or not all(np.isfinite(cs + rs)):
+            return
+        self._window = (r0, c0, self._read(r0, r1, c0, c1))
+        self._prepared = True
+
+    def _sample_chunk(self, lon: np.ndarray, lat: np.ndarray, method: str) -> np.ndarray:
+        """Bilinear lookups inside the prepared window: four flat gathers (same numbers as the
+        generic 2x2 kernel); anything else: the generic path."""
+        if method != "bilinear" or not self._prepared:
+            return super()._sample_chunk(lon, lat, method)
+        out = np.full(lon.size, np.nan)
+        idx = np.flatnonzero(np.isfinite(lon) & np.isfinite(lat))
+        r, c, inside = self._to_lattice(lon[idx], lat[idx])
+        idx, r, c = idx[inside], r[inside], c[inside]
+        if idx.size == 0:
+            return out
+        rf, cf = np.floor(r), np.floor(c)
+        ra = np.clip(rf.astype(np.int64), 0, self.n_rows - 1)
+        rb = np.clip(rf.astype(np.int64) + 1, 0, self.n_rows - 1)
+        ca = np.clip(cf.astype(np.int64), 0, self.n_cols - 1)
+        cb = np.clip(cf.astype(np.int64) + 1, 0, self.n_cols - 1)
+        if not self._covers(int(ra.min()), int(rb.max()) + 1, int(ca.min()), int(cb.max()) + 1):
+            return super()._sample_chunk(lon, lat, method)
+        w0, wc0, data = self._window  # type: ignore[misc]
+        flat = data.reshape(-1)
+        ra, rb = (ra - w0) * data.shape[1], (rb - w0) * data.shape[1]
+        ca, cb = ca - wc0, cb - wc0
+        fr, fc = r - rf, c - cf
+        top = flat[ra + ca] * (1.0 - fc) + flat[ra + cb] * fc
+        bottom = flat[rb + ca] * (1.0 - fc) + flat[rb + cb] * fc
+        out[idx] = top * (1.0 - fr) + bottom * fr
+        return out
 
     def close(self) -> None:
         self._ds.close()
@@ -442,6 +523,10 @@ class CompositeSource(DemSource):
 
     def sample(self, lon: Any, lat: Any, method: str = "bilinear") -> np.ndarray:
         return DemStack(self.sources).sample(lon, lat, method)[0]
+
+    def prepare(self, lon_min: float, lat_min: float, lon_max: float, lat_max: float) -> None:
+        for s in self.sources:
+            s.prepare(lon_min, lat_min, lon_max, lat_max)
 
     def close(self) -> None:
         for s in self.sources:
@@ -472,6 +557,11 @@ class DemStack:
             index.ravel()[sel] = i
             todo.ravel()[sel] = False
         return h, index
+
+    def prepare(self, lon_min: float, lat_min: float, lon_max: float, lat_max: float) -> None:
+        """Read once what lookups inside these WGS84 bounds need, from every DEM."""
+        for s in self.sources:
+            s.prepare(lon_min, lat_min, lon_max, lat_max)
 
     def close(self) -> None:
         for s in self.sources:
