@@ -201,6 +201,35 @@ def row_spans(boundary: Boundary, grid: OutputGrid, row_start: int = 0,
     return RowSpans(row_start, grid.width, rptr, start, stop)
 
 
+@njit(cache=True)
+def _sorted_small(x, n):  # pragma: no cover
+    """The first ``n`` values of ``x`` sorted (insertion sort: a few edge crossings per line;
+    numba's own sort costs seconds of compilation per dtype)."""
+    out = x[:n].copy()
+    for i in range(1, n):
+        v = out[i]
+        k = i - 1
+        while k >= 0 and out[k] > v:
+            out[k + 1] = out[k]
+            k -= 1
+        out[k + 1] = v
+    return out
+
+
+@njit(cache=True)
+def _argsort_small(s):  # pragma: no cover
+    """Stable argsort by insertion (rows of already sorted spans: nearly sorted)."""
+    order = np.arange(s.size)
+    for i in range(1, s.size):
+        q = order[i]
+        k = i - 1
+        while k >= 0 and s[order[k]] > s[q]:
+            order[k + 1] = order[k]
+            k -= 1
+        order[k + 1] = q
+    return order
+
+
 @njit(cache=True, parallel=True)
 def _scan(xv, yv, ptr, shifts, x0, y0, dx, dy, width, r0, margin, counts, start, stop, rptr,
           fill):  # pragma: no cover
@@ -218,7 +247,7 @@ def _scan(xv, yv, ptr, shifts, x0, y0, dx, dy, width, r0, margin, counts, start,
                     for s in range(shifts.size):
                         xs[n] = x + shifts[s]
                         n += 1
-        xs_sorted = np.sort(xs[:n])
+        xs_sorted = _sorted_small(xs, n)
         k = 0
         w = rptr[r] if fill else 0
         last_stop = -1
@@ -264,7 +293,7 @@ def _union_rows(rptr, start, stop, margin, counts, ostart, ostop, optr, fill):  
         b = rptr[r + 2 * margin + 1]
         s = start[a:b]
         e = stop[a:b]
-        order = np.argsort(s)
+        order = _argsort_small(s)
         k = 0
         w = optr[r] if fill else 0
         last = -1

@@ -170,8 +170,8 @@ def _inverse_many(lon, lat, lat_tp, lon_tp, df, dj):
     line = np.full(n, np.nan)
     col = np.full(n, np.nan)
     paths = np.zeros(5, np.int64)
-    f = -1
-    j = -1
+    f = np.int64(-1)  # not a literal: one specialisation of search_facet
+    j = np.int64(-1)
     for i in range(n):
         f2, j2, u, v, path = search_facet(lon[i], lat[i], f, j, lat_tp, lon_tp)
         paths[path + 1] += 1

@@ -79,8 +79,10 @@ def primary_grid(lon, lat, lat_tp, lon_tp, coef, df, dj, geo):
     line = np.full((nr, nc), np.nan)
     col = np.full((nr, nc), np.nan)
     paths = np.zeros(5, np.int64)
-    f = -1
-    j = -1
+    # typed constants: a literal argument would compile a second specialisation of the callee
+    f = np.int64(-1)
+    j = np.int64(-1)
+    model0 = np.int64(0)
     last_l = (lat_tp.shape[0] - 1) * df * 0.5
     last_p = (lat_tp.shape[1] - 1) * dj * 0.5
     for r in range(nr):
@@ -96,13 +98,13 @@ def primary_grid(lon, lat, lat_tp, lon_tp, coef, df, dj, geo):
                 col[r, c] = (j + v) * dj
                 if geo != 0:  # the search inverts the bilinear lon/lat facet: polish
                     l2, p2, it = _newton(lon[r, c], lat[r, c], line[r, c], col[r, c], 0.0, coef,
-                                         df, dj, 0, geo, 1e-6, 10)
+                                         df, dj, model0, geo, 1e-6, np.int64(10))
                     if not math.isnan(l2):
                         line[r, c] = l2
                         col[r, c] = p2
             else:
                 l2, p2, it = _newton(lon[r, c], lat[r, c], last_l, last_p, 0.0, coef, df, dj,
-                                     0, geo, 1e-6, 30)
+                                     model0, geo, 1e-6, np.int64(30))
                 if it < 30 and not math.isnan(l2):
                     line[r, c] = l2
                     col[r, c] = p2
@@ -172,7 +174,8 @@ def find_antecedents(lon, lat, height, hmode, ptr, start, stop, cl, cp, step,
     h_used = np.full(dshape, np.nan, np.float32)
     sh_e = np.full(dshape, np.nan, np.float32)
     sh_n = np.full(dshape, np.nan, np.float32)
-    for i in prange(nr):
+    for i0 in prange(nr):
+        i = np.int64(i0)  # one specialisation of the callees (a prange index is unsigned)
         for j in _columns(ptr, start, stop, i):
             tlon = lon[i, j]
             tlat = lat[i, j]
@@ -216,9 +219,10 @@ def find_antecedents_handbook(lon, lat, height, hmode, ptr, start, stop, lat_tp,
     out_p = np.full((nr, nc), np.nan, np.float32)
     iters = np.full((nr, nc), -1, np.int8)
     paths = np.zeros((nr, 5), np.int64)
-    for i in prange(nr):
-        f = -1
-        g = -1
+    for i0 in prange(nr):
+        i = np.int64(i0)  # one specialisation of the callees (a prange index is unsigned)
+        f = np.int64(-1)
+        g = np.int64(-1)
         for j in _columns(ptr, start, stop, i):
             tlon = lon[i, j]
             tlat = lat[i, j]

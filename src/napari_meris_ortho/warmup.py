@@ -1,0 +1,95 @@
+"""Compile the numba kernels of ``orthorectify`` ahead of a user's first run.
+
+numba compiles each kernel on its first call and caches the machine code (``cache=True``:
+``__pycache__`` next to the sources, or ``NUMBA_CACHE_DIR``). ``warm_up()`` orthorectifies a
+tiny synthetic product (``engine.tiepoints.analytic_swath``, written as a real N1 file) with
+every elevation source, sampling method and search method, on a geographic and a UTM grid, so
+that the kernels and specialisations a ``meris-ortho map`` uses are compiled once.
+``scripts/setup.sh`` runs ``python -m napari_meris_ortho.warmup`` in the background after
+installing; the napari Orthorectify widget starts ``warm_up_in_background()`` when it opens.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import tempfile
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+
+_STARTED: threading.Thread | None = None
+#: (elevation, sampling, method, crs) combinations compiled by ``warm_up``
+RUNS = (("none", "nearest", "primary", "EPSG:4326"),
+        ("tiepoints", "bilinear", "primary", "EPSG:4326"),
+        ("dem", "bicubic", "primary", "EPSG:4326"),
+        ("dem", "nearest", "primary", "utm"),
+        ("dem", "nearest", "handbook", "EPSG:4326"))
+
+
+def _tiny_product(directory: Path) -> tuple[Path, Path]:
+    """A 70 x 129 FR product on the analytic swath and a GeoTIFF DEM under it."""
+    import rasterio
+    from rasterio.transform import from_origin
+
+    from .engine.tiepoints import analytic_swath
+    from .io.n1 import write_product
+
+    height, width = 70, 129
+    g = analytic_swath(height=height, width=width)
+    tp = dict(latitude=g.latitude, longitude=(g.longitude + 180.0) % 360.0 - 180.0,
+              view_zenith=g.view_zenith, view_azimuth=g.view_azimuth,
+              dem_alt=np.round(g.dem_alt))
+    counts = [np.full((height, width), 100 + b, np.uint16) for b in range(15)]
+    product = write_product(directory / "warmup.N1", product_type="MER_FR__1P", tie_points=tp,
+                            counts=counts, flags=np.zeros((height, width), np.uint8),
+                            detector_index=np.zeros((height, width), np.int16),
+                            first_line_time=dt.datetime(2003, 9, 21, 9, 23))
+    lon0, lat0 = float(tp["longitude"].min()) - 0.5, float(tp["latitude"].min()) - 0.5
+    lon1, lat1 = float(tp["longitude"].max()) + 0.5, float(tp["latitude"].max()) + 0.5
+    res = 0.01
+    w, h = int((lon1 - lon0) / res), int((lat1 - lat0) / res)
+    dem = directory / "warmup_dem.tif"
+    with rasterio.open(dem, "w", driver="GTiff", width=w, height=h, count=1, dtype="float32",
+                       crs="EPSG:4326", transform=from_origin(lon0, lat1, res, res)) as ds:
+        ds.write(np.full((h, w), 1000.0, np.float32), 1)
+    return product, dem
+
+
+def warm_up() -> float:
+    """Run ``orthorectify`` on a tiny product in every configuration of ``RUNS``; seconds."""
+    from .engine.grid import utm_crs_for
+    from .io.n1 import read_product
+    from .ortho import orthorectify
+
+    t0 = time.perf_counter()
+    with tempfile.TemporaryDirectory(prefix="meris-ortho-warmup-") as tmp:
+        product, dem = _tiny_product(Path(tmp))
+        tp = read_product(product).tie_points
+        utm = utm_crs_for(float(tp["longitude"].mean()), float(tp["latitude"].mean()))
+        for elevation, sampling, method, crs in RUNS:
+            orthorectify(product, dems=[dem] if elevation == "dem" else (), elevation=elevation,
+                         sampling=sampling, method=method, bands=[1, 2],
+                         crs=utm if crs == "utm" else crs, diagnostics=method == "handbook")
+    return time.perf_counter() - t0
+
+
+def warm_up_in_background() -> threading.Thread:
+    """``warm_up`` once per process in a daemon thread (errors are ignored: a cold cache
+    only costs time)."""
+    global _STARTED
+    if _STARTED is None:
+        def run() -> None:
+            try:
+                warm_up()
+            except Exception:  # best effort: never disturbs the caller
+                pass
+
+        _STARTED = threading.Thread(target=run, name="meris-ortho-warmup", daemon=True)
+        _STARTED.start()
+    return _STARTED
+
+
+if __name__ == "__main__":
+    print(f"numba kernels compiled in {warm_up():.1f} s")
