@@ -3,7 +3,7 @@
 # under Xvfb.
 set -euo pipefail
 cd "$(dirname "$0")/.."
-bash scripts/setup.sh --gui
+MERIS_ORTHO_NO_WARMUP=1 bash scripts/setup.sh --gui
 export PATH="$PWD/.venv/bin:$PATH"
 unset QT_QPA_PLATFORM
 ruff check src tests benchmarks

@@ -33,4 +33,9 @@ if [[ ! -f $stamp ]]; then
     .venv/bin/python -m pip install -q -e ".[test]"
     rm -f .venv/.installed-*
     touch "$stamp"
+    # compile the numba kernels of `meris-ortho map` in the background (a user's first map then
+    # loads them from the cache); the test runner compiles them itself
+    if [[ -z "${MERIS_ORTHO_NO_WARMUP:-}" ]]; then
+        nohup .venv/bin/python -m napari_meris_ortho.warmup >/dev/null 2>&1 &
+    fi
 fi

@@ -70,6 +70,39 @@ def test_dem_mode_finds_consistent_antecedents(files, dem_run):
     assert len(hist) == 11 and sum(hist) == ok.sum() and sum(hist[4:]) == 0
 
 
+def test_precompute_once_apply_to_any_band(files, dem_run):
+    """Issue 12: antecedents once, then counts (fused gather of all bands), radiances, flags."""
+    from napari_meris_ortho import precompute
+
+    _, prod, dem, _ = files
+    product = read_product(prod)
+    ante = precompute(prod, dems=[dem])
+    np.testing.assert_array_equal(ante.line, dem_run.diagnostics["line"])
+    counts = ante.counts([2, 1, 9])
+    assert counts.dtype == np.uint16 and counts.shape == (3, *ante.grid.shape)
+    ok = ante.valid
+    line = np.floor(ante.line[ok] + 0.5).astype(int)
+    col = np.floor(ante.col[ok] + 0.5).astype(int)
+    for k, b in enumerate((2, 1, 9)):  # nearest: exactly the product's counts
+        np.testing.assert_array_equal(counts[k][ok], product.counts(b)[line, col])
+        assert not counts[k][~ok].any()
+        np.testing.assert_array_equal(ante.radiance([b])[b], dem_run.bands[b])
+    flags = ante.flags()
+    assert flags.dtype == np.uint8
+    np.testing.assert_array_equal(flags, dem_run.flags)
+    np.testing.assert_array_equal(flags[ok], product.flags[line, col])
+    # bilinear: counts are the interpolated radiances / sf_rad within half a count
+    bil = precompute(prod, dems=[dem], sampling="bilinear")
+    rad = bil.radiance([1])[1]
+    c = bil.counts([1])[0]
+    ok = bil.valid
+    sf = product.scaling.radiance[0]
+    assert np.max(np.abs(c[ok] * sf - rad[ok])) <= 0.5 * sf + 1e-6  # float32 radiances
+    assert np.any(np.abs(rad[ok] / sf - np.round(rad[ok] / sf)) > 0.1)  # really interpolated
+    assert bil.stats["seconds"]["resample"] > 0 and bil.window == tuple(
+        bil.stats["product_lines_read"])
+
+
 def test_parallax_shift_matches_the_antecedent_move(files, dem_run):
     _, prod, _, _ = files
     none = orthorectify(prod, elevation="none", diagnostics=True)

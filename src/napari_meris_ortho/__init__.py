@@ -17,6 +17,7 @@ _LAZY = {
     "N1FormatError": "napari_meris_ortho.errors",
     "MerisOrthoError": "napari_meris_ortho.errors",
     "orthorectify": "napari_meris_ortho.ortho",
+    "precompute": "napari_meris_ortho.ortho",
     "OrthoResult": "napari_meris_ortho.ortho",
     "geodetic_correction": "napari_meris_ortho.engine.location",
     "synthesize": "napari_meris_ortho.synthesis",

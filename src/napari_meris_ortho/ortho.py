@@ -78,19 +78,25 @@ class OrthoResult:
         return self.grid.transform
 
     def band_metadata(self) -> list[dict[str, Any]]:
-        """Per output band (sorted band numbers): MERIS band number, central wavelength and
-        bandwidth (nm), radiance unit and ``sf_rad``, the source product's counts-to-radiance
-        factor (Scaling Factor GADS, Appendix A); the band values are already radiances."""
-        out = []
-        for b in sorted(self.bands):
-            meta: dict[str, Any] = {"meris_band": b, "units": RADIANCE_UNITS}
-            for key, name in (("wavelengths", "wavelength_nm"), ("bandwidths", "bandwidth_nm"),
-                              ("scale_factors", "sf_rad")):
-                value = self.stats.get(key, {}).get(b)
-                if value is not None:
-                    meta[name] = value
-            out.append(meta)
-        return out
+        """Per output band (sorted band numbers), ``band_metadata``; the band values are
+        already radiances."""
+        return band_metadata(self.stats, self.bands)
+
+
+def band_metadata(stats: dict[str, Any], bands: Sequence[int]) -> list[dict[str, Any]]:
+    """Per band (sorted band numbers): MERIS band number, central wavelength and bandwidth
+    (nm), radiance unit and ``sf_rad``, the source product's counts-to-radiance factor
+    (Scaling Factor GADS, Appendix A)."""
+    out = []
+    for b in sorted(bands):
+        meta: dict[str, Any] = {"meris_band": b, "units": RADIANCE_UNITS}
+        for key, name in (("wavelengths", "wavelength_nm"), ("bandwidths", "bandwidth_nm"),
+                          ("scale_factors", "sf_rad")):
+            value = stats.get(key, {}).get(b)
+            if value is not None:
+                meta[name] = value
+        out.append(meta)
+    return out
 
 
 def _open_product(product: str | os.PathLike[str] | MerisProduct) -> MerisProduct:
@@ -186,7 +192,23 @@ def orthorectify(product: str | os.PathLike[str] | MerisProduct,
     facet search in the loop); ``allow_empty``: a ``grid`` holding no pixel centre inside the
     zero-height segment boundary gives an all-background result instead of an OptionsError
     (synthesis tiles: terrain points may still lie there, section 3.1).
+    Equals ``precompute(...).result()``.
     """
+    return precompute(product, grid, dems, elevation, sampling, bands, tolerance, parallax,
+                      diagnostics, progress, method=method, crs=crs, pixel_size=pixel_size,
+                      geolocation=geolocation, allow_empty=allow_empty).result()
+
+
+def precompute(product: Any, grid: OutputGrid | None = None, dems: Sequence[Any] = (),
+               elevation: str = "dem", sampling: str = "nearest",
+               bands: Sequence[int] | None = None, tolerance: float = 0.01,
+               parallax: str = "handbook", diagnostics: bool = False,
+               progress: ProgressCallback | None = None, *, method: str = "primary",
+               crs: Any = "EPSG:4326", pixel_size: float | None = None,
+               geolocation: str | None = None, allow_empty: bool = False) -> Antecedents:
+    """The antecedent of every output point, once (arguments as ``orthorectify``); then
+    ``Antecedents.counts/radiance/flags`` sample any band at them (as pyresample's
+    ``get_neighbour_info`` / ``get_sample_from_neighbour_info``)."""
     t_start = time.perf_counter()
     opts = OrthoOptions.parse(elevation=elevation, sampling=sampling, parallax=parallax,
                               geolocation=geolocation, method=method, tolerance=tolerance,
@@ -204,11 +226,148 @@ def orthorectify(product: str | os.PathLike[str] | MerisProduct,
             raise OptionsError(
                 f"the output extent {job.grid.bounds} misses the product footprint")
         if job.spans.count == 0:  # nothing to search: every point is background
-            return _empty_result(job)
+            return _empty_antecedents(job)
         return _run(job, progress)
     finally:
         if stack is not None:
             stack.close()
+
+
+@dataclass
+class Antecedents:
+    """Antecedent (line, col) of every output point of ``grid`` (float32, NaN: background)
+    and the product lines ``window`` = [first, stop) they read; ``counts``, ``radiance`` and
+    ``flags`` sample the product there (nearest: one fused gather of all bands)."""
+
+    prod: MerisProduct
+    grid: OutputGrid
+    line: np.ndarray
+    col: np.ndarray
+    iterations: np.ndarray
+    sampling: Sampling
+    bands: list[int]
+    stats: dict[str, Any]
+    diagnostics: dict[str, np.ndarray]
+    progress: ProgressCallback | None = None
+    t_start: float = field(default_factory=time.perf_counter)
+    _index: np.ndarray | None = field(default=None, repr=False)
+
+    @property
+    def valid(self) -> np.ndarray:
+        """Points whose antecedent is inside the product."""
+        return self.iterations >= 0
+
+    @property
+    def window(self) -> tuple[int, int]:
+        return tuple(self.stats["product_lines_read"])  # type: ignore[return-value]
+
+    def _rows(self) -> slice:
+        first, stop = self.window
+        return slice(first, stop)
+
+    def _nearest_index(self) -> np.ndarray:
+        """Flat pixel index (relative to the window) of each point's nearest pixel, once."""
+        from .engine.resample import nearest_pixel
+
+        if self._index is None:
+            first, stop = self.window
+            self._index = nearest_pixel(self.line.astype(np.float64) - first, self.col,
+                                        stop - first, int(self.prod.width))
+        return self._index
+
+    def _timed(self, key: str, t0: float) -> None:
+        sec = self.stats["seconds"]
+        sec[key] += time.perf_counter() - t0
+
+    def _stack(self, images: Sequence[Any], dtype: Any) -> np.ndarray:
+        """(n, window lines, W) native copy of the window of each image (memmaps read here)."""
+        t0 = time.perf_counter()
+        rows = self._rows()
+        out = np.empty((len(images), rows.stop - rows.start, int(self.prod.width)), dtype)
+        for k, im in enumerate(images):
+            out[k] = im[rows]
+        self._timed("read_bands", t0)
+        return out
+
+    def _interpolated(self, bands: Sequence[int]) -> list[np.ndarray]:
+        """Bilinear/bicubic counts (float32) of ``bands`` at the antecedents."""
+        from .engine.resample import resample_bands
+
+        stack = self._stack([self.prod.counts(b) for b in bands], np.uint16)
+        t0 = time.perf_counter()
+        out = resample_bands(list(stack), self.line.astype(np.float64) - self.window[0],
+                             self.col, self.sampling.value)
+        self._timed("resample", t0)
+        return out
+
+    def counts(self, bands: Sequence[int] | None = None) -> np.ndarray:
+        """uint16 counts (len(bands), rows, cols) at the antecedents, 0 = background; nearest:
+        the product's counts; bilinear/bicubic: interpolated counts rounded half up."""
+        from .engine.resample import gather
+
+        bands = self.bands if bands is None else [int(b) for b in bands]
+        nr, nc = self.grid.shape
+        first, stop = self.window
+        out = np.zeros((len(bands), nr * nc), np.uint16)
+        if stop <= first or not bands:
+            return out.reshape(len(bands), nr, nc)
+        if self.sampling is Sampling.NEAREST:
+            stack = self._stack([self.prod.counts(b) for b in bands], np.uint16)
+            index = self._nearest_index()
+            t0 = time.perf_counter()
+            gather(stack, index, out)
+            self._timed("resample", t0)
+            return out.reshape(len(bands), nr, nc)
+        for k, v in enumerate(self._interpolated(bands)):
+            out[k] = np.clip(np.floor(v.reshape(-1) + np.float32(0.5)), 0, 65535)
+        return out.reshape(len(bands), nr, nc)
+
+    def radiance(self, bands: Sequence[int] | None = None) -> dict[int, np.ndarray]:
+        """float32 radiances (counts x sf_rad, Scaling Factor GADS) of ``bands``, 0 = background;
+        bilinear/bicubic: the interpolated counts, not rounded."""
+        bands = self.bands if bands is None else [int(b) for b in bands]
+        sf = self.prod.scaling.radiance
+        nr, nc = self.grid.shape
+        if self.sampling is Sampling.NEAREST or self.window[1] <= self.window[0]:
+            counts = self.counts(bands)
+            return {b: counts[k].astype(np.float32) * np.float32(sf[b - 1])
+                    for k, b in enumerate(bands)}
+        out = {}
+        for b, v in zip(bands, self._interpolated(bands), strict=True):
+            v *= np.float32(sf[b - 1])
+            out[b] = v.reshape(nr, nc)
+        return out
+
+    def flags(self) -> np.ndarray:
+        """L1b flags (uint8) of the nearest pixel, 0 = background (any sampling)."""
+        from .engine.resample import gather
+
+        nr, nc = self.grid.shape
+        out = np.zeros((1, nr * nc), np.uint8)
+        first, stop = self.window
+        if stop > first:
+            stack = self._stack([self.prod.flags], np.uint8)
+            t0 = time.perf_counter()
+            gather(stack, self._nearest_index(), out)
+            self._timed("resample", t0)
+        return out.reshape(nr, nc)
+
+    def finish(self) -> dict[str, Any]:
+        """Statistics with the engine and total times up to now (Appendix B log)."""
+        sec = self.stats["seconds"]
+        sec["engine"] = sec["prediction_correction"] + sec["resample"]
+        sec["total"] = time.perf_counter() - self.t_start
+        return self.stats
+
+    def result(self) -> OrthoResult:
+        """All bands and flags as an ``OrthoResult`` (what ``orthorectify`` returns)."""
+        radiance = self.radiance()
+        flags = self.flags()
+        if self.progress is not None:
+            total = self.grid.height + len(self.bands)
+            self.progress(total, total)
+        return OrthoResult(radiance, self.grid, self.valid, flags, self.finish(),
+                           self.diagnostics)
 
 
 @dataclass
@@ -280,7 +439,7 @@ def _run(job: _Job, progress: ProgressCallback | None) -> OrthoResult:
                 "shift_north_m": np.full((nr, nc), np.nan, np.float32)}
     search: dict[str, int] = {}
     sources = np.zeros(len(stack.sources) + 1 if stack is not None else 1, np.int64)
-    t_dem = t_lonlat = t_engine = t_resample = 0.0
+    t_dem = t_lonlat = t_engine = 0.0
     total = nr + len(band_list)
     for r0 in range(0, nr, _BLOCK_ROWS):
         r1 = min(r0 + _BLOCK_ROWS, nr)
@@ -323,11 +482,8 @@ def _run(job: _Job, progress: ProgressCallback | None) -> OrthoResult:
             diag["elevation_source"][r0:r1] = np.where(ok, code, SOURCE_NONE)
         if progress is not None:
             progress(r1, total)
-    radiance, flags, window, t_read, t_res = _sample_bands(prod, line, col, band_list,
-                                                           opts.sampling)
-    t_resample += t_res
-    if progress is not None:
-        progress(total, total)
+    window = antecedent_line_window(line, col, int(prod.height), int(prod.width),
+                                    opts.sampling)
     valid = iters >= 0
     hist = predcorr.iteration_histogram(iters)
     if diagnostics:
@@ -337,11 +493,12 @@ def _run(job: _Job, progress: ProgressCallback | None) -> OrthoResult:
             diag["shift_east_m"] = diag["elevation"].copy()
             diag["shift_north_m"] = diag["elevation"].copy()
     seconds = {"lonlat": t_lonlat, "dem": t_dem, "prediction_correction": t_engine,
-               "read_bands": t_read, "resample": t_resample, "engine": t_engine + t_resample,
+               "read_bands": 0.0, "resample": 0.0, "engine": t_engine,
                "total": time.perf_counter() - job.t_start}
     stats = _stats(job, search=search, hist=hist, processed=int(valid.sum()), window=window,
                    sources=_source_counts(sources, stack, hmode), seconds=seconds)
-    return OrthoResult(radiance, grid, valid, flags, stats, diag)
+    return Antecedents(prod, grid, line, col, iters, opts.sampling, band_list, stats, diag,
+                       progress, job.t_start)
 
 
 def _stats(job: _Job, *, search: dict[str, int], hist: np.ndarray, processed: int,
@@ -372,26 +529,25 @@ def _stats(job: _Job, *, search: dict[str, int], hist: np.ndarray, processed: in
     }
 
 
-def _empty_result(job: _Job) -> OrthoResult:
-    """All-background result of a grid no antecedent search can reach (``allow_empty``)."""
-    grid, band_list, stack = job.grid, job.options.bands, job.stack
+def _empty_antecedents(job: _Job) -> Antecedents:
+    """No antecedent search can reach the grid (``allow_empty``): all background."""
+    grid, stack = job.grid, job.stack
     nr, nc = grid.shape
-    bands = {b: np.zeros((nr, nc), np.float32) for b in band_list}
+    nan = np.full((nr, nc), np.nan, np.float32)
+    iters = np.full((nr, nc), -1, np.int8)
     diag: dict[str, np.ndarray] = {}
     if job.options.diagnostics:
-        nan = np.full((nr, nc), np.nan, np.float32)
         diag = {"line": nan, "col": nan.copy(), "elevation": nan.copy(),
                 "elevation_source": np.full((nr, nc), SOURCE_NONE, np.int8),
-                "iterations": np.full((nr, nc), -1, np.int8),
-                "shift_east_m": nan.copy(), "shift_north_m": nan.copy()}
+                "iterations": iters, "shift_east_m": nan.copy(), "shift_north_m": nan.copy()}
     hist = np.zeros(predcorr.MAX_ITERATIONS + 1, np.int64)
     sources = np.zeros(len(stack.sources) + 1 if stack is not None else 1, np.int64)
     seconds = {"lonlat": 0.0, "dem": 0.0, "prediction_correction": 0.0, "read_bands": 0.0,
                "resample": 0.0, "engine": 0.0, "total": time.perf_counter() - job.t_start}
     stats = _stats(job, search={}, hist=hist, processed=0, window=(0, 0),
                    sources=_source_counts(sources, stack, job.hmode), seconds=seconds)
-    return OrthoResult(bands, grid, np.zeros((nr, nc), bool), np.zeros((nr, nc), np.uint8),
-                       stats, diag)
+    return Antecedents(job.prod, grid, nan, nan, iters, job.options.sampling,
+                       list(job.options.bands), stats, diag, None, job.t_start)
 
 
 def antecedent_line_window(line: np.ndarray, col: np.ndarray, n_lines: int, n_cols: int,
@@ -408,51 +564,6 @@ def antecedent_line_window(line: np.ndarray, col: np.ndarray, n_lines: int, n_co
     first = int(math.floor(float(lines.min()))) - before
     stop = int(math.floor(float(lines.max()))) + 1 + after
     return max(first, 0), min(stop, n_lines)
-
-
-def _sample_bands(prod: MerisProduct, line: np.ndarray, col: np.ndarray, band_list: list[int],
-                  sampling: str) -> tuple[dict[int, np.ndarray], np.ndarray, tuple[int, int],
-                                          float, float]:
-    """Radiances and flags at the antecedents, reading only the product lines they need
-    (``antecedent_line_window``): (bands, flags, window, read seconds, resample seconds)."""
-    from .engine.resample import gather, nearest_pixel, resample_bands
-
-    t0 = time.perf_counter()
-    n_lines, n_cols = int(prod.height), int(prod.width)
-    first, stop = antecedent_line_window(line, col, n_lines, n_cols, sampling)
-    nr, nc = line.shape
-    radiance = {b: np.zeros((nr, nc), np.float32) for b in band_list}
-    if stop <= first:
-        empty = np.zeros((nr, nc), np.uint8)
-        return radiance, empty, (first, stop), 0.0, time.perf_counter() - t0
-    rows = slice(first, stop)
-    # antecedents relative to the first line read; a point outside the product stays outside
-    sub_line = line.astype(np.float64) - first
-    t_read = 0.0
-    if sampling == "nearest":
-        index = nearest_pixel(sub_line, col, stop - first, n_cols)
-        for b in band_list:
-            t1 = time.perf_counter()
-            image = np.ascontiguousarray(prod.counts(b)[rows], dtype=np.uint16)
-            t_read += time.perf_counter() - t1
-            gather(image, index, float(prod.scaling.radiance[b - 1]), radiance[b].reshape(-1))
-        t1 = time.perf_counter()
-        image = np.ascontiguousarray(prod.flags[rows], dtype=np.uint8)
-        t_read += time.perf_counter() - t1
-        out = np.empty((nr, nc), np.float32)
-        gather(image, index, 1.0, out.reshape(-1))
-        flags = out.astype(np.uint8)
-    else:
-        images = [np.ascontiguousarray(prod.counts(b)[rows], dtype=np.uint16)
-                  for b in band_list]
-        fl = np.ascontiguousarray(prod.flags[rows], dtype=np.uint8)
-        t_read = time.perf_counter() - t0
-        out_bands = resample_bands(images, sub_line, col, sampling)
-        flags = resample_bands([fl], sub_line, col, "nearest")[0].astype(np.uint8)
-        for b, o in zip(band_list, out_bands, strict=True):
-            o *= np.float32(prod.scaling.radiance[b - 1])
-            radiance[b] = o
-    return radiance, flags, (first, stop), t_read, time.perf_counter() - t0 - t_read
 
 
 def _per_band(source: Any, name: str, band_list: list[int]) -> dict[int, float]:

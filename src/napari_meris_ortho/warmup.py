@@ -2,7 +2,7 @@
 
 numba compiles each kernel on its first call and caches the machine code (``cache=True``:
 ``__pycache__`` next to the sources, or ``NUMBA_CACHE_DIR``). ``warm_up()`` orthorectifies a
-tiny synthetic product (``engine.tiepoints.analytic_swath``, written as a real N1 file) with
+tiny synthetic product (``geometry.tiepoints.analytic_swath``, written as a real N1 file) with
 every elevation source, sampling method and search method, on a geographic and a UTM grid, so
 that the kernels and specialisations a ``meris-ortho map`` uses are compiled once.
 ``scripts/setup.sh`` runs ``python -m napari_meris_ortho.warmup`` in the background after
@@ -12,6 +12,7 @@ installing; the napari Orthorectify widget starts ``warm_up_in_background()`` wh
 from __future__ import annotations
 
 import datetime as dt
+import os
 import tempfile
 import threading
 import time
@@ -33,7 +34,7 @@ def _tiny_product(directory: Path) -> tuple[Path, Path]:
     import rasterio
     from rasterio.transform import from_origin
 
-    from .engine.tiepoints import analytic_swath
+    from .geometry.tiepoints import analytic_swath
     from .io.n1 import write_product
 
     height, width = 70, 129
@@ -59,7 +60,7 @@ def _tiny_product(directory: Path) -> tuple[Path, Path]:
 
 def warm_up() -> float:
     """Run ``orthorectify`` on a tiny product in every configuration of ``RUNS``; seconds."""
-    from .engine.grid import utm_crs_for
+    from .geometry.grid import utm_crs_for
     from .io.n1 import read_product
     from .ortho import orthorectify
 
@@ -75,10 +76,12 @@ def warm_up() -> float:
     return time.perf_counter() - t0
 
 
-def warm_up_in_background() -> threading.Thread:
+def warm_up_in_background() -> threading.Thread | None:
     """``warm_up`` once per process in a daemon thread (errors are ignored: a cold cache
-    only costs time)."""
+    only costs time); nothing when ``MERIS_ORTHO_NO_WARMUP`` is set (tests)."""
     global _STARTED
+    if os.environ.get("MERIS_ORTHO_NO_WARMUP"):
+        return None
     if _STARTED is None:
         def run() -> None:
             try:

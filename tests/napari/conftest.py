@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import datetime as dt
+import os
 
 import numpy as np
 import pytest
@@ -10,6 +11,9 @@ import rasterio
 from rasterio.transform import Affine
 
 from napari_meris_ortho.io.n1 import tie_columns, tie_lines, write_product
+
+# the Orthorectify widget would compile the numba kernels in a background thread
+os.environ.setdefault("MERIS_ORTHO_NO_WARMUP", "1")
 
 #: tiny FR product: 129 lines x 257 columns (3 x 5 tie points), Alps-like latitudes
 TINY_H, TINY_W = 129, 257

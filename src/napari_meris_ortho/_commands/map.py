@@ -141,37 +141,43 @@ def log_lines(stats: dict[str, Any], default_pixel: bool) -> list[str]:
     return out
 
 
-def _write(args: argparse.Namespace, result: Any) -> None:
+def _bands_streamed(args: argparse.Namespace, ante: Any, progress: Any) -> Any:
+    """One band at a time (uint16 counts or float32 radiances), reporting progress."""
+    nr, bands = ante.grid.height, ante.bands
+    for k, b in enumerate(bands):
+        yield ante.counts([b])[0] if args.dtype == "uint16" else ante.radiance([b])[b]
+        progress(nr + k + 1, nr + len(bands))
+
+
+def _write(args: argparse.Namespace, ante: Any, progress: Any) -> None:
+    """The bands streamed into a Cloud-Optimized GeoTIFF, then the diagnostics."""
     import numpy as np
 
-    from ..io.geotiff import meris_band_description, radiance_to_counts, write_cog
-    from ..ortho import RADIANCE_UNITS
+    from ..io.geotiff import meris_band_description, write_cog
+    from ..ortho import RADIANCE_UNITS, band_metadata
 
-    bands = sorted(result.bands)
-    wl = result.stats.get("wavelengths", {})
-    sf = result.stats.get("scale_factors", {})
+    bands, stats = ante.bands, ante.stats
+    wl = stats.get("wavelengths", {})
+    sf = stats.get("scale_factors", {})
     counts = args.dtype == "uint16"
-    values = ((radiance_to_counts(result.bands[b], sf[b]) if counts else result.bands[b])
-              for b in bands)
-    write_cog(args.output, values, result.grid, count=len(bands), dtype=args.dtype,
-              scales=[sf[b] for b in bands] if counts else None,
+    write_cog(args.output, _bands_streamed(args, ante, progress), ante.grid, count=len(bands),
+              dtype=args.dtype, scales=[sf[b] for b in bands] if counts else None,
               offsets=[0.0] * len(bands) if counts else None,
               units=[RADIANCE_UNITS] * len(bands),
               descriptions=[meris_band_description(b, wl.get(b)) for b in bands],
-              band_metadata=result.band_metadata(), compress=args.compress,
-              metadata={"product": result.stats["product"],
-                        "product_name": result.stats.get("product_name", ""),
+              band_metadata=band_metadata(stats, bands), compress=args.compress,
+              metadata={"product": stats["product"],
+                        "product_name": stats.get("product_name", ""),
                         "radiance": RADIANCE_NOTE[args.dtype], "elevation": args.elevation,
-                        "parallax": args.parallax,
-                        "geolocation": result.stats["geolocation"],
+                        "parallax": args.parallax, "geolocation": stats["geolocation"],
                         "tolerance_px": args.tolerance,
                         "sampling": args.sampling, "software": "napari-meris-ortho map"})
     if args.diagnostics:
         names = ("line", "col", "elevation", "elevation_source", "iterations", "shift_east_m",
                  "shift_north_m")
-        arrays = (np.nan_to_num(result.diagnostics[n].astype(np.float32), nan=0.0)
+        arrays = (np.nan_to_num(ante.diagnostics[n].astype(np.float32), nan=0.0)
                   for n in names)
-        write_cog(_diagnostics_path(Path(args.output)), arrays, result.grid, count=len(names),
+        write_cog(_diagnostics_path(Path(args.output)), arrays, ante.grid, count=len(names),
                   nodata=None, descriptions=list(names), dtype="float32",
                   compress=args.compress, overview_resampling="nearest",
                   metadata={"elevation_source": "k >= 0: DEM k; -1: tie points; -2: none"})
@@ -180,24 +186,24 @@ def _write(args: argparse.Namespace, result: Any) -> None:
 def run(args: argparse.Namespace) -> int:
     """Run ``meris-ortho map``."""
     from .._atomic import atomic_path
-    from ..ortho import orthorectify
+    from ..ortho import precompute
     from ..progress import tqdm_progress
 
     grid = _check(args)
     show = log.isEnabledFor(logging.INFO)
     with tqdm_progress("map", enabled=show, unit="step") as progress:
-        result = orthorectify(args.product, grid=grid, dems=args.dem, elevation=args.elevation,
-                              sampling=args.sampling, bands=args.bands,
-                              tolerance=args.tolerance, parallax=args.parallax,
-                              diagnostics=args.diagnostics, progress=progress,
-                              method=args.search, crs=args.crs, pixel_size=args.pixel_size,
-                              geolocation=args.geolocation)
-    _write(args, result)
+        ante = precompute(args.product, grid=grid, dems=args.dem, elevation=args.elevation,
+                          sampling=args.sampling, bands=args.bands, tolerance=args.tolerance,
+                          parallax=args.parallax, diagnostics=args.diagnostics,
+                          progress=progress, method=args.search, crs=args.crs,
+                          pixel_size=args.pixel_size, geolocation=args.geolocation)
+        _write(args, ante, progress)
+    stats = ante.finish()
     if args.stats_json:
         with atomic_path(args.stats_json) as tmp:
-            tmp.write_text(json.dumps(result.stats, indent=2, default=str))
-    for line in log_lines(result.stats, grid is None and args.pixel_size is None):
+            tmp.write_text(json.dumps(stats, indent=2, default=str))
+    for line in log_lines(stats, grid is None and args.pixel_size is None):
         log.info(line)
-    log.info("wrote %s (%d x %d, %d bands)", args.output, result.grid.width, result.grid.height,
-             len(result.bands))
+    log.info("wrote %s (%d x %d, %d bands)", args.output, ante.grid.width, ante.grid.height,
+             len(ante.bands))
     return 0

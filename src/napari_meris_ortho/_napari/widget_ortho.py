@@ -239,6 +239,13 @@ def _item_layers(item: dict[str, Any], frame: OutputGrid, opts: RunSettings) -> 
     return layers
 
 
+def warm_up_in_background() -> None:
+    """Compile the engine's numba kernels in a background thread (``warmup``)."""
+    from ..warmup import warm_up_in_background as start
+
+    start()
+
+
 def _import_engine() -> None:
     """Import the engine in the main thread (module-level pyproj objects made here)."""
     from .. import ortho, synthesis  # noqa: F401
@@ -328,6 +335,8 @@ class OrthorectifyWidget(Container):
         self.crs.changed.connect(lambda v: setattr(self.epsg, "visible", v == CRS_EPSG))
         self.run_button.changed.connect(lambda _=None: self.start())
         self.cancel_button.changed.connect(lambda _=None: self.cancel())
+        _import_engine()
+        warm_up_in_background()  # numba compiles while the user fills the form
 
     # ---------------------------------------------------------------- DEM list
     @property

@@ -75,9 +75,9 @@ def resample_bands(images: Sequence[np.ndarray], lines: np.ndarray, cols: np.nda
     if k == 1:
         index = nearest_pixel(fl, fc, shape[0], shape[1])
         for im, o in zip(images, outs, strict=True):
-            flat = np.empty(fl.size, np.float32)
-            gather(im, index, 1.0, flat)
-            o.flat[:] = flat
+            values = np.empty((1, fl.size), im.dtype)
+            gather(im[None], index, values)
+            o.flat[:] = values[0]
         return outs
     for a in range(0, fl.size, _CHUNK):
         b = min(a + _CHUNK, fl.size)
@@ -116,18 +116,21 @@ def _nearest_pixel(line, col, n_lines, n_cols):  # pragma: no cover
 
 
 @njit(cache=True, parallel=True)
-def gather(image, index, factor, out):  # pragma: no cover
-    """Nearest neighbour: ``out[i] = image[pixel index[i]] * factor`` (float32), 0 where the
-    index is -1; ``image`` 2-D of any strides (memmaps stay lazy), ``index``/``out`` 1-D."""
-    n_cols = image.shape[1]
-    f = np.float32(factor)
+def gather(images, index, out):  # pragma: no cover
+    """Nearest neighbour of all bands in one pass: ``out[b, i] = images[b, pixel index[i]]``,
+    0 where the index is -1; ``images`` (bands, lines, cols), ``out`` (bands, points) of the
+    same dtype (uint16 counts, uint8 flags: no conversion), ``index`` 1-D."""
+    n_bands, _, n_cols = images.shape
     for i in prange(index.size):
         k = index[i]
         if k < 0:
-            out[i] = np.float32(0.0)
+            for b in range(n_bands):
+                out[b, i] = 0
         else:
             r = k // n_cols
-            out[i] = np.float32(image[r, k - r * n_cols]) * f
+            c = k - r * n_cols
+            for b in range(n_bands):
+                out[b, i] = images[b, r, c]
 
 
 @njit(cache=True)
