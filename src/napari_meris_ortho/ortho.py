@@ -80,7 +80,7 @@ class OrthoResult:
     def band_metadata(self) -> list[dict[str, Any]]:
         """Per output band (sorted band numbers), ``band_metadata``; the band values are
         already radiances."""
-        return band_metadata(self.stats, self.bands)
+        return band_metadata(self.stats, list(self.bands))
 
 
 def band_metadata(stats: dict[str, Any], bands: Sequence[int]) -> list[dict[str, Any]]:
@@ -259,7 +259,8 @@ class Antecedents:
 
     @property
     def window(self) -> tuple[int, int]:
-        return tuple(self.stats["product_lines_read"])  # type: ignore[return-value]
+        first, stop = self.stats["product_lines_read"]
+        return int(first), int(stop)
 
     def _rows(self) -> slice:
         first, stop = self.window
@@ -421,7 +422,7 @@ def _prepare(prod: MerisProduct, grid: OutputGrid | None, stack: DemStack | None
                 opts, stats, t_start)
 
 
-def _run(job: _Job, progress: ProgressCallback | None) -> OrthoResult:
+def _run(job: _Job, progress: ProgressCallback | None) -> Antecedents:
     """Prediction/correction by blocks of output rows, then the resampling (section 3.2)."""
     prod, tp, grid, spans, stack, hmode = (job.prod, job.tp, job.grid, job.spans, job.stack,
                                            job.hmode)

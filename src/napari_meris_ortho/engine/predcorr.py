@@ -261,8 +261,8 @@ def find_antecedents_handbook(lon, lat, height, hmode, ptr, start, stop, lat_tp,
             out_p[i, j] = y
             iters[i, j] = it
     total = np.zeros(5, np.int64)
-    for i in range(nr):
-        total += paths[i]
+    for r in range(nr):
+        total += paths[r]
     return out_l, out_p, iters, total
 
 
