@@ -1,12 +1,20 @@
 """Merge rules of the MERSYN synthesis (handbook section 3.1, use cases 1 and 2; Appendix C).
 
-Arrays in, arrays out. A synthesis tile is ``synthesis`` (n_bands, rows, cols) float32 radiances
-(0 = background), ``count`` (rows, cols) uint16 (products that contributed a valid pixel) and,
-for the maximum-NDVI rule, ``ndvi_code`` (rows, cols) uint16: NDVI in [-1, 1] coded linearly on
-[1, 65535], 0 = background (Appendix C, ``radioShift``/``radioFactor``).
+Arrays in, arrays out. A synthesis tile (:class:`TileState`) is ``bands`` (n_bands, rows, cols)
+float32 radiances (0 = background), ``count`` (rows, cols) uint16 (products that contributed a
+valid pixel), ``winner`` (rows, cols) int32 (1-based index of the product that won the pixel,
+0 = background) and, for the maximum-NDVI rule, ``ndvi`` (rows, cols) uint16: NDVI in [-1, 1]
+coded linearly on [1, 65535], 0 = background (Appendix C, ``radioShift``/``radioFactor``).
+
+One product's contribution to a tile is itself a state (:func:`segment_state`); states are
+merged by :func:`combine`, which is associative and commutative: the synthesis does not depend
+on the order in which products or tiles are merged, nor on how the work is split. Ties are
+broken by the products' ``rank`` (sensing time, then name; lower rank wins).
 """
 
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import numpy as np
 from numba import njit, prange
@@ -88,54 +96,137 @@ def validated_pixels(inside: np.ndarray, flags: np.ndarray, reject_bright: bool)
 
 
 @njit(cache=True, parallel=True)
-def merge_minimum_radiance(synthesis: np.ndarray, count: np.ndarray, segment: np.ndarray,
-                           valid: np.ndarray) -> int:
-    """Use case 1: band by band, S_n = R when R < S_{n-1} or S_{n-1} is background (0).
-
-    A new value of 0 (background) never enters. Appendix C prints the test as
-    ``radiance_new == background || radiance_new < radiance_old``; the prose (section 3.1:
-    "replace ... only if MERIS pixel is inferior") and the background meaning of 0 read it as
-    ``radiance_old == background``. ``synthesis``/``count`` are updated in place; returns the
-    number of added points (pixels where at least one band was replaced, MERSYN's
-    ``added_point_number``).
-    """
-    n_bands, rows, cols = synthesis.shape
-    added = np.zeros(rows, dtype=np.int64)
+def _segment_fill(bands: np.ndarray, winner: np.ndarray, segment: np.ndarray,
+                  valid: np.ndarray, index: int) -> None:
+    """A product's pixels: valid ones keep their positive radiances (others, NaN included, are
+    background 0) and name the product as winner."""
+    n_bands, rows, cols = segment.shape
     for i in prange(rows):
         for j in range(cols):
             if valid[i, j]:
-                count[i, j] += 1
-                replaced = False
+                winner[i, j] = index
                 for b in range(n_bands):
-                    new = segment[b, i, j]
-                    old = synthesis[b, i, j]
-                    if new > 0.0 and (old == 0.0 or new < old):
-                        synthesis[b, i, j] = new
-                        replaced = True
-                if replaced:
-                    added[i] += 1
-    return added.sum()
+                    v = segment[b, i, j]
+                    bands[b, i, j] = v if v > 0.0 else np.float32(0.0)
 
 
 @njit(cache=True, parallel=True)
-def merge_maximum_ndvi(synthesis: np.ndarray, ndvi_code: np.ndarray, count: np.ndarray,
-                       segment: np.ndarray, red: np.ndarray, nir: np.ndarray,
-                       valid: np.ndarray) -> int:
-    """Use case 2: all bands of the segment pixel replace the synthesis pixel when its NDVI
-    (computed in float32 from R7, R13) is greater than the stored one, or the stored one is
-    background; the stored NDVI is the 16-bit code (Appendix C), so the comparison is against
-    the decoded code exactly as MERSYN reads its input NDVI image. Returns the added points."""
-    n_bands, rows, cols = synthesis.shape
-    added = np.zeros(rows, dtype=np.int64)
+def _ndvi_codes(red: np.ndarray, nir: np.ndarray, valid: np.ndarray) -> np.ndarray:
+    """16-bit NDVI (float32 from R7, R13; Appendix C coding) of the valid pixels, 0 elsewhere."""
+    rows, cols = valid.shape
+    out = np.zeros((rows, cols), np.uint16)
     for i in prange(rows):
         for j in range(cols):
             if valid[i, j]:
-                count[i, j] += 1
-                new = np.float32(ndvi_value(np.float32(red[i, j]), np.float32(nir[i, j])))
-                old_code = ndvi_code[i, j]
-                if old_code == 0 or new > ndvi_decode_value(old_code):
-                    for b in range(n_bands):
-                        synthesis[b, i, j] = segment[b, i, j]
-                    ndvi_code[i, j] = ndvi_encode_value(new)
-                    added[i] += 1
-    return added.sum()
+                v = np.float32(ndvi_value(np.float32(red[i, j]), np.float32(nir[i, j])))
+                out[i, j] = ndvi_encode_value(v)
+    return out
+
+
+@dataclass
+class TileState:
+    """A synthesis tile, or one product's contribution to it (module docstring)."""
+
+    bands: np.ndarray
+    count: np.ndarray
+    winner: np.ndarray
+    ndvi: np.ndarray | None = None
+
+    @classmethod
+    def empty(cls, n_bands: int, shape: tuple[int, int], with_ndvi: bool) -> TileState:
+        return cls(np.zeros((n_bands, *shape), np.float32), np.zeros(shape, np.uint16),
+                   np.zeros(shape, np.int32), np.zeros(shape, np.uint16) if with_ndvi else None)
+
+    def window(self, r0: int, r1: int, c0: int, c1: int) -> TileState:
+        """View of rows [r0, r1) and columns [c0, c1)."""
+        return TileState(self.bands[:, r0:r1, c0:c1], self.count[r0:r1, c0:c1],
+                         self.winner[r0:r1, c0:c1],
+                         None if self.ndvi is None else self.ndvi[r0:r1, c0:c1])
+
+    def copy(self) -> TileState:
+        return TileState(self.bands.copy(), self.count.copy(), self.winner.copy(),
+                         None if self.ndvi is None else self.ndvi.copy())
+
+
+def segment_state(segment: np.ndarray, valid: np.ndarray, index: int,
+                  red: np.ndarray | None = None, nir: np.ndarray | None = None) -> TileState:
+    """One product's contribution: ``segment`` (n_bands, rows, cols) radiances, ``valid`` the
+    validated pixels, ``index`` the product's 1-based index; with ``red``/``nir`` (bands 7 and
+    13) the 16-bit NDVI of the maximum-NDVI rule."""
+    valid = np.ascontiguousarray(valid, dtype=np.bool_)
+    state = TileState.empty(segment.shape[0], valid.shape, red is not None)
+    _segment_fill(state.bands, state.winner, np.ascontiguousarray(segment, np.float32), valid,
+                  int(index))
+    state.count[:] = valid
+    if red is not None and nir is not None:
+        state.ndvi = _ndvi_codes(np.ascontiguousarray(red, np.float32),
+                                 np.ascontiguousarray(nir, np.float32), valid)
+    return state
+
+
+@njit(cache=True)
+def _beats(value: float, rank: int, old_value: float, old_rank: int) -> bool:
+    """Lexicographic order of (value, rank): True when the first pair is smaller."""
+    return value < old_value or (value == old_value and rank < old_rank)
+
+
+@njit(cache=True, parallel=True)
+def combine_minimum_radiance(bands: np.ndarray, count: np.ndarray, winner: np.ndarray,
+                             new_bands: np.ndarray, new_count: np.ndarray,
+                             new_winner: np.ndarray, rank: np.ndarray) -> None:
+    """Use case 1, in place: band by band S = min(S, R) over positive radiances (0 =
+    background never enters, section 3.1 "replace ... only if MERIS pixel is inferior";
+    Appendix C prints ``radiance_new == background`` where the prose means the old one). The
+    winner is the product with the lowest first-band radiance, then the lowest rank."""
+    n_bands, rows, cols = bands.shape
+    for i in prange(rows):
+        for j in range(cols):
+            count[i, j] += new_count[i, j]
+            w = new_winner[i, j]
+            if w == 0:
+                continue
+            old = winner[i, j]
+            v_new = new_bands[0, i, j] if new_bands[0, i, j] > 0.0 else np.inf
+            v_old = bands[0, i, j] if bands[0, i, j] > 0.0 else np.inf
+            if old == 0 or _beats(v_new, rank[w], v_old, rank[old]):
+                winner[i, j] = w
+            for b in range(n_bands):
+                new = new_bands[b, i, j]
+                prev = bands[b, i, j]
+                if new > 0.0 and (prev == 0.0 or new < prev):
+                    bands[b, i, j] = new
+
+
+@njit(cache=True, parallel=True)
+def combine_maximum_ndvi(bands: np.ndarray, ndvi: np.ndarray, count: np.ndarray,
+                         winner: np.ndarray, new_bands: np.ndarray, new_ndvi: np.ndarray,
+                         new_count: np.ndarray, new_winner: np.ndarray, rank: np.ndarray
+                         ) -> None:
+    """Use case 2, in place: all bands of the pixel with the greater 16-bit NDVI (Appendix C
+    coding; equal codes: the lower rank) replace the synthesis pixel."""
+    n_bands, rows, cols = bands.shape
+    for i in prange(rows):
+        for j in range(cols):
+            count[i, j] += new_count[i, j]
+            w = new_winner[i, j]
+            if w == 0:
+                continue
+            old = winner[i, j]
+            if old == 0 or _beats(-float(new_ndvi[i, j]), rank[w], -float(ndvi[i, j]),
+                                  rank[old]):
+                winner[i, j] = w
+                ndvi[i, j] = new_ndvi[i, j]
+                for b in range(n_bands):
+                    bands[b, i, j] = new_bands[b, i, j]
+
+
+def combine(acc: TileState, new: TileState, rank: np.ndarray) -> None:
+    """Merge state ``new`` into ``acc`` (same shape; in place). Associative and commutative;
+    ``rank[k]``: tie-break rank of product ``k`` (distinct ranks)."""
+    rank = np.ascontiguousarray(rank, dtype=np.int64)
+    if acc.ndvi is None or new.ndvi is None:
+        combine_minimum_radiance(acc.bands, acc.count, acc.winner, new.bands, new.count,
+                                 new.winner, rank)
+    else:
+        combine_maximum_ndvi(acc.bands, acc.ndvi, acc.count, acc.winner, new.bands, new.ndvi,
+                             new.count, new.winner, rank)

@@ -181,13 +181,15 @@ def _corners(lat: np.ndarray, lon: np.ndarray, height: int, width: int, df: int,
     return out
 
 
-def default_product_name(product_type: str, start: np.datetime64, duration_s: float) -> str:
+def default_product_name(product_type: str, start: np.datetime64, duration_s: float,
+                         counter: int = 0) -> str:
     """An ENVISAT product file name (62 characters), e.g.
-    ``MER_FR__1PNSIM20030921_092341_000000982020_00000_00000_0000.N1``."""
+    ``MER_FR__1PNSIM20030921_092341_000000982020_00000_00000_0000.N1``; ``counter`` is the
+    file counter (last 4 digits: products of one acquisition told apart)."""
     s = str(np.asarray(start, dtype="datetime64[s]"))
     s = s.replace("-", "").replace(":", "").replace("T", "_")
     duration = min(int(round(duration_s)), 99_999_999)
-    return f"{product_type}NSIM{s}_{duration:08d}0000_00000_00000_0000.N1"
+    return f"{product_type}NSIM{s}_{duration:08d}0000_00000_00000_{int(counter) % 10000:04d}.N1"
 
 
 def _check_overrides(which: str, overrides: Mapping[str, Any] | None, fields) -> dict:

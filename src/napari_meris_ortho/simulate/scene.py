@@ -584,7 +584,8 @@ def _write_product(target: Path, cfg: dict, geom: SceneGeometry, grid: DemGrid,
     tp = tie_point_values(geom, grid, dem)
     det = np.broadcast_to(detector_index(geom), flags.shape)
     start = np.datetime64(geom.first_line_datetime.replace(tzinfo=None), "us")
-    name = default_product_name(geom.product_type, start, geom.lines * geom.frame_time)
+    name = default_product_name(geom.product_type, start, geom.lines * geom.frame_time,
+                                counter=int(cfg.get("file_counter", 0)))
     for old in target.glob("MER_*.N1"):
         if old.name != name:
             old.unlink()

@@ -1,0 +1,241 @@
+"""The on-disk synthesis: a Zarr v3 store managed by Icechunk (a transactional repository).
+
+Layout (``STORE`` is an Icechunk repository; branch ``main`` is the synthesis)::
+
+    /                       attributes: format, version, algorithm, bands, grid, tile,
+                            overview factors, products (the product table)
+    /band_07 ...            float32 radiance of each MERIS band (0 = background)
+    /ndvi                   uint16 NDVI of the maximum-NDVI rule (Appendix C: [1, 65535], 0 =
+                            background); absent for the minimum-radiance rule
+    /count                  uint16 number of products that gave a valid pixel
+    /product                int32 index (1-based) in the product table of the product that
+                            won the pixel (0 = background)
+    /overview_2/<layer> ... the same layers decimated by 2, 4, ... (every 2**k-th pixel), for
+                            viewers; written with the full-resolution tiles
+
+Arrays are chunked by the output tile (overviews by the tile / factor): one task writes one
+chunk of each array, so tasks never write the same chunk. Each ``synthesize`` call is one
+Icechunk commit whose metadata lists the products (``COMMIT_KEY``); a run that dies before its
+commit leaves the branch at the previous commit. An advisory lock on ``.STORE.meris-ortho-lock``
+next to the store (Icechunk creates repositories in empty directories only) is held from the
+"is there a synthesis" check to the commit.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..errors import OptionsError, OutputError
+
+FORMAT = "napari-meris-ortho synthesis"
+VERSION = 2
+BRANCH = "main"
+LOCK_SUFFIX = ".meris-ortho-lock"
+COMMIT_KEY = "meris_ortho"
+RUN_BRANCH_PREFIX = "meris-ortho-run-"
+#: the old (before Icechunk) generation-directory synthesis: recognised to refuse it clearly
+OLD_MANIFEST = "synthesis.json"
+#: overviews stop when the coarsest level's larger side is below this, or its chunk below
+#: ``MIN_OVERVIEW_CHUNK``
+OVERVIEW_TARGET = 512
+MIN_OVERVIEW_CHUNK = 16
+
+Window = tuple[int, int, int, int]  # row0, row1, col0, col1
+
+
+def quiet_icechunk() -> None:
+    """Icechunk warns on stderr that local storage is not safe for concurrent commits: we take
+    the lock (module docstring), so only errors are logged."""
+    import icechunk
+
+    icechunk.set_logs_filter("error")
+
+
+def band_layer(band: int) -> str:
+    return f"band_{band:02d}"
+
+
+def layer_names(bands: Sequence[int], algorithm: str) -> list[str]:
+    """Arrays of a synthesis: the bands, NDVI (maximum NDVI only), count, product."""
+    names = [band_layer(b) for b in bands]
+    if algorithm == "max-ndvi":
+        names.append("ndvi")
+    return [*names, "count", "product"]
+
+
+def layer_dtype(name: str) -> str:
+    return {"ndvi": "uint16", "count": "uint16", "product": "int32"}.get(name, "float32")
+
+
+def overview_factors(width: int, height: int, tile: int) -> list[int]:
+    """Decimation factors 2, 4, ... until the larger side is at most ``OVERVIEW_TARGET``."""
+    factors: list[int] = []
+    f = 2
+    while max(width, height) / (f // 2) > OVERVIEW_TARGET and tile // f >= MIN_OVERVIEW_CHUNK:
+        factors.append(f)
+        f *= 2
+    return factors
+
+
+def _storage(path: Path) -> Any:
+    import icechunk
+
+    quiet_icechunk()
+    return icechunk.local_filesystem_storage(str(path))
+
+
+def is_repository(path: str | os.PathLike[str]) -> bool:
+    """True when ``path`` is an Icechunk repository."""
+    import icechunk
+
+    p = Path(path)
+    if not (p / "refs").is_dir():
+        return False
+    try:
+        return bool(icechunk.Repository.exists(_storage(p)))
+    except Exception:  # any storage failure means "not a repository"
+        return False
+
+
+def open_repository(path: str | os.PathLike[str]) -> Any:
+    """The Icechunk repository at ``path`` (OptionsError naming the path if it is none)."""
+    import icechunk
+
+    p = Path(path)
+    if (p / OLD_MANIFEST).is_file():
+        raise OptionsError(f"{p}: a synthesis in the old generation-directory format (before "
+                           "the Icechunk store); it cannot be opened any more: synthesize its "
+                           "products again into a new store")
+    if not is_repository(p):
+        raise OptionsError(f"{p}: not a synthesis store (no Icechunk repository there)")
+    try:
+        return icechunk.Repository.open(_storage(p))
+    except Exception as exc:  # icechunk raises its own error types
+        raise OptionsError(f"{p}: damaged synthesis store ({exc})") from None
+
+
+def create_repository(path: Path) -> Any:
+    import icechunk
+
+    try:
+        return icechunk.Repository.create(_storage(path))
+    except Exception as exc:
+        raise OutputError(f"{path}: cannot create the synthesis store ({exc})") from None
+
+
+def read_attributes(store: Any) -> dict[str, Any] | None:
+    """Root attributes of a synthesis, or None when the snapshot holds no synthesis."""
+    import zarr
+
+    try:
+        attrs = dict(zarr.open_group(store, mode="r").attrs)
+    except (FileNotFoundError, KeyError, ValueError):
+        return None
+    return attrs if attrs.get("format") == FORMAT else None
+
+
+def create_layout(store: Any, attrs: dict[str, Any], shape: tuple[int, int], tile: int,
+                  names: Sequence[str], factors: Sequence[int]) -> None:
+    """Empty (fill value 0) arrays of a new synthesis, chunked by the tile, and overviews."""
+    import zarr
+
+    root = zarr.open_group(store, mode="w", attributes=attrs)
+    for name in names:
+        root.create_array(name, shape=shape, chunks=(tile, tile), dtype=layer_dtype(name),
+                          fill_value=0, dimension_names=("y", "x"))
+    for f in factors:
+        level = root.create_group(f"overview_{f}")
+        for name in names:
+            level.create_array(name, shape=(-(-shape[0] // f), -(-shape[1] // f)),
+                               chunks=(tile // f, tile // f), dtype=layer_dtype(name),
+                               fill_value=0, dimension_names=("y", "x"))
+
+
+def set_attributes(store: Any, attrs: dict[str, Any]) -> None:
+    import zarr
+
+    zarr.open_group(store, mode="r+").attrs.update(attrs)
+
+
+def read_window(store: Any, names: Sequence[str], window: Window, level: int = 1
+                ) -> dict[str, np.ndarray]:
+    """Arrays ``names`` over ``window`` (rows/columns of the full grid; at overview ``level``
+    the window is in that level's pixels)."""
+    import zarr
+
+    r0, r1, c0, c1 = window
+    prefix = "" if level == 1 else f"overview_{level}/"
+    return {n: np.asarray(zarr.open_array(store, path=prefix + n, mode="r")[r0:r1, c0:c1])
+            for n in names}
+
+
+def write_tile(store: Any, window: Window, arrays: dict[str, np.ndarray],
+               factors: Sequence[int]) -> None:
+    """Write one tile (``window`` starts on a chunk corner) and its overview chunks."""
+    import zarr
+
+    r0, r1, c0, c1 = window
+    for name, values in arrays.items():
+        zarr.open_array(store, path=name, mode="r+")[r0:r1, c0:c1] = values
+        for f in factors:  # tile corners are multiples of every factor
+            level = zarr.open_array(store, path=f"overview_{f}/{name}", mode="r+")
+            dec = values[::f, ::f]
+            level[r0 // f: r0 // f + dec.shape[0], c0 // f: c0 // f + dec.shape[1]] = dec
+
+
+def lock_path(directory: Path) -> Path:
+    """The lock file of the store ``directory``: a hidden file next to it."""
+    directory = Path(os.path.abspath(directory))
+    return directory.parent / f".{directory.name}{LOCK_SUFFIX}"
+
+
+@contextlib.contextmanager
+def locked(directory: Path) -> Iterator[None]:
+    """Exclusive advisory lock of the store ``directory`` (released by the OS if the run
+    dies)."""
+    try:
+        import fcntl
+    except ImportError:  # pragma: no cover - no advisory locks (Windows): unguarded
+        yield
+        return
+    try:
+        fh = open(lock_path(directory), "a+b")  # held for the whole run
+    except OSError as exc:
+        raise OutputError(f"{directory}: cannot write in the synthesis store ({exc})") from exc
+    try:
+        try:
+            fcntl.flock(fh.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            raise OptionsError(f"{directory}: another synthesis run is using it") from None
+        yield
+    finally:
+        fh.close()
+
+
+@dataclass
+class Commit:
+    """One ``synthesize`` commit of the history."""
+
+    snapshot: str
+    written_at: Any
+    message: str
+    products: list[dict[str, Any]]
+
+
+def history(repo: Any, branch: str = BRANCH, snapshot: str | None = None) -> list[Commit]:
+    """The synthesis commits reachable from ``branch`` (or ``snapshot``), newest first."""
+    kwargs = {"snapshot_id": snapshot} if snapshot else {"branch": branch}
+    out = []
+    for info in repo.ancestry(**kwargs):
+        meta = (info.metadata or {}).get(COMMIT_KEY)
+        if meta is not None:
+            out.append(Commit(info.id, info.written_at, info.message,
+                              list(meta.get("products", []))))
+    return out
