@@ -17,7 +17,8 @@ from . import __version__
 from .errors import MerisOrthoError
 
 #: subcommand modules; each defines ``register(subparsers)`` which sets ``func`` on its parser.
-COMMANDS = ("info", "sample", "map", "synthesize", "disparity", "demcheck")
+COMMANDS = ("info", "sample", "map", "synthesize", "synthesis-log", "export", "disparity",
+            "demcheck")
 
 log = logging.getLogger("napari_meris_ortho")
 
@@ -41,7 +42,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
     sub.required = True
     for name in COMMANDS:
-        import_module(f"napari_meris_ortho._commands.{name}").register(sub)
+        import_module(f"napari_meris_ortho._commands.{name.replace('-', '_')}").register(sub)
     return parser
 
 

@@ -1,13 +1,16 @@
-"""``meris-ortho synthesize``: merge many products into a synthesis (MERSYN use cases 1-2).
+"""``meris-ortho synthesize``: merge many products into a synthesis store (MERSYN use cases
+1-2) with dask workers.
 
-Exit code 0 when every product was merged, 1 when some product failed (reported and skipped),
-2 on bad options (handbook Appendix C parameter checks).
+Exit code 0 when every product was merged (or was already in the synthesis), 1 when some
+product failed (reported and skipped), 2 on bad options (handbook Appendix C parameter checks),
+an unreachable scheduler or a store that is not a synthesis.
 """
 
 from __future__ import annotations
 
 import argparse
 import logging
+import os
 from typing import Any
 
 from ..errors import OptionsError
@@ -33,9 +36,11 @@ def register(subparsers: Any) -> None:
     p.add_argument("products", nargs="+", metavar="PRODUCT.N1", help="MERIS L1b products")
     p.add_argument("--algorithm", choices=choices(MergeRule), default=None,
                    help="selection algorithm (new synthesis: min-radiance; update: the input's)")
-    p.add_argument("--out", required=True, metavar="DIR", help="output synthesis directory")
-    p.add_argument("--input", metavar="DIR", default=None,
-                   help="synthesis to update (may equal --out); grid and bands come from it")
+    p.add_argument("--out", required=True, metavar="STORE",
+                   help="output synthesis store (an Icechunk repository directory)")
+    p.add_argument("--input", metavar="STORE", default=None,
+                   help="synthesis to update (may equal --out: one more commit; else it is "
+                   "copied to --out first); grid and bands come from it")
     add_height_options(
         p, dem_help="DEM (repeatable; the first holding a point wins)",
         elevation_help="heights: the DEMs then the tie points (default), tie points only, "
@@ -45,7 +50,17 @@ def register(subparsers: Any) -> None:
     p.add_argument("--reject-bright", action="store_true",
                    help="keep BRIGHT-flagged pixels (clouds) out as well")
     p.add_argument("--tile", type=int, default=1024, metavar="PX",
-                   help="tile size in pixels, multiple of 256 (bounds the memory)")
+                   help="tile size (store chunk) of a new synthesis in pixels, multiple of 256 "
+                   "(bounds the memory of a task)")
+    engine = p.add_argument_group("workers (dask.distributed)")
+    engine.add_argument("--workers", type=int, default=None, metavar="N",
+                        help="worker processes of an embedded LocalCluster (default: the "
+                        "number of cores; 0: everything in this process)")
+    engine.add_argument("--scheduler", default=os.environ.get("DASK_SCHEDULER_ADDRESS"),
+                        metavar="tcp://HOST:PORT",
+                        help="use this existing dask scheduler (default: "
+                        "$DASK_SCHEDULER_ADDRESS); the store and products must be on storage "
+                        "all workers see")
     grid = p.add_argument_group("grid of a new synthesis (refused with --input)")
     add_grid_options(grid, None, "output CRS (default EPSG:4326)")
     p.set_defaults(func=run)
@@ -61,16 +76,24 @@ def run(args: argparse.Namespace) -> int:
                            "come from the input synthesis and shall not be given")
     check_heights(args)
     grid = grid_from_args(args)
-    with tqdm_progress("products", enabled=not args.quiet, unit="product") as progress:
+    if args.scheduler and args.workers is not None:
+        raise OptionsError("--workers and --scheduler exclude each other (the cluster of the "
+                           "scheduler has its own workers)")
+    workers = (os.cpu_count() or 1) if args.workers is None else args.workers
+    with tqdm_progress("tasks", enabled=not args.quiet, unit="task") as progress:
         result = synthesize(
             args.products, args.out, algorithm=args.algorithm, input=args.input, grid=grid,
             crs=None if grid is not None else args.crs,
             pixel_size=None if grid is not None else args.pixel_size, dems=args.dem,
             elevation=args.elevation, sampling=args.sampling, bands=args.bands,
-            reject_bright=args.reject_bright, tile=args.tile, progress=progress)
-    if result.generation is not None:
-        log.info("synthesis %s (%s) written to %s: %d product(s) merged", result.generation,
+            reject_bright=args.reject_bright, tile=args.tile, progress=progress,
+            workers=0 if args.scheduler else workers, scheduler=args.scheduler or None)
+    if result.snapshot is not None:
+        log.info("synthesis %s (%s) committed to %s: %d product(s) merged", result.snapshot,
                  result.algorithm, result.path, len(result.merged))
+    if result.skipped:
+        log.warning("%d product(s) already in the synthesis, skipped: %s", len(result.skipped),
+                    ", ".join(r.product_name for r in result.skipped))
     if result.failed:
         log.warning("%d of %d product(s) failed and were skipped", len(result.failed),
                     len(result.reports))

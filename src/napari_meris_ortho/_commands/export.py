@@ -1,0 +1,39 @@
+"""``meris-ortho export``: a synthesis store (or one of its snapshots) as a Cloud-Optimized
+GeoTIFF."""
+
+from __future__ import annotations
+
+import argparse
+import logging
+from typing import Any
+
+from ._options import add_bands_option
+
+log = logging.getLogger("napari_meris_ortho")
+
+
+def register(subparsers: Any) -> None:
+    """Add the ``export`` subcommand."""
+    p = subparsers.add_parser(
+        "export", help="write bands of a synthesis store as a Cloud-Optimized GeoTIFF",
+        description="Write chosen bands (or the NDVI, count or winning-product layer) of a "
+        "synthesis store as a Cloud-Optimized GeoTIFF.")
+    p.add_argument("store", metavar="STORE", help="synthesis store")
+    p.add_argument("-o", "--out", required=True, metavar="OUT.tif", help="output COG")
+    add_bands_option(p, "bands to write, e.g. 7,13 (default: every band of the synthesis)")
+    p.add_argument("--layer", choices=("ndvi", "count", "product"), default=None,
+                   help="write this layer instead of bands")
+    p.add_argument("--at", metavar="SNAPSHOT", default=None,
+                   help="export this snapshot (see synthesis-log) instead of the latest commit")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from ..progress import tqdm_progress
+    from ..synthesis import export_cog, open_synthesis
+
+    store = open_synthesis(args.store, at=args.at)
+    with tqdm_progress("tiles", enabled=not args.quiet, unit="tile") as progress:
+        out = export_cog(store, args.out, bands=args.bands, layer=args.layer, progress=progress)
+    log.info("%s written (snapshot %s)", out, store.snapshot)
+    return 0
