@@ -1,17 +1,17 @@
-"""``meris-ortho synthesize``: exit codes, MERSYN option refusals, and an update killed halfway
-that must leave the previous synthesis intact (handbook section 3.1, Appendix C)."""
+"""``meris-ortho synthesize``, ``synthesis-log`` and ``export``: exit codes, MERSYN option
+refusals, and updates killed at random moments that must leave the previous synthesis intact
+(handbook section 3.1, Appendix C)."""
 
 from __future__ import annotations
 
-import contextlib
 import os
+import random
 import signal
 import subprocess
 import sys
 import time
 from pathlib import Path
 
-import numpy as np
 import pytest
 
 from napari_meris_ortho.cli import main
@@ -20,7 +20,7 @@ from test_synthesis import BANDS, layers, scene_product
 
 GRID_ARGS = ["--crs", "EPSG:4326", "--ul", "13.45", "46.70", "--lr", "14.26", "46.19",
              "--pixel-size", "0.0015"]
-COMMON = ["--elevation", "tiepoints", "--tile", "256"]
+COMMON = ["--elevation", "tiepoints", "--tile", "256", "--workers", "0"]
 
 
 @pytest.fixture(scope="module")
@@ -48,9 +48,44 @@ def test_new_then_update_exit_codes(products, tmp_path, caplog) -> None:
     assert code == 1
     assert "truncated.N1" in caplog.text and "1 of 2 product(s) failed" in caplog.text
     store = open_synthesis(out)
-    assert store.manifest["generation"] == "gen-000002"
+    assert len(store.history()) == 2
     assert [p["product"] for p in store.products] == [Path(p).name for p in products[:2]]
     assert store.read("count").max() == 2
+    statuses = [p["status"] for p in store.history()[0].products]
+    assert statuses == ["failed", "merged"]
+    # rerun: the product is already there: reported, skipped, exit 0, no new commit
+    caplog.clear()
+    assert main(["synthesize", products[1], "--input", str(out), "--out", str(out),
+                 *COMMON]) == 0
+    assert "already in the synthesis" in caplog.text and len(open_synthesis(out).history()) == 2
+
+
+def test_synthesis_log_and_export(products, tmp_path, capsys) -> None:
+    out = tmp_path / "syn"
+    assert main(["-q", "synthesize", products[0], "--out", str(out), "--bands", "7,13",
+                 *GRID_ARGS, *COMMON]) == 0
+    first = open_synthesis(out).snapshot
+    assert main(["-q", "synthesize", products[1], "--input", str(out), "--out", str(out),
+                 *COMMON]) == 0
+    capsys.readouterr()
+    assert main(["synthesis-log", str(out)]) == 0
+    text = capsys.readouterr().out
+    names = [p["product_name"] for p in open_synthesis(out).products]
+    assert text.count("snapshot ") == 2 and all(n in text for n in names)
+    assert text.index(names[1]) < text.index(names[0])  # newest first
+    assert main(["-q", "export", str(out), "-o", str(tmp_path / "old.tif"), "--bands", "13",
+                 "--at", first]) == 0
+    import rasterio
+
+    with rasterio.open(tmp_path / "old.tif") as ds:
+        assert ds.tags(ns="IMAGE_STRUCTURE").get("LAYOUT") == "COG"
+        old = ds.read(1)
+    assert old.tobytes() == open_synthesis(out, at=first).band(13).tobytes()
+    assert main(["-q", "export", str(tmp_path), "-o", str(tmp_path / "x.tif")]) == 2
+    assert "not a synthesis store" in capsys.readouterr().err
+    assert main(["-q", "export", str(out), "-o", str(tmp_path / "x.tif"), "--bands", "3"]) == 2
+    assert "not in the synthesis" in capsys.readouterr().err
+    assert not (tmp_path / "x.tif").exists()
 
 
 def test_refusals_exit_2(products, tmp_path, capsys) -> None:
@@ -77,53 +112,61 @@ def test_refusals_exit_2(products, tmp_path, capsys) -> None:
     assert _snapshot(out) == before
 
 
-def test_update_killed_halfway_leaves_previous_synthesis(products, tmp_path) -> None:
+@pytest.mark.slow
+def test_updates_killed_at_random_moments(products, tmp_path) -> None:
+    """SIGKILL at random moments of an update (MERIS_ORTHO_KILL_TRIALS, default 10): the store
+    opens at the previous commit with identical arrays (or, killed after its commit, at the
+    new one, complete); the next run completes and gives the arrays of an update never
+    killed."""
     out = tmp_path / "syn"
     assert main(["-q", "synthesize", products[0], "--out", str(out), "--bands", "7,13",
                  *GRID_ARGS, *COMMON]) == 0
-    before = _snapshot(out)
-    arrays = layers(out)
-    cmd = [sys.executable, "-m", "napari_meris_ortho.cli", "-q", "synthesize",
-           *(products[1:] * 4), "--input", str(out), "--out", str(out), *COMMON]
-    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
-    deadline = time.monotonic() + 120
-    killed_in = None
-    copied = False
-    while time.monotonic() < deadline and proc.poll() is None:
-        temps = [p for p in out.iterdir() if p.name.startswith(".gen-")]
-        with contextlib.suppress(FileNotFoundError):
-            copied = bool(temps) and len(list(temps[0].iterdir())) == 3
-        if temps and copied:  # the 3 layers are copied: merging now
-            time.sleep(0.3)
-            killed_in = temps[0]
-            os.kill(proc.pid, signal.SIGKILL)
-            break
-        time.sleep(0.005)
-    proc.wait(timeout=30)
-    err = proc.stderr.read().decode()
-    proc.stderr.close()
-    assert killed_in is not None and proc.returncode == -signal.SIGKILL, err
-    assert killed_in.exists()  # the half-written generation is still there ...
-    after = _snapshot(out)
-    leftovers = [k for k in after if k.startswith(".gen-")]
-    assert leftovers
-    # ... but every file of the previous synthesis is byte-identical and readable
-    assert {k: v for k, v in after.items() if not k.startswith(".gen-")} == before
-    for key, value in layers(out).items():
-        np.testing.assert_array_equal(value, arrays[key])
-    # the next update cleans the leftovers and goes through
-    assert main(["-q", "synthesize", products[1], "--input", str(out), "--out", str(out),
-                 *COMMON]) == 0
-    assert sorted(p.name for p in out.iterdir() if p.name != ".lock") == \
-        ["gen-000002", "synthesis.json"]
-    assert open_synthesis(out).read("count").max() == 2
+    before, commits = layers(out), len(open_synthesis(out).history())
+    def command(target: Path) -> list[str]:
+        return [sys.executable, "-m", "napari_meris_ortho.cli", "-q", "synthesize",
+                *products[1:], "--input", str(out), "--out", str(target), *COMMON]
+
+    cmd = command(out)
+    reference = tmp_path / "ref"
+    t0 = time.monotonic()  # the same update, never killed, into a copy: its duration
+    subprocess.run(command(reference), check=True)
+    duration = time.monotonic() - t0
+    expected = layers(reference)
+    rng = random.Random(13)
+    trials = int(os.environ.get("MERIS_ORTHO_KILL_TRIALS", "10"))
+    killed_before_commit = 0
+    for _ in range(trials):
+        proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                                start_new_session=True)
+        try:
+            proc.wait(timeout=rng.uniform(0.2, 1.0) * duration)
+        except subprocess.TimeoutExpired:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait(timeout=60)
+        store = open_synthesis(out)
+        if len(store.history()) == commits:  # killed before its commit: the previous state
+            killed_before_commit += proc.returncode == -signal.SIGKILL
+            for key, value in layers(out).items():
+                assert value.tobytes() == before[key].tobytes(), key
+        else:  # the commit landed: complete, and the next run has nothing to do
+            for key, value in layers(out).items():
+                assert value.tobytes() == expected[key].tobytes(), key
+        assert main(["-q", "synthesize", *products[1:], "--input", str(out), "--out",
+                     str(out), *COMMON]) == 0
+        for key, value in layers(out).items():
+            assert value.tobytes() == expected[key].tobytes(), key
+        assert len(open_synthesis(out).history()) == commits + 1
+        # back to the previous commit for the next trial
+        repo = open_synthesis(out).repo
+        repo.reset_branch("main", open_synthesis(out).history()[1].snapshot)
+    assert killed_before_commit >= trials // 3
 
 
 def test_synthesis_with_a_dem(products, tmp_path) -> None:
     dem = Path(products[0]).parent / "dem_truth.tif"
     out = tmp_path / "syn"
     assert main(["-q", "synthesize", products[0], "--out", str(out), "--bands", "13",
-                 "--dem", str(dem), *GRID_ARGS, "--tile", "256"]) == 0
+                 "--dem", str(dem), *GRID_ARGS, "--tile", "256", "--workers", "0"]) == 0
     with_dem = open_synthesis(out).read("band_13")
     assert main(["-q", "synthesize", products[0], "--out", str(tmp_path / "tp"), "--bands",
                  "13", *GRID_ARGS, *COMMON]) == 0

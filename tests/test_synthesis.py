@@ -1,10 +1,10 @@
 """Synthesis of many products (synthesis.py; section 3.1 use cases 1-2, Appendix B-C) on
 simulated products: clouds, maximum NDVI, mosaic of adjacent orbits, incremental = batch, the
-on-disk layers, the manifest and the option checks."""
+Icechunk store (layers, product table, history, snapshots), idempotent updates and the option
+checks. Runs in this process (workers=0); dask workers: test_synthesis_distributed.py."""
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
@@ -14,12 +14,11 @@ import rasterio
 from napari_meris_ortho.engine.synthesis import ndvi_encode, validated_pixels
 from napari_meris_ortho.errors import OptionsError
 from napari_meris_ortho.geometry.grid import OutputGrid
+from napari_meris_ortho.io import synthesis_store as st
 from napari_meris_ortho.ortho import orthorectify
 from napari_meris_ortho.simulate.radiometry import CLOUD_SPECTRUM
 from napari_meris_ortho.synthesis import (
-    _commit,
-    _create_layers,
-    _Layers,
+    export_cog,
     open_synthesis,
     synthesize,
     tiles,
@@ -34,20 +33,24 @@ GRID = OutputGrid("EPSG:4326", 13.45, 46.70, 0.0015, 0.0015, 540, 340)
 
 def scene_product(clouds: dict | None = None, orbit_shift_deg: float = 0.0,
                   **options: object) -> str:
-    """A small simulated FR product (128 x 193) of the fr-small area, cached by the simulator."""
+    """A small simulated FR product (128 x 193) of the fr-small area, cached by the simulator.
+    Cloudy variants of one acquisition get the file counter ``seed // 10`` in their product
+    name (otherwise they would be one product: same name, same sensing time)."""
     from napari_meris_ortho.simulate.scene import generate_scene
 
     cfg = {"base": "fr-small", "lines": 128, "columns": 193, "first_column": 1150,
            "exports": NO_EXPORTS, "clouds": clouds, **options}
+    if clouds and "file_counter" not in options:
+        cfg["file_counter"] = int(clouds.get("seed", 0)) // 10 + 1
     if orbit_shift_deg:
         cfg["orbit"] = {"nadir_lon": 18.014693 + orbit_shift_deg}
     return str(generate_scene(cfg).product_path)
 
 
-def layers(path) -> dict[str, np.ndarray]:
-    """Every layer of a synthesis directory as arrays."""
-    store = open_synthesis(path)
-    return {name: store.read(name) for name in store.files()}
+def layers(path, at: str | None = None) -> dict[str, np.ndarray]:
+    """Every layer of a synthesis store as arrays."""
+    store = open_synthesis(path, at=at)
+    return {name: store.read(name) for name in store.layers()}
 
 
 def stack(path) -> np.ndarray:
@@ -61,7 +64,7 @@ def products() -> dict[str, str]:
     for k in (1, 2, 3):
         out[f"cloudy{k}"] = scene_product({"fraction": 0.4, "scale_km": 12.0, "seed": 10 * k})
     out["east"] = out["clear"]
-    out["west"] = scene_product(orbit_shift_deg=-0.6)
+    out["west"] = scene_product(orbit_shift_deg=-0.6, file_counter=9)
     return out
 
 
@@ -90,41 +93,71 @@ def test_tiles_cover_window_once_aligned() -> None:
     assert seen[100:700, 30:530].min() == 1 and seen.sum() == 600 * 500
 
 
-def test_layers_round_trip_and_manifest(tmp_path) -> None:
-    grid = _grid()
-    work = tmp_path / "out" / ".gen-000001.x.tmp"
-    work.mkdir(parents=True)
-    _create_layers(work, grid, (7, 13), "max-ndvi")
-    layers = _Layers(work, (7, 13), "max-ndvi")
-    win = (10, 60, 20, 300)
-    state = layers.read(win)
-    assert state["synthesis"].shape == (2, 50, 280) and not state["synthesis"].any()
-    state["synthesis"][1] = 42.5
-    state["ndvi"][:] = 49152
-    state["count"][:] = 3
-    layers.write(win, state)
-    layers.close()
-    _commit(work, tmp_path / "out", "gen-000001", None, "max-ndvi", (7, 13), grid, [])
-    store = open_synthesis(tmp_path / "out")
-    assert store.bands == (7, 13) and store.algorithm == "max-ndvi"
-    assert store.grid == grid
-    band = store.read("band_13")
-    assert band.dtype == np.float32 and band.shape == (200, 300)
-    assert band[10:60, 20:].min() == 42.5 and band.sum() == 42.5 * 50 * 280
-    assert store.read("ndvi", (10, 12, 20, 22)).tolist() == [[49152] * 2] * 2
-    with rasterio.open(store.files()["ndvi"]) as ds:
-        assert ds.dtypes[0] == "uint16" and ds.nodata == 0
-        assert ds.transform.c == 10.0 and ds.transform.f == 46.0
-    assert not any(p.name.endswith(".tmp") for p in (tmp_path / "out").iterdir())
+def test_store_layout_history_and_snapshots(products, tmp_path) -> None:
+    """One commit per run; arrays chunked by the tile with decimated overviews; the product
+    table names the winner of every pixel; --at reads an older state."""
+    import zarr
+
+    out = tmp_path / "s"
+    first = synthesize([products["cloudy1"]], out, grid=GRID, bands=BANDS, tile=256,
+                       algorithm="max-ndvi", elevation="tiepoints")
+    state1 = layers(out)
+    second = synthesize([products["cloudy2"]], out, input=out, tile=256, elevation="tiepoints")
+    store = open_synthesis(out)
+    assert store.snapshot == second.snapshot != first.snapshot
+    assert store.layers() == ["band_07", "band_13", "ndvi", "count", "product"]
+    assert store.overviews == [2] == st.overview_factors(540, 340, 256)
+    root = zarr.open_group(store.session.store, mode="r")
+    for name, dtype in (("band_07", "float32"), ("ndvi", "uint16"), ("count", "uint16"),
+                        ("product", "int32")):
+        assert root[name].dtype == dtype and root[name].chunks == (256, 256)
+        assert root[name].shape == (340, 540)
+        assert root[f"overview_2/{name}"].chunks == (128, 128)
+        np.testing.assert_array_equal(store.read(name, level=2), store.read(name)[::2, ::2])
+    # history: one commit per run, newest first, listing its products
+    history = store.history()
+    assert [c.snapshot for c in history] == [second.snapshot, first.snapshot]
+    assert [p["product_name"] for p in history[1].products] == [first.reports[0].product_name]
+    assert history[0].products[0]["status"] == "merged" and "1 product(s)" in history[0].message
+    # the winner layer: index into the product table, present exactly where count > 0
+    names = store.product_names()
+    assert sorted(names) == [1, 2]
+    winner, count = store.read("product"), store.read("count")
+    np.testing.assert_array_equal(winner > 0, count > 0)
+    assert set(np.unique(winner)) == {0, 1, 2}
+    assert [(r.added) for r in second.reports] == [int((winner == 2).sum())]
+    # the first snapshot is still there, byte for byte
+    older = layers(out, at=first.snapshot)
+    for key, value in state1.items():
+        assert value.tobytes() == older[key].tobytes(), key
+    with pytest.raises(OptionsError, match="no snapshot"):
+        open_synthesis(out, at="0" * 20)
 
 
-def test_options_refused_like_mersyn(tmp_path) -> None:
+def test_product_already_merged_is_skipped(products, tmp_path) -> None:
+    """Same product name and sensing time: reported and skipped, the count does not grow
+    (also within one run, and without a commit when nothing is new)."""
+    out = tmp_path / "s"
+    synthesize([products["cloudy1"], products["cloudy1"]], out, grid=GRID, bands=(13,),
+               tile=256, elevation="tiepoints")
+    before = layers(out)
+    assert open_synthesis(out).read("count").max() == 1
+    result = synthesize([products["cloudy1"], products["cloudy2"]], out, input=out, tile=256,
+                        elevation="tiepoints")
+    assert [r.status for r in result.reports] == ["already in the synthesis", "merged"]
+    assert result.skipped[0].product_name == result.reports[0].product_name
+    assert open_synthesis(out).read("count").max() == 2
+    again = synthesize([products["cloudy2"]], out, input=out, tile=256, elevation="tiepoints")
+    assert again.snapshot is None and len(again.skipped) == 1
+    assert len(open_synthesis(out).history()) == 2
+    assert before["count"].sum() < open_synthesis(out).read("count").sum()
+
+
+def test_options_refused_like_mersyn(products, tmp_path) -> None:
     grid = _grid()
-    work = tmp_path / "syn" / ".gen-000001.x.tmp"
-    work.mkdir(parents=True)
-    _create_layers(work, grid, (3,), "min-radiance")
-    _commit(work, tmp_path / "syn", "gen-000001", None, "min-radiance", (3,), grid, [])
-    product = tmp_path / "p.N1"
+    product = products["cloudy1"]
+    synthesize([product], tmp_path / "syn", grid=GRID, bands=(13,), tile=256,
+               elevation="tiepoints")
     with pytest.raises(OptionsError, match="shall not be given"):
         synthesize([product], tmp_path / "syn", input=tmp_path / "syn", grid=grid)
     with pytest.raises(OptionsError, match="shall not be given"):
@@ -147,11 +180,23 @@ def test_options_refused_like_mersyn(tmp_path) -> None:
         synthesize([product], tmp_path / "new", elevation="none", dems=["x.tif"])
     with pytest.raises(OptionsError, match="CRS"):
         synthesize([product], tmp_path / "new", crs="EPSG:99999999")
-    with pytest.raises(OptionsError, match="not a synthesis"):
+    with pytest.raises(OptionsError, match="workers"):
+        synthesize([product], tmp_path / "new", workers=-1)
+    with pytest.raises(OptionsError, match="absolute path"):
+        synthesize([product], "relative/store", scheduler="tcp://127.0.0.1:8786")
+    with pytest.raises(OptionsError, match="not a synthesis store"):
         synthesize([product], tmp_path / "new", input=tmp_path)
-    (tmp_path / "syn" / "synthesis.json").write_text(json.dumps({"format": "other"}))
-    with pytest.raises(OptionsError, match="damaged"):
-        open_synthesis(tmp_path / "syn")
+    (tmp_path / "busy").mkdir()
+    (tmp_path / "busy" / "notes.txt").write_text("x")
+    with pytest.raises(OptionsError, match="not empty and not a synthesis store"):
+        synthesize([product], tmp_path / "busy")
+    assert not (tmp_path / "new").exists()
+    # a synthesis of the old generation-directory format is refused with a clear message
+    old = tmp_path / "old"
+    old.mkdir()
+    (old / "synthesis.json").write_text('{"format": "napari-meris-ortho synthesis"}')
+    with pytest.raises(OptionsError, match="old generation-directory format"):
+        open_synthesis(old)
 
 
 # --------------------------------------------------------------------------- merge on products
@@ -162,7 +207,7 @@ def test_minimum_radiance_is_cloud_free_where_one_product_is_clear(products, sin
     cloudy = ["cloudy1", "cloudy2", "cloudy3"]
     result = synthesize([products[k] for k in cloudy], tmp_path / "s", grid=GRID, bands=BANDS,
                         tile=256, elevation="tiepoints")
-    assert not result.failed and result.generation == "gen-000001"
+    assert not result.failed and result.snapshot is not None
     synthesis = stack(tmp_path / "s")
     clear = singles["clear"]
     inside = clear[0] > 0
@@ -238,13 +283,11 @@ def test_incremental_equals_batch(products, tmp_path, algorithm) -> None:
         assert not result.failed
     batch, incremental = layers(tmp_path / "batch"), layers(inc)
     assert batch.keys() == incremental.keys()
-    for key in batch:
-        np.testing.assert_array_equal(batch[key], incremental[key], err_msg=key)
+    for key in batch:  # the winner indices too: products were added in canonical order
+        assert batch[key].tobytes() == incremental[key].tobytes(), key
     store = open_synthesis(inc)
-    assert store.manifest["generation"] == "gen-000003"
+    assert len(store.history()) == 3
     assert [p["product"] for p in store.products] == [Path(n).name for n in names]
-    assert sorted(p.name for p in inc.iterdir() if p.name != ".lock") == \
-        ["gen-000003", "synthesis.json"]
 
 
 def test_adjacent_orbits_mosaic_without_seam(products, tmp_path) -> None:
@@ -314,19 +357,20 @@ def test_new_synthesis_takes_the_first_footprint(products, tmp_path) -> None:
     assert count.sum() == result.reports[0].validated > 0.5 * count.size
 
 
-def test_update_into_another_directory_and_lock(products, tmp_path) -> None:
-    from napari_meris_ortho.synthesis import _locked
-
+def test_update_into_another_store_and_lock(products, tmp_path) -> None:
     first, second = products["cloudy1"], products["cloudy2"]
     a, b = tmp_path / "a", tmp_path / "b"
     synthesize([first], a, grid=GRID, bands=(13,), tile=256, elevation="tiepoints")
-    before = {p.name: p.read_bytes() for p in (a / "gen-000001").iterdir()}
+    before = layers(a)
     result = synthesize([second], b, input=a, tile=256, elevation="tiepoints")
-    assert result.generation == "gen-000002" and open_synthesis(b).grid == GRID
-    assert open_synthesis(b).read("count").max() == 2
-    assert {p.name: p.read_bytes() for p in (a / "gen-000001").iterdir()} == before
-    with _locked(a), pytest.raises(OptionsError, match="another synthesis run"):
+    assert open_synthesis(b).grid == GRID and open_synthesis(b).read("count").max() == 2
+    assert len(open_synthesis(b).history()) == 2  # the copy keeps the history
+    assert result.snapshot == open_synthesis(b).snapshot != open_synthesis(a).snapshot
+    for key, value in layers(a).items():
+        assert value.tobytes() == before[key].tobytes()
+    with st.locked(a), pytest.raises(OptionsError, match="another synthesis run"):
         synthesize([second], a, input=a, tile=256, elevation="tiepoints")
+    assert len(open_synthesis(a).history()) == 1
 
 
 def test_bright_pixels_kept_out_on_request(products, tmp_path) -> None:
@@ -379,7 +423,8 @@ def test_tile_beyond_the_zero_height_boundary_keeps_terrain_pixels(tmp_path) -> 
     assert terrain_margin_px(product, grid) == int(np.ceil(9000.0 / pixel_m)) + 2 == 81
 
 
-def test_band_layers_carry_band_and_scaling_metadata(products, tmp_path) -> None:
+def test_product_table_and_cog_export_carry_band_and_scaling_metadata(products,
+                                                                      tmp_path) -> None:
     """Issue 4 item 9: band description (number, wavelength) and radiance factors sf_rad."""
     from napari_meris_ortho.io.n1 import read_product
 
@@ -389,30 +434,21 @@ def test_band_layers_carry_band_and_scaling_metadata(products, tmp_path) -> None
     synthesize([products["cloudy1"]], tmp_path / "s", input=tmp_path / "s", tile=256,
                elevation="tiepoints")
     store = open_synthesis(tmp_path / "s")
-    for b in BANDS:
-        with rasterio.open(store.files()[f"band_{b:02d}"]) as ds:
-            tags, band_tags, description = ds.tags(), ds.tags(1), ds.descriptions[0]
-        assert description == f"MERIS band {b} ({clear.wavelengths[b - 1]:.1f} nm)"
-        assert float(band_tags["wavelength_nm"]) == pytest.approx(clear.wavelengths[b - 1])
-        assert float(band_tags["bandwidth_nm"]) == pytest.approx(clear.bandwidths[b - 1])
-        assert band_tags["meris_band"] == str(b) and band_tags["units"] == "W m-2 sr-1 um-1"
-        # both simulated products carry the Appendix A factors: one value
-        assert cloudy.scaling.radiance[b - 1] == clear.scaling.radiance[b - 1]
-        assert float(band_tags["sf_rad"]) == clear.scaling.radiance[b - 1]
-        assert tags["products"].split() == [clear.product_name, cloudy.product_name]
-    manifest = store.manifest["products"]
-    assert [p["product_name"] for p in manifest] == [clear.product_name, cloudy.product_name]
-    assert manifest[1]["sf_rad"] == {str(b): cloudy.scaling.radiance[b - 1] for b in BANDS}
-
-
-def test_changed_window_is_block_aligned_inside_the_tile() -> None:
-    from napari_meris_ortho.synthesis import _changed_window
-
-    win = (1024, 2048, 300, 1024)  # a tile clipped on the left by the footprint window
-    valid = np.zeros((1024, 724), bool)
-    assert _changed_window(win, valid) is None
-    valid[300, 10] = valid[700, 500] = True  # grid rows 1324, 1724; columns 310, 800
-    assert _changed_window(win, valid) == (1280, 1792, 300, 1024)
-    valid[:] = False
-    valid[0, 0] = True
-    assert _changed_window(win, valid) == (1024, 1280, 300, 512)
+    table = store.products
+    assert [p["product_name"] for p in table] == [clear.product_name, cloudy.product_name]
+    assert table[1]["sf_rad"] == {str(b): cloudy.scaling.radiance[b - 1] for b in BANDS}
+    assert table[0]["sensing_start"] == str(clear.first_line_time)
+    out = export_cog(store, tmp_path / "s.tif", bands=[13])
+    with rasterio.open(out) as ds:
+        assert ds.count == 1 and ds.descriptions[0] == "MERIS band 13"
+        assert ds.tags()["products"].split() == [clear.product_name, cloudy.product_name]
+        assert ds.overviews(1) and ds.profile["blockxsize"] == 256
+        assert (ds.width, ds.height) == (GRID.width, GRID.height)
+        assert ds.transform.c == GRID.x0 and ds.transform.f == GRID.y0
+        assert ds.read(1).tobytes() == store.band(13).tobytes()
+    winner = export_cog(store, tmp_path / "w.tif", layer="product")
+    with rasterio.open(winner) as ds:
+        assert ds.dtypes[0] == "int32" and ds.read(1).max() == 2
+    with pytest.raises(OptionsError, match="not in the synthesis"):
+        export_cog(store, tmp_path / "x.tif", bands=[3])
+    assert not (tmp_path / "x.tif").exists()

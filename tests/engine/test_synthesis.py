@@ -9,11 +9,12 @@ from napari_meris_ortho.engine.synthesis import (
     FLAG_BRIGHT,
     FLAG_GLINT_RISK,
     FLAG_INVALID,
-    merge_maximum_ndvi,
-    merge_minimum_radiance,
+    TileState,
+    combine,
     ndvi_decode,
     ndvi_encode,
     ndvi_value,
+    segment_state,
     validated_pixels,
 )
 
@@ -44,34 +45,84 @@ def test_validity_from_flags() -> None:
     assert validated_pixels(inside, flags, True).tolist() == [[True, False, False, False, False]]
 
 
+def _merge_all(states: list[TileState], rank: np.ndarray, order: list[int]) -> TileState:
+    acc = TileState.empty(states[0].bands.shape[0], states[0].count.shape,
+                          states[0].ndvi is not None)
+    for k in order:
+        combine(acc, states[k], rank)
+    return acc
+
+
+def _same(a: TileState, b: TileState) -> None:
+    for x, y in zip(vars(a).values(), vars(b).values(), strict=True):
+        assert (x is None and y is None) or x.tobytes() == y.tobytes()
+
+
 def test_minimum_radiance_band_by_band() -> None:
-    synthesis = np.array([[[0.0, 50.0, 50.0, 50.0]], [[0.0, 10.0, 10.0, 10.0]]], np.float32)
-    count = np.array([[0, 1, 1, 1]], np.uint16)
-    segment = np.array([[[40.0, 40.0, 60.0, 1.0]], [[20.0, 20.0, 5.0, 1.0]]], np.float32)
-    valid = np.array([[True, True, True, False]])
-    added = merge_minimum_radiance(synthesis, count, segment, valid)
-    # pixel 0 background -> taken; pixel 1: band 1 lower, band 2 higher; pixel 2: band 2 lower
-    assert synthesis[:, 0].tolist() == [[40.0, 40.0, 50.0, 50.0], [20.0, 10.0, 5.0, 10.0]]
-    assert count.tolist() == [[1, 2, 2, 1]]
-    assert added == 3
+    # two products, bands (7, 13); the stored state holds product 1
+    stored = segment_state(np.array([[[50.0, 50.0, 0.0]], [[10.0, 10.0, 0.0]]], np.float32),
+                           np.array([[True, True, False]]), 1)
+    new = segment_state(np.array([[[40.0, 60.0, 1.0]], [[20.0, 5.0, 1.0]]], np.float32),
+                        np.array([[True, True, True]]), 2)
+    rank = np.array([0, 1, 2])
+    combine(stored, new, rank)
+    # pixel 0: band 7 lower, band 13 higher; pixel 1: band 13 lower; pixel 2: background
+    assert stored.bands[:, 0].tolist() == [[40.0, 50.0, 1.0], [10.0, 5.0, 1.0]]
+    assert stored.count.tolist() == [[2, 2, 1]]
+    # the winner is the product of the lowest first-band radiance
+    assert stored.winner.tolist() == [[2, 1, 2]]
 
 
-def test_minimum_radiance_is_order_independent() -> None:
+def test_segment_state_keeps_only_positive_valid_radiances() -> None:
+    segment = np.array([[[5.0, -1.0, np.nan, 7.0]]], np.float32)
+    state = segment_state(segment, np.array([[True, True, True, False]]), 3)
+    assert state.bands.tolist() == [[[5.0, 0.0, 0.0, 0.0]]]
+    assert state.winner.tolist() == [[3, 3, 3, 0]] and state.count.tolist() == [[1, 1, 1, 0]]
+
+
+@pytest.mark.parametrize("ndvi", [False, True])
+def test_combine_is_associative_and_commutative(ndvi) -> None:
+    """Any order and any grouping of the contributions gives the same bytes, ties included
+    (products of equal radiance or equal NDVI code: the lower rank wins)."""
     rng = np.random.default_rng(3)
-    segments = rng.uniform(1, 100, (4, 2, 30, 40)).astype(np.float32)
-    masks = rng.random((4, 30, 40)) > 0.3
-    results = []
-    for order in ([0, 1, 2, 3], [3, 1, 0, 2]):
-        synthesis = np.zeros((2, 30, 40), np.float32)
-        count = np.zeros((30, 40), np.uint16)
-        for k in order:
-            merge_minimum_radiance(synthesis, count, segments[k], masks[k])
-        results.append((synthesis, count))
-    np.testing.assert_array_equal(results[0][0], results[1][0])
-    expected = np.where(masks[:, None], segments, np.inf).min(axis=0)
-    expected[np.isinf(expected)] = 0
-    np.testing.assert_array_equal(results[0][0], expected)
-    np.testing.assert_array_equal(results[0][1], masks.sum(axis=0))
+    n, shape = 6, (30, 40)
+    states = []
+    for k in range(n):
+        segment = rng.choice(np.array([1.0, 2.0, 3.0, 50.0], np.float32), (2, *shape))
+        valid = rng.random(shape) > 0.3
+        red = nir = None
+        if ndvi:  # few distinct values: many equal NDVI codes
+            red, nir = segment[0], rng.choice(np.array([2.0, 4.0], np.float32), shape)
+        states.append(segment_state(segment, valid, k + 1, red, nir))
+    rank = np.array([0, 4, 2, 6, 1, 3, 5])  # sensing time / name order of products 1..6
+    reference = _merge_all(states, rank, list(range(n)))
+    for order in ([5, 4, 3, 2, 1, 0], [2, 0, 5, 1, 4, 3]):
+        _same(reference, _merge_all(states, rank, order))
+    # grouping: (0 + 1 + 2) and (3 + 4 + 5) merged separately, then together
+    left, right = _merge_all(states, rank, [0, 1, 2]), _merge_all(states, rank, [3, 4, 5])
+    combine(right, left, rank)
+    _same(reference, right)
+    valid = np.stack([s.count for s in states]).astype(bool)
+    np.testing.assert_array_equal(reference.count, valid.sum(axis=0))
+    if not ndvi:  # band by band the minimum; the winner holds it, lowest rank among equals
+        values = np.where(valid[:, None], np.stack([s.bands for s in states]), np.inf)
+        expected = values.min(axis=0)
+        expected[np.isinf(expected)] = 0
+        np.testing.assert_array_equal(reference.bands, expected)
+        first = values[:, 0]
+        best = (first == first.min(axis=0)) & valid
+        ranks = np.where(best, rank[1:, None, None], 99)
+        winner = np.where(valid.any(axis=0), ranks.argmin(axis=0) + 1, 0)
+        np.testing.assert_array_equal(reference.winner, winner)
+    else:  # the greatest code; all bands of that product
+        codes = np.where(valid, np.stack([s.ndvi for s in states]).astype(int), -1)
+        np.testing.assert_array_equal(reference.ndvi, np.maximum(codes.max(axis=0), 0))
+        w = reference.winner
+        for k, s in enumerate(states):
+            sel = w == k + 1
+            np.testing.assert_array_equal(reference.bands[:, sel], s.bands[:, sel])
+            ties = (codes[k] == codes.max(axis=0)) & valid[k] & (w > 0)
+            assert np.all(rank[w[ties]] <= rank[k + 1])
 
 
 def test_maximum_ndvi_keeps_greenest_pixel_all_bands() -> None:
@@ -79,14 +130,11 @@ def test_maximum_ndvi_keeps_greenest_pixel_all_bands() -> None:
     date_a = np.array([[[10.0, 10.0]], [[30.0, 30.0]], [[5.0, 5.0]]], np.float32)
     date_b = np.array([[[10.0, 10.0]], [[20.0, 20.0]], [[7.0, 7.0]]], np.float32)
     valid = np.array([[True, True]])
-    synthesis = np.zeros((3, 1, 2), np.float32)
-    ndvi = np.zeros((1, 2), np.uint16)
-    count = np.zeros((1, 2), np.uint16)
-    assert merge_maximum_ndvi(synthesis, ndvi, count, date_b, date_b[0], date_b[1], valid) == 2
-    assert merge_maximum_ndvi(synthesis, ndvi, count, date_a, date_a[0], date_a[1], valid) == 2
-    assert synthesis[2].tolist() == [[5.0, 5.0]]
-    # a lower NDVI does not replace
-    assert merge_maximum_ndvi(synthesis, ndvi, count, date_b, date_b[0], date_b[1], valid) == 0
-    assert synthesis[:, 0, 0].tolist() == [10.0, 30.0, 5.0]
-    assert ndvi.tolist() == [[49152, 49152]]
-    assert count.tolist() == [[3, 3]]
+    a = segment_state(date_a, valid, 1, date_a[0], date_a[1])
+    b = segment_state(date_b, valid, 2, date_b[0], date_b[1])
+    rank = np.array([0, 1, 2])
+    for order in ([0, 1], [1, 0]):
+        out = _merge_all([a, b], rank, order)
+        assert out.bands[:, 0, 0].tolist() == [10.0, 30.0, 5.0]
+        assert out.ndvi.tolist() == [[49152, 49152]] and out.winner.tolist() == [[1, 1]]
+        assert out.count.tolist() == [[2, 2]]
