@@ -1,0 +1,168 @@
+"""Synthesis on dask.distributed workers (synthesis.py, _synthesis_run.py): a real LocalCluster
+gives the bytes of the in-process run in any product order; an unreachable scheduler, two
+concurrent runs on one store and a corrupt product among many end cleanly."""
+
+from __future__ import annotations
+
+import socket
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from napari_meris_ortho.cli import main
+from napari_meris_ortho.synthesis import open_synthesis, synthesize
+from test_synthesis import GRID, layers, scene_product
+
+COMMON = dict(grid=GRID, bands=(7, 13), tile=256, elevation="tiepoints")
+GRID_ARGS = ["--crs", "EPSG:4326", "--ul", "13.45", "46.70", "--lr", "14.26", "46.19",
+             "--pixel-size", "0.0015", "--bands", "7,13", "--elevation", "tiepoints",
+             "--tile", "256"]
+
+
+@pytest.fixture(scope="module")
+def products() -> list[str]:
+    """4 small simulated products of one area: cloudy dates (distinct product names)."""
+    return [scene_product({"fraction": 0.4, "scale_km": 12.0, "seed": 10 * k})
+            for k in (1, 2, 3, 4)]
+
+
+@pytest.fixture(scope="module")
+def cluster():
+    """A real LocalCluster: 2 worker processes, one thread each."""
+    from distributed import LocalCluster
+
+    from napari_meris_ortho._synthesis_run import WORKER_ENV
+
+    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                      dashboard_address=None, env=WORKER_ENV) as c:
+        yield c
+
+
+def _same(a: Path, b: Path) -> None:
+    left, right = layers(a), layers(b)
+    assert left.keys() == right.keys()
+    for key in left:
+        assert left[key].tobytes() == right[key].tobytes(), key
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("algorithm", ["max-ndvi", "min-radiance"])
+def test_workers_give_the_bytes_of_one_process_in_any_order(products, cluster, tmp_path,
+                                                            algorithm) -> None:
+    single = tmp_path / "single"
+    result = synthesize(products, single, algorithm=algorithm, **COMMON)
+    assert len(result.merged) == 4 and not result.failed
+    winners = open_synthesis(single).read("product")
+    assert set(np.unique(winners)) == {0, 1, 2, 3, 4}  # every product wins somewhere
+    orders = [products[::-1], [products[k] for k in (2, 0, 3, 1)]]
+    for k, order in enumerate(orders):
+        out = tmp_path / f"cluster{k}"
+        result = synthesize(order, out, algorithm=algorithm,
+                            scheduler=cluster.scheduler_address, **COMMON)
+        assert len(result.merged) == 4
+        _same(single, out)
+    # and in two runs on the cluster (an update adds two products), same bytes again
+    update = tmp_path / "update"
+    synthesize(products[2:], update, algorithm=algorithm, scheduler=cluster.scheduler_address,
+               **COMMON)
+    synthesize(products[:2], update, input=update, scheduler=cluster.scheduler_address,
+               elevation="tiepoints")
+    for key, value in layers(update).items():
+        if key != "product":  # indices follow the order products came in
+            assert value.tobytes() == layers(single)[key].tobytes(), key
+
+
+@pytest.mark.slow
+def test_embedded_local_cluster(products, tmp_path) -> None:
+    """``workers=2`` starts its own LocalCluster (worker processes) and closes it."""
+    synthesize(products[:2], tmp_path / "single", **COMMON)
+    result = synthesize(products[:2][::-1], tmp_path / "two", workers=2, **COMMON)
+    assert len(result.merged) == 2
+    _same(tmp_path / "single", tmp_path / "two")
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+@pytest.mark.timeout(60)
+def test_unreachable_scheduler_is_one_message_exit_2(products, tmp_path, capsys) -> None:
+    address = f"tcp://127.0.0.1:{_free_port()}"  # nobody listens there
+    out = tmp_path / "syn"
+    assert main(["-q", "synthesize", products[0], "--out", str(out), "--scheduler", address,
+                 *GRID_ARGS]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("meris-ortho: error: cannot reach the dask "
+                                               f"scheduler at {address}")
+    assert not out.exists()
+    assert main(["-q", "synthesize", products[0], "--out", "relative/syn", "--scheduler",
+                 address, *GRID_ARGS]) == 2
+    assert "absolute path" in capsys.readouterr().err
+
+
+def test_store_that_is_not_a_synthesis(products, tmp_path, capsys) -> None:
+    for path in (tmp_path, tmp_path / "missing"):
+        assert main(["-q", "synthesize", products[0], "--input", str(path), "--out",
+                     str(path), "--workers", "0"]) == 2
+        assert "not a synthesis store" in capsys.readouterr().err
+        assert main(["-q", "synthesis-log", str(path)]) == 2
+        assert "not a synthesis store" in capsys.readouterr().err
+
+
+def test_corrupt_product_among_many(products, tmp_path, caplog) -> None:
+    """Reported, skipped, exit 1; the others merged as if it were not there."""
+    bad = tmp_path / "corrupt.N1"
+    bad.write_bytes(Path(products[1]).read_bytes()[:20000])
+    out, ref = tmp_path / "syn", tmp_path / "ref"
+    assert main(["-q", "synthesize", products[0], str(bad), *products[2:], "--out", str(out),
+                 "--workers", "0", *GRID_ARGS]) == 1
+    assert "corrupt.N1" in caplog.text
+    synthesize([products[0], *products[2:]], ref, **COMMON)
+    _same(out, ref)
+    commit = open_synthesis(out).history()[0]
+    assert [p["status"] for p in commit.products] == ["merged", "failed", "merged", "merged"]
+    assert "corrupt.N1" in commit.products[1]["product"]
+
+
+@pytest.mark.slow
+def test_two_concurrent_runs_on_one_store(products, tmp_path) -> None:
+    """Two processes start the same new synthesis at once: one commits, the other ends with
+    one message (exit 2): the lock is held from the "is there a synthesis" check to the
+    commit. Then two concurrent updates: never a corrupted store."""
+    out = tmp_path / "syn"
+    cmd = [sys.executable, "-m", "napari_meris_ortho.cli", "-q", "synthesize", *products[:2],
+           "--out", str(out), "--workers", "0", *GRID_ARGS]
+    procs = [subprocess.Popen(cmd, stderr=subprocess.PIPE, text=True) for _ in range(2)]
+    outcomes = sorted((p.wait(timeout=300), p.stderr.read()) for p in procs)
+    for p in procs:
+        p.stderr.close()
+    assert [code for code, _ in outcomes] == [0, 2], outcomes
+    message = outcomes[1][1].strip().splitlines()
+    assert len(message) == 1 and message[0].startswith("meris-ortho: error:")
+    assert "another synthesis run is using it" in message[0] or \
+        "already holds a synthesis" in message[0]
+    assert len(open_synthesis(out).history()) == 1
+    synthesize(products[:2], tmp_path / "ref", **COMMON)
+    _same(out, tmp_path / "ref")
+    update = [sys.executable, "-m", "napari_meris_ortho.cli", "-q", "synthesize",
+              "--input", str(out), "--out", str(out), "--workers", "0",
+              "--elevation", "tiepoints"]
+    procs = [subprocess.Popen([*update, p], stderr=subprocess.PIPE, text=True)
+             for p in products[2:]]
+    codes = [p.wait(timeout=300) for p in procs]
+    errors = [p.stderr.read() for p in procs]
+    for p in procs:
+        p.stderr.close()
+    assert sorted(codes) in ([0, 0], [0, 2]), errors
+    store = open_synthesis(out)
+    assert len(store.history()) == 1 + codes.count(0)
+    merged = [products[2 + k] for k, c in enumerate(codes) if c == 0]
+    synthesize(merged, tmp_path / "ref", input=tmp_path / "ref", elevation="tiepoints")
+    for key, value in layers(tmp_path / "ref").items():
+        if key != "product":
+            assert value.tobytes() == layers(out)[key].tobytes(), key
