@@ -270,9 +270,11 @@ def tile_task(fork: Any, spec: Spec, window: Window, pieces: list[Piece], rank: 
     stored = st.read_window(fork.store, spec.names, window)
     state = _state_of(stored, spec)
     for p in sorted(usable, key=lambda p: int(rank[p.index])):  # any order gives the same
-        r0, c0 = p.window[0] - window[0], p.window[2] - window[2]
-        combine(state.window(r0, r0 + p.state.bands.shape[1], c0, c0 + p.state.bands.shape[2]),
-                p.state, rank)
+        if p.state is None:
+            continue
+        r0, r1, c0, c1 = (p.window[0] - window[0], p.window[1] - window[0],
+                          p.window[2] - window[2], p.window[3] - window[2])
+        combine(state.window(r0, r1, c0, c1), p.state, rank)
     st.write_tile(fork.store, window, _arrays_of(state, spec), spec.overviews)
     ids, counts = np.unique(state.winner, return_counts=True)
     new = {p.index for p in usable}
@@ -340,6 +342,7 @@ class Synthesis:
         self.reject_bright = reject_bright
         self.progress = progress
         self.table: list[dict[str, Any]] = old.products if old else []
+        self._branch: str | None = None  # run branch of a new synthesis
 
     # ---------------------------------------------------------------- products
     def _open(self) -> list[_Product]:
@@ -472,10 +475,9 @@ class Synthesis:
                 lambda s, m, r: self._commit(s, m, r, base, move_main=True))
 
     def _abandon(self) -> None:
-        branch = getattr(self, "_branch", None)
-        if branch is not None:
+        if self._branch is not None:
             with contextlib.suppress(Exception):
-                self.target.repo.delete_branch(branch)
+                self.target.repo.delete_branch(self._branch)
 
     def _attributes(self, table: list[dict[str, Any]]) -> dict[str, Any]:
         shape = (self.grid.height, self.grid.width)
