@@ -17,9 +17,10 @@ PACKAGE = "napari_meris_ortho"
 ROOT = Path(napari_meris_ortho.__file__).parent
 
 #: rooms (first component under the package) each room may import, besides itself
-BOTTOM = {"errors", "options", "geometry", "progress", "_atomic"}
+BOTTOM = {"errors", "options", "flags", "geometry", "progress", "_atomic"}
 ALLOWED = {
     "errors": set(),
+    "flags": set(),
     "options": {"errors"},
     "geometry": {"errors"},
     "io": BOTTOM,

@@ -26,29 +26,19 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import OptionsError
-from ..geometry.grid import OutputGrid
+from ..geometry.grid import OutputGrid, parse_crs
 
 GEO_KEY = "geo"
 
 
 def crs_wkt(crs: Any) -> str:
     """WKT of any CRS input (EPSG int, 'EPSG:32632', pyproj/rasterio CRS, WKT)."""
-    from pyproj import CRS
-
-    if hasattr(crs, "to_wkt"):
-        return str(crs.to_wkt())
-    try:
-        return CRS.from_user_input(crs).to_wkt()
-    except Exception as exc:  # pyproj.exceptions.CRSError
-        raise OptionsError(f"unknown CRS {crs!r}: {exc}") from None
+    return str(parse_crs(crs).to_wkt())
 
 
 def same_crs(a: Any, b: Any) -> bool:
     """True when two CRS inputs describe the same coordinate system."""
-    from pyproj import CRS
-
-    return bool(CRS.from_user_input(crs_wkt(a)) == CRS.from_user_input(crs_wkt(b)))
+    return bool(parse_crs(a) == parse_crs(b))
 
 
 def to_world(x: np.ndarray, y: np.ndarray) -> np.ndarray:
@@ -64,10 +54,9 @@ def from_world(world: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 def lonlat_to_crs(lon: np.ndarray, lat: np.ndarray, crs: Any) -> tuple[np.ndarray, np.ndarray]:
     """Project WGS84 lon/lat (degrees) into ``crs`` (always x = easting/lon, y = northing/lat)."""
-    from pyproj import CRS, Transformer
+    from pyproj import Transformer
 
-    target = CRS.from_user_input(crs_wkt(crs))
-    transformer = Transformer.from_crs("EPSG:4326", target, always_xy=True)
+    transformer = Transformer.from_crs("EPSG:4326", parse_crs(crs), always_xy=True)
     x, y = transformer.transform(np.asarray(lon, np.float64), np.asarray(lat, np.float64))
     return np.asarray(x, np.float64), np.asarray(y, np.float64)
 

@@ -6,13 +6,24 @@ Public entry points (the ``io.n1`` contract of ``docs/ARCHITECTURE.md``):
 - :func:`write_product` (``n1_writer``);
 - :class:`ScalingFactors` (``.appendix_a()``: the values printed in Appendix A);
 - :func:`west_to_east`: the mirrored (BEAM/EPR) view of stored-order arrays;
-- the L1b flag bits ``FLAG_*`` (Flags MDS(16)).
+- the L1b flag bits ``FLAG_*`` (Flags MDS(16), defined in ``flags``).
 
 Byte layouts live in ``n1_format``.
 """
 
 from __future__ import annotations
 
+from ..flags import (
+    FLAG_BRIGHT,
+    FLAG_COASTLINE,
+    FLAG_COSMETIC,
+    FLAG_DUPLICATED,
+    FLAG_GLINT_RISK,
+    FLAG_INVALID,
+    FLAG_LAND_OCEAN,
+    FLAG_NAMES,
+    FLAG_SUSPECT,
+)
 from .n1_format import (
     FR,
     NUM_BANDS,
@@ -27,21 +38,6 @@ from .n1_format import (
 )
 from .n1_reader import MerisL1bProduct, read_product, west_to_east
 from .n1_writer import write_product
-
-#: L1b flag bits of Flags MDS(16) (EPR's MER_RR__1P_flags)
-FLAG_COSMETIC = 1
-FLAG_DUPLICATED = 2
-FLAG_GLINT_RISK = 4
-FLAG_SUSPECT = 8
-FLAG_LAND_OCEAN = 16
-FLAG_BRIGHT = 32
-FLAG_COASTLINE = 64
-FLAG_INVALID = 128
-#: names of the flag bits, lowest bit first
-FLAG_NAMES = (
-    "COSMETIC", "DUPLICATED", "GLINT_RISK", "SUSPECT", "LAND_OCEAN", "BRIGHT", "COASTLINE",
-    "INVALID",
-)  # fmt: skip
 
 __all__ = [
     "FLAG_BRIGHT",

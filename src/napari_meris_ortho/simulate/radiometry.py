@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit, prange
 
+from ..flags import FLAG_BRIGHT, FLAG_COASTLINE, FLAG_GLINT_RISK, FLAG_INVALID, FLAG_LAND_OCEAN
 from .sensor import D_DLAT, D_DLON, D_LAT0, D_LON0
 from .terrain import KM_PER_DEG, Terrain, band_noise
 
@@ -31,11 +32,6 @@ SPECTRA = np.array([
 CLOUD_SPECTRUM = np.array([205, 212, 206, 200, 195, 186, 180, 178, 172, 162, 82, 158, 140,
                            135, 110], dtype=np.float64)
 
-FLAG_GLINT_RISK = 4
-FLAG_LAND_OCEAN = 16
-FLAG_BRIGHT = 32
-FLAG_COASTLINE = 64
-FLAG_INVALID = 128
 #: flags kept on the DEM posts (nearest post of T)
 POST_LAND, POST_COAST, POST_SNOW = 1, 2, 4
 
@@ -255,7 +251,7 @@ def product_radiometry(t_lon: np.ndarray, t_lat: np.ndarray, glint: np.ndarray,
             if r < 0:
                 for b in range(15):
                     counts[b, i, j] = 0
-                flags[i, j] = 128
+                flags[i, j] = FLAG_INVALID
                 continue
             acc = np.empty(spectra.shape[0])
             cl = _mixture(cover, brightness, cloud, r, c, fx, fy, acc)
@@ -268,12 +264,12 @@ def product_radiometry(t_lon: np.ndarray, t_lat: np.ndarray, glint: np.ndarray,
             pr, pc = nearest_post(geo, nr, nc, t_lon[i, j], t_lat[i, j])
             pf = post_flags[pr, pc]
             f = 0
-            if pf & 1:
-                f |= 16
-            if pf & 2:
-                f |= 64
-            if (pf & 4) or cloud[pr, pc] > 127:
-                f |= 32
-            if (pf & 1) == 0 and glint[i, j]:
-                f |= 4
+            if pf & POST_LAND:
+                f |= FLAG_LAND_OCEAN
+            if pf & POST_COAST:
+                f |= FLAG_COASTLINE
+            if (pf & POST_SNOW) or cloud[pr, pc] > 127:
+                f |= FLAG_BRIGHT
+            if (pf & POST_LAND) == 0 and glint[i, j]:
+                f |= FLAG_GLINT_RISK
             flags[i, j] = f
