@@ -1,0 +1,86 @@
+"""Pixel geolocation model (direct bilinear, inverse by cell search + Newton) on synthetic grids."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from napari_meris_ortho.engine.boundary import row_spans, segment_boundary
+from napari_meris_ortho.engine.grid import OutputGrid
+from napari_meris_ortho.engine.location import direct_location
+from napari_meris_ortho.engine.pixelgeo import direct_pixel_location, solve_pixel
+from napari_meris_ortho.engine.predcorr import HEIGHT_NONE, solve
+from napari_meris_ortho.engine.tiepoints import analytic_swath
+
+
+def _terrain(lon, lat):
+    return 1500.0 + 1200.0 * np.sin(np.radians(lon) * 40.0) * np.cos(np.radians(lat) * 30.0)
+
+
+def _pixel_grids(tp, heights: bool):
+    """Per-pixel terrain points of the analytic swath: the tie-point model at every pixel."""
+    line, col = np.meshgrid(np.arange(tp.height, dtype=float), np.arange(tp.width, dtype=float),
+                            indexing="ij")
+    if not heights:
+        return direct_location(tp, line, col, 0.0)
+    lon, lat = direct_location(tp, line, col, 0.0)
+    for _ in range(3):  # fixed point: the terrain height at the terrain point
+        lon, lat = direct_location(tp, line, col, _terrain(lon, lat))
+    return lon, lat
+
+
+def _scene(lon0=11.0, width=513, height=200):
+    tp = analytic_swath(height=height, width=width, lon0=lon0)
+    b = segment_boundary(tp.latitude, tp.longitude)
+    d = np.degrees(260.0 / 6370997.0)
+    x0, x1 = b.lon.min(), b.lon.max()
+    if x1 - x0 > 180:
+        x0, x1 = b.lon[b.lon > 0].min(), b.lon[b.lon < 0].max() + 360
+    grid = OutputGrid("EPSG:4326", x0, b.lat.max(), d * 1.4, d, int((x1 - x0) / (d * 1.4)) + 1,
+                      int((b.lat.max() - b.lat.min()) / d) + 1)
+    lon, lat = grid.lonlat()
+    spans = row_spans(b, grid, margin=20)
+    return tp, grid, lon, lat, (spans.ptr, spans.start, spans.stop)
+
+
+def test_direct_model_interpolates_pixel_centres_exactly():
+    lon = np.array([[10.0, 10.1], [10.02, 10.12]])
+    lat = np.array([[45.0, 44.99], [44.9, 44.89]])
+    lo, la = direct_pixel_location(lon, lat, [0, 1, 0.5, 0.25], [1, 0, 0.5, 0.5])
+    np.testing.assert_allclose(lo, [10.1, 10.02, 10.06, 10.055], atol=1e-12)
+    np.testing.assert_allclose(la, [44.99, 44.9, 44.945, 44.97], atol=1e-12)
+
+
+def test_direct_model_across_the_antimeridian():
+    lon = np.array([[179.99, -179.99], [179.98, -179.995]])
+    lat = np.array([[60.0, 60.0], [59.99, 59.99]])
+    lo, _ = direct_pixel_location(lon, lat, [0.0, 0.0], [0.5, 0.75])
+    np.testing.assert_allclose(lo, [-180.0, -179.995], atol=1e-9)
+
+
+def test_flat_pixel_inverse_matches_the_tie_point_inverse():
+    """Without heights the bilinear tie-point model restricted to a pixel cell is bilinear:
+    the pixel inverse must find the tie-point antecedents."""
+    tp, grid, lon, lat, spans = _scene()
+    plon, plat = _pixel_grids(tp, heights=False)
+    ref = solve(tp, grid, lon, lat, None, HEIGHT_NONE, spans, tolerance=1e-5)
+    res = solve_pixel(plon, plat, grid, lon, lat, spans, tolerance=1e-5)
+    ok = (ref["iterations"] >= 0) & (res["iterations"] >= 0)
+    assert ok.sum() > 0.97 * (ref["iterations"] >= 0).sum()
+    assert np.max(np.abs(res["line"][ok] - ref["line"][ok])) < 2e-3
+    assert np.max(np.abs(res["col"][ok] - ref["col"][ok])) < 2e-3
+    assert res["search"]["primary not found"] == 0
+
+
+@pytest.mark.parametrize("lon0", [11.0, 179.5])
+def test_terrain_pixel_inverse_is_consistent_with_the_direct_model(lon0):
+    tp, grid, lon, lat, spans = _scene(lon0=lon0)
+    plon, plat = _pixel_grids(tp, heights=True)
+    res = solve_pixel(plon, plat, grid, lon, lat, spans, tolerance=1e-4)
+    ok = res["iterations"] >= 0
+    assert ok.sum() > 0.5 * np.count_nonzero(spans[2] - spans[1])
+    lo, la = direct_pixel_location(plon, plat, res["line"][ok], res["col"][ok])
+    dx = ((lo - lon[ok] + 180) % 360 - 180) * 111320 * np.cos(np.radians(lat[ok])) / 260.0
+    dy = (la - lat[ok]) * 111320 / 260.0
+    assert np.max(np.hypot(dx, dy)) < 1e-3
+    assert np.all(res["iterations"][ok] <= 10)
