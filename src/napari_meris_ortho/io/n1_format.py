@@ -72,8 +72,11 @@ PRODUCT_TYPES: dict[str, Resolution] = {
     "MER_FSG_1P": FULL_RESOLUTION,
     RR: REDUCED_RESOLUTION,
 }
+#: AMORGOS (third reprocessing) geo-corrected FR types: three more MDS after Flags MDS(16) hold
+#: the per-pixel terrain-corrected position (BEAM's DDDB ``MER_FSG_1P.dd`` / ``MER_FRG_1P.dd``)
+PIXEL_GEOLOCATION_TYPES = ("MER_FRG_1P", "MER_FSG_1P")
 #: product types the writer produces
-WRITABLE_PRODUCT_TYPES = (FR, RR)
+WRITABLE_PRODUCT_TYPES = (FR, RR, *PIXEL_GEOLOCATION_TYPES)
 
 
 def tie_columns(width: int, samples_per_tie_point: int) -> int:
@@ -350,6 +353,36 @@ def flags_dtype(width: int) -> np.dtype:
     )
 
 
+@dataclass(frozen=True)
+class GeolocationMds:
+    """A per-pixel geolocation MDS of FRG/FSG products (BEAM's ``MER_FSG_1P_MDSR_17..19``):
+    13-byte header + ``dtype``[W]; physical = raw x ``scale``."""
+
+    name: str  #: DS_NAME
+    band: str  #: band name in BEAM / EPR
+    dtype: str  #: big-endian raw type
+    scale: float
+    unit: str
+
+
+#: Corrected Longitude MDS(17), Corrected Latitude MDS(18) (int32, 1e-6 deg), Altitude MDS(19)
+#: (int16, m): the AMORGOS terrain point of each pixel centre
+GEOLOCATION_MDS: tuple[GeolocationMds, ...] = (
+    GeolocationMds("Corrected Longitude MDS(17)", "corr_longitude", ">i4", 1e-6, "deg"),
+    GeolocationMds("Corrected Latitude MDS(18)", "corr_latitude", ">i4", 1e-6, "deg"),
+    GeolocationMds("Altitude MDS(19)", "altitude", ">i2", 1.0, "m"),
+)
+
+
+def geolocation_record_size(mds: GeolocationMds, width: int) -> int:
+    """Bytes of a geolocation MDS record: 13 + 4 W (longitude, latitude) or 13 + 2 W (altitude)."""
+    return RECORD_HEADER_SIZE + np.dtype(mds.dtype).itemsize * width
+
+
+def geolocation_dtype(mds: GeolocationMds, width: int) -> np.dtype:
+    return np.dtype(RECORD_HEADER_FIELDS + [("values", mds.dtype, (width,))])
+
+
 QUALITY_DTYPE = np.dtype(
     RECORD_HEADER_FIELDS + [("range_flag", ">u2", (5,)), ("range_blind_flag", ">u2", (5,))]
 )
@@ -446,6 +479,7 @@ def plan_layout(product_type: str, width: int, height: int, n_tie_lines: int) ->
     """The 30 DSDs of a MERIS L1b product of ``width`` x ``height`` pixels, laid out like
     Appendix A: Quality ADS, Scaling Factor GADS, Tie points ADS, Radiance MDS(1..15),
     Flags MDS(16), 10 reference DSDs, 1 spare. Offsets follow MPH (1247) + SPH (9942).
+    FRG/FSG products have 33: the three geolocation MDS (17..19) follow Flags MDS(16).
     """
     res = PRODUCT_TYPES[product_type]
     n_cols = tie_columns(width, res.samples_per_tie_point)
@@ -457,15 +491,24 @@ def plan_layout(product_type: str, width: int, height: int, n_tie_lines: int) ->
     ]
     stored += [(radiance_mds(b), "M", height, radiance_record_size(width)) for b in range(1, 16)]
     stored.append((FLAGS_MDS, "M", height, flags_record_size(width)))
-    offset = MPH_SIZE + sph_size()
+    if product_type in PIXEL_GEOLOCATION_TYPES:
+        stored += [(m.name, "M", height, geolocation_record_size(m, width))
+                   for m in GEOLOCATION_MDS]
+    n_dsd = num_dsd(product_type)
+    offset = MPH_SIZE + sph_size(n_dsd)
     dsds = []
     for name, kind, num, size in stored:
         dsds.append(Dsd(name, kind, "", offset, num * size, num, size))
         offset += num * size
     dsds += [Dsd(name, "R", filename, 0, 0, 0, 0) for name, filename in REFERENCE_DSDS]
     dsds.append(SPARE_DSD)
-    assert len(dsds) == NUM_DSD
+    assert len(dsds) == n_dsd
     return dsds
+
+
+def num_dsd(product_type: str) -> int:
+    """DSDs of a product type: 30, plus the 3 geolocation MDS of FRG/FSG products."""
+    return NUM_DSD + (len(GEOLOCATION_MDS) if product_type in PIXEL_GEOLOCATION_TYPES else 0)
 
 
 def sph_size(num_dsd: int = NUM_DSD) -> int:

@@ -27,8 +27,10 @@ from .n1_format import (
     FLAGS_MDS,
     GADS_DTYPE,
     GADS_SIZE,
+    GEOLOCATION_MDS,
     MPH_SIZE,
     NUM_BANDS,
+    PIXEL_GEOLOCATION_TYPES,
     PRODUCT_TYPES,
     SCALING_GADS,
     SPARE_DSD,
@@ -39,6 +41,8 @@ from .n1_format import (
     ScalingFactors,
     flags_dtype,
     flags_record_size,
+    geolocation_dtype,
+    geolocation_record_size,
     mjd2000_to_seconds,
     parse_utc,
     radiance_dtype,
@@ -158,6 +162,8 @@ class MerisL1bProduct:
     float64 grids), ``tie_point_times``, ``line_times`` (float64 seconds since 2000-01-01),
     ``wavelengths`` (nm); methods ``counts(band)``, ``radiance(band)``; properties ``flags``,
     ``detector_index``. Band arrays are big-endian memory maps of the file (``>u2``, ``>i2``).
+    FRG/FSG (AMORGOS) products also have a per-pixel geolocation (``has_pixel_geolocation``,
+    ``pixel_longitude()``, ``pixel_latitude()``, ``pixel_altitude()``: MDS(17..19)).
     """
 
     def __init__(
@@ -299,6 +305,34 @@ class MerisL1bProduct:
         rec = self._records(radiance_mds(1), radiance_dtype(self.width))  # headers only read
         return mjd2000_to_seconds(rec["days"], rec["seconds"], rec["microseconds"])
 
+    # -- per-pixel geolocation (MER_FRG_1P / MER_FSG_1P) ------------------------------------
+    @property
+    def has_pixel_geolocation(self) -> bool:
+        """True for products with the Corrected Longitude/Latitude and Altitude MDS(17..19)."""
+        return self.product_type in PIXEL_GEOLOCATION_TYPES
+
+    def _geolocation(self, k: int, lines: slice | None, dtype: type) -> np.ndarray:
+        if not self.has_pixel_geolocation:
+            raise N1FormatError(self.path, f"{self.product_type} products have no per-pixel "
+                                f"geolocation (only {', '.join(PIXEL_GEOLOCATION_TYPES)})")
+        mds = GEOLOCATION_MDS[k]
+        raw = self._records(mds.name, geolocation_dtype(mds, self.width))["values"]
+        if lines is not None:
+            raw = raw[lines]
+        return raw.astype(dtype) * dtype(mds.scale)
+
+    def pixel_longitude(self, lines: slice | None = None) -> np.ndarray:
+        """Terrain-corrected longitude of every pixel (Corrected Longitude MDS(17)), float64 deg."""
+        return self._geolocation(0, lines, np.float64)
+
+    def pixel_latitude(self, lines: slice | None = None) -> np.ndarray:
+        """Terrain-corrected latitude of every pixel (Corrected Latitude MDS(18)), float64 deg."""
+        return self._geolocation(1, lines, np.float64)
+
+    def pixel_altitude(self, lines: slice | None = None) -> np.ndarray:
+        """DEM altitude of every pixel's terrain point (Altitude MDS(19)), float32 m."""
+        return self._geolocation(2, lines, np.float32)
+
     @property
     def line_interval_s(self) -> float:
         """SPH LINE_TIME_INTERVAL in seconds (falls back to the resolution's nominal value)."""
@@ -424,6 +458,8 @@ def _read(path: Path, f, file_size: int, head: bytes) -> MerisL1bProduct:
         raise N1FormatError(path, f"Flags MDS(16) has {flags.num_dsr} lines, band 1 has {height}")
     if height < 1:
         raise N1FormatError(path, "the product has no lines (Radiance MDS(1) NUM_DSR=0)")
+    if product_type in PIXEL_GEOLOCATION_TYPES:
+        _check_geolocation_mds(path, by_name, product_type, width, height)
     if tie_dsd.num_dsr < tie_lines(height, df):
         raise N1FormatError(
             path, f"Tie points ADS has {tie_dsd.num_dsr} tie-point lines, {height} product lines "
@@ -483,6 +519,21 @@ def _check_dsds(path: Path, dsds: list[Dsd], file_size: int, data_start: int) ->
     if missing:
         raise N1FormatError(path, f"missing data sets: {', '.join(missing)}")
     return by_name
+
+
+def _check_geolocation_mds(path: Path, by_name: dict[str, Dsd], product_type: str, width: int,
+                           height: int) -> None:
+    """FRG/FSG products need MDS(17..19), one record of W values per product line."""
+    for mds in GEOLOCATION_MDS:
+        d = by_name.get(mds.name)
+        if d is None:
+            raise N1FormatError(path, f"{product_type} product without {mds.name} (its "
+                                f"per-pixel {mds.band})")
+        size = geolocation_record_size(mds, width)
+        if d.dsr_size != size or d.num_dsr != height:
+            raise N1FormatError(
+                path, f"{mds.name}: {d.num_dsr} records of {d.dsr_size} bytes, expected "
+                f"{height} of {size} (LINE_LENGTH={width})")
 
 
 def _read_records(f, path: Path, offset: int, dtype: np.dtype, count: int) -> np.ndarray:

@@ -2,8 +2,10 @@
 
 MPH (1247 bytes), SPH text (1542 bytes) and 30 DSDs of 280 bytes, then Quality ADS, Scaling Factor
 GADS, Tie points ADS, Radiance MDS(1..15) and Flags MDS(16), with the offsets and sizes of
-Appendix A for a 2241 x 2241 FR product. The bands are streamed a block of lines at a time, so
-memory-mapped inputs of any size are welcome. The file is written to a temporary name and renamed.
+Appendix A for a 2241 x 2241 FR product. AMORGOS types (MER_FRG_1P, MER_FSG_1P) add the
+Corrected Longitude/Latitude and Altitude MDS(17..19) of the per-pixel terrain point. The bands
+are streamed a block of lines at a time, so memory-mapped inputs of any size are welcome. The file
+is written to a temporary name and renamed.
 """
 
 from __future__ import annotations
@@ -24,10 +26,11 @@ from .n1_format import (
     APPENDIX_A_BANDWIDTHS,
     APPENDIX_A_WAVELENGTHS,
     DSD_FIELDS,
+    GEOLOCATION_MDS,
     MPH_FIELDS,
     MPH_SIZE,
     NUM_BANDS,
-    NUM_DSD,
+    PIXEL_GEOLOCATION_TYPES,
     PRODUCT_TYPES,
     QUALITY_DTYPE,
     SPH_FIELDS,
@@ -39,6 +42,8 @@ from .n1_format import (
     ScalingFactors,
     flags_dtype,
     format_utc,
+    geolocation_dtype,
+    num_dsd,
     plan_layout,
     radiance_dtype,
     seconds_to_mjd2000,
@@ -244,6 +249,7 @@ def write_product(
     product_name: str | None = None,
     mph: Mapping[str, Any] | None = None,
     sph: Mapping[str, Any] | None = None,
+    pixel_geolocation: Mapping[str, np.ndarray] | None = None,
     progress: ProgressCallback | None = None,
 ) -> Path:
     """Write a MERIS L1b product (``MER_FR__1P`` or ``MER_RR__1P``) and return its path.
@@ -255,8 +261,10 @@ def write_product(
     (W-1)/DJ+1; ``first_line_time``: UTC of line 0 (naive datetimes are UTC);
     ``line_interval_s``: default 0.043997 s (FR) / 0.175988 s (RR); ``scaling``: default
     :meth:`ScalingFactors.appendix_a` with the sampling rate set to the line interval;
-    ``mph``/``sph``: overrides of header values by file key (``{"PROC_CENTER": "UK-PAC"}``).
-    Bad arguments raise :class:`OptionsError`.
+    ``mph``/``sph``: overrides of header values by file key (``{"PROC_CENTER": "UK-PAC"}``);
+    ``pixel_geolocation``: for MER_FRG_1P / MER_FSG_1P only (and required there), the per-pixel
+    terrain point as (H, W) ``longitude``, ``latitude`` (deg, stored in 1e-6 deg) and
+    ``altitude`` (m, stored as int16). Bad arguments raise :class:`OptionsError`.
     """
     if product_type not in WRITABLE_PRODUCT_TYPES:
         raise OptionsError(
@@ -301,6 +309,7 @@ def write_product(
     # quantize with the factors as stored (float32), which the reader multiplies back
     stored_scaling = ScalingFactors.from_record(scaling.to_record())
     raw_tie = _quantize_tie_points(tie_points, (n_tie, n_cols), stored_scaling)
+    geo_raw = _quantize_geolocation(product_type, pixel_geolocation, shape)
     mph_over = _check_overrides("mph", mph, MPH_FIELDS)
     sph_over = _check_overrides("sph", sph, SPH_FIELDS)
 
@@ -345,8 +354,8 @@ def write_product(
         "PRODUCT_ERR": "0",
         **mph_over,
         "TOT_SIZE": tot_size,
-        "SPH_SIZE": sph_size(),
-        "NUM_DSD": NUM_DSD,
+        "SPH_SIZE": sph_size(len(dsds)),
+        "NUM_DSD": len(dsds),
         "DSD_SIZE": 280,
         "NUM_DATA_SETS": sum(d.has_data for d in dsds),
     }
@@ -389,7 +398,7 @@ def write_product(
         header += b"".join(format_dsd(d) for d in dsds)
     except ValueError as exc:
         raise OptionsError(f"{path}: header value: {exc}") from exc
-    assert len(header) == MPH_SIZE + sph_size()
+    assert len(header) == MPH_SIZE + sph_size(num_dsd(product_type))
 
     # annotation data sets
     quality = dsds[0]
@@ -401,7 +410,7 @@ def write_product(
         tie[key] = raw
     annotations = q.tobytes() + scaling.to_record().tobytes() + tie.tobytes()
 
-    total = (NUM_BANDS + 1) * height
+    total = (NUM_BANDS + 1 + len(geo_raw)) * height
     with atomic_path(path) as tmp, open(tmp, "wb") as f:
         f.write(header)
         f.write(annotations)
@@ -410,9 +419,52 @@ def write_product(
             _write_band(f, counts[b], radiance_dtype(width), line_times, b, progress, total)
         assert f.tell() == dsds[18].offset
         _write_flags(f, flags, detector_index, width, line_times, progress, total)
+        for k, (mds, raw) in enumerate(zip(GEOLOCATION_MDS, geo_raw, strict=False)):
+            assert f.tell() == dsds[19 + k].offset
+            _write_geolocation(f, raw, geolocation_dtype(mds, width), line_times)
+            if progress is not None:
+                progress((NUM_BANDS + 2 + k) * height, total)
         if f.tell() != tot_size:  # pragma: no cover - a bug, not a user error
             raise AssertionError(f"wrote {f.tell()} bytes, planned {tot_size}")
     return Path(path)
+
+
+def _quantize_geolocation(product_type: str, geo: Mapping[str, np.ndarray] | None,
+                          shape: tuple[int, ...]) -> list[np.ndarray]:
+    """Stored integers of the geolocation MDS(17..19) (empty for the other types)."""
+    if product_type not in PIXEL_GEOLOCATION_TYPES:
+        if geo is not None:
+            raise OptionsError(f"pixel_geolocation: only {' and '.join(PIXEL_GEOLOCATION_TYPES)} "
+                               f"products carry a per-pixel geolocation, not {product_type}")
+        return []
+    if geo is None:
+        raise OptionsError(f"pixel_geolocation: required for {product_type} (longitude, "
+                           "latitude, altitude)")
+    out = []
+    for mds in GEOLOCATION_MDS:
+        key = mds.band.removeprefix("corr_")
+        if key not in geo:
+            raise OptionsError(f"pixel_geolocation: {key!r} is required")
+        values = np.asarray(geo[key], dtype=np.float64)
+        if values.shape != shape:
+            raise OptionsError(f"pixel_geolocation[{key!r}]: shape {values.shape}, the bands "
+                               f"have {shape}")
+        raw = np.round(values / mds.scale)
+        info = np.iinfo(np.dtype(mds.dtype))
+        if not np.all(np.isfinite(raw)) or raw.min() < info.min or raw.max() > info.max:
+            raise OptionsError(f"pixel_geolocation[{key!r}]: values not finite or out of range")
+        out.append(raw.astype(mds.dtype))
+    return out
+
+
+def _write_geolocation(f, raw: np.ndarray, dtype: np.dtype, line_times: np.ndarray) -> None:
+    height = len(line_times)
+    for i0 in range(0, height, _BLOCK_LINES):
+        i1 = min(i0 + _BLOCK_LINES, height)
+        rec = np.zeros(i1 - i0, dtype=dtype)
+        _set_times(rec, line_times[i0:i1])
+        rec["values"] = raw[i0:i1]
+        f.write(rec.tobytes())
 
 
 def _set_times(records: np.ndarray, seconds: np.ndarray) -> None:
