@@ -21,6 +21,16 @@ class GeometryError(MerisOrthoError, ValueError):
     product, inconsistent tie-point arrays)."""
 
 
+class Sen3FormatError(MerisOrthoError, ValueError):
+    """A ``.SEN3`` (SAFE) MERIS product that cannot be read: a member file missing, a variable
+    absent or of the wrong shape, a foreign directory."""
+
+    def __init__(self, path: object, problem: str) -> None:
+        self.path = str(path)
+        self.problem = problem
+        super().__init__(f"{self.path}: {problem}")
+
+
 class DemError(MerisOrthoError):
     """A DEM that cannot be opened or read."""
 
