@@ -12,9 +12,10 @@ from typing import Any
 __version__ = "0.1.0"
 
 _LAZY = {
-    "read_product": "napari_meris_ortho.io.n1",
+    "read_product": "napari_meris_ortho.io.product",
     "MerisL1bProduct": "napari_meris_ortho.io.n1",
     "N1FormatError": "napari_meris_ortho.errors",
+    "Sen3FormatError": "napari_meris_ortho.errors",
     "MerisOrthoError": "napari_meris_ortho.errors",
     "orthorectify": "napari_meris_ortho.ortho",
     "precompute": "napari_meris_ortho.ortho",

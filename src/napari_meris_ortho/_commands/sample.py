@@ -29,6 +29,11 @@ def register(subparsers: Any) -> None:
     p.add_argument("--set", metavar="JSON", default=None, dest="overrides",
                    help='config overrides as JSON, e.g. \'{"clouds": {"seed": 2, '
                    '"fraction": 0.3}}\'')
+    p.add_argument("--fsg", action="store_true",
+                   help="also write the per-pixel geolocated AMORGOS-like MER_FRG_1P N1 (FR)")
+    p.add_argument("--sen3", action="store_true",
+                   help="also write the 4th-reprocessing-like ME_1_FRG___/ME_1_RRG___ .SEN3 "
+                   "directory (per-pixel truth geolocation)")
     p.add_argument("--list", action="store_true", help="list the scene names and exit")
     p.set_defaults(func=run)
 
@@ -52,9 +57,17 @@ def run(args: argparse.Namespace) -> int:
     quiet = getattr(args, "quiet", False)
     with tqdm_progress(f"sample {args.name}", enabled=not quiet, unit="%") as progress:
         result = generate_scene(scene, out_dir=args.out, progress=progress)
+    extra = {}
+    if args.fsg or args.sen3:
+        from ..simulate.geocorrected import write_geocorrected
+
+        with tqdm_progress("per-pixel geolocated products", enabled=not quiet) as progress:
+            extra = write_geocorrected(result, fsg=args.fsg, sen3=args.sen3, progress=progress)
     print(f"scene      {result.name}")
     print(f"directory  {result.out_dir}")
     print(f"product    {result.product_path}")
+    for key, path in extra.items():
+        print(f"{key:<10} {path}")
     for key, path in result.dem_paths.items():
         print(f"dem        {key:<15} {path}")
     if result.reference_path is not None:

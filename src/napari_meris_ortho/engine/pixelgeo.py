@@ -23,12 +23,16 @@ import numpy as np
 from numba import njit, prange
 
 from .inverse import wrap180
-from .predcorr import MAX_ITERATIONS, _columns, _node_lonlat, _predict
+from .predcorr import _columns, _node_lonlat, _predict
 
 #: subsampling (pixels) of the brute-force nearest-node search that seeds the cell search
 SEED_STEP = 8
 #: guesses further than this many product pixels outside the product are dropped at once
 _FAR = 256.0
+#: largest Newton step (pixels) of the correction
+_MAX_STEP = 16.0
+#: correction iterations of the pixel model (damped steps may need more than the tie points)
+MAX_PIXEL_ITERATIONS = 20
 
 
 @njit(cache=True, inline="always")
@@ -99,6 +103,10 @@ def correct(tlon: float, tlat: float, line: float, col: float, lon: np.ndarray,
             return math.nan, math.nan, it, False
         dl = (rx * yp - ry * xp) / det
         dp = (xl * ry - yl * rx) / det
+        big = max(abs(dl), abs(dp))
+        if big > _MAX_STEP:  # damped: folded (terrain-corrected) cells must not throw it far
+            dl *= _MAX_STEP / big
+            dp *= _MAX_STEP / big
         line += dl
         col += dp
         if abs(dl) <= tol and abs(dp) <= tol:
@@ -166,7 +174,9 @@ def find_pixel_antecedents(tlon_a, tlat_a, ptr, start, stop, cl, cp, step, lon, 
                            tol, max_iter, diagnostics):
     """Antecedents of output points on the pixel model: rows in parallel over the column spans
     (CSR ``ptr``/``start``/``stop``). Returns line, col (float32, NaN dropped), iterations (int8,
-    -1 dropped) and with ``diagnostics`` the product altitude at the antecedent (else 1x1)."""
+    -1 dropped) and with ``diagnostics`` the product altitude at the antecedent (else 1x1).
+    A point whose correction does not converge is dropped: a ground point hidden by the relief
+    has no antecedent in a terrain-corrected geolocation (it lies in no pixel's footprint)."""
     nr, nc = tlon_a.shape
     nl, npx = lon.shape
     out_l = np.full((nr, nc), np.nan, np.float32)
@@ -183,7 +193,7 @@ def find_pixel_antecedents(tlon_a, tlat_a, ptr, start, stop, cl, cp, step, lon, 
             if math.isnan(gl) or gl < -_FAR or gl > nl + _FAR or gp < -_FAR or gp > npx + _FAR:
                 continue
             l2, p2, it, ok = correct(tlon, tlat, gl, gp, lon, lat, tol, max_iter)
-            if not (-0.5 <= l2 < nl - 0.5 and -0.5 <= p2 < npx - 0.5):
+            if not ok or not (-0.5 <= l2 < nl - 0.5 and -0.5 <= p2 < npx - 0.5):
                 continue
             out_l[i, j] = l2
             out_p[i, j] = p2
@@ -224,7 +234,8 @@ def _grids(lon: np.ndarray, lat: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 def solve_pixel(lon_grid: np.ndarray, lat_grid: np.ndarray, grid, lon: np.ndarray,
                 lat: np.ndarray, spans: tuple[np.ndarray, np.ndarray, np.ndarray], *,
-                row_start: int = 0, tolerance: float = 0.01, max_iter: int = MAX_ITERATIONS,
+                row_start: int = 0, tolerance: float = 0.01,
+                max_iter: int = MAX_PIXEL_ITERATIONS,
                 step: int = 16, altitude: np.ndarray | None = None,
                 diagnostics: bool = False) -> dict:
     """Antecedents of output rows [row_start, row_start + lon.shape[0]) of ``grid`` on the pixel
