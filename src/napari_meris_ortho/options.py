@@ -40,10 +40,12 @@ class Parallax(StrEnum):
 
 
 class Geolocation(StrEnum):
-    """Interpolation of the tie-point positions (eq. 4a-4b or unit vectors)."""
+    """Direct location model: the tie points (positions interpolated as eq. 4a-4b or as unit
+    vectors, plus the parallax) or the product's own per-pixel terrain-corrected geolocation."""
 
     BILINEAR = "bilinear"  # latitude and longitude bilinearly (MERSYN, BEAM)
     ECEF = "ecef"  # the tie points' unit vectors bilinearly
+    PIXEL = "pixel"  # per-pixel lon/lat of FRG/FSG N1 and .SEN3 products (engine.pixelgeo)
 
     @property
     def code(self) -> int:
@@ -146,6 +148,9 @@ class OrthoOptions:
         par = parse(Parallax, parallax)
         geo = (Geolocation.default_for(par) if geolocation is None
                else parse(Geolocation, geolocation))
+        if geo is Geolocation.PIXEL and n_dems > 0:
+            raise OptionsError("DEMs given with geolocation 'pixel': the product's per-pixel "
+                               "geolocation is already terrain-corrected, no DEM is used")
         return cls(elev, parse(Sampling, sampling), par, geo, parse(SearchMethod, method),
                    float(tolerance), check_bands(bands), bool(diagnostics))
 

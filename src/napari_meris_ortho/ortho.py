@@ -21,12 +21,12 @@ import numpy as np
 import pyproj
 from affine import Affine
 
-from .engine import predcorr
+from .engine import pixelgeo, predcorr
 from .engine.boundary import RowSpans, row_spans, segment_boundary
 from .errors import DemError, OptionsError
 from .geometry.grid import OutputGrid, default_grid, parse_crs, terrain_margin_px
 from .geometry.tiepoints import ProductGeometry, TiePointGrid
-from .options import Elevation, OrthoOptions, Sampling, SearchMethod
+from .options import Elevation, Geolocation, OrthoOptions, Sampling, SearchMethod
 from .progress import ProgressCallback
 
 if TYPE_CHECKING:
@@ -100,7 +100,7 @@ def band_metadata(stats: dict[str, Any], bands: Sequence[int]) -> list[dict[str,
 
 
 def _open_product(product: str | os.PathLike[str] | MerisProduct) -> MerisProduct:
-    from .io.n1 import read_product
+    from .io.product import read_product
 
     if isinstance(product, (str, os.PathLike)):
         return read_product(product)
@@ -188,7 +188,9 @@ def orthorectify(product: str | os.PathLike[str] | MerisProduct,
     points); ``tolerance``: prediction/correction tolerance in product pixels; ``parallax``:
     "handbook" (sphere) or "ellipsoid" (WGS84 radii); ``geolocation``: "bilinear" lon/lat
     (eq. 4a-4b) or "ecef" (default: bilinear with the handbook parallax, ecef with the
-    ellipsoid one); ``method``: "primary" (primary grid + Newton) or "handbook" (MERSYN's
+    ellipsoid one) tie points, or "pixel": the per-pixel terrain-corrected geolocation of
+    MER_FRG_1P/MER_FSG_1P and .SEN3 products (``engine.pixelgeo``; no parallax, no DEM, the
+    elevation is ignored); ``method``: "primary" (primary grid + Newton) or "handbook" (MERSYN's
     facet search in the loop); ``allow_empty``: a ``grid`` holding no pixel centre inside the
     zero-height segment boundary gives an all-background result instead of an OptionsError
     (synthesis tiles: terrain points may still lie there, section 3.1).
@@ -385,6 +387,8 @@ class _Job:
     options: OrthoOptions
     stats: dict[str, Any]
     t_start: float
+    #: per-pixel (lon, lat, altitude) grids of the pixel geolocation model, else None
+    pixel: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
 
 
 def _height_mode(elevation: Elevation, has_dems: bool) -> int:
@@ -409,22 +413,50 @@ def _prepare(prod: MerisProduct, grid: OutputGrid | None, stack: DemStack | None
         if bounds is not None:
             stack.prepare(*bounds)
     # MERSYN processes the points inside the segment boundary; the primary-grid path also tries
-    # a margin: the outer half pixel of the product and terrain seen obliquely beyond it
-    margin = (_margin_px(tp, grid, opts.elevation is not Elevation.NONE, res_m)
-              if opts.method is SearchMethod.PRIMARY else 0)
+    # a margin: the outer half pixel of the product and terrain seen obliquely beyond it (the
+    # pixel geolocation always: its terrain points may lie outside the zero-height boundary)
+    pixel = _pixel_grids(prod) if opts.geolocation is Geolocation.PIXEL else None
+    margin = (_margin_px(tp, grid, pixel is not None or opts.elevation is not Elevation.NONE,
+                         res_m)
+              if pixel is not None or opts.method is SearchMethod.PRIMARY else 0)
     inner = row_spans(boundary, grid)
     spans = row_spans(boundary, grid, margin=margin) if margin else inner
     stats = dict(elevation=opts.elevation.value, parallax=opts.parallax.value,
                  sampling=opts.sampling.value, geolocation=opts.geolocation.value,
                  tolerance=opts.tolerance, method=opts.method.value, margin_px=margin,
                  points_in_boundary=inner.count)
-    return _Job(prod, tp, grid, spans, stack, _height_mode(opts.elevation, stack is not None),
-                opts, stats, t_start)
+    hmode = (predcorr.HEIGHT_NONE if pixel is not None
+             else _height_mode(opts.elevation, stack is not None))
+    return _Job(prod, tp, grid, spans, stack, hmode, opts, stats, t_start, pixel)
+
+
+def _pixel_grids(prod: MerisProduct) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The product's per-pixel (lon, lat, altitude), or OptionsError when it has none."""
+    if not getattr(prod, "has_pixel_geolocation", False):
+        raise OptionsError(
+            f"{getattr(prod, 'path', prod)}: geolocation 'pixel' needs a product with a "
+            "per-pixel geolocation (MER_FRG_1P / MER_FSG_1P N1 or a .SEN3 directory)")
+    return prod.pixel_longitude(), prod.pixel_latitude(), prod.pixel_altitude()
+
+
+def _solve(job: _Job, lon: np.ndarray, lat: np.ndarray, h: np.ndarray | None,
+           spans: tuple[np.ndarray, ...], r0: int) -> dict:
+    """Antecedents of one block of output rows: tie-point model (``predcorr``) or the
+    product's pixel geolocation (``pixelgeo``)."""
+    opts = job.options
+    if job.pixel is not None:
+        return pixelgeo.solve_pixel(job.pixel[0], job.pixel[1], job.grid, lon, lat, spans,
+                                    row_start=r0, tolerance=opts.tolerance,
+                                    altitude=job.pixel[2], diagnostics=opts.diagnostics)
+    return predcorr.solve(job.tp, job.grid, lon, lat, h, job.hmode, spans, row_start=r0,
+                          tolerance=opts.tolerance, model=opts.parallax.code,
+                          geo=opts.geolocation.code, method=opts.method.value,
+                          diagnostics=opts.diagnostics)
 
 
 def _run(job: _Job, progress: ProgressCallback | None) -> Antecedents:
     """Prediction/correction by blocks of output rows, then the resampling (section 3.2)."""
-    prod, tp, grid, spans, stack, hmode = (job.prod, job.tp, job.grid, job.spans, job.stack,
+    prod, grid, spans, stack, hmode = (job.prod, job.grid, job.spans, job.stack,
                                            job.hmode)
     opts = job.options
     band_list, diagnostics = list(opts.bands), opts.diagnostics
@@ -460,10 +492,7 @@ def _run(job: _Job, progress: ProgressCallback | None) -> Antecedents:
             h, src = _heights(stack, lon, lat, mask)
             t_dem += time.perf_counter() - t0
         t0 = time.perf_counter()
-        res = predcorr.solve(tp, grid, lon, lat, h, hmode, (ptr, start, stop), row_start=r0,
-                             tolerance=opts.tolerance, model=opts.parallax.code,
-                             geo=opts.geolocation.code, method=opts.method.value,
-                             diagnostics=diagnostics)
+        res = _solve(job, lon, lat, h, (ptr, start, stop), r0)
         t_engine += time.perf_counter() - t0
         line[r0:r1], col[r0:r1], iters[r0:r1] = res["line"], res["col"], res["iterations"]
         for k, v in res["search"].items():
@@ -486,10 +515,11 @@ def _run(job: _Job, progress: ProgressCallback | None) -> Antecedents:
     window = antecedent_line_window(line, col, int(prod.height), int(prod.width),
                                     opts.sampling)
     valid = iters >= 0
-    hist = predcorr.iteration_histogram(iters)
+    hist = predcorr.iteration_histogram(
+        iters, pixelgeo.MAX_PIXEL_ITERATIONS if job.pixel is not None else predcorr.MAX_ITERATIONS)
     if diagnostics:
         diag.update(line=line, col=col, iterations=iters)
-        if hmode == predcorr.HEIGHT_NONE:
+        if hmode == predcorr.HEIGHT_NONE and job.pixel is None:
             diag["elevation"] = np.where(valid, np.float32(0), np.float32(np.nan))
             diag["shift_east_m"] = diag["elevation"].copy()
             diag["shift_north_m"] = diag["elevation"].copy()

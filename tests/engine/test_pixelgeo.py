@@ -6,11 +6,11 @@ import numpy as np
 import pytest
 
 from napari_meris_ortho.engine.boundary import row_spans, segment_boundary
-from napari_meris_ortho.engine.grid import OutputGrid
 from napari_meris_ortho.engine.location import direct_location
 from napari_meris_ortho.engine.pixelgeo import direct_pixel_location, solve_pixel
 from napari_meris_ortho.engine.predcorr import HEIGHT_NONE, solve
-from napari_meris_ortho.engine.tiepoints import analytic_swath
+from napari_meris_ortho.geometry.grid import OutputGrid
+from napari_meris_ortho.geometry.tiepoints import analytic_swath
 
 
 def _terrain(lon, lat):

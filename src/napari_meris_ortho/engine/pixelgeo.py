@@ -266,6 +266,8 @@ def solve_pixel(lon_grid: np.ndarray, lat_grid: np.ndarray, grid, lon: np.ndarra
     out = {"line": line, "col": col, "iterations": iters,
            "search": {"primary warm": int(counts[0]), "primary seeded": int(counts[1]),
                       "primary not found": int(counts[2])}}
-    if with_alt:
+    if with_alt:  # the product's altitude; no parallax shift is applied by this model
         out["elevation"] = h_used
+        out["shift_east_m"] = np.full(h_used.shape, np.nan, np.float32)
+        out["shift_north_m"] = out["shift_east_m"]
     return out
