@@ -167,6 +167,8 @@ class Spec:
     tile: int
     names: tuple[str, ...]
     overviews: tuple[int, ...]
+    #: location model of orthorectify: None (tie points) or "pixel" (per-pixel geolocation)
+    geolocation: str | None = None
 
     @property
     def needed(self) -> tuple[int, ...]:
@@ -212,7 +214,7 @@ def _cached(cache: OrderedDict[Any, Any], key: Any, make: Callable[[], Any]) -> 
 
 
 def _product(path: str) -> Any:
-    from .io.n1 import read_product
+    from .io.product import read_product
 
     return _cached(_PRODUCTS, path, lambda: read_product(path))
 
@@ -230,7 +232,8 @@ def segment_task(spec: Spec, index: int, path: str, window: Window) -> Piece:
     try:
         result = orthorectify(_product(path), grid=_grid(spec).window(*window),
                               dems=list(spec.dems), elevation=spec.elevation,
-                              sampling=spec.sampling, bands=spec.needed, allow_empty=True)
+                              sampling=spec.sampling, bands=spec.needed, allow_empty=True,
+                              geolocation=spec.geolocation)
     except DemError as exc:
         return Piece(index, window, None, dem_error=message_of(exc))
     except (MerisOrthoError, OSError, ValueError) as exc:
@@ -329,7 +332,7 @@ class Synthesis:
     def __init__(self, target: Target, paths: list[str], *, algorithm: str | None, grid: Any,
                  crs: Any, pixel_size: float | None, dems: list[str], elevation: str,
                  sampling: str, bands: Sequence[int] | None, reject_bright: bool, tile: int,
-                 progress: ProgressCallback | None) -> None:
+                 progress: ProgressCallback | None, geolocation: str | None = None) -> None:
         self.target = target
         self.paths = paths
         old = target.synthesis
@@ -340,6 +343,7 @@ class Synthesis:
         self.crs, self.pixel_size = crs, pixel_size
         self.dems, self.elevation, self.sampling = dems, elevation, sampling
         self.reject_bright = reject_bright
+        self.geolocation = geolocation
         self.progress = progress
         self.table: list[dict[str, Any]] = old.products if old else []
         self._branch: str | None = None  # run branch of a new synthesis
@@ -347,7 +351,7 @@ class Synthesis:
     # ---------------------------------------------------------------- products
     def _open(self) -> list[_Product]:
         """Read every product's header; report failures and products already merged."""
-        from .io.n1 import read_product
+        from .io.product import read_product
 
         seen = {(str(p.get("sensing_start", "")), str(p["product_name"])) for p in self.table}
         out = []
@@ -447,7 +451,7 @@ class Synthesis:
         return Spec(tuple(grid_to_dict(self.grid).items()), self.bands, self.algorithm,
                     tuple(self.dems), self.elevation, self.sampling, self.reject_bright,
                     self.tile, tuple(st.layer_names(self.bands, self.algorithm)),
-                    tuple(st.overview_factors(shape[1], shape[0], self.tile)))
+                    tuple(st.overview_factors(shape[1], shape[0], self.tile)), self.geolocation)
 
     def _session(self, spec: Spec) -> tuple[Any, Callable[..., str]]:
         """A writable session without uncommitted changes (forks need one) and the function

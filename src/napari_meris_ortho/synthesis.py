@@ -30,7 +30,7 @@ import numpy as np
 from ._atomic import check_writable_dir
 from .errors import MerisOrthoError, OptionsError, OutputError
 from .io import synthesis_store as st
-from .options import Elevation, MergeRule, Sampling, choices, parse
+from .options import Elevation, MergeRule, OrthoOptions, Sampling, choices, parse
 from .progress import ProgressCallback
 
 log = logging.getLogger("napari_meris_ortho.synthesis")
@@ -322,7 +322,8 @@ def synthesize(products: Sequence[str | os.PathLike[str]], out: str | os.PathLik
                dems: Sequence[Any] = (), elevation: str = "dem", sampling: str = "nearest",
                bands: Sequence[int] | None = None, reject_bright: bool = False,
                tile: int = DEFAULT_TILE, progress: ProgressCallback | None = None,
-               workers: int = 0, scheduler: str | None = None) -> SynthesisResult:
+               workers: int = 0, scheduler: str | None = None,
+               geolocation: str | None = None) -> SynthesisResult:
     """Orthorectify ``products`` onto the synthesis grid and merge them (section 3.1 use cases
     1-2, Appendix C) into the synthesis store ``out``: one Icechunk commit.
 
@@ -337,11 +338,14 @@ def synthesize(products: Sequence[str | os.PathLike[str]], out: str | os.PathLik
     worker processes; ``scheduler``: address of an existing dask scheduler (the store path and
     the products must then be on storage every worker sees: absolute paths). ``progress(done,
     total)`` is called after each task; an exception raised by it cancels the run (nothing is
-    committed).
+    committed). ``geolocation``: the location model of ``orthorectify`` (None: the tie points;
+    "pixel": the products' per-pixel geolocation, a product without one fails).
     """
     from . import _synthesis_run as run
 
     out_dir = Path(out)
+    if geolocation is not None:
+        OrthoOptions.parse(geolocation=geolocation, elevation=elevation, n_dems=len(dems))
     source_path = _check_options(products, out_dir, algorithm, input, grid, crs, pixel_size,
                                  bands, tile, dems, elevation, sampling, workers, scheduler)
     paths = [str(Path(p).absolute()) if scheduler else str(p) for p in products]
@@ -359,7 +363,7 @@ def synthesize(products: Sequence[str | os.PathLike[str]], out: str | os.PathLik
                     target, paths, algorithm=algorithm, grid=grid, crs=crs,
                     pixel_size=pixel_size, dems=[str(d) for d in dems], elevation=elevation,
                     sampling=sampling, bands=bands, reject_bright=reject_bright, tile=tile,
-                    progress=progress).run(runner)
+                    progress=progress, geolocation=geolocation).run(runner)
                 if created and result.snapshot is None:  # nothing merged: no store
                     shutil.rmtree(out_dir, ignore_errors=True)
         except BaseException:

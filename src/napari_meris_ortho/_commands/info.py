@@ -1,6 +1,8 @@
 """``meris-ortho info PRODUCT.N1``: the decoded MPH/SPH summary, the data sets and a tie-point
 table like the handbook's Appendix A and E (first and last tie point of every 8th tie-point line,
 and of the last one). A file that is not a readable MERIS L1b product: one message, exit code 2.
+``.SEN3`` directories: the member files instead of the DSDs; FRG/FSG and SEN3 products: the
+extent of their per-pixel geolocation.
 """
 
 from __future__ import annotations
@@ -10,8 +12,9 @@ from typing import Any
 
 import numpy as np
 
-from ..io.n1 import FLAG_NAMES, MerisL1bProduct, read_product
+from ..io.n1 import FLAG_NAMES, MerisL1bProduct
 from ..io.n1_format import EPOCH_2000
+from ..io.product import read_product
 
 _RESOLUTION_NAMES = {"FR": "full resolution", "RR": "reduced resolution"}
 
@@ -26,7 +29,8 @@ def register(subparsers: Any) -> None:
         "Appendix A (first and last tie point of every 8th tie-point line).",
     )
     p.add_argument(
-        "product", metavar="PRODUCT.N1", help="MERIS L1b product (MER_FR__1P, MER_RR__1P)"
+        "product", metavar="PRODUCT", help="MERIS L1b product: N1 file (MER_FR__1P, "
+        "MER_RR__1P, MER_FRG_1P, MER_FSG_1P...) or .SEN3 directory (ME_1_FRG___, ME_1_RRG___)"
     )
     p.add_argument(
         "--every",
@@ -63,7 +67,9 @@ def describe(product: MerisL1bProduct, every: int = 8) -> list[str]:
     """The lines ``meris-ortho info`` prints."""
     mph, sph = product.mph, product.sph
     res = _RESOLUTION_NAMES.get(product.resolution.name, product.resolution.name)
-    size = product.path.stat().st_size
+    is_dir = product.path.is_dir()
+    size = (sum(f.stat().st_size for f in product.path.iterdir() if f.is_file()) if is_dir
+            else product.path.stat().st_size)
     times = product.line_times
     lines = [
         f"Product        {product.product_name}",
@@ -80,8 +86,8 @@ def describe(product: MerisL1bProduct, every: int = 8) -> list[str]:
         f"Sensing        {mph.get('SENSING_START', '?')} to {mph.get('SENSING_STOP', '?')}",
         f"Orbit          phase {mph.get('PHASE', '?')}, cycle {mph.get('CYCLE', '?')}, "
         f"relative orbit {mph.get('REL_ORBIT', '?')}, absolute orbit {mph.get('ABS_ORBIT', '?')}",
-        f"Headers        MPH 1247 bytes, SPH {mph['SPH_SIZE']} bytes, {mph['NUM_DSD']} DSDs, "
-        f"{mph.get('NUM_DATA_SETS', '?')} data sets, total {mph['TOT_SIZE']} bytes",
+        _headers_line(product),
+        *_geolocation_lines(product),
         "",
         "Corners (lat, lon)  first sample            middle sample           last sample",
     ]
@@ -111,6 +117,11 @@ def describe(product: MerisL1bProduct, every: int = 8) -> list[str]:
             f"{sf.radiance[b]:15.6f}  {sf.sun_flux[b]:9.3f}"
         )
     bits = ", ".join(f"{name}={1 << i}" for i, name in enumerate(FLAG_NAMES))
+    if is_dir:
+        return lines + ["", f"Flags (mapped from quality_flags)  {bits}", "",
+                        *_member_lines(product), "", "Tie points (tie_geo_coordinates.nc, "
+                        "tie_geometries.nc; first and last tie point of the tie-point lines)",
+                        *tie_point_table(product, every)]
     lines += ["", f"Flags (Flags MDS(16))  {bits}", "", "Data sets"]
     lines.append("  #  DS_NAME                       T  DS_OFFSET   DS_SIZE  NUM_DSR  DSR_SIZE")
     for i, d in enumerate(product.dsds, start=1):
@@ -126,6 +137,35 @@ def describe(product: MerisL1bProduct, every: int = 8) -> list[str]:
     lines += ["", 'DATA SET "Tie points ADS" (first and last tie point of the tie-point lines)']
     lines += tie_point_table(product, every)
     return lines
+
+
+def _headers_line(product: MerisL1bProduct) -> str:
+    mph = product.mph
+    if product.path.is_dir():
+        return f"Format         SAFE .SEN3 directory, {len(list(product.path.iterdir()))} files"
+    return (f"Headers        MPH 1247 bytes, SPH {mph['SPH_SIZE']} bytes, {mph['NUM_DSD']} DSDs, "
+            f"{mph.get('NUM_DATA_SETS', '?')} data sets, total {mph['TOT_SIZE']} bytes")
+
+
+def _geolocation_lines(product: MerisL1bProduct) -> list[str]:
+    """Extent of the per-pixel terrain-corrected geolocation (FRG/FSG, SEN3), else nothing."""
+    if not getattr(product, "has_pixel_geolocation", False):
+        return []
+    lon, lat = product.pixel_longitude(), product.pixel_latitude()
+    alt = product.pixel_altitude()
+    return [f"Geolocation    per pixel, terrain-corrected: lat {np.nanmin(lat):.6f} .. "
+            f"{np.nanmax(lat):.6f}, lon {np.nanmin(lon):.6f} .. {np.nanmax(lon):.6f}, "
+            f"altitude {np.nanmin(alt):.0f} .. {np.nanmax(alt):.0f} m "
+            "(map with --geolocation pixel)"]
+
+
+def _member_lines(product: MerisL1bProduct) -> list[str]:
+    """The member files of a .SEN3 directory with their sizes."""
+    out = ["Member files"]
+    for f in sorted(product.path.iterdir()):
+        if f.is_file():
+            out.append(f"  {f.name:<28} {f.stat().st_size:>12} bytes")
+    return out
 
 
 def tie_point_table(product: MerisL1bProduct, every: int = 8) -> list[str]:

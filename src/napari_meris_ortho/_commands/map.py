@@ -40,7 +40,8 @@ def register(subparsers: Any) -> None:
         "map", help="orthorectify one product to a GeoTIFF",
         description="Orthorectify a MERIS L1b product onto a map grid (handbook sections 3.1-3.4, "
         "MERSYN use case 3) and write the radiances as a GeoTIFF.")
-    p.add_argument("product", metavar="PRODUCT.N1", help="MERIS L1b product")
+    p.add_argument("product", metavar="PRODUCT", help="MERIS L1b product: N1 file or .SEN3 "
+                   "directory")
     p.add_argument("-o", "--output", required=True, metavar="OUT.tif", help="output GeoTIFF")
     add_height_options(
         p, dem_help="DEM (repeatable; tried in order at each point, then the tie points)",
@@ -55,7 +56,8 @@ def register(subparsers: Any) -> None:
     p.add_argument("--geolocation", choices=choices(Geolocation), default=None,
                    help="tie-point position interpolation: bilinear lon/lat (eq. 4a-4b) or "
                    "ecef unit vectors (default: bilinear with --parallax handbook, ecef with "
-                   "ellipsoid)")
+                   "ellipsoid); or pixel: the product's own per-pixel terrain-corrected "
+                   "geolocation (MER_FRG_1P/MER_FSG_1P, .SEN3; no DEM, no parallax)")
     p.add_argument("--search", choices=choices(SearchMethod), default="primary",
                    help="antecedent search: primary grid + Newton (fast, maps every output "
                    "point seen by the product) or MERSYN's facet search in the loop (as "

@@ -14,7 +14,7 @@ import os
 from typing import Any
 
 from ..errors import OptionsError
-from ..options import MergeRule, choices
+from ..options import Geolocation, MergeRule, choices
 from ._options import (
     add_bands_option,
     add_grid_options,
@@ -33,7 +33,8 @@ def register(subparsers: Any) -> None:
         "synthesize", help="orthorectify products and merge them into a synthesis",
         description="Orthorectify MERIS L1b products onto a synthesis grid and merge them by "
         "minimum radiance or maximum NDVI (handbook section 3.1, Appendix C).")
-    p.add_argument("products", nargs="+", metavar="PRODUCT.N1", help="MERIS L1b products")
+    p.add_argument("products", nargs="+", metavar="PRODUCT",
+                   help="MERIS L1b products (N1 files or .SEN3 directories)")
     p.add_argument("--algorithm", choices=choices(MergeRule), default=None,
                    help="selection algorithm (new synthesis: min-radiance; update: the input's)")
     p.add_argument("--out", required=True, metavar="STORE",
@@ -46,6 +47,9 @@ def register(subparsers: Any) -> None:
         elevation_help="heights: the DEMs then the tie points (default), tie points only, "
         "or none (no orthorectification)")
     add_sampling_option(p, "resampling of the radiances (MERSYN: nearest)")
+    p.add_argument("--geolocation", choices=choices(Geolocation), default=None,
+                   help="location model: tie points (bilinear, ecef; default) or pixel, the "
+                   "products' per-pixel terrain-corrected geolocation (FRG/FSG N1, .SEN3)")
     add_bands_option(p, "bands of a new synthesis, e.g. 3,5,7,13 (default all 15)")
     p.add_argument("--reject-bright", action="store_true",
                    help="keep BRIGHT-flagged pixels (clouds) out as well")
@@ -87,7 +91,8 @@ def run(args: argparse.Namespace) -> int:
             pixel_size=None if grid is not None else args.pixel_size, dems=args.dem,
             elevation=args.elevation, sampling=args.sampling, bands=args.bands,
             reject_bright=args.reject_bright, tile=args.tile, progress=progress,
-            workers=0 if args.scheduler else workers, scheduler=args.scheduler or None)
+            workers=0 if args.scheduler else workers, scheduler=args.scheduler or None,
+            geolocation=args.geolocation)
     if result.snapshot is not None:
         log.info("synthesis %s (%s) committed to %s: %d product(s) merged", result.snapshot,
                  result.algorithm, result.path, len(result.merged))

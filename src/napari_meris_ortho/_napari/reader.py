@@ -1,4 +1,5 @@
-"""napari readers: MERIS L1b ``.N1`` products (product geometry) and geocoded GeoTIFFs.
+"""napari readers: MERIS L1b ``.N1`` products and ``.SEN3`` directories (product geometry) and
+geocoded GeoTIFFs.
 
 N1: the 15 radiance bands as one multichannel image (band axis first, lazy), an RGB quick-look
 from bands 7, 5, 2, the flags as a labels layer; tie points and headers in the layer metadata.
@@ -30,13 +31,20 @@ N1_SUFFIXES = (".n1",)
 TIFF_SUFFIXES = (".tif", ".tiff")
 
 
+def _is_product(path: str | Path) -> bool:
+    """An N1 file, a ``.SEN3`` directory or its ``xfdumanifest.xml``."""
+    from ..io.sen3 import is_sen3
+
+    p = Path(path)
+    return p.suffix.lower() in N1_SUFFIXES or is_sen3(p)
+
+
 def get_reader(path: str | list[str]) -> Callable[[str | list[str]], list[LayerData]] | None:
-    """npe2 reader hook: a reader function for N1 products and GeoTIFFs, else None."""
+    """npe2 reader hook: a reader function for N1/SEN3 products and GeoTIFFs, else None."""
     paths = [path] if isinstance(path, str | Path) else list(path)
     if not paths:
         return None
-    suffixes = {Path(p).suffix.lower() for p in paths}
-    if suffixes <= set(N1_SUFFIXES) | set(TIFF_SUFFIXES):
+    if all(_is_product(p) or Path(p).suffix.lower() in TIFF_SUFFIXES for p in paths):
         return read_layers
     return None
 
@@ -47,7 +55,7 @@ def read_layers(path: str | list[str]) -> list[LayerData]:
     frame = _current_frame()
     layers: list[LayerData] = []
     for p in paths:
-        if Path(p).suffix.lower() in N1_SUFFIXES:
+        if _is_product(p):
             layers.extend(n1_layers(p))
         else:
             new = geotiff_layers(p, frame)
@@ -133,8 +141,9 @@ def _contrast_limits(band: np.ndarray, nodata: float | None) -> tuple[float, flo
 # N1
 # --------------------------------------------------------------------------------------------
 def n1_layers(path: str | Path) -> list[LayerData]:
-    """Radiance stack, RGB quick-look (bands 7, 5, 2) and flags of a MERIS L1b product."""
-    from ..io.n1 import read_product
+    """Radiance stack, RGB quick-look (bands 7, 5, 2) and flags of a MERIS L1b product (N1 or
+    .SEN3; FRG/FSG and SEN3 products also carry their per-pixel altitude in the metadata)."""
+    from ..io.product import read_product
 
     try:
         product = read_product(path)
@@ -143,7 +152,7 @@ def n1_layers(path: str | Path) -> list[LayerData]:
     except (OSError, ValueError) as exc:
         raise N1FormatError(path, str(exc)) from None
     meta = n1_metadata(product)
-    stem = Path(path).stem
+    stem = str(getattr(product, "product_name", "") or Path(path).stem)
     return [
         (radiance_stack(product), {"name": f"{stem} radiance", "metadata": meta,
                                    "colormap": "gray", "axis_labels": ("band", "line", "column"),
@@ -166,6 +175,7 @@ def n1_metadata(product: MerisL1bProduct) -> dict[str, Any]:
         "samples_per_tie_point": product.samples_per_tie_point,
         "wavelengths": list(product.wavelengths),
         "column_order": "stored (chronological/detector)",
+        "pixel_geolocation": bool(getattr(product, "has_pixel_geolocation", False)),
     }
 
 

@@ -47,6 +47,9 @@ if TYPE_CHECKING:
 
 #: "mapping" orthorectifies every product on its own; the merge rules build a synthesis
 ALGORITHMS = ("mapping", *choices(MergeRule))
+#: location models offered: the tie points (parallax from the DEMs) or the product's per-pixel
+#: terrain-corrected geolocation (FRG/FSG N1, .SEN3)
+GEOLOCATIONS = ("tiepoints", "pixel")
 CRS_UTM = "UTM zone of the footprint"
 CRS_GEOGRAPHIC = "geographic (EPSG:4326)"
 CRS_EPSG = "EPSG code"
@@ -71,6 +74,9 @@ class RunSettings:
     epsg: int | None = None
     pixel_size_m: float = 0.0  # 0: the nominal FR 260 m / RR 1040 m
     bands: tuple[int, ...] | None = (7, 5, 2)
+    #: location model: "tiepoints" (with the parallax) or "pixel" (FRG/FSG/SEN3 per-pixel
+    #: terrain-corrected geolocation, no DEM)
+    geolocation: str = "tiepoints"
     output: Path | None = None
     geometry: bool = True
     exaggeration: float = 10.0
@@ -126,7 +132,7 @@ class OrthoRun:
 
 def run_orthorectify(options: RunSettings, progress: ProgressCallback | None = None) -> OrthoRun:
     """Run the chosen algorithm (no Qt): mapping of every product, or a synthesis."""
-    from ..io.n1 import read_product
+    from ..io.product import read_product
 
     if not options.products:
         raise OptionsError("choose at least one N1 product")
@@ -150,11 +156,14 @@ def _run_mapping(products: list[Any], crs: Any, options: RunSettings,
             if progress is not None:
                 progress(k * 1000 + int(1000 * done / max(total, 1)), n * 1000)
 
+        pixel = options.geolocation == "pixel"
         result = orthorectify(
-            product, dems=list(options.dems), elevation=options.elevation,
+            product, dems=[] if pixel else list(options.dems), elevation=options.elevation,
             sampling=options.sampling, bands=options.bands, diagnostics=options.geometry,
-            progress=part, crs=crs, grid=_grid_for(product, crs, options))
-        items.append({"name": Path(product.path).stem, "tie_points": product.tie_points,
+            progress=part, crs=crs, grid=_grid_for(product, crs, options),
+            geolocation="pixel" if pixel else None)
+        name = Path(product.path).stem + (" pixel-geolocation" if pixel else "")
+        items.append({"name": name, "tie_points": product.tie_points,
                       "bands": result.bands, "grid": result.grid, "valid": result.valid,
                       "diagnostics": result.diagnostics, "stats": result.stats})
         if options.output is not None:
@@ -189,11 +198,13 @@ def _run_synthesis(products: list[Any], crs: Any, options: RunSettings,
     from ..synthesis import open_synthesis, synthesize
 
     out = Path(options.output) if options.output else Path(tempfile.mkdtemp(prefix="synthesis-"))
+    pixel = options.geolocation == "pixel"
     result = synthesize(
         [p.path for p in products], out, algorithm=options.algorithm, crs=crs,
-        pixel_size=_pixel_size(options, products[0], crs), dems=list(options.dems),
-        elevation=options.elevation, sampling=options.sampling, bands=options.bands,
-        progress=progress)
+        pixel_size=_pixel_size(options, products[0], crs),
+        dems=[] if pixel else list(options.dems), elevation=options.elevation,
+        sampling=options.sampling, bands=options.bands, progress=progress,
+        geolocation="pixel" if pixel else None)
     if not result.merged:
         reasons = "; ".join(f"{r.path}: {r.error}" for r in result.failed)
         raise OptionsError(f"no product could be merged into the synthesis ({reasons})")
@@ -283,8 +294,9 @@ class OrthorectifyWidget(Container):
 
     def __init__(self, viewer: napari.viewer.Viewer) -> None:
         self.viewer = viewer
-        self.products = FileEdit(label="N1 products", mode=FileDialogMode.EXISTING_FILES,
-                                 filter="*.N1")
+        self.products = FileEdit(label="products (N1, SEN3 manifest)",
+                                 mode=FileDialogMode.EXISTING_FILES,
+                                 filter="*.N1 *.n1 xfdumanifest.xml")
         self.dem_kind = ComboBox(label="DEM type", choices=[DEM_FILE, DEM_DIR], value=DEM_FILE)
         self.dem_path = FileEdit(label="DEM", mode=FileDialogMode.EXISTING_FILE)
         self.dem_add = PushButton(text="Add DEM")
@@ -296,6 +308,8 @@ class OrthorectifyWidget(Container):
                                 layout="horizontal", labels=False)
         self.elevation = ComboBox(label="elevation", choices=choices(Elevation),
                                   value=Elevation.DEM.value)
+        self.geolocation = ComboBox(label="geolocation", choices=list(GEOLOCATIONS),
+                                    value="tiepoints")
         self.algorithm = ComboBox(label="selection", choices=list(ALGORITHMS), value="mapping")
         self.sampling = ComboBox(label="sampling", choices=choices(Sampling),
                                  value=Sampling.NEAREST.value)
@@ -316,7 +330,8 @@ class OrthorectifyWidget(Container):
         self.status = Label(value="")
         super().__init__(widgets=[
             self.products, self.dem_kind, self.dem_path, self.dem_add, self.dem_list,
-            dem_buttons, self.elevation, self.algorithm, self.sampling, self.crs, self.epsg,
+            dem_buttons, self.elevation, self.geolocation, self.algorithm, self.sampling,
+            self.crs, self.epsg,
             self.pixel_size, self.bands, self.geometry, self.exaggeration, self.vector_step,
             self.output, self.run_button, self.cancel_button, self.status,
         ])
@@ -399,7 +414,8 @@ class OrthorectifyWidget(Container):
         output = self.output.value if isinstance(self.output.value, Path) else None
         return RunSettings(
             products=products, dems=self.dems, elevation=self.elevation.value,
-            algorithm=self.algorithm.value, sampling=self.sampling.value, crs=self.crs.value,
+            geolocation=self.geolocation.value, algorithm=self.algorithm.value,
+            sampling=self.sampling.value, crs=self.crs.value,
             epsg=int(self.epsg.value), pixel_size_m=float(self.pixel_size.value),
             bands=parse_bands(self.bands.value), output=output, geometry=self.geometry.value,
             exaggeration=float(self.exaggeration.value), vector_step=int(self.vector_step.value))

@@ -513,8 +513,6 @@ def write_sen3(path: str | os.PathLike[str], *, resolution: str,
     ``altitude`` (m); ``scaling``: radiance factors of the counts (default Appendix A).
     Written to a temporary directory and renamed. Bad arguments raise :class:`OptionsError`.
     """
-    import netCDF4
-
     out = Path(path)
     if out.suffix != ".SEN3":
         raise OptionsError(f"{out}: a SAFE product directory name ends with .SEN3")
@@ -534,101 +532,130 @@ def write_sen3(path: str | os.PathLike[str], *, resolution: str,
     t0 = np.datetime64(first_line_time, "us")
     t0_us = int((t0 - np.datetime64("2000-01-01T00:00:00", "us")) / np.timedelta64(1, "us"))
     stamps = t0_us + np.round(np.arange(height) * line_interval_s * 1e6).astype(np.int64)
-    name = out.name.removesuffix(".SEN3")
     common = {"Conventions": "CF-1.6", "title": f"MERIS Level 1 {resolution} (simulated)",
               "product_name": out.name, "institution": "meris-ortho simulator",
               "absolute_orbit_number": np.uint16(0), "ac_subsampling_factor": np.uint16(dj),
               "al_subsampling_factor": np.uint16(df),
               "start_time": str(t0) + "Z", "source": "napari-meris-ortho"}
-    total = NUM_BANDS + 7
     with atomic_dir(out) as tmp:
-
-        def dataset(fname: str, dims: dict[str, int]) -> netCDF4.Dataset:
-            ds = netCDF4.Dataset(tmp / fname, "w", format="NETCDF4")
-            ds.setncatts(common)
-            for d, n in dims.items():
-                ds.createDimension(d, n)
-            return ds
-
-        def var(ds, vname, dtype, dims, data, fill=None, **attrs):
-            v = ds.createVariable(vname, dtype, dims, zlib=True, complevel=1, fill_value=fill)
-            v.set_auto_maskandscale(False)
-            v.setncatts(attrs)
-            v[...] = np.asarray(data).astype(v.dtype)
-            return v
-
-        img = {"rows": height, "columns": width}
-        for b in range(1, NUM_BANDS + 1):
-            with dataset(radiance_file(b), img) as ds:
-                var(ds, radiance_variable(b), "u2", ("rows", "columns"),
-                    np.asarray(counts[b - 1], np.uint16), _RADIANCE_FILL,
-                    scale_factor=np.float32(scaling.radiance[b - 1]),
-                    add_offset=np.float32(0.0), units="mW.m-2.sr-1.nm-1",
-                    standard_name="toa_upwelling_spectral_radiance",
-                    long_name=f"TOA radiance for band M{b:02d}",
-                    valid_min=np.uint16(0), valid_max=np.uint16(65534))
-            if progress is not None:
-                progress(b, total)
-        with dataset(GEO_FILE, img) as ds:
-            _write_geo(var, ds, ("rows", "columns"), pixel_geolocation)
-        det = DETECTORS[resolution]
-        with dataset(INSTRUMENT_FILE, {**img, "bands": NUM_BANDS, "detectors": det}) as ds:
-            var(ds, "detector_index", "i2", ("rows", "columns"),
-                np.asarray(detector_index, np.int16), np.int16(-1),
-                long_name="Detector index", valid_min=np.int16(0), valid_max=np.int16(det - 1))
-            for vname, values, unit, long in (
-                    ("lambda0", APPENDIX_A_WAVELENGTHS, "nm", "Central wavelength"),
-                    ("FWHM", APPENDIX_A_BANDWIDTHS, "nm", "Bandwidth (full width at half max)"),
-                    ("solar_flux", scaling.sun_flux, "mW.m-2.nm-1", "In-band solar irradiance")):
-                var(ds, vname, "f4", ("bands", "detectors"),
-                    np.repeat(np.asarray(values, np.float32)[:, None], det, axis=1),
-                    np.float32(np.nan), units=unit, long_name=long)
-        with dataset(QUALITY_FILE, img) as ds:
-            bits = [b for _, b, _ in QUALITY_BITS]
-            var(ds, "quality_flags", "u4", ("rows", "columns"), l1b_to_quality(flags), None,
-                long_name="Classification and quality flags",
-                flag_masks=np.array([1 << b for b in bits], np.uint32),
-                flag_meanings=" ".join(n for n, _, _ in QUALITY_BITS))
-        tdims = {"tie_rows": tshape[0], "tie_columns": tshape[1]}
-        tie = ("tie_rows", "tie_columns")
-        with dataset(TIE_GEO_FILE, tdims) as ds:
-            _write_geo(var, ds, tie, {"longitude": tie_points["longitude"],
-                                      "latitude": tie_points["latitude"],
-                                      "altitude": tie_points.get("dem_alt", np.zeros(tshape))})
-        with dataset(TIE_GEOMETRY_FILE, tdims) as ds:
-            for vname, key, unsigned, long in (
-                    ("SZA", "sun_zenith", True, "Sun zenith angle"),
-                    ("SAA", "sun_azimuth", False, "Sun azimuth angle"),
-                    ("OZA", "view_zenith", True, "Observation zenith angle"),
-                    ("OAA", "view_azimuth", False, "Observation azimuth angle")):
-                deg = np.asarray(tie_points[key], np.float64)
-                if not unsigned:  # azimuths stored on (-180, 180]
-                    deg = 180.0 - (180.0 - deg) % 360.0
-                var(ds, vname, "u4" if unsigned else "i4", tie, np.round(deg * 1e6),
-                    None, scale_factor=1e-6, units="degrees", long_name=long,
-                    standard_name=("solar_" if vname[0] == "S" else "sensor_")
-                    + ("zenith_angle" if vname[1] == "Z" else "azimuth_angle"))
-        with dataset(TIE_METEO_FILE, {**tdims, "wind_vectors": 2}) as ds:
-            wind = np.stack([np.asarray(tie_points.get(k, np.zeros(tshape)), np.float32)
-                             for k in ("zonal_wind", "merid_wind")], axis=-1)
-            var(ds, "horizontal_wind", "f4", (*tie, "wind_vectors"), wind, None,
-                units="m s-1", long_name="Horizontal wind vector at 10 m (east, north)")
-            for vname, key, factor, unit in (
-                    ("sea_level_pressure", "atm_pressure", 1.0, "hPa"),
-                    ("total_ozone", "ozone", DOBSON_KG_M2, "kg.m-2"),
-                    ("humidity", "rel_humidity", 1.0, "%")):
-                var(ds, vname, "f4", tie,
-                    np.asarray(tie_points.get(key, np.zeros(tshape)), np.float64) * factor,
-                    None, units=unit, long_name=vname.replace("_", " ").capitalize())
-        with dataset(TIME_FILE, {"rows": height}) as ds:
-            var(ds, "time_stamp", "i8", ("rows",), stamps, None,
-                units="microseconds since 2000-01-01 00:00:00", standard_name="time",
-                calendar="gregorian", long_name="Elapsed time since 01 Jan 2000 0h")
-        (tmp / MANIFEST).write_text(_manifest(name, resolution, height, width, df, dj,
-                                              t0, stamps[-1] - t0_us))
+        nc = _NcWriter(tmp, common)
+        _write_bands(nc, counts, scaling, progress)
+        with nc.dataset(GEO_FILE, {"rows": height, "columns": width}) as ds:
+            _write_geo(nc.var, ds, ("rows", "columns"), pixel_geolocation)
+        _write_instrument(nc, detector_index, flags, scaling, DETECTORS[resolution])
+        _write_tie_points(nc, tie_points)
+        with nc.dataset(TIME_FILE, {"rows": height}) as ds:
+            nc.var(ds, "time_stamp", "i8", ("rows",), stamps, None,
+                   units="microseconds since 2000-01-01 00:00:00", standard_name="time",
+                   calendar="gregorian", long_name="Elapsed time since 01 Jan 2000 0h")
+        (tmp / MANIFEST).write_text(_manifest(out.name.removesuffix(".SEN3"), resolution,
+                                              height, width, df, dj, t0, stamps[-1] - t0_us))
         if progress is not None:
-            progress(total, total)
+            progress(NUM_BANDS + 1, NUM_BANDS + 1)
     return out
+
+
+class _NcWriter:
+    """netCDF-4 member files of one product: the global attributes they share, CF variables."""
+
+    def __init__(self, directory: Path, common: dict[str, Any]) -> None:
+        self.directory = directory
+        self.common = common
+
+    def dataset(self, name: str, dims: dict[str, int]) -> Any:
+        import netCDF4
+
+        ds = netCDF4.Dataset(self.directory / name, "w", format="NETCDF4")
+        ds.setncatts(self.common)
+        for d, n in dims.items():
+            ds.createDimension(d, n)
+        return ds
+
+    @staticmethod
+    def var(ds: Any, name: str, dtype: str, dims: tuple[str, ...], data: Any,
+            fill: Any = None, **attrs: Any) -> Any:
+        """A compressed variable holding ``data`` cast to ``dtype`` (raw, attributes as given)."""
+        v = ds.createVariable(name, dtype, dims, zlib=True, complevel=1, fill_value=fill)
+        v.set_auto_maskandscale(False)
+        v.setncatts(attrs)
+        v[...] = np.asarray(data).astype(v.dtype)
+        return v
+
+
+def _write_bands(nc: _NcWriter, counts: Any, scaling: ScalingFactors,
+                 progress: ProgressCallback | None) -> None:
+    """``Mnn_radiance.nc``: the counts with the radiance factor as CF ``scale_factor``."""
+    height, width = np.shape(counts[0])
+    for b in range(1, NUM_BANDS + 1):
+        with nc.dataset(radiance_file(b), {"rows": height, "columns": width}) as ds:
+            nc.var(ds, radiance_variable(b), "u2", ("rows", "columns"),
+                   np.asarray(counts[b - 1], np.uint16), _RADIANCE_FILL,
+                   scale_factor=np.float32(scaling.radiance[b - 1]),
+                   add_offset=np.float32(0.0), units="mW.m-2.sr-1.nm-1",
+                   standard_name="toa_upwelling_spectral_radiance",
+                   long_name=f"TOA radiance for band M{b:02d}",
+                   valid_min=np.uint16(0), valid_max=np.uint16(65534))
+        if progress is not None:
+            progress(b, NUM_BANDS + 1)
+
+
+def _write_instrument(nc: _NcWriter, detector_index: np.ndarray, flags: np.ndarray,
+                      scaling: ScalingFactors, det: int) -> None:
+    """``instrument_data.nc`` (detector index, per-detector spectral data) and
+    ``qualityFlags.nc`` (the L1b flags as 4th-reprocessing quality bits)."""
+    height, width = np.shape(flags)
+    img = {"rows": height, "columns": width}
+    with nc.dataset(INSTRUMENT_FILE, {**img, "bands": NUM_BANDS, "detectors": det}) as ds:
+        nc.var(ds, "detector_index", "i2", ("rows", "columns"),
+               np.asarray(detector_index, np.int16), np.int16(-1),
+               long_name="Detector index", valid_min=np.int16(0), valid_max=np.int16(det - 1))
+        for name, values, unit, long in (
+                ("lambda0", APPENDIX_A_WAVELENGTHS, "nm", "Central wavelength"),
+                ("FWHM", APPENDIX_A_BANDWIDTHS, "nm", "Bandwidth (full width at half max)"),
+                ("solar_flux", scaling.sun_flux, "mW.m-2.nm-1", "In-band solar irradiance")):
+            nc.var(ds, name, "f4", ("bands", "detectors"),
+                   np.repeat(np.asarray(values, np.float32)[:, None], det, axis=1),
+                   np.float32(np.nan), units=unit, long_name=long)
+    with nc.dataset(QUALITY_FILE, img) as ds:
+        nc.var(ds, "quality_flags", "u4", ("rows", "columns"), l1b_to_quality(flags), None,
+               long_name="Classification and quality flags",
+               flag_masks=np.array([1 << b for _, b, _ in QUALITY_BITS], np.uint32),
+               flag_meanings=" ".join(n for n, _, _ in QUALITY_BITS))
+
+
+def _write_tie_points(nc: _NcWriter, tie_points: dict[str, np.ndarray]) -> None:
+    """``tie_geo_coordinates.nc``, ``tie_geometries.nc`` (azimuths on (-180, 180]) and
+    ``tie_meteo.nc`` (ozone in kg m-2) from N1-named physical tie points."""
+    tshape = np.shape(tie_points["latitude"])
+    tdims = {"tie_rows": tshape[0], "tie_columns": tshape[1]}
+    tie = ("tie_rows", "tie_columns")
+
+    def get(key: str) -> np.ndarray:
+        return np.asarray(tie_points.get(key, np.zeros(tshape)), np.float64)
+
+    with nc.dataset(TIE_GEO_FILE, tdims) as ds:
+        _write_geo(nc.var, ds, tie, {"longitude": get("longitude"), "latitude": get("latitude"),
+                                     "altitude": get("dem_alt")})
+    with nc.dataset(TIE_GEOMETRY_FILE, tdims) as ds:
+        for name, key, long in (("SZA", "sun_zenith", "Sun zenith angle"),
+                                ("SAA", "sun_azimuth", "Sun azimuth angle"),
+                                ("OZA", "view_zenith", "Observation zenith angle"),
+                                ("OAA", "view_azimuth", "Observation azimuth angle")):
+            zenith = name[1] == "Z"
+            deg = get(key) if zenith else 180.0 - (180.0 - get(key)) % 360.0
+            nc.var(ds, name, "u4" if zenith else "i4", tie, np.round(deg * 1e6), None,
+                   scale_factor=1e-6, units="degrees", long_name=long,
+                   standard_name=("solar_" if name[0] == "S" else "sensor_")
+                   + ("zenith_angle" if zenith else "azimuth_angle"))
+    with nc.dataset(TIE_METEO_FILE, {**tdims, "wind_vectors": 2}) as ds:
+        wind = np.stack([get("zonal_wind"), get("merid_wind")], axis=-1)
+        nc.var(ds, "horizontal_wind", "f4", (*tie, "wind_vectors"), wind, None,
+               units="m s-1", long_name="Horizontal wind vector at 10 m (east, north)")
+        for name, key, factor, unit in (("sea_level_pressure", "atm_pressure", 1.0, "hPa"),
+                                        ("total_ozone", "ozone", DOBSON_KG_M2, "kg.m-2"),
+                                        ("humidity", "rel_humidity", 1.0, "%")):
+            nc.var(ds, name, "f4", tie, get(key) * factor, None, units=unit,
+                   long_name=name.replace("_", " ").capitalize())
 
 
 def _write_geo(var, ds, dims: tuple[str, str], geo: dict[str, np.ndarray]) -> None:
