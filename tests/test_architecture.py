@@ -72,7 +72,7 @@ def test_the_rules_see_every_import():
     """The parser resolves relative imports (a broken resolver would make the rules vacuous)."""
     found = {name for _, name in _imports(ROOT / "ortho.py")}
     assert {"napari_meris_ortho.engine.predcorr", "napari_meris_ortho.geometry.grid",
-            "napari_meris_ortho.io.n1", "napari_meris_ortho.options"} <= found
+            "napari_meris_ortho.io.product", "napari_meris_ortho.options"} <= found
     found = {name for _, name in _imports(ROOT / "_napari" / "widget_ortho.py")}
     assert "napari_meris_ortho.ortho" in found and "napari_meris_ortho.synthesis" in found
 
