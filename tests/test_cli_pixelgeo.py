@@ -93,3 +93,28 @@ def test_bad_inputs_exit_2(scene, products, tmp_path, capsys):
         assert err.startswith(f"meris-ortho: error: {broken}: missing member file(s): "
                               "time_coordinates.nc")
     assert not list(tmp_path.glob("*.tif"))
+
+
+def test_broken_fsg_and_misshapen_sen3_exit_2(products, tmp_path, capsys):
+    import netCDF4
+
+    data = bytearray(products["fsg"].read_bytes())
+    i = data.index(b'DS_NAME="Corrected Latitude MDS(18)')
+    data[i + 9: i + 36] = b"Corrected Latitude MDS(99)"[:27].ljust(27)
+    bad = tmp_path / products["fsg"].name
+    bad.write_bytes(bytes(data))
+    code, _, err = _run(capsys, "info", bad)
+    assert code == 2 and err.count("\n") == 1
+    assert err.startswith(f"meris-ortho: error: {bad}: MER_FRG_1P product without Corrected "
+                          "Latitude MDS(18)")
+    broken = tmp_path / products["sen3"].name
+    shutil.copytree(products["sen3"], broken)
+    with netCDF4.Dataset(broken / "qualityFlags.nc", "a") as ds:
+        ds.createDimension("few", 3)
+        ds.renameVariable("quality_flags", "old")
+        ds.createVariable("quality_flags", "u4", ("few", "columns"))
+    code, _, err = _run(capsys, "map", broken, "-o", tmp_path / "d.tif", "--geolocation",
+                        "pixel")
+    assert code == 2 and err.count("\n") == 1
+    assert "qualityFlags.nc: variable 'quality_flags' has shape (3, 513)" in err
+    assert not (tmp_path / "d.tif").exists()
