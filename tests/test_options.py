@@ -44,7 +44,7 @@ def test_bad_values_name_the_mode_and_the_choices(enum, value, words):
 
 def test_kernel_codes():
     assert [p.code for p in Parallax] == [0, 1, 2]
-    assert [g.code for g in Geolocation] == [0, 1]
+    assert [g.code for g in Geolocation] == [0, 1, 2]
     assert [s.taps for s in Sampling] == [1, 2, 4]
     assert Sampling.BICUBIC.margin == (1, 2) and Sampling.NEAREST.margin == (0, 1)
     assert Geolocation.default_for(Parallax.HANDBOOK) is Geolocation.BILINEAR

@@ -49,7 +49,9 @@ class Geolocation(StrEnum):
 
     @property
     def code(self) -> int:
-        return 0 if self is Geolocation.BILINEAR else 1
+        """Kernel code of the tie-point interpolation (0, 1); PIXEL is 2 and never reaches the
+        tie-point kernels (``ortho`` hands such runs to ``engine.pixelgeo``)."""
+        return {"bilinear": 0, "ecef": 1, "pixel": 2}[self.value]
 
     @classmethod
     def default_for(cls, parallax: Parallax) -> Geolocation:
