@@ -436,11 +436,13 @@ def _pixel_grids(prod: MerisProduct) -> tuple[np.ndarray, np.ndarray, np.ndarray
         raise OptionsError(
             f"{getattr(prod, 'path', prod)}: geolocation 'pixel' needs a product with a "
             "per-pixel geolocation (MER_FRG_1P / MER_FSG_1P N1 or a .SEN3 directory)")
-    return prod.pixel_longitude(), prod.pixel_latitude(), prod.pixel_altitude()
+    geolocated: Any = prod  # FRG/FSG N1 or SEN3 (io.product): the per-pixel accessors
+    return (geolocated.pixel_longitude(), geolocated.pixel_latitude(),
+            geolocated.pixel_altitude())
 
 
 def _solve(job: _Job, lon: np.ndarray, lat: np.ndarray, h: np.ndarray | None,
-           spans: tuple[np.ndarray, ...], r0: int) -> dict:
+           spans: tuple[np.ndarray, np.ndarray, np.ndarray], r0: int) -> dict:
     """Antecedents of one block of output rows: tie-point model (``predcorr``) or the
     product's pixel geolocation (``pixelgeo``)."""
     opts = job.options
@@ -545,7 +547,7 @@ def _stats(job: _Job, *, search: dict[str, int], hist: np.ndarray, processed: in
         "crs": grid.crs.to_string(), "ul_x": grid.x0, "ul_y": grid.y0,
         "lr_x": grid.x0 + nc * grid.dx, "lr_y": grid.y0 - nr * grid.dy,
         "pixel_width": grid.dx, "pixel_height": grid.dy,
-        "orthorectification": job.hmode != predcorr.HEIGHT_NONE,
+        "orthorectification": job.hmode != predcorr.HEIGHT_NONE or job.pixel is not None,
         "facet_search": search,
         "iterations_histogram": [int(v) for v in hist],
         "processed_points": processed,

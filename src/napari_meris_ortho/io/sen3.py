@@ -493,7 +493,7 @@ def default_sen3_name(resolution: str, start: np.datetime64, duration_s: float) 
     stop = start + np.timedelta64(int(round(duration_s * 1e6)), "us")
 
     def stamp(t: np.datetime64) -> str:
-        return str(np.datetime64(t, "s")).replace("-", "").replace(":", "")
+        return str(t.astype("datetime64[s]")).replace("-", "").replace(":", "")
 
     return (f"ENV_ME_1_{resolution}G____{stamp(start)}_{stamp(stop)}_{'_' * 17}"
             f"{int(round(duration_s)):04d}_000_000______MOR_R_NT____.SEN3")
@@ -523,13 +523,13 @@ def write_sen3(path: str | os.PathLike[str], *, resolution: str,
     height, width = np.shape(counts[0])
     shape = (height, width)
     for key in ("longitude", "latitude", "altitude"):
-        if np.shape(pixel_geolocation.get(key)) != shape:
+        if key not in pixel_geolocation or np.shape(pixel_geolocation[key]) != shape:
             raise OptionsError(f"pixel_geolocation[{key!r}] must have the bands' shape {shape}")
     tshape = np.shape(tie_points["latitude"])
     if tshape[0] < tie_lines(height, df) or tshape[1] != tie_columns(width, dj):
         raise OptionsError(f"tie points {tshape} do not cover {shape} every {df} x {dj}")
     scaling = scaling or ScalingFactors()
-    t0 = np.datetime64(first_line_time, "us")
+    t0: Any = np.asarray(first_line_time).astype("datetime64[us]")[()]
     t0_us = int((t0 - np.datetime64("2000-01-01T00:00:00", "us")) / np.timedelta64(1, "us"))
     stamps = t0_us + np.round(np.arange(height) * line_interval_s * 1e6).astype(np.int64)
     common = {"Conventions": "CF-1.6", "title": f"MERIS Level 1 {resolution} (simulated)",
