@@ -45,6 +45,7 @@ from typing import Any
 
 import numpy as np
 
+from .. import flags as fl
 from .._atomic import atomic_dir
 from ..errors import OptionsError, Sen3FormatError
 from ..progress import ProgressCallback
@@ -76,8 +77,10 @@ TIME_FILE = "time_coordinates.nc"
 DOBSON_KG_M2 = 2.1415e-5
 #: (name in flag_meanings, bit of quality_flags, L1b flag bit)
 QUALITY_BITS: tuple[tuple[str, int, int], ...] = (
-    ("land", 31, 16), ("coastline", 30, 64), ("bright", 27, 32), ("invalid", 25, 128),
-    ("cosmetic", 24, 1), ("duplicated", 23, 2), ("sun_glint_risk", 22, 4), ("dubious", 21, 8),
+    ("land", 31, fl.FLAG_LAND_OCEAN), ("coastline", 30, fl.FLAG_COASTLINE),
+    ("bright", 27, fl.FLAG_BRIGHT), ("invalid", 25, fl.FLAG_INVALID),
+    ("cosmetic", 24, fl.FLAG_COSMETIC), ("duplicated", 23, fl.FLAG_DUPLICATED),
+    ("sun_glint_risk", 22, fl.FLAG_GLINT_RISK), ("dubious", 21, fl.FLAG_SUSPECT),
 )
 #: nominal number of detectors (instrument_data ``detectors`` dimension)
 DETECTORS = {"FR": 3700, "RR": 925}
