@@ -23,7 +23,7 @@ import shutil
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -32,6 +32,11 @@ from .errors import MerisOrthoError, OptionsError, OutputError
 from .io import synthesis_store as st
 from .options import Elevation, MergeRule, OrthoOptions, Sampling, choices, parse
 from .progress import ProgressCallback
+
+if TYPE_CHECKING:
+    from .geometry.grid import OutputGrid
+    from .geometry.tiepoints import ProductGeometry
+    from .io.dem import DemSource
 
 log = logging.getLogger("napari_meris_ortho.synthesis")
 
@@ -54,7 +59,7 @@ STATUS_ALREADY = "already in the synthesis"
 # --------------------------------------------------------------------------- grid helpers
 
 
-def grid_to_dict(grid: Any) -> dict[str, Any]:
+def grid_to_dict(grid: OutputGrid) -> dict[str, Any]:
     """The output grid as JSON-able values (CRS as WKT)."""
     from .geometry.grid import parse_crs
 
@@ -63,7 +68,7 @@ def grid_to_dict(grid: Any) -> dict[str, Any]:
             "width": int(grid.width), "height": int(grid.height)}
 
 
-def grid_from_dict(values: dict[str, Any]) -> Any:
+def grid_from_dict(values: dict[str, Any]) -> OutputGrid:
     """Rebuild an ``geometry.grid.OutputGrid`` from :func:`grid_to_dict` values."""
     from .geometry.grid import OutputGrid
 
@@ -71,7 +76,7 @@ def grid_from_dict(values: dict[str, Any]) -> Any:
                       int(values["width"]), int(values["height"]))
 
 
-def terrain_margin_px(product: Any, grid: Any) -> int:
+def terrain_margin_px(product: ProductGeometry, grid: OutputGrid) -> int:
     """Output pixels beyond the zero-height segment boundary that a terrain point of the
     product may reach: ``geometry.earth.MAX_TERRAIN_M`` x tan(max(45 deg, largest view
     zenith)), + 2."""
@@ -82,7 +87,7 @@ def terrain_margin_px(product: Any, grid: Any) -> int:
     return margin_px(grid, zenith, float(np.nanmax(np.abs(tp["latitude"]))))
 
 
-def footprint_window(product: Any, grid: Any, margin: int | None = None
+def footprint_window(product: ProductGeometry, grid: OutputGrid, margin: int | None = None
                      ) -> tuple[int, int, int, int] | None:
     """Rows/columns ``(row0, row1, col0, col1)`` of ``grid`` that the product may reach: its
     tie points widened by ``margin`` pixels (default ``terrain_margin_px``); None when
@@ -294,7 +299,7 @@ class SynthesisResult:
 
     path: Path
     snapshot: str | None
-    grid: Any
+    grid: OutputGrid
     algorithm: str
     bands: tuple[int, ...]
     reports: list[ProductReport] = field(default_factory=list)
@@ -318,8 +323,10 @@ class SynthesisResult:
 
 def synthesize(products: Sequence[str | os.PathLike[str]], out: str | os.PathLike[str], *,
                algorithm: str | None = None, input: str | os.PathLike[str] | None = None,
-               grid: Any = None, crs: Any = None, pixel_size: float | None = None,
-               dems: Sequence[Any] = (), elevation: str = "dem", sampling: str = "nearest",
+               grid: OutputGrid | None = None, crs: Any = None,
+               pixel_size: float | None = None,
+               dems: Sequence[DemSource | str | os.PathLike[str]] = (), elevation: str = "dem",
+               sampling: str = "nearest",
                bands: Sequence[int] | None = None, reject_bright: bool = False,
                tile: int = DEFAULT_TILE, progress: ProgressCallback | None = None,
                workers: int = 0, scheduler: str | None = None,
@@ -484,7 +491,7 @@ def _check_options(products: Sequence[Any], out_dir: Path, algorithm: str | None
     return Path(input)
 
 
-def _new_grid(product: Any, crs: Any, pixel_size: float | None) -> Any:
+def _new_grid(product: ProductGeometry, crs: Any, pixel_size: float | None) -> OutputGrid:
     """Grid of a new synthesis: the smallest rectangle holding the product's segment
     boundary (section 3.1, fig. 19), nominal FR/RR pixel size unless ``pixel_size``."""
     from .engine.boundary import segment_boundary

@@ -19,10 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit, prange
 
-#: MERIS L1b flag bits (MDS(16)) used by the validity test of Appendix C.
-FLAG_GLINT_RISK = 4
-FLAG_BRIGHT = 32
-FLAG_INVALID = 128
+from ..flags import FLAG_BRIGHT, FLAG_GLINT_RISK, FLAG_INVALID  # validity test, Appendix C
 
 #: NDVI 16-bit coding of Appendix C: pixels [1, 65535] <-> values [-1, +1], 0 = background.
 NDVI_MIN_PIXEL = 1
