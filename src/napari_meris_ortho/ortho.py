@@ -201,7 +201,9 @@ def orthorectify(product: str | os.PathLike[str] | MerisProduct,
                       geolocation=geolocation, allow_empty=allow_empty).result()
 
 
-def precompute(product: Any, grid: OutputGrid | None = None, dems: Sequence[Any] = (),
+def precompute(product: str | os.PathLike[str] | MerisProduct,
+               grid: OutputGrid | None = None,
+               dems: Sequence[DemSource | str | os.PathLike[str]] = (),
                elevation: str = "dem", sampling: str = "nearest",
                bands: Sequence[int] | None = None, tolerance: float = 0.01,
                parallax: str = "handbook", diagnostics: bool = False,

@@ -452,7 +452,7 @@ def _check_ortho_options(dems: Sequence[Any], elevation: str, sampling: str) -> 
 
 
 def _check_options(products: Sequence[Any], out_dir: Path, algorithm: str | None,
-                   input: Any, grid: Any, crs: Any, pixel_size: float | None,
+                   input: Any, grid: OutputGrid | None, crs: Any, pixel_size: float | None,
                    bands: Sequence[int] | None, tile: int, dems: Sequence[Any],
                    elevation: str, sampling: str, workers: int, scheduler: str | None
                    ) -> Path | None:
