@@ -122,6 +122,18 @@ def _open_dems(dems: Sequence[DemSource | str | os.PathLike[str]]) -> DemStack |
         raise DemError(f"cannot open DEM: {exc}") from exc
 
 
+def _check_dem_coverage(stack: Any, boundary: Any) -> None:
+    """A tile directory none of whose tiles meets the footprint is a DemError (a wrong
+    directory, not a DEM gap): DEM entries with ``check_covers`` are asked."""
+    pad = 0.2  # degrees: terrain seen beyond the zero-height boundary
+    bounds = (float(np.nanmin(boundary.lon)) - pad, float(np.nanmin(boundary.lat)) - pad,
+              float(np.nanmax(boundary.lon)) + pad, float(np.nanmax(boundary.lat)) + pad)
+    for src in stack.sources:
+        check = getattr(src, "check_covers", None)
+        if check is not None:
+            check(bounds)
+
+
 def _margin_px(tp: TiePointGrid, grid: OutputGrid, terrain: bool = True,
                pixel_m: float = 260.0) -> int:
     """Output pixels beyond the zero-height boundary that an antecedent inside the product
@@ -407,6 +419,8 @@ def _prepare(prod: MerisProduct, grid: OutputGrid | None, stack: DemStack | None
     """Segment boundary, default grid and the spans to search (section 3.1)."""
     tp = TiePointGrid.from_product(prod)
     boundary = segment_boundary(tp.latitude, tp.longitude)
+    if stack is not None:
+        _check_dem_coverage(stack, boundary)
     res_m = float(getattr(getattr(prod, "resolution", None), "column_spacing_m", 260.0))
     if grid is None:
         grid = default_grid(boundary, res_m, crs, pixel_size=pixel_size)

@@ -23,13 +23,17 @@ def register(subparsers: Any) -> None:
         "of H - h.")
     p.add_argument("points", metavar="POINTS.csv",
                    help="GPS points: CSV with lon, lat, h columns, or a DEMCHK listing")
-    p.add_argument("--dem", action="append", required=True, metavar="PATH",
-                   help="DEM (repeatable; tried in order at each point)")
+    p.add_argument("--dem", action="append", required=True, metavar="PATH[:DATUM]",
+                   help="DEM (repeatable; tried in order at each point); ':egm96' or "
+                   "':ellipsoid' names the vertical datum of its heights (default: SRTM30 and "
+                   "Copernicus egm96, GETASSE30 ellipsoid, GeoTIFF from its vertical CRS)")
     p.add_argument("--method", choices=("nearest", "bilinear", "bicubic", "all"), default="all",
                    help="interpolation of the DEM (default all three)")
-    p.add_argument("--geoid", default=None, metavar="FILE",
-                   help="raster of geoid undulations N (m) for DEMs above the geoid "
-                   "(e.g. EGM96 for SRTM30): h = H_dem + N")
+    p.add_argument("--geoid", nargs="?", const="egm96", default=None, metavar="FILE",
+                   help="the DEM heights are above the geoid, h = H_dem + N: without FILE every "
+                   "DEM without a ':datum' is taken as EGM96 (proj-data's egm96_15.gtx, as "
+                   "--dem PATH:egm96); with FILE a raster of undulations N (m) added to the "
+                   "stored heights")
     p.add_argument("--plot", default=None, metavar="FILE.png",
                    help="write the histogram of the differences (fig. 64)")
     p.add_argument("--bin-width", type=float, default=10.0, metavar="M",

@@ -11,10 +11,11 @@ interpolated (nearest neighbour, bilinear or bicubic) and the differences H_i - 
 
 A point is "inside" where a DEM of the list gives a height (``io.dem.DemStack``: outside or a
 no-data post used by the interpolation sends the point to the next DEM, then outside).
-DEM heights above the geoid (SRTM30/GTOPO30: EGM96) can be put on the ellipsoid with a geoid grid
-of undulations N (any raster ``io.dem.open_dem`` reads, e.g. a GeoTIFF): h = H_dem + N. No EGM96
-package with an offline grid installs on Python 3.11 here (``egm96`` >= 0.3.0 needs 3.12; pyproj
-cannot download its grids), so the user gives the grid file.
+DEM heights above the geoid are put on the ellipsoid, h = H_dem + N, by the same code as the
+orthorectification (``io.geoid``, EGM96 from proj-data): each DEM entry has its vertical datum
+(``PATH:egm96``, SRTM30 and Copernicus by default); ``geoid="egm96"`` takes every entry without
+an explicit datum as EGM96 heights. A raster of undulations N (any raster ``io.dem.open_dem``
+reads) may be given instead; the DEM heights are then used as stored.
 """
 
 from __future__ import annotations
@@ -33,6 +34,7 @@ import numpy as np
 from .._atomic import atomic_path
 from ..errors import OptionsError
 from ..io.dem import METHODS, DemSource, DemStack, open_dem
+from ..io.geoid import EGM96, ELLIPSOID, GEOID_GRID, split_datum
 
 __all__ = [
     "METHOD_TITLES", "DemCheckResult", "ElevationStatistics", "GroundControlPoints", "MethodCheck",
@@ -156,8 +158,9 @@ def demcheck(
 ) -> DemCheckResult:
     """Compare GPS points with a DEM list for each interpolation method (section 5.2, DEMCHK).
 
-    ``geoid``: a raster of geoid undulations N (m) when the DEM heights are above the geoid; the
-    DEM heights become H_dem + N (points where N is unknown are outside).
+    ``geoid``: "egm96" (DEM entries without a datum suffix are EGM96 heights, ``io.geoid``)
+    or a raster of geoid undulations N (m) added to the stored DEM heights (points where N is
+    unknown are outside).
     """
     if not isinstance(points, GroundControlPoints):
         points = read_points(points)
@@ -169,10 +172,15 @@ def demcheck(
         dems = [dems]
     if not dems:
         raise OptionsError("no DEM given to control")
+    labels = ", ".join(_label(d) for d in dems)
+    if geoid is not None:
+        dems = [_with_datum(d, EGM96 if geoid == EGM96 else ELLIPSOID,
+                            force=geoid != EGM96) for d in dems]
     stack = DemStack([d if isinstance(d, DemSource) else Path(d) for d in dems])
-    undulation = _geoid_undulation(geoid, points)
-    result = DemCheckResult(points, ", ".join(_label(d) for d in dems),
-                            geoid_label=None if geoid is None else _label(geoid))
+    undulation = _geoid_undulation(None if geoid == EGM96 else geoid, points)
+    label = f"EGM96 ({GEOID_GRID})" if geoid == EGM96 else (
+        None if geoid is None else _label(geoid))
+    result = DemCheckResult(points, labels, geoid_label=label)
     for method in methods:
         h, _index = stack.sample(points.lon, points.lat, method)
         h = h + undulation
@@ -187,11 +195,21 @@ def _label(source) -> str:
     return getattr(source, "name", None) or str(getattr(source, "path", source))
 
 
+def _with_datum(dem, datum: str, force: bool) -> DemSource | str:
+    """The DEM entry with ``datum`` unless it names one (``force``: always ``datum``)."""
+    if isinstance(dem, DemSource):
+        if force or dem.datum is None:
+            dem.set_datum(datum)
+        return dem
+    path, named = split_datum(dem)
+    return f"{path}:{datum if force or named is None else named}"
+
+
 def _geoid_undulation(geoid, points: GroundControlPoints) -> np.ndarray:
-    """N at the points (bilinear), or zeros without a geoid."""
+    """N at the points (bilinear) from a raster of undulations, or zeros without one."""
     if geoid is None:
         return np.zeros(len(points))
-    source = geoid if isinstance(geoid, DemSource) else open_dem(geoid)
+    source = geoid if isinstance(geoid, DemSource) else open_dem(f"{geoid}:{ELLIPSOID}")
     return np.asarray(source.sample(points.lon, points.lat, "bilinear"), dtype=np.float64)
 
 

@@ -15,6 +15,16 @@ chapter 5 GETASSE30, Appendix C ``TimMersynGetAltitudeFromDem``).
 - any raster GDAL reads (GeoTIFF...) in any CRS: posts at pixel centres, lookups reprojected with
   pyproj, nodata honoured, only the window under the requested points read.
 
+- a directory (searched 3 levels deep) of Copernicus DEM GLO-30 / GLO-90 tiles
+  (``Copernicus_DSM_COG_10_N46_00_E010_00_DEM.tif``; ``io.copernicus``), only the tiles under
+  the requested points read; a VRT is any GDAL raster.
+
+Vertical datum (issue 11): every source has a ``datum``, "ellipsoid" or "egm96"; ``sample``
+returns ellipsoidal heights (EGM96 heights + the geoid undulation N, ``io.geoid``). A DEM entry
+``PATH:egm96`` or ``PATH:ellipsoid`` names it; by default SRTM30 and Copernicus are EGM96,
+GETASSE30 ellipsoidal, a GDAL raster takes its vertical CRS (compound EGM96/EGM2008 height,
+3-D geographic) or its ``VERTICAL_DATUM`` tag, else it is taken as ellipsoidal with a warning.
+
 ``DemSource.sample(lon, lat, method="bilinear")`` -> float64 heights, NaN outside or where a post
 used by the interpolation is no data (as MERSYN: a background post sends the point to the next
 DEM). Methods "nearest", "bilinear" (2x2 posts), "bicubic" (4x4 posts, Keys a = -0.5).
@@ -27,6 +37,7 @@ read nothing more (bilinear: four flat gathers).
 
 from __future__ import annotations
 
+import logging
 import os
 import re
 import zipfile
@@ -40,6 +51,9 @@ import pyproj
 from ..errors import DemError
 from ..geometry.interpolation import keys_weights
 from ..options import Sampling, choices
+from .geoid import EGM96, ELLIPSOID, crs_datum, geoid_grid_path, split_datum, to_ellipsoid
+
+log = logging.getLogger(__name__)
 
 METHODS = tuple(choices(Sampling))
 _CHUNK = 1 << 18
@@ -77,6 +91,12 @@ class DemSource:
     n_rows: int = 0
     n_cols: int = 0
     wrap_cols: bool = False
+    #: vertical datum of the stored heights ("ellipsoid" or "egm96"); None: unknown (ellipsoid)
+    datum: str | None = ELLIPSOID
+
+    def set_datum(self, datum: str) -> None:
+        """Declare the vertical datum of the stored heights (a ``PATH:datum`` DEM entry)."""
+        self.datum = datum
 
     @property
     def bounds(self) -> tuple[float, float, float, float]:
@@ -103,6 +123,9 @@ class DemSource:
         for a in range(0, lon.size, _CHUNK):
             b = min(a + _CHUNK, lon.size)
             out[a:b] = self._sample_chunk(flon[a:b], flat[a:b], method)
+        if self.datum not in (None, ELLIPSOID):
+            ok = np.isfinite(out)
+            out[ok] = to_ellipsoid(out[ok], flon[ok], flat[ok], self.datum)
         return out.reshape(lon.shape)
 
     def _sample_chunk(self, lon: np.ndarray, lat: np.ndarray, method: str) -> np.ndarray:
@@ -300,7 +323,10 @@ def _read_hdr(path: Path) -> dict[str, str]:
 
 
 class SrtmTile(DemSource):
-    """One SRTM30/GTOPO30 ``.DEM`` tile (int16, ``.HDR`` header; ULXMAP/ULYMAP = post centre)."""
+    """One SRTM30/GTOPO30 ``.DEM`` tile (int16, ``.HDR`` header; ULXMAP/ULYMAP = post centre);
+    heights above the EGM96 geoid."""
+
+    datum = EGM96
 
     def __init__(self, dem_path: str | Path) -> None:
         p = Path(dem_path)
@@ -382,6 +408,7 @@ class RasterSource(DemSource):
             raise DemError(f"{path}: no band {band}")
         self.n_rows, self.n_cols = ds.height, ds.width
         self.crs = pyproj.CRS.from_user_input(ds.crs.to_wkt())
+        self.datum = _raster_datum(ds, self.crs)
         self._inv = ~ds.transform
         self._nodata = ds.nodatavals[band - 1]
         self._scale = float((ds.scales or (1.0,))[band - 1] or 1.0)
@@ -508,6 +535,22 @@ class RasterSource(DemSource):
         self._ds.close()
 
 
+def _raster_datum(ds: Any, crs: pyproj.CRS) -> str | None:
+    """Vertical datum of a GDAL raster: its ``VERTICAL_DATUM`` tag, its vertical CRS, or a
+    Copernicus VRT (EGM96 for EGM2008); None when unknown."""
+    tag = str(ds.tags().get("VERTICAL_DATUM", "")).lower()
+    if tag in (EGM96, ELLIPSOID):
+        return tag
+    datum = crs_datum(crs)
+    if datum is None and str(ds.name).lower().endswith(".vrt"):
+        try:
+            if "Copernicus_DSM" in Path(ds.name).read_text(errors="replace"):
+                return EGM96
+        except OSError:
+            pass
+    return datum
+
+
 # ---------------------------------------------------------------------- several sources
 class CompositeSource(DemSource):
     """Several sources of one DEM series (tiles): the first with data wins at each point."""
@@ -515,6 +558,13 @@ class CompositeSource(DemSource):
     def __init__(self, name: str, sources: Sequence[DemSource]) -> None:
         self.name = name
         self.sources = list(sources)
+        datums = {s.datum for s in self.sources}
+        self.datum = datums.pop() if len(datums) == 1 else None
+
+    def set_datum(self, datum: str) -> None:
+        self.datum = datum
+        for s in self.sources:
+            s.set_datum(datum)
 
     @property
     def bounds(self) -> tuple[float, float, float, float]:
@@ -569,8 +619,23 @@ class DemStack:
 
 
 def open_dem(path: str | os.PathLike[str]) -> DemSource:
-    """Open a DEM, detecting its format (module docstring). Raises DemError."""
-    p = Path(path)
+    """Open a DEM entry ``PATH[:egm96|:ellipsoid]``, detecting its format and vertical datum
+    (module docstring). Raises DemError."""
+    text, datum = split_datum(path)
+    src = _open_path(Path(text))
+    if datum is not None:
+        src.set_datum(datum)
+    elif src.datum is None:
+        log.warning("%s: the DEM does not say its vertical datum: its heights are taken as "
+                    "ellipsoidal (write %s:egm96 for heights above the geoid, %s:ellipsoid to "
+                    "silence this)", text, text, text)
+        src.set_datum(ELLIPSOID)
+    if src.datum == EGM96 or src.datum is None:
+        geoid_grid_path()  # a missing geoid grid fails now, before any work
+    return src
+
+
+def _open_path(p: Path) -> DemSource:
     if not p.exists():
         raise DemError(f"{p}: DEM not found")
     if p.is_dir():
@@ -589,6 +654,11 @@ def _open_directory(p: Path) -> DemSource:
         raise DemError(f"{p}: cannot list DEM directory ({exc})") from exc
     if any(_TILE_RE.match(f.name) or _ZIP_RE.match(f.name) for f in files):
         return GetasseSource(p, files)
+    from .copernicus import CopernicusSource, find_tiles
+
+    tiles = find_tiles(p)
+    if tiles:
+        return CopernicusSource(p, tiles)
     dems = [f for f in files if f.suffix.upper() == ".DEM"]
     if dems:
         return CompositeSource(str(p), [SrtmTile(f) for f in dems])

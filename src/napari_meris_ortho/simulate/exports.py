@@ -12,9 +12,14 @@ All exports are resampled from the truth DEM (bilinear between its posts, ellips
   (lat0 + 15 - (r+0.5)/120); 0 outside the scene.
 - ``srtm30`` (SRTM30/GTOPO30): 40 x 50 deg tiles ``W020N90.DEM`` (int16 big-endian, rows North
   to South) + ``.HDR`` (ULXMAP/ULYMAP = centre of the upper-left post); -9999 over the sea and
-  outside the scene like real SRTM30. Real SRTM30 heights are above the EGM96 geoid; these are
-  the scene's *ellipsoidal* heights (no geoid model is available offline).
+  outside the scene like real SRTM30; heights above the EGM96 geoid like real SRTM30
+  (h - N, ``io.geoid``).
+- ``copernicus`` (Copernicus DEM GLO-90 COG tiles, ``io.copernicus``): 1 x 1 deg float32
+  ``Copernicus_DSM_COG_30_N46_00_E010_00_DEM.tif``, posts every 3" on whole multiples of the
+  spacing (origin half a post north-west of the corner), heights above the EGM96 geoid
+  (h - N), -32767 outside the scene.
 - ``geotiff_utm``: a 250 m UTM GeoTIFF like the handbook's "DEM Italy" (float32, -9999 nodata).
+  The GeoTIFF DEMs carry the tag ``VERTICAL_DATUM=ellipsoid``.
 - reference image: truth radiances on the DEM posts (float32 GeoTIFF, one band per MERIS band,
   like the handbook's Landsat mosaic, section 4.3).
 """
@@ -38,7 +43,8 @@ PER_DEG = 120
 
 
 def _write_tif(path: Path, data: np.ndarray, transform: Affine, crs: str,
-               nodata: float | None, descriptions: Sequence[str] | None = None) -> Path:
+               nodata: float | None, descriptions: Sequence[str] | None = None,
+               tags: dict[str, str] | None = None) -> Path:
     arr = data if data.ndim == 3 else data[None]
     with atomic_path(path, suffix=".tif") as tmp:
         with rasterio.open(tmp, "w", driver="GTiff", width=arr.shape[2], height=arr.shape[1],
@@ -48,15 +54,32 @@ def _write_tif(path: Path, data: np.ndarray, transform: Affine, crs: str,
             dst.write(arr)
             for i, text in enumerate(descriptions or (), start=1):
                 dst.set_band_description(i, text)
+            if tags:
+                dst.update_tags(**tags)
     return path
 
 
 def write_geographic_geotiff(path: Path, grid: DemGrid, data: np.ndarray,
                              nodata: float | None = None,
-                             descriptions: Sequence[str] | None = None) -> Path:
+                             descriptions: Sequence[str] | None = None,
+                             tags: dict[str, str] | None = None) -> Path:
     """A GeoTIFF on the DEM grid (EPSG:4326; lon0 may exceed 180 across the antimeridian)."""
     transform = Affine(grid.spacing, 0.0, grid.lon0, 0.0, -grid.spacing, grid.lat0)
-    return _write_tif(path, data, transform, "EPSG:4326", nodata, descriptions)
+    return _write_tif(path, data, transform, "EPSG:4326", nodata, descriptions, tags)
+
+
+#: tag of our DEM GeoTIFFs naming the vertical datum of their heights (``io.dem``)
+ELLIPSOIDAL = {"VERTICAL_DATUM": "ellipsoid"}
+
+
+def geoid_heights(sample: Sampler) -> Sampler:
+    """A sampler of heights above the EGM96 geoid (H = h - N) from an ellipsoidal one."""
+    from ..io.geoid import geoid_undulation
+
+    def above_geoid(lon: np.ndarray, lat: np.ndarray) -> np.ndarray:
+        return sample(lon, lat) - geoid_undulation(lon, lat)
+
+    return above_geoid
 
 
 def _wrap(lon: np.ndarray | float) -> np.ndarray:
@@ -146,14 +169,15 @@ def srtm30_tile_name(left: int, top: int) -> str:
 
 
 def write_srtm30(out_dir: Path, sample: Sampler, sea: Sampler, grid: DemGrid) -> list[Path]:
-    """SRTM30-style ``.DEM`` + ``.HDR`` tiles under the scene (-9999 over sea and outside)."""
+    """SRTM30-style ``.DEM`` + ``.HDR`` tiles under the scene (-9999 over sea and outside);
+    ``sample`` gives ellipsoidal heights, the tiles hold heights above the geoid."""
     out_dir.mkdir(parents=True, exist_ok=True)
     paths = []
     for left, top, width, height in srtm30_tiles(grid.bounds):
         nrows, ncols = height * PER_DEG, width * PER_DEG
         lat_rows = top - (np.arange(nrows) + 0.5) / PER_DEG
         lon_cols = left + (np.arange(ncols) + 0.5) / PER_DEG
-        heights, inside = _tile_heights(sample, lat_rows, lon_cols, grid)
+        heights, inside = _tile_heights(geoid_heights(sample), lat_rows, lon_cols, grid)
         values = np.full(heights.shape, -9999, dtype=">i2")
         keep = inside.copy()
         rr, cc = np.nonzero(inside)
@@ -213,4 +237,26 @@ def write_utm_geotiff(path: Path, sample: Sampler, grid: DemGrid,
         h = sample(lon.ravel(), lat.ravel()).reshape(xx.shape)
         out[r0:r0 + ys.size] = np.where(np.isfinite(h), h, -9999.0)
     transform = Affine(spacing_m, 0.0, x0, 0.0, -spacing_m, y1)
-    return _write_tif(path, out, transform, f"EPSG:{epsg}", -9999.0)
+    return _write_tif(path, out, transform, f"EPSG:{epsg}", -9999.0, tags=ELLIPSOIDAL)
+
+
+def write_copernicus(out_dir: Path, sample: Sampler, grid: DemGrid, code: str = "30",
+                     nodata: float = -32767.0) -> list[Path]:
+    """Copernicus DEM COG tiles under the scene (module docstring); ``sample`` gives the heights
+    to store (the caller passes geoid heights)."""
+    from ..io.copernicus import ARCSEC, covering_tiles, lon_factor, tile_name
+
+    out_dir.mkdir(parents=True, exist_ok=True)
+    dy = ARCSEC[code] / 3600.0
+    paths = []
+    for lat0, lon0 in covering_tiles(grid.bounds):
+        dx = dy * lon_factor(lat0)
+        n, m = int(round(1 / dy)), int(round(1 / dx))
+        lat_rows = lat0 + 1 - np.arange(n) * dy
+        lon_cols = lon0 + np.arange(m) * dx
+        heights, inside = _tile_heights(sample, lat_rows, lon_cols, grid)
+        data = np.where(inside, heights, nodata).astype(np.float32)
+        transform = Affine(dx, 0.0, lon0 - 0.5 * dx, 0.0, -dy, lat0 + 1 + 0.5 * dy)
+        paths.append(_write_tif(out_dir / tile_name(lat0, lon0, code), data, transform,
+                                "EPSG:4326", nodata))
+    return paths

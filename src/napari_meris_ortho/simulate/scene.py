@@ -35,7 +35,7 @@ from .radiometry import (
 from .terrain import DemGrid, Terrain, auxiliary_dem, block_max, make_terrain
 
 #: bump when the generator changes its output for a given config (part of the cache key)
-GENERATOR_VERSION = 1
+GENERATOR_VERSION = 2
 #: mean Earth radius of eq. 2 (handbook section 2.2)
 RESOLUTIONS = {
     # frame time (s), column spacing (m), tie-point spacing DF = DJ, product type
@@ -56,6 +56,7 @@ DEFAULTS: dict[str, Any] = {
     "invalid_fraction": 2e-5,
     "glint_angle_deg": 50.0,
     "exports": {"getasse30": True, "getasse30_beam": True, "srtm30": True, "geotiff_utm": True,
+                "copernicus": False,
                 "utm_spacing_m": 250.0, "reference": True, "reference_bands": [5, 7, 13]},
 }
 
@@ -358,6 +359,25 @@ def _sample_dem_kernel(dem: np.ndarray, geo: np.ndarray, lon: np.ndarray, lat: n
 # ------------------------------------------------------------------------------------------
 
 
+#: highest sun zenith (deg) of a simulated scene: MERIS measures reflected sunlight only
+MAX_SUN_ZENITH = 90.0
+
+
+def _refuse_night(cfg: dict, geom: SceneGeometry, t_mid: float,
+                  bounds: tuple[float, float, float, float]) -> None:
+    """OptionsError when the sun is below the horizon somewhere on the footprint: the radiance
+    spectra are daylight ones, a night pass would get daylight radiances (issue 11)."""
+    lon_min, lat_min, lon_max, lat_max = bounds
+    lon = np.array([lon_min, lon_max, lon_min, lon_max, 0.5 * (lon_min + lon_max)])
+    lat = np.array([lat_min, lat_min, lat_max, lat_max, 0.5 * (lat_min + lat_max)])
+    sz, _ = solar_angles(np.full(lon.size, t_mid), (lon + 180.0) % 360.0 - 180.0, lat)
+    if float(np.max(sz)) > MAX_SUN_ZENITH:
+        raise OptionsError(
+            f"scene {cfg.get('name', '')!r}: night pass (sun zenith up to {float(np.max(sz)):.1f} "
+            f"deg on the footprint on {cfg['date']}, {cfg['orbit'].get('direction')} orbit): "
+            "MERIS images the day side only; choose a descending daytime pass or another date")
+
+
 def build_truth(cfg: dict, geom: SceneGeometry) -> tuple[DemGrid, Terrain, GroundTruth]:
     """The DEM grid over the footprint (plus margin), its terrain and radiometric truth."""
     lon_min, lat_min, lon_max, lat_max = footprint(geom)
@@ -372,6 +392,7 @@ def build_truth(cfg: dict, geom: SceneGeometry) -> tuple[DemGrid, Terrain, Groun
     t_mid = geom.t0 + 0.5 * (geom.lines - 1) * geom.frame_time
     lon_c = grid.lon0 + 0.5 * grid.ncols * grid.spacing
     lat_c = grid.lat0 - 0.5 * grid.nrows * grid.spacing
+    _refuse_night(cfg, geom, t_mid, (lon_min, lat_min, lon_max, lat_max))
     sz, sa = solar_angles(np.array(t_mid), np.array(lon_c), np.array(lat_c))
     truth = make_ground_truth(terrain, seed, float(sz), float(sa), cfg.get("clouds"),
                               snowline=float(cfg["terrain"].get("snowline", 2900.0)))
@@ -614,13 +635,15 @@ def _write_exports(target: Path, cfg: dict, scene: SimulatedScene, terrain: Terr
     paths: dict[str, Path] = {}
     steps = [("geotiff", True), ("getasse30", ex.get("getasse30")),
              ("getasse30_beam", ex.get("getasse30_beam")), ("srtm30", ex.get("srtm30")),
-             ("geotiff_utm", ex.get("geotiff_utm")), ("reference", ex.get("reference"))]
+             ("geotiff_utm", ex.get("geotiff_utm")), ("copernicus", ex.get("copernicus")),
+             ("reference", ex.get("reference"))]
     keys = [k for k, on in steps if on]
     reference = None
     for i, key in enumerate(keys):
         if key == "geotiff":
             paths[key] = exports.write_geographic_geotiff(
-                target / "dem_truth.tif", grid, scene.dem, descriptions=["height above WGS84"])
+                target / "dem_truth.tif", grid, scene.dem, descriptions=["height above WGS84"],
+                tags=exports.ELLIPSOIDAL)
         elif key == "getasse30":
             paths[key] = exports.write_getasse30(target / "getasse30", sample, grid, "handbook")
         elif key == "getasse30_beam":
@@ -628,6 +651,9 @@ def _write_exports(target: Path, cfg: dict, scene: SimulatedScene, terrain: Terr
         elif key == "srtm30":
             tiles = exports.write_srtm30(target / "srtm30", sample, sea, grid)
             paths[key] = tiles[0] if len(tiles) == 1 else target / "srtm30"
+        elif key == "copernicus":
+            exports.write_copernicus(target / "copernicus", exports.geoid_heights(sample), grid)
+            paths[key] = target / "copernicus"
         elif key == "geotiff_utm":
             paths[key] = exports.write_utm_geotiff(target / "dem_utm.tif", sample, grid,
                                                    float(ex.get("utm_spacing_m", 250.0)))
