@@ -8,8 +8,11 @@ GUI=0
 
 apt_pkgs=()
 command -v python3 >/dev/null || apt_pkgs+=(python3 python3-venv python3-pip)
-# gdal-bin: gdalwarp, the peer of benchmarks/bench_ortho.py (our own GDAL comes with rasterio)
+# gdal-bin: gdalwarp, the peer of benchmarks/bench_ortho.py (our own GDAL comes with rasterio), and
+# gdalbuildvrt (a VRT of Copernicus DEM tiles is one DEM entry; tests build one)
 command -v gdalwarp >/dev/null || apt_pkgs+=(gdal-bin)
+# proj-data: the EGM96 geoid grid (/usr/share/proj/egm96_15.gtx) for DEM heights above the geoid
+[[ -f /usr/share/proj/egm96_15.gtx ]] || apt_pkgs+=(proj-data)
 if [[ $GUI == 1 ]]; then
     for p in xvfb xauth libxcb-icccm4 libxcb-keysyms1 libgl1 libegl1 libxkbcommon-x11-0 libxcb-cursor0 \
              libdbus-1-3 libxcb-image0 libxcb-render-util0 libxcb-xinerama0 libxcb-randr0 libxcb-shape0 \

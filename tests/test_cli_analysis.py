@@ -99,6 +99,14 @@ def test_demcheck_cli(tmp_path, capsys):
                  "--no-listing"])
     out = capsys.readouterr().out
     assert code == 0 and "GCP #" not in out and ". STANDARD DEVIATION : 30.503" in out
+    # --geoid (no file): the DEM heights are above EGM96; h = H + N moves the mean by -N
+    code = main(["-q", "demcheck", str(pts), "--dem", str(dem), "--method", "nearest",
+                 "--no-listing", "--geoid"])
+    out = capsys.readouterr().out
+    mean = float(out.split("ARITHMETIC MEAN")[1].split(":")[1].split()[0])
+    assert code == 0 and "EGM96 (egm96_15.gtx)" in out and -45.0 < mean < -25.0
+    assert main(["demcheck", str(pts), "--dem", f"{dem}:egm2008"]) == 2
+    assert "unknown vertical datum" in capsys.readouterr().err
 
 
 def test_demcheck_cli_errors(tmp_path, capsys):

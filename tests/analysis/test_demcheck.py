@@ -18,6 +18,7 @@ from napari_meris_ortho.analysis.demcheck import (
     read_points,
 )
 from napari_meris_ortho.errors import MerisOrthoError, OptionsError
+from napari_meris_ortho.io.geoid import geoid_undulation
 
 FIXTURES = Path(__file__).parent / "fixtures"
 
@@ -135,6 +136,18 @@ def test_interpolation_methods_on_a_plane_and_geoid(tmp_path):
     assert s.arithmetic_mean == pytest.approx(-47.5, abs=1e-6)
     assert s.standard_deviation < 1e-6
     assert "geoid" in with_geoid.report(listing=False)
+    # --geoid without a file: EGM96 of io.geoid, the same as the entry PATH:egm96
+    egm = demcheck(pts, [dem_path], methods=("bilinear",), geoid="egm96")
+    entry = demcheck(pts, [f"{dem_path}:egm96"], methods=("bilinear",))
+    n = geoid_undulation(plon, plat)
+    assert 45.0 < n.min()
+    np.testing.assert_allclose(egm.methods["bilinear"].dem_heights[:40], truth + n, atol=1e-6)
+    np.testing.assert_allclose(entry.methods["bilinear"].dem_heights,
+                               egm.methods["bilinear"].dem_heights)
+    assert "EGM96 (egm96_15.gtx)" in egm.report(listing=False)
+    # an entry naming its datum keeps it under --geoid
+    kept = demcheck(pts, [f"{dem_path}:ellipsoid"], methods=("bilinear",), geoid="egm96")
+    assert kept.methods["bilinear"].statistics.quadratic_mean < 1e-6
 
 
 def test_dem_list_second_dem_fills_the_first(tmp_path):

@@ -19,6 +19,7 @@ from napari_meris_ortho.io.dem import (
     heights_or_fallback,
     open_dem,
 )
+from napari_meris_ortho.io.geoid import geoid_undulation
 
 
 def plane(lon, lat):
@@ -144,7 +145,11 @@ def test_srtm30_tile(tmp_path):
     h = dem.sample(lon, lat)
     ok = np.isfinite(h)
     assert ok.mean() > 0.95
-    np.testing.assert_allclose(h[ok], plane(lon, lat)[ok], atol=1e-6)
+    # SRTM30 heights are above the EGM96 geoid: the source gives ellipsoidal ones (+ N)
+    np.testing.assert_allclose(h[ok], plane(lon, lat)[ok] + geoid_undulation(lon, lat)[ok],
+                               atol=1e-6)
+    raw = open_dem(f"{tmp_path / 'W020N90.DEM'}:ellipsoid").sample(lon, lat)
+    np.testing.assert_allclose(raw[ok], plane(lon, lat)[ok], atol=1e-6)
     # no-data post (row 5, col 7) and a point outside the tile
     plon, plat = -20 + 7.5 / 120, 90 - 5.5 / 120
     out = dem.sample(np.array([plon + 0.1 / 120, -25.0, plon]), np.array([plat, 89.9, 89.9]))

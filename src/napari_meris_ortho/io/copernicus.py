@@ -199,7 +199,10 @@ class CopernicusSource(DemSource):
         tiles = find_tiles(self.path) if tiles is None else tiles
         if not tiles:
             raise DemError(f"{path}: no Copernicus DEM tile found")
-        code = parse_name(next(iter(tiles.values())).name)[0]
+        parsed = parse_name(next(iter(tiles.values())).name)
+        if parsed is None:
+            raise DemError(f"{path}: not a Copernicus DEM tile name")
+        code = parsed[0]
         dy = ARCSEC[code] / 3600.0
         self.resolution = "GLO-30" if code == "10" else "GLO-90"
         zones: dict[float, dict[tuple[int, int], _Tile]] = {}
