@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 import zipfile
 
 import numpy as np
@@ -294,3 +295,25 @@ def test_geotiff_prepared_window_read_once_same_heights(tmp_path):
     stack = DemStack([path])
     stack.prepare(10.5, 45.5, 12.5, 46.8)
     assert stack.sources[0]._window[2].shape == (136, 206)
+
+
+def test_geotiff_vertical_datum_from_its_crs_or_a_warning(tmp_path, caplog):
+    """Issue 11: a compound EGM96-height CRS gives EGM96 heights (+ N), a plain 2-D CRS is
+    taken as ellipsoidal with one warning per path, each tile of a directory keeps its own."""
+    t = from_origin(10.0, 47.0, 0.01, 0.01)
+    data = np.full((100, 100), 500.0)
+    (tmp_path / "d").mkdir()
+    geoid_tif = write_geotiff_dem(tmp_path / "d" / "a.tif", "EPSG:4326+5773", t, data)
+    plain_tif = write_geotiff_dem(tmp_path / "d" / "b.tif", "EPSG:4326",
+                                  from_origin(11.0, 47.0, 0.01, 0.01), data)
+    lon, lat = np.array([10.5, 11.5]), np.array([46.5, 46.5])
+    n = geoid_undulation(lon, lat)
+    assert open_dem(geoid_tif).sample(lon[0], lat[0]) == pytest.approx(500.0 + n[0], abs=1e-6)
+    caplog.set_level(logging.WARNING, logger="napari_meris_ortho")
+    for _ in range(2):
+        assert open_dem(plain_tif).sample(lon[1], lat[1]) == pytest.approx(500.0, abs=1e-6)
+    assert caplog.text.count("does not say its vertical datum") == 1
+    both = open_dem(tmp_path / "d")
+    np.testing.assert_allclose(both.sample(lon, lat), [500.0 + n[0], 500.0], atol=1e-6)
+    forced = open_dem(f"{tmp_path / 'd'}:egm96")
+    np.testing.assert_allclose(forced.sample(lon, lat), 500.0 + n, atol=1e-6)

@@ -618,6 +618,9 @@ class DemStack:
             s.close()
 
 
+_WARNED: set[str] = set()
+
+
 def open_dem(path: str | os.PathLike[str]) -> DemSource:
     """Open a DEM entry ``PATH[:egm96|:ellipsoid]``, detecting its format and vertical datum
     (module docstring). Raises DemError."""
@@ -625,14 +628,37 @@ def open_dem(path: str | os.PathLike[str]) -> DemSource:
     src = _open_path(Path(text))
     if datum is not None:
         src.set_datum(datum)
-    elif src.datum is None:
-        log.warning("%s: the DEM does not say its vertical datum: its heights are taken as "
-                    "ellipsoidal (write %s:egm96 for heights above the geoid, %s:ellipsoid to "
-                    "silence this)", text, text, text)
-        src.set_datum(ELLIPSOID)
-    if src.datum == EGM96 or src.datum is None:
+    elif _datums(src) & {None}:
+        if text not in _WARNED:  # once per path (synthesis opens the DEMs per tile)
+            _WARNED.add(text)
+            log.warning("%s: the DEM does not say its vertical datum: its heights are taken as "
+                        "ellipsoidal (write %s:egm96 for heights above the geoid, %s:ellipsoid "
+                        "to silence this)", text, text, text)
+        _assume_ellipsoid(src)
+    if EGM96 in _datums(src):
         geoid_grid_path()  # a missing geoid grid fails now, before any work
     return src
+
+
+def _datums(src: DemSource) -> set[str | None]:
+    """Vertical datums of a source and of its parts (a CompositeSource of tiles)."""
+    parts = getattr(src, "sources", None)
+    if parts is None:
+        return {src.datum}
+    return set().union(*(_datums(p) for p in parts)) if parts else {src.datum}
+
+
+def _assume_ellipsoid(src: DemSource) -> None:
+    """Ellipsoidal heights where a source (or a part of it) does not say its datum."""
+    parts = getattr(src, "sources", None)
+    if parts is None:
+        if src.datum is None:
+            src.set_datum(ELLIPSOID)
+        return
+    for p in parts:
+        _assume_ellipsoid(p)
+    datums = _datums(src)
+    src.datum = datums.pop() if len(datums) == 1 else None
 
 
 def _open_path(p: Path) -> DemSource:
