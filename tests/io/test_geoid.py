@@ -26,8 +26,9 @@ def test_undulation_at_the_alps_and_the_compound_crs_agree():
     pyproj.datadir.append_data_dir(str(geoid.geoid_grid_path().parent))
     try:
         tr = pyproj.Transformer.from_crs("EPSG:4326+5773", "EPSG:4979", always_xy=True)
-        lon = np.array([10.0, -75.0, 147.3, 179.9, 0.0, 78.0])
-        lat = np.array([46.0, 4.0, -42.9, -16.0, 0.0, -75.0])
+        rng = np.random.default_rng(11)
+        lon = np.r_[10.0, -75.0, 147.3, 179.9, 0.0, 78.0, rng.uniform(-180, 180, 2000)]
+        lat = np.r_[46.0, 4.0, -42.9, -16.0, 0.0, -75.0, rng.uniform(-90, 90, 2000)]
         _, _, h = tr.transform(lon, lat, np.zeros(lon.size))
     finally:
         pyproj.datadir.set_data_dir(before)

