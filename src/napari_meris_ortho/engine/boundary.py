@@ -202,11 +202,11 @@ def row_spans(boundary: Boundary, grid: OutputGrid, row_start: int = 0,
 
 
 @njit(cache=True)
-def _sorted_small(x, n):  # pragma: no cover
-    """The first ``n`` values of ``x`` sorted (insertion sort: a few edge crossings per line;
-    numba's own sort costs seconds of compilation per dtype)."""
-    out = x[:n].copy()
-    for i in range(1, n):
+def _sorted_small(x):  # pragma: no cover
+    """A sorted copy of ``x`` (insertion sort: a few edge crossings per line; numba's own sort
+    costs seconds of compilation per dtype)."""
+    out = x.copy()
+    for i in range(1, out.size):
         v = out[i]
         k = i - 1
         while k >= 0 and out[k] > v:
@@ -230,12 +230,12 @@ def _argsort_small(s):  # pragma: no cover
     return order
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True)  # serial: a few crossings per line; a parallel loop costs compile time
 def _scan(xv, yv, ptr, shifts, x0, y0, dx, dy, width, r0, margin, counts, start, stop, rptr,
           fill):  # pragma: no cover
     """Scanline fill: for each line y = y0 - (i + 0.5) dy, pixel-centre intervals inside."""
     n_edges = xv.size
-    for r in prange(counts.size):
+    for r in range(counts.size):
         y = y0 - (r0 + r + 0.5) * dy
         xs = np.empty(n_edges * shifts.size + 1)
         n = 0
@@ -247,7 +247,7 @@ def _scan(xv, yv, ptr, shifts, x0, y0, dx, dy, width, r0, margin, counts, start,
                     for s in range(shifts.size):
                         xs[n] = x + shifts[s]
                         n += 1
-        xs_sorted = _sorted_small(xs, n)
+        xs_sorted = _sorted_small(xs[:n])
         k = 0
         w = rptr[r] if fill else 0
         last_stop = -1

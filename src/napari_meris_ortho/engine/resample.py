@@ -104,10 +104,10 @@ def nearest_pixel(lines: np.ndarray, cols: np.ndarray, n_lines: int, n_cols: int
                           int(n_lines), int(n_cols))
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True)  # serial: memory bound; a parallel loop costs compile time
 def _nearest_pixel(line, col, n_lines, n_cols):  # pragma: no cover
     out = np.full(line.size, -1, np.int64)
-    for i in prange(line.size):
+    for i in range(line.size):
         x = line[i]
         y = col[i]
         if x >= -0.5 and x < n_lines - 0.5 and y >= -0.5 and y < n_cols - 0.5:
