@@ -12,7 +12,9 @@ import rasterio
 from napari_meris_ortho.errors import OutputError
 from napari_meris_ortho.geometry.grid import OutputGrid
 from napari_meris_ortho.io.geotiff import (
+    halve,
     meris_band_description,
+    overview_levels,
     radiance_to_counts,
     read_geotiff,
     write_cog,
@@ -180,3 +182,12 @@ def test_cog_float32_deflate_and_errors_leave_no_file(tmp_path):
         write_cog(out, [np.zeros((3, 3))], g, count=1)
     assert out.read_bytes() == before
     assert [p.name for p in tmp_path.iterdir()] == ["f.tif"]
+
+
+def test_overview_levels_and_halving_ignore_nodata():
+    assert overview_levels(3758, 2944) == [2, 4, 8] and overview_levels(512, 300) == []
+    a = np.array([[4, 0, 7], [6, 0, 9], [0, 0, 2]], np.uint16)
+    np.testing.assert_array_equal(halve(a, 0), [[5, 8], [0, 2]])  # (4+6)/2, (7+9)/2, 0, 2
+    np.testing.assert_array_equal(halve(a, 0, "nearest"), [[4, 7], [0, 2]])
+    f = np.array([[1.0, 2.0, 3.0], [3.0, 4.0, 5.0]], np.float32)
+    np.testing.assert_allclose(halve(f, None), [[2.5, 4.0]])  # the padding is not counted
