@@ -23,7 +23,8 @@ import numpy as np
 from numba import njit, prange
 
 from .inverse import wrap180
-from .predcorr import _columns, _node_lonlat, _predict
+from .location import facet_of
+from .predcorr import _columns, _predict, primary_nodes
 
 #: subsampling (pixels) of the brute-force nearest-node search that seeds the cell search
 SEED_STEP = 8
@@ -35,17 +36,6 @@ _MAX_STEP = 16.0
 MAX_PIXEL_ITERATIONS = 20
 
 
-@njit(cache=True, inline="always")
-def _cell(x: float, n: int) -> tuple[int, float]:
-    """Cell index clamped to [0, n-2] (edge cells extended) and the offset in it."""
-    k = int(math.floor(x))
-    if k < 0:
-        k = 0
-    elif k > n - 2:
-        k = n - 2
-    return k, x - k
-
-
 @njit(cache=True)
 def pixel_point(line: float, col: float, lon: np.ndarray, lat: np.ndarray):
     """Direct pixel model at fractional (line, col): (lon, lat, dlon/dl, dlon/dp, dlat/dl, dlat/dp).
@@ -54,8 +44,8 @@ def pixel_point(line: float, col: float, lon: np.ndarray, lat: np.ndarray):
     the result longitude is on that branch (not wrapped).
     """
     nl, nc = lon.shape
-    i, u = _cell(line, nl)
-    j, v = _cell(col, nc)
+    i, u = facet_of(line, 1.0, nl)
+    j, v = facet_of(col, 1.0, nc)
     x00 = lon[i, j]
     x01 = x00 + wrap180(lon[i, j + 1] - x00)
     x10 = x00 + wrap180(lon[i + 1, j] - x00)
@@ -77,8 +67,8 @@ def pixel_point(line: float, col: float, lon: np.ndarray, lat: np.ndarray):
 def pixel_value(line: float, col: float, grid: np.ndarray) -> float:
     """Bilinear value of a per-pixel grid (altitude...) at fractional (line, col)."""
     nl, nc = grid.shape
-    i, u = _cell(line, nl)
-    j, v = _cell(col, nc)
+    i, u = facet_of(line, 1.0, nl)
+    j, v = facet_of(col, 1.0, nc)
     return ((1 - u) * ((1 - v) * grid[i, j] + v * grid[i, j + 1])
             + u * ((1 - v) * grid[i + 1, j] + v * grid[i + 1, j + 1]))
 
@@ -248,14 +238,7 @@ def solve_pixel(lon_grid: np.ndarray, lat_grid: np.ndarray, grid, lon: np.ndarra
     lon = np.ascontiguousarray(lon, dtype=np.float64)
     lat = np.ascontiguousarray(lat, dtype=np.float64)
     ptr, start, stop = (np.ascontiguousarray(a, dtype=np.int64) for a in spans)
-    nr, nc = lon.shape
-    rows = row_start + np.arange(0, max(nr - 1, 0) + step, step, dtype=np.float64)
-    cols = np.arange(0, max(nc - 1, 0) + step, step, dtype=np.float64)
-    if rows.size < 2:
-        rows = np.r_[rows, rows[-1] + step]
-    if cols.size < 2:
-        cols = np.r_[cols, cols[-1] + step]
-    nlon, nlat = _node_lonlat(grid, rows, cols)
+    nlon, nlat = primary_nodes(grid, row_start, lon.shape, step)
     cl, cp, counts = primary_grid_pixel(nlon, nlat, lon_g, lat_g, SEED_STEP)
     with_alt = diagnostics and altitude is not None
     alt = (np.ascontiguousarray(altitude, dtype=np.float64) if with_alt

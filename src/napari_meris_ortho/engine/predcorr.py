@@ -29,12 +29,16 @@ antecedent leaves the product (-0.5 <= l < H-0.5, -0.5 <= p < W-0.5). Heights (`
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numba import njit, prange
 
 from .inverse import search_facet, wrap180
 from .location import direct_point
+
+if TYPE_CHECKING:
+    from ..geometry.grid import OutputGrid
 
 HEIGHT_NONE = 0
 HEIGHT_TIEPOINTS = 1
@@ -292,20 +296,19 @@ def iteration_histogram(iters: np.ndarray, max_iter: int = MAX_ITERATIONS) -> np
     return np.bincount(valid.ravel().astype(np.int64), minlength=max_iter + 1)[: max_iter + 1]
 
 
-def _node_lonlat(grid, rows: np.ndarray, cols: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """WGS84 lon/lat of output pixel positions (primary-grid nodes may lie past the grid edge)."""
-    import pyproj
-
-    x, y = grid.xy(rows[:, None], cols[None, :])
-    x, y = np.broadcast_arrays(x, y)
-    if grid.is_lonlat:
-        return (x + 180.0) % 360.0 - 180.0, np.array(y, dtype=np.float64)
-    tr = pyproj.Transformer.from_crs(grid.crs, "EPSG:4326", always_xy=True)
-    lon, lat = tr.transform(x, y, errcheck=False)
-    lon = np.asarray(lon, dtype=np.float64)
-    lat = np.asarray(lat, dtype=np.float64)
-    bad = ~(np.isfinite(lon) & np.isfinite(lat))
-    return np.where(bad, np.nan, lon), np.where(bad, np.nan, lat)
+def primary_nodes(grid: OutputGrid, row_start: int, shape: tuple[int, int], step: int
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """WGS84 lon/lat (2-D) of the primary-grid nodes of output rows [row_start, row_start +
+    shape[0]): every ``step`` pixels from the first row and column, at least 2 x 2 nodes, the
+    last ones past the grid edge when needed (the prediction interpolates between them)."""
+    nr, nc = shape
+    rows = row_start + np.arange(0, max(nr - 1, 0) + step, step, dtype=np.float64)
+    cols = np.arange(0, max(nc - 1, 0) + step, step, dtype=np.float64)
+    if rows.size < 2:
+        rows = np.r_[rows, rows[-1] + step]
+    if cols.size < 2:
+        cols = np.r_[cols, cols[-1] + step]
+    return grid.lonlat_at(rows[:, None], cols[None, :])
 
 
 def solve(tp, grid, lon: np.ndarray, lat: np.ndarray, height: np.ndarray | None, hmode: int,
@@ -345,14 +348,7 @@ def solve(tp, grid, lon: np.ndarray, lat: np.ndarray, height: np.ndarray | None,
         return out
     if method != "primary":
         raise ValueError(f"unknown prediction/correction method {method!r}")
-    nr, nc = lon.shape
-    rows = row_start + np.arange(0, max(nr - 1, 0) + step, step, dtype=np.float64)
-    cols = np.arange(0, max(nc - 1, 0) + step, step, dtype=np.float64)
-    if rows.size < 2:
-        rows = np.r_[rows, rows[-1] + step]
-    if cols.size < 2:
-        cols = np.r_[cols, cols[-1] + step]
-    nlon, nlat = _node_lonlat(grid, rows, cols)
+    nlon, nlat = primary_nodes(grid, row_start, lon.shape, step)
     cl, cp, paths = primary_grid(nlon, nlat, lat_tp, lon_tp, coef, df, dj, geo)
     line, col, iters, h_used, sh_e, sh_n = find_antecedents(
         lon, lat, h, hmode, ptr, start, stop, cl, cp, float(step), coef, df, dj, tp.height,

@@ -248,6 +248,12 @@ class OutputGrid:
             return self.lonlat_exact(row_start, row_stop)
         return self._lonlat_primary(row_start, row_stop)
 
+    def lonlat_at(self, rows: np.ndarray, cols: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """WGS84 (lon, lat) of fractional (row, col) pixel positions, exact (one pyproj call per
+        point; positions may lie past the grid edge); broadcast; NaN without a position."""
+        x, y = np.broadcast_arrays(*self.xy(rows, cols))
+        return self._xy_to_lonlat(x, y)
+
     def xy_of_lonlat(self, lon: np.ndarray, lat: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Fractional (row, col) of WGS84 (lon, lat) points (integers = pixel centres).
 
