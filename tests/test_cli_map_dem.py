@@ -94,3 +94,13 @@ def test_bad_dem_entries_exit_2(files, tmp_path, capsys, monkeypatch):
     monkeypatch.delenv("MERIS_ORTHO_GEOID", raising=False)
     _bad(["map", str(prod), "-o", out, "--dem", str(tiles)], tmp_path, capsys,
          "egm96_15.gtx not found")
+
+
+def test_help_tells_the_dem_entries_and_the_handbook_search(capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(["map", "--help"])
+    out = " ".join(capsys.readouterr().out.split())
+    assert exc.value.code == 0
+    assert "--dem PATH[:DATUM]" in out and "Copernicus GLO-30/90" in out
+    assert "DATUM: egm96 (heights above the geoid) or ellipsoid" in out
+    assert "the outer half pixel and, on high relief, terrain within one parallax shift" in out

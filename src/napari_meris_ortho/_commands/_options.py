@@ -31,9 +31,18 @@ def add_bands_option(p: Any, help: str) -> None:
     p.add_argument("--bands", type=parse_bands, default=None, metavar="LIST", help=help)
 
 
+#: what a ``--dem`` entry may be (io.dem, io.copernicus, io.geoid)
+DEM_ENTRY_HELP = (
+    "PATH: GeoTIFF/VRT, SRTM30 .DEM, a directory of GETASSE30, SRTM30 or Copernicus GLO-30/90 "
+    "tiles; DATUM: egm96 (heights above the geoid) or ellipsoid; default: SRTM30 and "
+    "Copernicus egm96, GETASSE30 ellipsoid, GeoTIFF from its vertical CRS (else ellipsoid, "
+    "with a warning). EGM96 comes from proj-data's egm96_15.gtx")
+
+
 def add_height_options(p: Any, dem_help: str, elevation_help: str) -> None:
     """``--dem`` (repeatable) and ``--elevation none|tiepoints|dem`` (default dem)."""
-    p.add_argument("--dem", action="append", default=[], metavar="PATH", help=dem_help)
+    p.add_argument("--dem", action="append", default=[], metavar="PATH[:DATUM]",
+                   help=f"{dem_help}. {DEM_ENTRY_HELP}")
     p.add_argument("--elevation", choices=choices(Elevation), default="dem", help=elevation_help)
 
 
