@@ -1,5 +1,5 @@
-"""napari readers: MERIS L1b ``.N1`` products and ``.SEN3`` directories (product geometry) and
-geocoded GeoTIFFs.
+"""napari readers: MERIS L1b ``.N1`` products and ``.SEN3`` directories (product geometry),
+geocoded GeoTIFFs and synthesis stores (directories; ``synthesis_layers``).
 
 N1: the 15 radiance bands as one multichannel image (band axis first, lazy), an RGB quick-look
 from bands 7, 5, 2, the flags as a labels layer; tie points and headers in the layer metadata.
@@ -46,7 +46,18 @@ def get_reader(path: str | list[str]) -> Callable[[str | list[str]], list[LayerD
         return None
     if all(_is_product(p) or Path(p).suffix.lower() in TIFF_SUFFIXES for p in paths):
         return read_layers
+    from .synthesis_layers import is_store
+
+    if len(paths) == 1 and is_store(paths[0]):
+        return read_store
     return None
+
+
+def read_store(path: str | list[str]) -> list[LayerData]:
+    """Read a synthesis store (multiscale layers, winning product as labels)."""
+    from .synthesis_layers import store_layers
+
+    return store_layers(path[0] if isinstance(path, list) else path)
 
 
 def read_layers(path: str | list[str]) -> list[LayerData]:
