@@ -22,6 +22,7 @@ _LAZY = {
     "OrthoResult": "napari_meris_ortho.ortho",
     "geodetic_correction": "napari_meris_ortho.engine.location",
     "synthesize": "napari_meris_ortho.synthesis",
+    "open_synthesis": "napari_meris_ortho.synthesis",
     "disparity": "napari_meris_ortho.analysis.disparity",
     "demcheck": "napari_meris_ortho.analysis.demcheck",
 }

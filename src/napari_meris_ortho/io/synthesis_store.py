@@ -45,7 +45,7 @@ OLD_MANIFEST = "synthesis.json"
 #: overviews stop when the coarsest level's larger side is below this, or its chunk below
 #: ``MIN_OVERVIEW_CHUNK``
 OVERVIEW_TARGET = 512
-MIN_OVERVIEW_CHUNK = 16
+MIN_OVERVIEW_CHUNK = 64
 
 Window = tuple[int, int, int, int]  # row0, row1, col0, col1
 
