@@ -99,6 +99,9 @@ class InProcess:
     def result(self, future: _Lazy) -> Any:
         return future.value
 
+    def release(self, futures: Sequence[Any]) -> None:
+        pass
+
     def cancel(self, futures: Sequence[Any]) -> None:
         pass
 
@@ -119,6 +122,10 @@ class Dask:
 
     def result(self, future: Any) -> Any:
         return future.result()
+
+    def release(self, futures: Sequence[Any]) -> None:
+        for f in futures:
+            f.release()
 
     def cancel(self, futures: Sequence[Any]) -> None:
         with contextlib.suppress(Exception):
@@ -495,25 +502,24 @@ class Synthesis:
                  exclude: frozenset[int]) -> list[TileDone]:
         """Submit every task (tile by tile), report progress, return the written tiles."""
         futures: list[Any] = []
-        tile_futures = []
+        inputs: dict[int, list[Any]] = {}  # tile future -> its pieces
         total = sum(len(v) + 1 for v in jobs.values())
+        run = uuid.uuid4().hex[:8]
         for t, (window, tasks) in enumerate(jobs.items()):
-            pieces = [runner.submit(segment_task, spec, index, path, piece,
-                                    key=f"segment-{index}-{piece[0]}-{piece[2]}-{uuid.uuid4().hex[:6]}",
-                                    priority=-t)
+            pieces = [runner.submit(segment_task, spec, index, path, piece, priority=-t,
+                                    key=f"segment-{run}-{index}-{piece[0]}-{piece[2]}")
                       for index, path, piece in tasks if index not in exclude]
-            tile_futures.append(runner.submit(tile_task, session.fork(), spec, window, pieces,
-                                              rank, exclude,
-                                              key=f"tile-{window[0]}-{window[2]}-{uuid.uuid4().hex[:6]}",
-                                              priority=-t))
-            futures += [*pieces, tile_futures[-1]]
+            tile = runner.submit(tile_task, session.fork(), spec, window, pieces, rank, exclude,
+                                 key=f"tile-{run}-{window[0]}-{window[2]}", priority=-t)
+            inputs[id(tile)] = pieces
+            futures += [*pieces, tile]
         done = 0
         written: list[TileDone] = []
-        wanted = {id(f) for f in tile_futures}
         try:
             for future in runner.completed(futures):
                 done += 1
-                if id(future) in wanted:
+                if id(future) in inputs:
+                    runner.release(inputs.pop(id(future)))  # merged: free the workers' memory
                     tile = runner.result(future)
                     written.append(tile)
                     errors = [p.dem_error for p in tile.pieces if p.dem_error is not None]
