@@ -1,42 +1,39 @@
-"""Benchmark of the tiled synthesis (handbook section 3.1, use cases 1-2): peak memory and time.
+"""Benchmark of the synthesis on dask workers (handbook section 3.1, use cases 1-2).
 
-    .venv/bin/python benchmarks/bench_synthesis.py [--bands 15] [--tile 1024] [--products 3]
-                                                    [--scene fr-small|fr-alps]
+    .venv/bin/python benchmarks/bench_synthesis.py [--scene fr-alps] [--products 8]
+                                                    [--tile 1024] [--bands 15]
 
-Each case runs in a fresh process (peak RSS = ``VmHWM`` of that process) and merges the
-same simulated FR products (``--scene``: fr-small, 320 x 513 pixels, or fr-alps, 2241 x 2241;
-a clear date and cloudy dates of it) into a maximum-NDVI synthesis, first as a new synthesis
-and then as an update (``--input``):
+Prints two tables:
 
-- ``untiled``: for reference, one ``orthorectify()`` of the first product (no synthesis);
-- ``local``: the first product's footprint at 260 m;
-- ``continent``: Europe at 260 m (50 x 35 deg, 21384 x 14969 pixels): held whole in memory,
-  its layers would need (4 bytes x bands + 2 + 2) x 320 M pixels.
+1. Throughput: the same ``--products`` simulated FR products (cloudy dates of ``--scene``, told
+   apart by their file counter) merged into a new maximum-NDVI synthesis on their footprint,
+   in this process (numba threads) and on a LocalCluster of 1 and 2 worker processes (one
+   thread each). Products merged per minute (workers started and warmed up beforehand: the
+   time is the run's), speed-up against 1 worker, peak resident memory per worker (``VmHWM``),
+   tasks and seconds per (product, tile) task.
+2. Update cost: one more product merged into a store holding one product, on the product's
+   footprint ("small") and on Europe at 260 m (50 x 35 deg, 21384 x 14969 pixels): seconds,
+   bytes added to the store, chunks written. Only the tiles the product touches are read and
+   written, so neither should grow with the store.
 
-The peak memory of both cases should be about the same: only the tiles the products touch
-are ever in memory (and on disk, the GeoTIFFs being sparse).
-
-Measured (2 cores shared with other jobs; fr-alps, 15 bands, per product; times are noisy):
-untiled orthorectify 2.1 s, peak 1216 MB; tile 1024: local 5.4 s / 612 MB, continent
-6.6 s / 619 MB (its layers whole: 19.5 GB); tile 512: 11 s / 450 MB for both grids.
-Most of the tile overhead is ``orthorectify`` reading every band of the whole product at
-each call.
+The paper estimate of 10 000 products on 32 workers (README) uses the measured seconds per
+task. The machine is shared: figures are loaded.
 """
 
 from __future__ import annotations
 
 import argparse
-import json
-import subprocess
-import sys
+import logging
+import os
+import shutil
 import tempfile
 import time
 from pathlib import Path
 
 NO_EXPORTS = {"getasse30": False, "getasse30_beam": False, "srtm30": False,
               "geotiff_utm": False, "reference": False}
-PIXEL_260M = 0.0023382372764265  # 260 m on the sphere R = 6 370 997 m (engine.grid)
-CASES = {"untiled": None, "local": None, "continent": (-10.0, 70.0, 50.0, 35.0)}
+PIXEL_260M = 0.0023382372764265  # 260 m on the sphere R = 6 370 997 m (geometry.earth)
+EUROPE = (-10.0, 70.0, 50.0, 35.0)  # x0, y0, width, height (deg)
 
 
 def products(n: int, scene: str) -> list[str]:
@@ -44,15 +41,14 @@ def products(n: int, scene: str) -> list[str]:
 
     out = []
     for k in range(n):
-        clouds = None if k == 0 else {"fraction": 0.4, "scale_km": 20.0, "seed": 10 * k}
-        cfg = {"base": scene, "exports": NO_EXPORTS, "clouds": clouds}
+        cfg = {"base": scene, "exports": NO_EXPORTS, "file_counter": k + 1,
+               "clouds": {"fraction": 0.4, "scale_km": 20.0, "seed": 10 * (k + 1)}}
         out.append(str(generate_scene(cfg).product_path))
     return out
 
 
 def peak_rss_mb() -> float:
-    """High-water mark of this process's resident memory (``VmHWM``: per address space, so a
-    child started with exec does not inherit its parent's peak as ``ru_maxrss`` does)."""
+    """High-water mark of this process's resident memory (``VmHWM``)."""
     with open("/proc/self/status") as fh:
         for line in fh:
             if line.startswith("VmHWM:"):
@@ -60,84 +56,120 @@ def peak_rss_mb() -> float:
     raise RuntimeError("no VmHWM in /proc/self/status")
 
 
-def run_untiled(paths: list[str], band_list: list[int]) -> dict:
-    """Reference: one untiled orthorectify() of the first product on its footprint grid."""
-    from napari_meris_ortho.ortho import orthorectify
-
-    rss0 = peak_rss_mb()
-    t0 = time.perf_counter()
-    result = orthorectify(paths[0], bands=band_list, elevation="tiepoints")
-    t1 = time.perf_counter()
-    grid = result.grid
-    whole = grid.width * grid.height * (4 * len(band_list) + 2 + 2)
-    return {"case": "untiled", "size": f"{grid.width} x {grid.height}",
-            "bands": len(band_list), "new_s": t1 - t0, "update_s": float("nan"),
-            "baseline_mb": rss0, "peak_mb": peak_rss_mb(),
-            "whole_in_memory_mb": whole / 2**20, "disk_mb": 0.0}
+def store_bytes(path: Path) -> tuple[int, int]:
+    """(bytes, files) of a store directory."""
+    files = [p for p in path.rglob("*") if p.is_file()]
+    return sum(p.stat().st_size for p in files), len(files)
 
 
-def run_case(case: str, paths: list[str], bands: int, tile: int) -> dict:
-    """One case in this process: new synthesis of the first product, update with the others."""
-    from napari_meris_ortho.geometry.grid import OutputGrid
-    from napari_meris_ortho.synthesis import open_synthesis, synthesize
+def throughput(paths: list[str], grid, bands: list[int], tile: int, workers: int,
+               tmp: Path) -> dict:
+    """One new synthesis of every product; workers = 0: in this process."""
+    from distributed import Client, LocalCluster
 
-    if CASES[case] is None:  # the first product's footprint
-        from napari_meris_ortho.io.n1 import read_product
-        from napari_meris_ortho.synthesis import _new_grid
+    from napari_meris_ortho._synthesis_run import WORKER_ENV
+    from napari_meris_ortho.synthesis import synthesize
 
-        grid = _new_grid(read_product(paths[0]), "EPSG:4326", None)
-    else:
-        x0, y0, width_deg, height_deg = CASES[case]
-        grid = OutputGrid("EPSG:4326", x0, y0, PIXEL_260M, PIXEL_260M,
-                          round(width_deg / PIXEL_260M), round(height_deg / PIXEL_260M))
-    band_list = sorted(set(range(1, min(bands, 15) + 1)) | {7, 13})
-    if case == "untiled":
-        return run_untiled(paths, band_list)
-    rss0 = peak_rss_mb()
-    with tempfile.TemporaryDirectory() as tmp:
-        out = Path(tmp) / "syn"
+    kwargs = dict(grid=grid, bands=bands, algorithm="max-ndvi", tile=tile,
+                  elevation="tiepoints")
+    tasks = {"n": 0}
+
+    def count(done: int, total: int) -> None:
+        tasks["n"] = total
+
+    if workers == 0:
+        synthesize(paths[:1], tmp / "warm0", **kwargs)  # numba kernels loaded
         t0 = time.perf_counter()
-        synthesize(paths[:1], out, grid=grid, bands=band_list, algorithm="max-ndvi", tile=tile,
-                   elevation="tiepoints")
-        t1 = time.perf_counter()
-        result = synthesize(paths[1:], out, input=out, tile=tile, elevation="tiepoints")
-        t2 = time.perf_counter()
-        store = open_synthesis(out)
-        disk = sum(p.stat().st_size for p in store.generation_dir.iterdir())
-        merged = sum(r.validated for r in result.merged)
-    whole = grid.width * grid.height * (4 * len(band_list) + 2 + 2)
-    return {"case": case, "size": f"{grid.width} x {grid.height}", "bands": len(band_list),
-            "new_s": t1 - t0, "update_s": t2 - t1, "baseline_mb": rss0,
-            "peak_mb": peak_rss_mb(),
-            "whole_in_memory_mb": whole / 2**20, "disk_mb": disk / 2**20,
-            "validated_points_update": merged}
+        result = synthesize(paths, tmp / "run0", progress=count, **kwargs)
+        seconds = time.perf_counter() - t0
+        peaks = [peak_rss_mb()]
+    else:
+        with LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                          dashboard_address=None, env=WORKER_ENV,
+                          silence_logs=logging.ERROR) as cluster, \
+                Client(cluster) as client:
+            address = cluster.scheduler_address
+            synthesize(paths[:workers], tmp / f"warm{workers}", scheduler=address, **kwargs)
+            client.run(_reset_peak)
+            t0 = time.perf_counter()
+            result = synthesize(paths, tmp / f"run{workers}", scheduler=address,
+                                progress=count, **kwargs)
+            seconds = time.perf_counter() - t0
+            peaks = sorted(client.run(peak_rss_mb).values())
+    assert len(result.merged) == len(paths), [r.error for r in result.failed]
+    return {"workers": workers, "seconds": seconds,
+            "per_minute": 60.0 * len(paths) / seconds, "peaks": peaks, "tasks": tasks["n"]}
+
+
+def _reset_peak() -> None:
+    """Reset ``VmHWM`` of a worker (Linux: write 5 to clear_refs) so the peak is the run's."""
+    try:
+        with open("/proc/self/clear_refs", "w") as fh:
+            fh.write("5")
+    except OSError:
+        pass
+
+
+def update_cost(paths: list[str], grid, bands: list[int], tile: int, tmp: Path,
+                name: str) -> dict:
+    """Seconds and bytes of merging one product into a store holding another."""
+    from napari_meris_ortho.io.synthesis_store import overview_factors
+    from napari_meris_ortho.synthesis import synthesize
+
+    out = tmp / f"update-{name}"
+    synthesize(paths[:1], out, grid=grid, bands=bands, algorithm="max-ndvi", tile=tile,
+               elevation="tiepoints")
+    before, files0 = store_bytes(out)
+    t0 = time.perf_counter()
+    synthesize(paths[1:2], out, input=out, elevation="tiepoints")
+    seconds = time.perf_counter() - t0
+    after, files1 = store_bytes(out)
+    shutil.rmtree(out, ignore_errors=True)
+    levels = len(overview_factors(grid.width, grid.height, tile))
+    return {"store": name, "size": f"{grid.width} x {grid.height}", "seconds": seconds,
+            "bytes": after - before, "files": files1 - files0, "levels": levels}
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--bands", type=int, default=15, help="bands 1..N (plus 7 and 13)")
+    parser.add_argument("--scene", default="fr-alps", help="simulated scene (fr-small: quick)")
+    parser.add_argument("--products", type=int, default=8)
     parser.add_argument("--tile", type=int, default=1024)
-    parser.add_argument("--products", type=int, default=3)
-    parser.add_argument("--scene", default="fr-small", help="simulated scene (fr-alps: full FR)")
-    parser.add_argument("--case", choices=tuple(CASES), default=None, help=argparse.SUPPRESS)
-    parser.add_argument("--paths", nargs="*", default=None, help=argparse.SUPPRESS)
+    parser.add_argument("--bands", type=int, default=15, help="bands 1..N (plus 7 and 13)")
+    parser.add_argument("--workers", default="0,1,2", help="worker counts to run")
     args = parser.parse_args()
-    if args.case is not None:  # child process: one case, JSON on stdout
-        print(json.dumps(run_case(args.case, args.paths, args.bands, args.tile)))
-        return
+
+    from napari_meris_ortho.geometry.grid import OutputGrid
+    from napari_meris_ortho.io.n1 import read_product
+    from napari_meris_ortho.synthesis import _new_grid
+
     paths = products(args.products, args.scene)
-    rows = []
-    for case in CASES:
-        cmd = [sys.executable, __file__, "--case", case, "--bands", str(args.bands),
-               "--tile", str(args.tile), "--paths", *paths]
-        done = subprocess.run(cmd, check=True, capture_output=True, text=True)
-        rows.append(json.loads(done.stdout.strip().splitlines()[-1]))
-    print(f"{'case':10s} {'grid':>15s} {'bands':>5s} {'new s':>7s} {'update s':>8s} "
-          f"{'base MB':>8s} {'peak MB':>8s} {'whole MB':>9s} {'disk MB':>8s}")
-    for r in rows:
-        print(f"{r['case']:10s} {r['size']:>15s} {r['bands']:5d} {r['new_s']:7.2f} "
-              f"{r['update_s']:8.2f} {r['baseline_mb']:8.0f} {r['peak_mb']:8.0f} "
-              f"{r['whole_in_memory_mb']:9.0f} {r['disk_mb']:8.1f}")
+    bands = sorted(set(range(1, min(args.bands, 15) + 1)) | {7, 13})
+    grid = _new_grid(read_product(paths[0]), "EPSG:4326", None)
+    europe = OutputGrid("EPSG:4326", EUROPE[0], EUROPE[1], PIXEL_260M, PIXEL_260M,
+                        round(EUROPE[2] / PIXEL_260M), round(EUROPE[3] / PIXEL_260M))
+    print(f"{len(paths)} {args.scene} products, {len(bands)} bands, grid {grid.width} x "
+          f"{grid.height}, tile {args.tile}; {os.cpu_count()} cores (shared, loaded)")
+    with tempfile.TemporaryDirectory() as tmp_dir:
+        tmp = Path(tmp_dir)
+        rows = [throughput(paths, grid, bands, args.tile, int(w), tmp)
+                for w in args.workers.split(",")]
+        one = next((r for r in rows if r["workers"] == 1), rows[0])
+        print(f"\n{'workers':>10s} {'seconds':>8s} {'prod/min':>9s} {'speed-up':>9s} "
+              f"{'tasks':>6s} {'s/task':>7s} {'peak MB per worker':>20s}")
+        for r in rows:
+            label = "in-process" if r["workers"] == 0 else str(r["workers"])
+            per_task = r["seconds"] * max(r["workers"], 1) / max(r["tasks"], 1)
+            print(f"{label:>10s} {r['seconds']:8.1f} {r['per_minute']:9.2f} "
+                  f"{one['seconds'] / r['seconds']:9.2f} {r['tasks']:6d} {per_task:7.2f} "
+                  f"{' '.join(f'{p:.0f}' for p in r['peaks']):>20s}")
+        updates = [update_cost(paths, g, bands, args.tile, tmp, name)
+                   for name, g in (("small", grid), ("Europe", europe))]
+    print(f"\n{'store':>8s} {'grid':>15s} {'overviews':>9s} {'update s':>9s} "
+          f"{'bytes added':>12s} {'files added':>12s}")
+    for u in updates:
+        print(f"{u['store']:>8s} {u['size']:>15s} {u['levels']:9d} {u['seconds']:9.2f} "
+              f"{u['bytes']:12d} {u['files']:12d}")
 
 
 if __name__ == "__main__":
