@@ -1,19 +1,28 @@
 """``meris-ortho`` command line: thin wiring over the engine (subcommands in ``_commands/``).
 
 Every user error (bad file, bad option, unwritable output) ends in one line on stderr and exit
-code 2; a run where only some inputs failed exits with code 1.
+code 2; a run where only some inputs failed exits with code 1. SIGINT (Ctrl-C) and SIGTERM at
+any moment end in "meris-ortho: interrupted" and exit code 130 (143 for SIGTERM) with no output
+of the run left: the handlers are installed before any heavy import (numba, GDAL), and they
+never raise into the running code (a KeyboardInterrupt inside numba's cache loading used to
+end in a SystemError); they undo the run's outputs and leave at once.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import logging
+import os
+import signal
 import sys
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from importlib import import_module
 from typing import NoReturn
 
 from . import __version__
+from ._atomic import abort_run, output_run
+from ._terminal import printable, stderr_is_terminal
 from .errors import MerisOrthoError
 
 #: subcommand modules; each defines ``register(subparsers)`` which sets ``func`` on its parser.
@@ -46,22 +55,56 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def main(argv: Sequence[str] | None = None) -> int:
-    parser = build_parser()
-    args = parser.parse_args(argv)
-    level = logging.DEBUG if args.verbose else logging.WARNING if args.quiet else logging.INFO
-    logging.basicConfig(level=level, format="%(message)s", stream=sys.stderr)
+def _on_signal(signum: int, frame: object) -> None:
+    """Undo the run's outputs, say so and leave: exit 128 + signal number (SIGINT: 130)."""
+    abort_run()
+    word = "interrupted" if signum == signal.SIGINT else "terminated"
+    with contextlib.suppress(Exception):
+        start = "\n" if stderr_is_terminal() else ""  # after a progress bar
+        os.write(2, f"{start}meris-ortho: {word}\n".encode())
+    os._exit(128 + signum)
+
+
+@contextlib.contextmanager
+def _signals_handled() -> Iterator[None]:
+    """SIGINT and SIGTERM handled by :func:`_on_signal` (main thread only; restored after)."""
+    previous = {}
     try:
-        return int(args.func(args) or 0)
-    except MerisOrthoError as exc:
-        print(f"meris-ortho: error: {exc}", file=sys.stderr)
-        return 2
-    except OSError as exc:  # file system problems not caught by a reader: still one line
-        print(f"meris-ortho: error: {exc}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        print("meris-ortho: interrupted", file=sys.stderr)
-        return 130
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            previous[sig] = signal.signal(sig, _on_signal)
+    except ValueError:  # not the main thread: leave the signals alone
+        pass
+    try:
+        yield
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    with _signals_handled():
+        try:
+            parser = build_parser()
+            args = parser.parse_args(argv)
+            quiet = logging.WARNING if args.quiet else logging.INFO
+            level = logging.DEBUG if args.verbose else quiet
+            logging.basicConfig(level=level, format="%(message)s", stream=sys.stderr)
+            with output_run():
+                return int(args.func(args) or 0)
+        except MerisOrthoError as exc:
+            return _error(exc)
+        except OSError as exc:  # file system problems not caught by a reader: still one line
+            return _error(exc)
+        except MemoryError:
+            return _error("out of memory (a smaller output grid or --bands may help)")
+        except KeyboardInterrupt:  # signals not delivered through the handler
+            print("meris-ortho: interrupted", file=sys.stderr)
+            return 130
+
+
+def _error(exc: object) -> int:
+    print(f"meris-ortho: error: {printable(str(exc))}", file=sys.stderr)
+    return 2
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -14,8 +14,11 @@ ProgressCallback = Callable[[int, int], None]
 
 @contextmanager
 def tqdm_progress(desc: str, enabled: bool = True, unit: str = "it") -> Iterator[ProgressCallback]:
-    """A ProgressCallback drawing a tqdm bar on stderr (nothing when ``enabled`` is false)."""
-    if not enabled:
+    """A ProgressCallback drawing a tqdm bar on stderr (nothing when ``enabled`` is false or
+    stderr is not a terminal: no carriage-return fragments in logs and pipes)."""
+    from ._terminal import stderr_is_terminal
+
+    if not (enabled and stderr_is_terminal()):
         yield lambda done, total: None
         return
     from tqdm import tqdm

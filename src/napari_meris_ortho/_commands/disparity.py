@@ -87,9 +87,12 @@ def pixel_size_metres(transform: Any, crs: Any, height: int) -> tuple[float, flo
 
 
 def run(args: argparse.Namespace) -> int:
-    from .._atomic import atomic_path, check_writable_dir
+    from .._atomic import atomic_path, check_distinct, check_writable_dir
     from ..analysis.disparity import disparity
     from ..progress import tqdm_progress
+
+    check_distinct({"--vectors": args.vectors, "--report": args.report},
+                   {"input image": [args.first, args.second]})
 
     if len(args.band) > 2:
         raise OptionsError("--band takes one or two band numbers (A [B])")

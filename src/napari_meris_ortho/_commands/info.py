@@ -8,10 +8,12 @@ extent of their per-pixel geolocation.
 from __future__ import annotations
 
 import argparse
+import math
 from typing import Any
 
 import numpy as np
 
+from .._terminal import printable
 from ..io.n1 import FLAG_NAMES, MerisL1bProduct
 from ..io.n1_format import EPOCH_2000
 from ..io.product import read_product
@@ -54,11 +56,17 @@ def _positive(text: str) -> int:
 
 def run(args: argparse.Namespace) -> int:
     product = read_product(args.product)
-    print("\n".join(describe(product, every=args.every)))
+    print("\n".join(printable(line) for line in describe(product, every=args.every)))
     return 0
 
 
+#: record times ``info`` converts to dates: years 1900..2200 (others print as a number only)
+_UTC_RANGE_S = (-3.2e9, 6.4e9)
+
+
 def _utc(seconds: float) -> str:
+    if not (math.isfinite(seconds) and _UTC_RANGE_S[0] < seconds < _UTC_RANGE_S[1]):
+        return "(not a valid time)"
     t = EPOCH_2000 + np.timedelta64(int(round(seconds * 1e6)), "us")
     return str(t).replace("T", " ") + " UTC"
 

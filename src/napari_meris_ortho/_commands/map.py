@@ -82,17 +82,15 @@ def _diagnostics_path(out: Path) -> Path:
 
 def _check(args: argparse.Namespace) -> Any:
     """Every check that needs no product read, before any work (Appendix C parameter checks)."""
-    from .._atomic import check_writable_dir
+    from .._atomic import check_distinct, check_writable_dir
 
-    outputs = [Path(args.output)]
-    if args.diagnostics:
-        outputs.append(_diagnostics_path(Path(args.output)))
-    if args.stats_json:
-        outputs.append(Path(args.stats_json))
-    for out in outputs:
-        check_writable_dir(out)
-        if out.is_dir():
-            raise OptionsError(f"{out}: output is a directory")
+    outputs = {"-o": args.output, "--stats-json": args.stats_json,
+               "the diagnostics output": (_diagnostics_path(Path(args.output))
+                                          if args.diagnostics else None)}
+    check_distinct(outputs, {"input product": [args.product], "DEM": args.dem})
+    for out in outputs.values():
+        if out is not None:
+            check_writable_dir(out)
     check_heights(args)
     if not (math.isfinite(args.tolerance) and args.tolerance > 0):
         raise OptionsError(f"--tolerance must be > 0 product pixels, got {args.tolerance}")

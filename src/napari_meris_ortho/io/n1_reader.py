@@ -22,6 +22,13 @@ from typing import Any
 import numpy as np
 
 from ..errors import N1FormatError
+from .n1_checks import (
+    check_counts,
+    check_dimensions,
+    check_header_numbers,
+    check_scaling,
+    check_tie_points,
+)
 from .n1_format import (
     DSD_SIZE,
     FLAGS_MDS,
@@ -49,7 +56,6 @@ from .n1_format import (
     radiance_mds,
     radiance_record_size,
     tie_columns,
-    tie_lines,
     tie_point_dtype,
     tie_point_record_size,
 )
@@ -416,6 +422,8 @@ def _read(path: Path, f, file_size: int, head: bytes) -> MerisL1bProduct:
         raise N1FormatError(path, f"SPH LINE_LENGTH={width} is not a MERIS line length")
     if not (1 <= df <= 4096 and 1 <= dj < width):
         raise N1FormatError(path, f"SPH tie-point spacing {df} lines x {dj} samples is invalid")
+    check_dimensions(path, product_type, resolution, width, df, dj)
+    check_header_numbers(path, sph)
     wavelengths = sph.get("BAND_WAVELEN")
     if not (isinstance(wavelengths, tuple) and len(wavelengths) == NUM_BANDS):
         raise N1FormatError(path, f"SPH BAND_WAVELEN does not hold {NUM_BANDS} wavelengths")
@@ -460,21 +468,15 @@ def _read(path: Path, f, file_size: int, head: bytes) -> MerisL1bProduct:
         raise N1FormatError(path, "the product has no lines (Radiance MDS(1) NUM_DSR=0)")
     if product_type in PIXEL_GEOLOCATION_TYPES:
         _check_geolocation_mds(path, by_name, product_type, width, height)
-    if tie_dsd.num_dsr < tie_lines(height, df):
-        raise N1FormatError(
-            path, f"Tie points ADS has {tie_dsd.num_dsr} tie-point lines, {height} product lines "
-            f"every {df} need {tie_lines(height, df)}"
-        )  # fmt: skip
+    check_counts(path, resolution, height, tie_dsd.num_dsr, df)
 
     gads_rec = _read_records(f, path, gads.offset, GADS_DTYPE, 1)
     scaling = ScalingFactors.from_record(gads_rec)
-    factors = [scaling.factor(field) for field in TIE_POINT_FIELDS] + list(scaling.radiance)
-    if not all(math.isfinite(v) for v in factors):
-        raise N1FormatError(path, "Scaling Factor GADS holds non-finite scaling factors")
+    check_scaling(path, scaling)
     tie_records = _read_records(
         f, path, tie_dsd.offset, tie_point_dtype(n_cols), tie_dsd.num_dsr
     )
-    return MerisL1bProduct(
+    product = MerisL1bProduct(
         path=path,
         mph=mph,
         sph=sph,
@@ -489,6 +491,8 @@ def _read(path: Path, f, file_size: int, head: bytes) -> MerisL1bProduct:
         scaling=scaling,
         tie_records=tie_records,
     )
+    check_tie_points(path, product.tie_points, tie_records["days"])
+    return product
 
 
 def _check_dsds(path: Path, dsds: list[Dsd], file_size: int, data_start: int) -> dict[str, Dsd]:
