@@ -11,10 +11,10 @@ import subprocess
 import sys
 
 import pytest
-from ortho_samples import make_dem, make_product
 
 from napari_meris_ortho.cli import main
 from napari_meris_ortho.io.n1 import read_product
+from ortho_samples import make_dem, make_product
 
 
 @pytest.fixture(scope="module")

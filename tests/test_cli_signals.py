@@ -12,9 +12,9 @@ import sys
 import time
 
 import pytest
-from ortho_samples import make_dem, make_product
 
 from napari_meris_ortho.io.n1 import read_product
+from ortho_samples import make_dem, make_product
 
 #: signal offsets as fractions of an uninterrupted run
 FRACTIONS = (0.0, 0.03, 0.08, 0.15, 0.25, 0.4, 0.55, 0.7, 0.85)

@@ -12,11 +12,11 @@ import numpy as np
 import pytest
 from n1_mutants import patch_text
 from n1_samples import sample_inputs
-from ortho_samples import make_product
 
 from napari_meris_ortho._terminal import printable
 from napari_meris_ortho.cli import main
 from napari_meris_ortho.io.n1 import read_product, write_product
+from ortho_samples import make_product
 
 
 @pytest.fixture(scope="module")
