@@ -141,3 +141,25 @@ def test_intersects():
     far = OutputGrid.from_extent("EPSG:4326", (-80.0, 10.0), (-70.0, 0.0), 0.05)
     assert b.intersects(near)
     assert not b.intersects(far)
+
+
+@pytest.mark.parametrize("margin", [1, 3, 6, 7, 11])
+def test_margin_dilation_matches_a_square_structuring_element(margin):
+    lat, lon = tilted_footprint(n_lines=12)
+    b = segment_boundary(lat, lon)
+    g = default_grid(b, 9000.0, "EPSG:32633")
+    base = row_spans(b, g).mask()
+    grown = row_spans(b, g, margin=margin).mask()
+    side = 2 * margin + 1
+    expected = binary_dilation(np.pad(base, margin), structure=np.ones((side, side), bool))
+    np.testing.assert_array_equal(grown, expected[margin:-margin, margin:-margin])
+
+
+def test_huge_margin_is_bounded():
+    """A margin of 200 000 rows (a 0.1 m pixel) costs log2(margin) passes, not margin x rows:
+    the dilated spans of 30 rows cover every column the boundary can reach."""
+    lat, lon = tilted_footprint(n_lines=12)
+    b = segment_boundary(lat, lon)
+    g = default_grid(b, 5000.0, "EPSG:32633")
+    spans = row_spans(b, g, 0, 30, margin=200_000)
+    assert spans.n_rows == 30 and spans.count == 30 * g.width

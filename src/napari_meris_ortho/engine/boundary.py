@@ -216,20 +216,6 @@ def _sorted_small(x):  # pragma: no cover
     return out
 
 
-@njit(cache=True)
-def _argsort_small(s):  # pragma: no cover
-    """Stable argsort by insertion (rows of already sorted spans: nearly sorted)."""
-    order = np.arange(s.size)
-    for i in range(1, s.size):
-        q = order[i]
-        k = i - 1
-        while k >= 0 and s[order[k]] > s[q]:
-            order[k + 1] = order[k]
-            k -= 1
-        order[k + 1] = q
-    return order
-
-
 @njit(cache=True)  # serial: a few crossings per line; a parallel loop costs compile time
 def _scan(xv, yv, ptr, shifts, x0, y0, dx, dy, width, r0, margin, counts, start, stop, rptr,
           fill):  # pragma: no cover
@@ -276,40 +262,64 @@ def _scan(xv, yv, ptr, shifts, x0, y0, dx, dy, width, r0, margin, counts, start,
 
 def _dilate_rows(rptr: np.ndarray, start: np.ndarray, stop: np.ndarray, margin: int,
                  n_rows: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Union over rows i - margin .. i + margin of the (already widened) spans."""
-    counts = np.zeros(n_rows, np.int64)
-    _union_rows(rptr, start, stop, margin, counts, start, stop, counts, False)
+    """Union over rows i - margin .. i + margin of the (already widened) spans.
+
+    Bounded time whatever the margin: windows of 1, 2, 4, ... rows are built by merging two
+    halves (log2(2 margin + 1) passes over the rows), then the window of 2 margin + 1 rows is
+    the union of two overlapping power-of-two windows.
+    """
+    window = 2 * margin + 1
+    p = 1
+    while 2 * p <= window:
+        rptr, start, stop = _merge_shifted(rptr, start, stop, p)  # windows of 2p rows
+        p *= 2
+    if p < window:
+        rptr, start, stop = _merge_shifted(rptr, start, stop, window - p)
+    assert rptr.size - 1 == n_rows
+    return rptr, start, stop
+
+
+def _merge_shifted(rptr: np.ndarray, start: np.ndarray, stop: np.ndarray, shift: int
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Rows r of the result: union of the spans of rows r and r + shift (n - shift rows)."""
+    n_out = rptr.size - 1 - shift
+    counts = np.zeros(n_out, np.int64)
+    _union_pair(rptr, start, stop, shift, counts, start, stop, counts, False)
     optr = np.r_[0, np.cumsum(counts)].astype(np.int64)
     ostart = np.empty(optr[-1], np.int64)
     ostop = np.empty(optr[-1], np.int64)
-    _union_rows(rptr, start, stop, margin, counts, ostart, ostop, optr, True)
+    _union_pair(rptr, start, stop, shift, counts, ostart, ostop, optr, True)
     return optr, ostart, ostop
 
 
 @njit(cache=True)
-def _union_rows(rptr, start, stop, margin, counts, ostart, ostop, optr, fill):  # pragma: no cover
+def _union_pair(rptr, start, stop, shift, counts, ostart, ostop, optr, fill):  # pragma: no cover
+    """Merge the sorted disjoint spans of rows r and r + shift (count, then fill)."""
     for r in range(counts.size):
-        a = rptr[r]
-        b = rptr[r + 2 * margin + 1]
-        s = start[a:b]
-        e = stop[a:b]
-        order = _argsort_small(s)
+        i, i_end = rptr[r], rptr[r + 1]
+        j, j_end = rptr[r + shift], rptr[r + shift + 1]
         k = 0
         w = optr[r] if fill else 0
         last = -1
-        for q in order:
-            if k > 0 and s[q] <= last:
-                if e[q] > last:
-                    last = e[q]
+        while i < i_end or j < j_end:
+            if j >= j_end or (i < i_end and start[i] <= start[j]):
+                a, b = start[i], stop[i]
+                i += 1
+            else:
+                a, b = start[j], stop[j]
+                j += 1
+            if k > 0 and a <= last:
+                if b > last:
+                    last = b
                     if fill:
-                        ostop[w - 1] = last
+                        ostop[w - 1] = b
                 continue
             if fill:
-                ostart[w] = s[q]
-                ostop[w] = e[q]
+                ostart[w] = a
+                ostop[w] = b
                 w += 1
             k += 1
-            last = e[q]
+            last = b
         if not fill:
             counts[r] = k
 
