@@ -31,6 +31,7 @@ from .synthesis import (
     ProductReport,
     SynthesisResult,
     SynthesisStore,
+    _check_grid_size,
     _new_grid,
     footprint_window,
     grid_from_dict,
@@ -339,7 +340,8 @@ class Synthesis:
     def __init__(self, target: Target, paths: list[str], *, algorithm: str | None, grid: Any,
                  crs: Any, pixel_size: float | None, dems: list[str], elevation: str,
                  sampling: str, bands: Sequence[int] | None, reject_bright: bool, tile: int,
-                 progress: ProgressCallback | None, geolocation: str | None = None) -> None:
+                 progress: ProgressCallback | None, geolocation: str | None = None,
+                 max_pixels: int | None = None) -> None:
         self.target = target
         self.paths = paths
         old = target.synthesis
@@ -351,6 +353,7 @@ class Synthesis:
         self.dems, self.elevation, self.sampling = dems, elevation, sampling
         self.reject_bright = reject_bright
         self.geolocation = geolocation
+        self.max_pixels = max_pixels
         self.progress = progress
         self.table: list[dict[str, Any]] = old.products if old else []
         self._branch: str | None = None  # run branch of a new synthesis
@@ -388,6 +391,7 @@ class Synthesis:
         todo = sorted((i for i in items if i.product is not None), key=lambda i: i.key)
         if self.grid is None and todo:
             self.grid = _new_grid(todo[0].product, self.crs, self.pixel_size)
+            _check_grid_size(self.grid, len(self.bands), self.target.path, self.max_pixels)
         for k, item in enumerate(todo):
             item.report.index = len(self.table) + k + 1
             item.margin = terrain_margin_px(item.product, self.grid)

@@ -24,7 +24,13 @@ from affine import Affine
 from .engine import pixelgeo, predcorr
 from .engine.boundary import RowSpans, row_spans, segment_boundary
 from .errors import DemError, OptionsError
-from .geometry.grid import OutputGrid, default_grid, parse_crs, terrain_margin_px
+from .geometry.grid import (
+    OutputGrid,
+    check_grid_size,
+    default_grid,
+    parse_crs,
+    terrain_margin_px,
+)
 from .geometry.tiepoints import ProductGeometry, TiePointGrid
 from .options import Elevation, Geolocation, OrthoOptions, Sampling, SearchMethod
 from .progress import ProgressCallback
@@ -189,7 +195,8 @@ def orthorectify(product: str | os.PathLike[str] | MerisProduct,
                  parallax: str = "handbook", diagnostics: bool = False,
                  progress: ProgressCallback | None = None, *, method: str = "primary",
                  crs: Any = "EPSG:4326", pixel_size: float | None = None,
-                 geolocation: str | None = None, allow_empty: bool = False) -> OrthoResult:
+                 geolocation: str | None = None, allow_empty: bool = False,
+                 max_pixels: int | None = None) -> OrthoResult:
     """Map a MERIS L1b product onto ``grid`` with terrain correction (sections 3.1-3.4).
 
     ``product``: path or ``MerisL1bProduct``; ``grid``: ``OutputGrid`` (default: the smallest
@@ -205,12 +212,15 @@ def orthorectify(product: str | os.PathLike[str] | MerisProduct,
     elevation is ignored); ``method``: "primary" (primary grid + Newton) or "handbook" (MERSYN's
     facet search in the loop); ``allow_empty``: a ``grid`` holding no pixel centre inside the
     zero-height segment boundary gives an all-background result instead of an OptionsError
-    (synthesis tiles: terrain points may still lie there, section 3.1).
+    (synthesis tiles: terrain points may still lie there, section 3.1); ``max_pixels``: largest
+    output grid (default: what fits in 80 % of the available memory at
+    :func:`bytes_per_output_pixel`; a larger grid is an OptionsError before any allocation).
     Equals ``precompute(...).result()``.
     """
     return precompute(product, grid, dems, elevation, sampling, bands, tolerance, parallax,
                       diagnostics, progress, method=method, crs=crs, pixel_size=pixel_size,
-                      geolocation=geolocation, allow_empty=allow_empty).result()
+                      geolocation=geolocation, allow_empty=allow_empty,
+                      max_pixels=max_pixels).result()
 
 
 def precompute(product: str | os.PathLike[str] | MerisProduct,
@@ -221,7 +231,8 @@ def precompute(product: str | os.PathLike[str] | MerisProduct,
                parallax: str = "handbook", diagnostics: bool = False,
                progress: ProgressCallback | None = None, *, method: str = "primary",
                crs: Any = "EPSG:4326", pixel_size: float | None = None,
-               geolocation: str | None = None, allow_empty: bool = False) -> Antecedents:
+               geolocation: str | None = None, allow_empty: bool = False,
+               max_pixels: int | None = None) -> Antecedents:
     """The antecedent of every output point, once (arguments as ``orthorectify``); then
     ``Antecedents.counts/radiance/flags`` sample any band at them (as pyresample's
     ``get_neighbour_info`` / ``get_sample_from_neighbour_info``)."""
@@ -236,7 +247,7 @@ def precompute(product: str | os.PathLike[str] | MerisProduct,
     prod = _open_product(product)
     stack = _open_dems(dems) if opts.elevation is Elevation.DEM else None
     try:
-        job = _prepare(prod, grid, stack, opts, crs, pixel_size, t_start)
+        job = _prepare(prod, grid, stack, opts, crs, pixel_size, t_start, max_pixels)
         job.stats["dems"] = [str(d) for d in dems]
         if job.stats["points_in_boundary"] == 0 and not allow_empty:
             raise OptionsError(
@@ -414,9 +425,17 @@ def _height_mode(elevation: Elevation, has_dems: bool) -> int:
     return predcorr.HEIGHT_TIEPOINTS
 
 
+def bytes_per_output_pixel(opts: OrthoOptions) -> int:
+    """Memory an output pixel costs in :func:`_run`: antecedent line/column (float32) and
+    iterations, each band and its resampling buffer (float32), the diagnostics layers and
+    their float32 copies for writing."""
+    return 16 + 8 * len(opts.bands) + (48 if opts.diagnostics else 0)
+
+
 def _prepare(prod: MerisProduct, grid: OutputGrid | None, stack: DemStack | None,
-             opts: OrthoOptions, crs: Any, pixel_size: float | None, t_start: float) -> _Job:
-    """Segment boundary, default grid and the spans to search (section 3.1)."""
+             opts: OrthoOptions, crs: Any, pixel_size: float | None, t_start: float,
+             max_pixels: int | None = None) -> _Job:
+    """Segment boundary, default grid (its size checked) and the spans to search (3.1)."""
     tp = TiePointGrid.from_product(prod)
     boundary = segment_boundary(tp.latitude, tp.longitude)
     if stack is not None:
@@ -424,6 +443,8 @@ def _prepare(prod: MerisProduct, grid: OutputGrid | None, stack: DemStack | None
     res_m = float(getattr(getattr(prod, "resolution", None), "column_spacing_m", 260.0))
     if grid is None:
         grid = default_grid(boundary, res_m, crs, pixel_size=pixel_size)
+    check_grid_size(grid.width, grid.height, (grid.dx, grid.dy), bytes_per_output_pixel(opts),
+                    max_pixels)
     if stack is not None:  # the DEM window under the output grid, read once
         bounds = lonlat_bounds(grid)
         if bounds is not None:

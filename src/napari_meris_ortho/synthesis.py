@@ -330,7 +330,8 @@ def synthesize(products: Sequence[str | os.PathLike[str]], out: str | os.PathLik
                bands: Sequence[int] | None = None, reject_bright: bool = False,
                tile: int = DEFAULT_TILE, progress: ProgressCallback | None = None,
                workers: int = 0, scheduler: str | None = None,
-               geolocation: str | None = None) -> SynthesisResult:
+               geolocation: str | None = None,
+               max_pixels: int | None = None) -> SynthesisResult:
     """Orthorectify ``products`` onto the synthesis grid and merge them (section 3.1 use cases
     1-2, Appendix C) into the synthesis store ``out``: one Icechunk commit.
 
@@ -347,6 +348,8 @@ def synthesize(products: Sequence[str | os.PathLike[str]], out: str | os.PathLik
     total)`` is called after each task; an exception raised by it cancels the run (nothing is
     committed). ``geolocation``: the location model of ``orthorectify`` (None: the tie points;
     "pixel": the products' per-pixel geolocation, a product without one fails).
+    ``max_pixels``: largest grid of a new synthesis (default: what the free space of the
+    output's file system holds, uncompressed); a larger one is an OptionsError.
     """
     from . import _synthesis_run as run
 
@@ -355,6 +358,8 @@ def synthesize(products: Sequence[str | os.PathLike[str]], out: str | os.PathLik
         OrthoOptions.parse(geolocation=geolocation, elevation=elevation, n_dems=len(dems))
     source_path = _check_options(products, out_dir, algorithm, input, grid, crs, pixel_size,
                                  bands, tile, dems, elevation, sampling, workers, scheduler)
+    if grid is not None and source_path is None:
+        _check_grid_size(grid, len(bands or ALL_BANDS), out_dir, max_pixels)
     paths = [str(Path(p).absolute()) if scheduler else str(p) for p in products]
     with run.engine(workers, scheduler) as runner:
         created = _make_dir(out_dir)
@@ -370,7 +375,8 @@ def synthesize(products: Sequence[str | os.PathLike[str]], out: str | os.PathLik
                     target, paths, algorithm=algorithm, grid=grid, crs=crs,
                     pixel_size=pixel_size, dems=[str(d) for d in dems], elevation=elevation,
                     sampling=sampling, bands=bands, reject_bright=reject_bright, tile=tile,
-                    progress=progress, geolocation=geolocation).run(runner)
+                    progress=progress, geolocation=geolocation,
+                    max_pixels=max_pixels).run(runner)
                 if created and result.snapshot is None:  # nothing merged: no store
                     shutil.rmtree(out_dir, ignore_errors=True)
         except BaseException:
@@ -501,6 +507,21 @@ def _new_grid(product: ProductGeometry, crs: Any, pixel_size: float | None) -> O
     resolution = FR_PIXEL_SIZE_M if product.samples_per_tie_point >= 64 else RR_PIXEL_SIZE_M
     return default_grid(boundary, resolution, crs if crs is not None else "EPSG:4326",
                         pixel_size=pixel_size)
+
+
+def _check_grid_size(grid: OutputGrid, n_bands: int, out_dir: Path,
+                     max_pixels: int | None) -> None:
+    """A new synthesis grid must fit the free space of the output's file system (its layers
+    uncompressed: the bands and the bookkeeping layers) or ``max_pixels``."""
+    from .geometry.grid import check_grid_size
+
+    parent = out_dir if out_dir.exists() else out_dir.absolute().parent
+    try:
+        free: int | None = shutil.disk_usage(parent).free
+    except OSError:
+        free = None
+    check_grid_size(grid.width, grid.height, (grid.dx, grid.dy), 4 * (n_bands + 2),
+                    max_pixels, free, f"the free space in {parent}")
 
 
 # --------------------------------------------------------------------------- export

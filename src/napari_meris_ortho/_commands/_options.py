@@ -59,6 +59,20 @@ def add_grid_options(p: Any, crs_default: str | None, crs_help: str) -> None:
                    help="upper-left corner of the output (CRS units)")
     p.add_argument("--lr", type=float, nargs=2, default=None, metavar=("X", "Y"),
                    help="lower-right corner of the output (CRS units)")
+    p.add_argument("--max-pixels", type=_pixel_count, default=None, metavar="N",
+                   help="largest output grid in pixels (default: what fits in 80%% of the "
+                   "available memory; synthesize: in the free disk space)")
+
+
+def _pixel_count(text: str) -> int:
+    """argparse type of ``--max-pixels``: a positive count ("2e9" allowed)."""
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not (math.isfinite(value) and value >= 1):
+        raise argparse.ArgumentTypeError(f"{text!r} is not a positive pixel count")
+    return int(value)
 
 
 def check_heights(args: argparse.Namespace) -> None:
@@ -71,12 +85,12 @@ def check_heights(args: argparse.Namespace) -> None:
 def grid_from_args(args: argparse.Namespace, default_crs: str = "EPSG:4326") -> Any:
     """The ``OutputGrid`` of ``--ul``/``--lr``/``--pixel-size``/``--crs``, or None without
     corners (then the product footprint sets the extent); checks the pixel size and the CRS."""
-    from ..geometry.grid import OutputGrid, parse_crs
+    from ..geometry.grid import OutputGrid, output_crs
 
     if args.pixel_size is not None and not (math.isfinite(args.pixel_size)
                                             and args.pixel_size > 0):
         raise OptionsError(f"--pixel-size must be > 0, got {args.pixel_size}")
-    crs = parse_crs(args.crs or default_crs)
+    crs = output_crs(args.crs or default_crs)
     if (args.ul is None) != (args.lr is None):
         raise OptionsError("--ul and --lr need each other")
     if args.ul is None:

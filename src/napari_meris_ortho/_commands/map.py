@@ -196,7 +196,8 @@ def run(args: argparse.Namespace) -> int:
                           sampling=args.sampling, bands=args.bands, tolerance=args.tolerance,
                           parallax=args.parallax, diagnostics=args.diagnostics,
                           progress=progress, method=args.search, crs=args.crs,
-                          pixel_size=args.pixel_size, geolocation=args.geolocation)
+                          pixel_size=args.pixel_size, geolocation=args.geolocation,
+                          max_pixels=args.max_pixels)
         _write(args, ante, progress)
     stats = ante.finish()
     if args.stats_json:

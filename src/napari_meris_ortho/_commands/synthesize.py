@@ -92,7 +92,7 @@ def run(args: argparse.Namespace) -> int:
             elevation=args.elevation, sampling=args.sampling, bands=args.bands,
             reject_bright=args.reject_bright, tile=args.tile, progress=progress,
             workers=0 if args.scheduler else workers, scheduler=args.scheduler or None,
-            geolocation=args.geolocation)
+            geolocation=args.geolocation, max_pixels=args.max_pixels)
     if result.snapshot is not None:
         log.info("synthesis %s (%s) committed to %s: %d product(s) merged", result.snapshot,
                  result.algorithm, result.path, len(result.merged))

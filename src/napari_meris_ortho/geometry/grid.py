@@ -29,6 +29,7 @@ fig. 19). Pixel size: MERSYN's nominal FR/RR size, 260 m / 1040 m in a metric CR
 from __future__ import annotations
 
 import math
+import os
 from collections.abc import Sequence
 from typing import Any, Protocol
 
@@ -60,6 +61,98 @@ def parse_crs(crs: Any) -> pyproj.CRS:
         return pyproj.CRS.from_user_input(crs)
     except (pyproj.exceptions.CRSError, TypeError, ValueError) as exc:
         raise OptionsError(f"unknown CRS {crs!r}: pyproj cannot interpret it") from exc
+
+
+#: semi-major axes (m) and inverse flattenings of the Earth ellipsoids and spheres a grid may use
+_EARTH_SEMI_MAJOR_M = (6.3e6, 6.4e6)
+_EARTH_INVERSE_FLATTENING = (250.0, 350.0)
+
+
+def output_crs(crs: Any) -> pyproj.CRS:
+    """:func:`parse_crs` restricted to what an output grid can use: a 2-D projected or
+    geographic CRS on an Earth ellipsoid (or sphere). Geocentric, 3-D, compound, engineering
+    (LOCAL_CS) and other bodies' CRSs raise OptionsError."""
+    given = crs
+    crs = parse_crs(crs)
+    name = f"{given} ({crs.name})" if isinstance(given, str) else crs.name
+    if crs.is_geocentric:
+        raise OptionsError(f"CRS {name!r} is geocentric: an output grid needs a 2-D projected "
+                           "or geographic CRS")
+    if not (crs.is_projected or crs.is_geographic) or crs.is_compound or len(crs.axis_info) != 2:
+        raise OptionsError(f"CRS {name!r} is not a 2-D projected or geographic CRS")
+    ellipsoid = crs.ellipsoid
+    a = ellipsoid.semi_major_metre if ellipsoid is not None else math.nan
+    inv_f = ellipsoid.inverse_flattening if ellipsoid is not None else math.nan
+    sphere = ellipsoid is not None and ellipsoid.semi_minor_metre == a
+    if not (_EARTH_SEMI_MAJOR_M[0] <= a <= _EARTH_SEMI_MAJOR_M[1]
+            and (sphere or _EARTH_INVERSE_FLATTENING[0] <= inv_f <= _EARTH_INVERSE_FLATTENING[1])):
+        raise OptionsError(f"CRS {name!r} is not on the Earth (ellipsoid semi-major axis {a:g} m, "
+                           f"inverse flattening {inv_f:g})")
+    return crs
+
+
+#: share of the available memory an output grid may take unless a pixel limit is given
+MEMORY_SHARE = 0.8
+
+
+def available_memory_bytes() -> int:
+    """MemAvailable of /proc/meminfo (else the free physical pages), in bytes."""
+    try:
+        with open("/proc/meminfo") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    try:
+        return os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    except (OSError, ValueError, AttributeError):
+        return 4 << 30
+
+
+def _size_text(n: float) -> str:
+    for unit in ("bytes", "KiB", "MiB", "GiB", "TiB", "PiB"):
+        if n < 1024 or unit == "PiB":
+            return f"{n:.0f} {unit}" if unit == "bytes" else f"{n:.1f} {unit}"
+        n /= 1024
+    return f"{n:.1f} PiB"  # pragma: no cover
+
+
+def pixel_limit(bytes_per_pixel: float, max_pixels: int | None = None,
+                budget_bytes: int | None = None) -> int:
+    """Most output pixels allowed: ``max_pixels``, else ``budget_bytes`` (default
+    :data:`MEMORY_SHARE` of the available memory) over ``bytes_per_pixel``."""
+    if max_pixels is not None:
+        return int(max_pixels)
+    budget = MEMORY_SHARE * available_memory_bytes() if budget_bytes is None else budget_bytes
+    return max(int(budget / bytes_per_pixel), 1)
+
+
+def check_grid_size(
+    width: float, height: float, pixel_size: tuple[float, float], bytes_per_pixel: float,
+    max_pixels: int | None = None, budget_bytes: int | None = None,
+    budget_what: str = f"{MEMORY_SHARE:.0%} of the available memory",
+) -> None:
+    """Refuse an output grid larger than :func:`pixel_limit` before anything is allocated.
+
+    The message gives the grid size, the estimate, the limit and a pixel size that fits.
+    """
+    pixels = float(width) * float(height)
+    limit = pixel_limit(bytes_per_pixel, max_pixels, budget_bytes)
+    if pixels <= limit:
+        return
+    factor = math.sqrt(pixels / limit) * 1.01
+    dx = max(pixel_size) * factor
+    digits = 1 - int(math.floor(math.log10(dx))) if dx > 0 and math.isfinite(dx) else 0
+    suggest = math.ceil(dx * 10**digits) / 10**digits
+    source = ("--max-pixels" if max_pixels is not None else
+              f"{_size_text(limit * bytes_per_pixel)}, {budget_what}")  # fmt: skip
+    raise OptionsError(
+        f"output grid of {width:.0f} x {height:.0f} pixels ({pixels:.3g} pixels, about "
+        f"{_size_text(pixels * bytes_per_pixel)}) exceeds the limit of {limit:.3g} pixels "
+        f"({source}): use a pixel size of at least {suggest:g} or a smaller extent, or raise "
+        "the limit with --max-pixels"
+    )
 
 
 def utm_crs_for(lon: float, lat: float) -> pyproj.CRS:
@@ -115,7 +208,7 @@ class OutputGrid:
         self, crs: Any, x0: float, y0: float, dx: float, dy: float, width: int, height: int,
         tolerance: float = INTERPOLATION_TOLERANCE_PX,
     ) -> None:
-        self.crs = parse_crs(crs)
+        self.crs = output_crs(crs)
         self.x0, self.y0, self.dx, self.dy = float(x0), float(y0), float(dx), float(dy)
         self.width, self.height = int(width), int(height)
         if not (math.isfinite(self.dx) and math.isfinite(self.dy) and self.dx > 0 and self.dy > 0):
@@ -124,10 +217,14 @@ class OutputGrid:
             raise OptionsError(f"output grid size must be > 0, got {width} x {height}")
         self.tolerance = float(tolerance)
         self.is_lonlat = _is_lonlat_identity(self.crs)
-        self._to_lonlat = None if self.is_lonlat else pyproj.Transformer.from_crs(
-            self.crs, _WGS84, always_xy=True)
-        self._from_lonlat = None if self.is_lonlat else pyproj.Transformer.from_crs(
-            _WGS84, self.crs, always_xy=True)
+        try:
+            self._to_lonlat = None if self.is_lonlat else pyproj.Transformer.from_crs(
+                self.crs, _WGS84, always_xy=True)
+            self._from_lonlat = None if self.is_lonlat else pyproj.Transformer.from_crs(
+                _WGS84, self.crs, always_xy=True)
+        except pyproj.exceptions.ProjError as exc:
+            raise OptionsError(f"CRS {self.crs.name!r}: no transformation to WGS84 ({exc})"
+                               ) from None
         self._step: int | None = None
         self.interpolation_stats: dict[str, float] = {
             "step": 0, "trial_max_error_px": 0.0, "max_error_px": 0.0, "exact_pixels": 0}
@@ -463,7 +560,7 @@ def default_grid(
     (Appendix C "COMPUTING IMAGE SIZE AND ORIGIN", Appendix B logs: y_max grows by 1/10000 of the
     height, lines = int((y_max - y_min + 1) / dy), columns = int((x_max - x_min) / dx)).
     """
-    crs = parse_crs(crs)
+    crs = output_crs(crs)
     if pixel_size is None:
         dx = dy = pixel_size_for(resolution_m, crs)
     else:
