@@ -24,8 +24,9 @@ from napari_meris_ortho.io.geoid import geoid_undulation
 
 
 def plane(lon, lat):
-    """Integer at every 30" post of the tiles used here, so int16 tiles store it exactly."""
-    return 1200.0 * np.asarray(lon) + 240.0 * np.asarray(lat) - 25000.0
+    """Integer at every 30" post of the tiles used here, so int16 tiles store it exactly
+    (120 x a half-post offset is 0.5 in each term); 600..7800 m over lon 0..30, lat 30..60."""
+    return 120.0 * np.asarray(lon) + 120.0 * np.asarray(lat) - 3000.0
 
 
 def post_lonlat(lat0, lon0, south_to_north=True):
@@ -192,14 +193,15 @@ def test_geotiff_utm_lookups_are_reprojected(tmp_path):
     r, c = np.mgrid[0:100, 0:120].astype(float)
     x = 400000.0 + (c + 0.5) * 1000.0
     y = 5200000.0 - (r + 0.5) * 1000.0
-    data = 0.01 * (x - 400000.0) - 0.02 * (y - 5100000.0) + 500.0
+    data = 0.01 * (x - 400000.0) - 0.02 * (y - 5100000.0) + 1500.0  # 0..3200 m
     dem = open_dem(write_geotiff_dem(tmp_path / "utm.tif", "EPSG:32633", t, data))
     rng = np.random.default_rng(6)
     px = rng.uniform(401000, 518000, 200)
     py = rng.uniform(5101000, 5199000, 200)
     lon, lat = pyproj.Transformer.from_crs(32633, 4326, always_xy=True).transform(px, py)
     h = dem.sample(lon, lat)
-    np.testing.assert_allclose(h, 0.01 * (px - 400000) - 0.02 * (py - 5100000) + 500, atol=1e-6)
+    np.testing.assert_allclose(h, 0.01 * (px - 400000) - 0.02 * (py - 5100000) + 1500,
+                               atol=1e-6)
     assert dem.bounds[0] == pytest.approx(13.7, abs=0.1)
     for method in ("nearest", "bicubic"):
         assert np.all(np.isfinite(dem.sample(lon, lat, method=method)))

@@ -183,6 +183,16 @@ def _write(args: argparse.Namespace, ante: Any, progress: Any) -> None:
                   metadata={"elevation_source": "k >= 0: DEM k; -1: tie points; -2: none"})
 
 
+def _warn_unused_dems(dems: list[str], sources: dict[str, int]) -> None:
+    """Warn about each DEM the user listed that gave no height (outside the product, a wrong
+    CRS tag, only no data or implausible heights)."""
+    for key, count in sources.items():
+        index, _, _ = key.partition(":")
+        if index.isdigit() and int(index) < len(dems) and count == 0:
+            log.warning("warning: DEM %s contributed no height (outside the product, wrong CRS, "
+                        "or only no data / heights outside -500..9000 m)", dems[int(index)])
+
+
 def run(args: argparse.Namespace) -> int:
     """Run ``meris-ortho map``."""
     from .._atomic import atomic_path
@@ -198,6 +208,7 @@ def run(args: argparse.Namespace) -> int:
                           progress=progress, method=args.search, crs=args.crs,
                           pixel_size=args.pixel_size, geolocation=args.geolocation,
                           max_pixels=args.max_pixels)
+        _warn_unused_dems(args.dem, ante.stats.get("elevation_sources") or {})
         _write(args, ante, progress)
     stats = ante.finish()
     if args.stats_json:

@@ -21,3 +21,6 @@ METRES_PER_DEGREE = 111_320.0
 #: highest terrain expected (m): how far beyond the zero-height segment boundary a terrain point
 #: may lie (section 3.1)
 MAX_TERRAIN_M = 9000.0
+#: lowest terrain expected (m): the Dead Sea shore is at -430 m; a DEM value or tie-point height
+#: outside MIN_TERRAIN_M..MAX_TERRAIN_M is no data (DEMs) or an error (N1 tie points)
+MIN_TERRAIN_M = -500.0

@@ -40,6 +40,7 @@ from __future__ import annotations
 import logging
 import os
 import re
+import stat
 import zipfile
 from collections.abc import Sequence
 from pathlib import Path
@@ -49,6 +50,7 @@ import numpy as np
 import pyproj
 
 from ..errors import DemError
+from ..geometry.earth import MAX_TERRAIN_M, MIN_TERRAIN_M
 from ..geometry.interpolation import keys_weights
 from ..options import Sampling, choices
 from .geoid import EGM96, ELLIPSOID, crs_datum, geoid_grid_path, split_datum, to_ellipsoid
@@ -149,6 +151,7 @@ class DemSource:
         rr = np.broadcast_to(rows[:, :, None], (idx.size, kr, kc))
         cc = np.broadcast_to(cols[:, None, :], (idx.size, kr, kc))
         vals = self._fetch(rr.reshape(-1), cc.reshape(-1)).reshape(idx.size, kr, kc)
+        vals[~((vals >= MIN_TERRAIN_M) & (vals <= MAX_TERRAIN_M))] = np.nan  # implausible: no data
         out[idx] = np.einsum("nij,ni,nj->n", vals, rw, cw)
         return out
 
@@ -206,6 +209,7 @@ class _GetasseTile:
             raise DemError(f"{self._label}: cannot read GETASSE30 tile ({exc})") from exc
         shape = (GETASSE_POSTS, GETASSE_POSTS)
         if self.kind == "int16":
+            _check_int16_heights(raw, self._label)
             return raw.view(">i2").reshape(shape)
         return raw.view(_float_order(raw)).reshape(shape)
 
@@ -217,6 +221,18 @@ class _GetasseTile:
         else:
             v[~np.isfinite(v) | (np.abs(v) > 1e5)] = np.nan
         return v
+
+
+def _check_int16_heights(raw: np.ndarray, label: str) -> None:
+    """A tile of the BEAM int16 size must hold int16 heights: half of a float32 tile read as
+    int16 gives the exponent halves of the floats (|v| mostly > 9000 m) and is refused."""
+    v = raw[: raw.size // 2 * 2].view(">i2")[::499].astype(np.int64)
+    v = v[(v != -32768) & (v != 32767)]
+    bad = np.sum((v < MIN_TERRAIN_M) | (v > MAX_TERRAIN_M))
+    if v.size and bad > 0.05 * v.size:
+        raise DemError(f"{label}: {100 * bad / v.size:.0f}% of the sampled posts are outside "
+                       f"{MIN_TERRAIN_M:g}..{MAX_TERRAIN_M:g} m: not a BEAM int16 GETASSE30 tile "
+                       "(half of a float32 tile?)")
 
 
 def _float_order(raw: np.ndarray) -> str:
@@ -310,6 +326,7 @@ def _zip_member(path: Path) -> str:
 
 # ---------------------------------------------------------------------- SRTM30 / GTOPO30
 def _read_hdr(path: Path) -> dict[str, str]:
+    _check_regular(path)
     try:
         text = path.read_text(errors="replace")
     except OSError as exc:
@@ -349,6 +366,7 @@ class SrtmTile(DemSource):
         if nbits != 16 or self.xdim <= 0 or self.ydim <= 0:
             raise DemError(f"{hdr}: unsupported header (NBITS {nbits}, XDIM/YDIM must be > 0)")
         self.dtype = np.dtype(f"{order}{'i' if signed else 'u'}2")
+        _check_regular(dem)
         try:
             size = dem.stat().st_size
         except OSError as exc:
@@ -402,6 +420,10 @@ class RasterSource(DemSource):
         except (RasterioError, OSError) as exc:
             raise DemError(f"{path}: cannot read DEM ({exc})") from exc
         ds = self._ds
+        t = ds.transform
+        if not (all(np.isfinite(tuple(t)[:6])) and abs(t.determinant) > 0):
+            raise DemError(f"{path}: invalid georeferencing: pixel size {t.a:g} x {t.e:g} "
+                           f"(transform {tuple(t)[:6]})")
         if ds.crs is None:
             raise DemError(f"{path}: the DEM has no coordinate reference system")
         if not 1 <= band <= ds.count:
@@ -666,11 +688,22 @@ def _open_path(p: Path) -> DemSource:
         raise DemError(f"{p}: DEM not found")
     if p.is_dir():
         return _open_directory(p)
+    _check_regular(p)
     if _TILE_RE.match(p.name) or _ZIP_RE.match(p.name):
         return GetasseSource(p.parent, files=[p])
     if p.suffix.upper() in (".DEM", ".HDR"):
         return SrtmTile(p)
     return RasterSource(p)
+
+
+def _check_regular(p: Path) -> None:
+    """A DEM file must be a regular file (a FIFO would block the reader forever)."""
+    try:
+        mode = p.stat().st_mode
+    except OSError as exc:
+        raise DemError(f"{p}: cannot read DEM ({exc.strerror or exc})") from None
+    if not stat.S_ISREG(mode):
+        raise DemError(f"{p}: not a regular file")
 
 
 def _open_directory(p: Path) -> DemSource:

@@ -17,14 +17,15 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import N1FormatError
+from ..geometry.earth import MAX_TERRAIN_M, MIN_TERRAIN_M
 from .n1_format import Resolution, ScalingFactors, tie_lines
 
 #: an Envisat orbit lasts 6036 s: no product holds more lines than one orbit (FR 137 189)
 MAX_PRODUCT_DURATION_S = 6100.0
 #: widest MERIS line: the FR full swath (MER_FRS_1P) has 4481 samples
 MAX_FR_WIDTH = 4481
-#: terrain heights a DEM or a tie point may hold (m): Dead Sea shore to above Mount Everest
-HEIGHT_RANGE_M = (-500.0, 9000.0)
+#: terrain heights a tie point may hold (m): Dead Sea shore to above Mount Everest
+HEIGHT_RANGE_M = (MIN_TERRAIN_M, MAX_TERRAIN_M)
 #: largest stored DEM correction (deg): h tan(vz)/R at 9000 m and 60 deg is 0.14 deg; the
 #: longitude correction grows as 1/cos(lat)
 MAX_CORRECTION_DEG = 10.0
