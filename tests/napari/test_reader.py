@@ -168,6 +168,21 @@ def test_geotiff_without_crs_is_refused(tmp_path):
         read_layers(str(path))
 
 
+def test_sparse_huge_geotiff_is_refused_before_reading(tmp_path):
+    """A 200000 x 100000 float32 GeoTIFF with no block written (sparse: kB on disk) would
+    need 80 GB per band: refused with the grid size instead of read."""
+    path = tmp_path / "sparse.tif"
+    with rasterio.open(path, "w", driver="GTiff", width=200_000, height=100_000, count=1,
+                       dtype="float32", crs="EPSG:4326", tiled=True, sparse_ok=True,
+                       BIGTIFF="YES", transform=Affine(0.0018, 0, -180, 0, -0.0018, 90)):
+        pass
+    assert path.stat().st_size < 10_000_000
+    with pytest.raises(MerisOrthoError) as info:
+        read_layers(str(path))
+    assert "output grid of 200000 x 100000 pixels" in str(info.value)
+    assert str(info.value).startswith(f"{path}: ")
+
+
 def test_reader_in_viewer_reprojects_onto_first_geocoded_layer(make_napari_viewer, tmp_path):
     viewer = make_napari_viewer()
     base = _write_tif(tmp_path / "base.tif", np.ones((30, 40), np.float32), "EPSG:32632",

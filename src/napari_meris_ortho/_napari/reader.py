@@ -105,6 +105,7 @@ def geotiff_layers(path: str | Path, frame: OutputGrid | None = None) -> list[La
         with rasterio.open(path) as ds:
             if ds.crs is None:
                 raise MerisOrthoError(f"{path}: GeoTIFF has no CRS (not geocoded)")
+            _check_size(path, ds)
             data = _physical(ds)
             source = OutputGrid.from_transform(ds.crs, tuple(ds.transform), (ds.height, ds.width))
             names = [d or f"band {i + 1}" for i, d in enumerate(ds.descriptions)]
@@ -138,6 +139,20 @@ def _physical(ds: Any) -> np.ndarray:
     out += np.asarray(ds.offsets, np.float32)[:, None, None]
     out[mask] = 0
     return out
+
+
+def _check_size(path: Path, ds: Any) -> None:
+    """Refuse a raster whose bands would not fit the memory limit (a sparse 40000 x 40000
+    GeoTIFF is a few kB on disk): the bands, their float32 physical values, masks and placed
+    copies, and a float64 band for the contrast limits."""
+    from ..geometry.grid import check_grid_size
+
+    per_pixel = ds.count * (np.dtype(ds.dtypes[0]).itemsize + 9) + 8
+    try:
+        check_grid_size(ds.width, ds.height, (abs(ds.transform.a), abs(ds.transform.e)),
+                        per_pixel)
+    except MerisOrthoError as exc:
+        raise MerisOrthoError(f"{path}: {exc}") from None
 
 
 def _contrast_limits(band: np.ndarray, nodata: float | None) -> tuple[float, float]:
