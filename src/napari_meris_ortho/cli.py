@@ -57,7 +57,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 def _on_signal(signum: int, frame: object) -> None:
     """Undo the run's outputs, say so and leave: exit 128 + signal number (SIGINT: 130)."""
-    abort_run()
+    with contextlib.suppress(Exception):  # whatever happens, the process ends here
+        abort_run()
     word = "interrupted" if signum == signal.SIGINT else "terminated"
     with contextlib.suppress(Exception):
         start = "\n" if stderr_is_terminal() else ""  # after a progress bar
