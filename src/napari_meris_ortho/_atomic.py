@@ -152,8 +152,7 @@ def abort_run() -> None:
     for run in reversed(_RUNS):
         _rollback(run)
     for tmp in list(_LIVE):
-        with contextlib.suppress(OSError):
-            tmp.unlink()
+        _remove(tmp)
     _LIVE.clear()
 
 
@@ -170,8 +169,7 @@ def _rollback(run: _Run) -> None:
                 c.target.unlink()
     run.commits.clear()
     for tmp in list(run.live):
-        with contextlib.suppress(OSError):
-            tmp.unlink()
+        _remove(tmp)
     run.live.clear()
     for d in reversed(run.directories):
         shutil.rmtree(d, ignore_errors=True)
@@ -192,9 +190,8 @@ def remove_stale_parts(target: Path) -> list[Path]:
             m = _STALE.fullmatch(entry.name[len(prefix) - 1 :])
             if m is None or _alive(int(m.group(1))):
                 continue
-            with contextlib.suppress(OSError):
-                os.unlink(entry.path)
-                removed.append(Path(entry.path))
+            _remove(Path(entry.path))
+            removed.append(Path(entry.path))
     return removed
 
 
@@ -249,6 +246,33 @@ def atomic_path(path: str | os.PathLike[str], suffix: str = "") -> Iterator[Path
         raise
     finally:
         live.discard(tmp_path)
+
+
+@contextlib.contextmanager
+def scratch_dir(beside: str | os.PathLike[str], suffix: str = "") -> Iterator[Path]:
+    """A hidden temporary directory ``.NAME.PID-XXXX{suffix}.part`` next to ``beside``, removed
+    with its content on exit, on a signal (:func:`abort_run`) or, after a SIGKILL, by the next
+    write there."""
+    target = Path(beside)
+    run = _RUNS[-1] if _RUNS else None
+    live = run.live if run is not None else _LIVE
+    path = Path(tempfile.mkdtemp(prefix=f".{target.name}.{os.getpid()}-",
+                                 suffix=suffix + ".part", dir=target.parent))
+    live.add(path)
+    try:
+        yield path
+    finally:
+        _remove(path)
+        live.discard(path)
+
+
+def _remove(path: Path) -> None:
+    """Remove a temporary file or directory; nothing if it is gone."""
+    if path.is_dir() and not path.is_symlink():
+        shutil.rmtree(path, ignore_errors=True)
+    else:
+        with contextlib.suppress(OSError):
+            path.unlink()
 
 
 def _keep_copy(target: Path) -> Path | None:

@@ -51,6 +51,7 @@ import pyproj
 
 from ..errors import DemError
 from ..geometry.earth import MAX_TERRAIN_M, MIN_TERRAIN_M
+from ..geometry.grid import pixel_limit
 from ..geometry.interpolation import keys_weights
 from ..options import Sampling, choices
 from .geoid import EGM96, ELLIPSOID, crs_datum, geoid_grid_path, split_datum, to_ellipsoid
@@ -480,6 +481,7 @@ class RasterSource(DemSource):
             data = data * self._scale + self._offset
         data = data.astype(dtype)
         data[nodata] = np.nan
+        data[~((data >= MIN_TERRAIN_M) & (data <= MAX_TERRAIN_M))] = np.nan  # implausible
         return data
 
     def _covers(self, r0: int, r1: int, c0: int, c1: int) -> bool:
@@ -521,6 +523,8 @@ class RasterSource(DemSource):
         c0 = max(int(np.floor(min(cs))) - 3, 0)
         c1 = min(int(np.ceil(max(cs))) + 3, self.n_cols)
         if r1 <= r0 or c1 <= c0 or not all(np.isfinite(cs + rs)):
+            return
+        if (r1 - r0) * (c1 - c0) > pixel_limit(16):  # beyond the memory: read lazily
             return
         self._window = (r0, c0, self._read(r0, r1, c0, c1))
         self._prepared = True

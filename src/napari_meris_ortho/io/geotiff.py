@@ -20,7 +20,6 @@ and rasterio (``masked=True`` and the scales) read physical values.
 from __future__ import annotations
 
 import contextlib
-import tempfile
 from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -28,7 +27,7 @@ from typing import Any
 import numpy as np
 import pyproj
 
-from .._atomic import atomic_path
+from .._atomic import atomic_path, scratch_dir
 from ..errors import OutputError
 from ..geometry.grid import OutputGrid
 from ..progress import ProgressCallback
@@ -184,6 +183,7 @@ def write_cog(
     """
     import rasterio
     import rasterio.shutil
+    from rasterio._err import CPLE_BaseError
     from rasterio.errors import RasterioError
 
     out = Path(path)
@@ -196,7 +196,7 @@ def write_cog(
     options = _cog_options(compress, level)
     levels = overview_levels(grid.width, grid.height)
     try:
-        with atomic_path(out, suffix=".tif") as tmp, _stage_dir(tmp) as stage:
+        with atomic_path(out, suffix=".tif") as tmp, _stage_dir(out) as stage:
             pyramid = [stage / f"ov{f}.tif" for f in levels]
             with contextlib.ExitStack() as stack:
                 ds = stack.enter_context(rasterio.open(
@@ -217,7 +217,7 @@ def write_cog(
             vrt = _vrt_with_overviews(stage / "full.tif", pyramid, stage / "full.vrt",
                                       {"Scale": scales, "Offset": offsets})
             rasterio.shutil.copy(vrt, tmp, **options)
-    except (RasterioError, OSError) as exc:
+    except (RasterioError, CPLE_BaseError, OSError) as exc:
         raise OutputError(f"{out}: cannot write GeoTIFF ({exc})") from exc
     if progress is not None:
         progress(count + 1, count + 1)
@@ -256,12 +256,10 @@ def _vrt_with_overviews(full: Path, pyramid: Sequence[Path], vrt: Path,
     return vrt
 
 
-@contextlib.contextmanager
-def _stage_dir(tmp: Path) -> Any:
-    """A hidden staging directory next to the output, removed in any case."""
-    with tempfile.TemporaryDirectory(prefix=f".{tmp.name}.", suffix=".stage",
-                                     dir=tmp.parent) as name:
-        yield Path(name)
+def _stage_dir(out: Path) -> Any:
+    """A hidden staging directory next to the output, removed in any case (also on a signal;
+    after a SIGKILL by the next write there)."""
+    return scratch_dir(out, suffix=".stage")
 
 
 def _write_bands(ds: Any, ovs: Sequence[Any], bands: Iterable[np.ndarray], grid: OutputGrid,
