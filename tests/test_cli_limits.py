@@ -59,9 +59,10 @@ def test_synthesis_over_the_world_is_refused_and_leaves_no_directory(product, tm
                     "180", "-90", "--pixel-size", "1e-4")  # fmt: skip
     assert code == 2 and "output grid of 3600000 x 1800000 pixels" in err, err
     assert "free space in" in err
+    assert list(tmp_path.iterdir()) == []  # refused before anything is created
     code, err = run(capsys, "synthesize", product, "--out", out, "--pixel-size", "1e-5")
     assert code == 2 and "exceeds the limit" in err, err
-    assert list(tmp_path.iterdir()) == []
+    assert not out.exists()  # (the store's lock file beside it may stay)
 
 
 @pytest.mark.parametrize(
