@@ -46,9 +46,11 @@ def register(subparsers: Any) -> None:
 def run(args: argparse.Namespace) -> int:
     from .._atomic import atomic_path, check_distinct, check_writable_dir
     from ..analysis.demcheck import demcheck, plot_histogram, read_points
+    from ..io.geoid import split_datum
 
     check_distinct({"--plot": args.plot, "--report": args.report},
-                   {"GPS point file": [args.points], "DEM": args.dem,
+                   {"GPS point file": [args.points],
+                    "DEM": [split_datum(d)[0] for d in args.dem],
                     "geoid": [args.geoid] if args.geoid else []})
 
     for out in (args.plot, args.report):

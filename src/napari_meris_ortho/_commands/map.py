@@ -83,11 +83,13 @@ def _diagnostics_path(out: Path) -> Path:
 def _check(args: argparse.Namespace) -> Any:
     """Every check that needs no product read, before any work (Appendix C parameter checks)."""
     from .._atomic import check_distinct, check_writable_dir
+    from ..io.geoid import split_datum
 
     outputs = {"-o": args.output, "--stats-json": args.stats_json,
                "the diagnostics output": (_diagnostics_path(Path(args.output))
                                           if args.diagnostics else None)}
-    check_distinct(outputs, {"input product": [args.product], "DEM": args.dem})
+    dems = [split_datum(d)[0] for d in args.dem]  # PATH[:egm96|:ellipsoid]
+    check_distinct(outputs, {"input product": [args.product], "DEM": dems})
     for out in outputs.values():
         if out is not None:
             check_writable_dir(out)
