@@ -87,9 +87,10 @@ def test_map_warns_about_a_dem_that_gives_no_height(tmp_path, caplog):
         ds.crs = "EPSG:3857"  # degrees tagged as metres: lies off the coast of Africa
     caplog.set_level(logging.INFO, logger="napari_meris_ortho")
     out = tmp_path / "out.tif"
-    code = main(["map", str(prod), "-o", str(out), "--bands", "1", "--dem", str(wrong_crs),
-                 "--dem", str(good)])  # fmt: skip
+    wrong_entry = f"{wrong_crs}:ellipsoid"  # (the datum named: no datum warning)
+    code = main(["map", str(prod), "-o", str(out), "--bands", "1", "--dem", wrong_entry,
+                 "--dem", f"{good}:ellipsoid"])  # fmt: skip
     assert code == 0 and out.exists()
     warnings = [r.getMessage() for r in caplog.records if r.levelno == logging.WARNING]
-    assert warnings == [f"warning: DEM {wrong_crs} contributed no height (outside the product, "
+    assert warnings == [f"warning: DEM {wrong_entry} contributed no height (outside the product, "
                         "wrong CRS, or only no data / heights outside -500..9000 m)"]
