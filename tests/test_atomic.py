@@ -126,3 +126,20 @@ def test_outputs_distinct_from_inputs_and_each_other(tmp_path):
     with pytest.raises(OptionsError, match="-o .*a.tif and --stats-json .*a.tif are the same"):
         check_distinct({"--stats-json": tmp_path / "a.tif", "-o": tmp_path / "a.tif"}, {})
     check_distinct({"-o": tmp_path / "a.tif", "--stats-json": None}, {"DEM": [product]})
+
+
+def test_scratch_dir_is_removed_on_abort_and_when_stale(tmp_path):
+    from napari_meris_ortho._atomic import scratch_dir
+
+    out = tmp_path / "out.tif"
+    with pytest.raises(KeyboardInterrupt), output_run(), scratch_dir(out, ".stage") as stage:
+        (stage / "full.tif").write_text("staged")
+        assert stage.name.startswith(f".out.tif.{os.getpid()}-")
+        abort_run()
+        assert list(tmp_path.iterdir()) == []
+        raise KeyboardInterrupt
+    stale = tmp_path / f".out.tif.{_dead_pid()}-abc.stage.part"  # left by a SIGKILL
+    stale.mkdir()
+    (stale / "ov2.tif").write_text("x")
+    write(out, "done")
+    assert [p.name for p in tmp_path.iterdir()] == ["out.tif"]
