@@ -493,26 +493,62 @@ def _solve(job: _Job, lon: np.ndarray, lat: np.ndarray, h: np.ndarray | None,
                           diagnostics=opts.diagnostics)
 
 
+@dataclass
+class _Blocks:
+    """What the blocks of output rows accumulate: antecedents, iterations, diagnostics, the
+    facet-search counts and the points per elevation source."""
+
+    line: np.ndarray
+    col: np.ndarray
+    iters: np.ndarray
+    diag: dict[str, np.ndarray]
+    sources: np.ndarray
+    search: dict[str, int] = field(default_factory=dict)
+
+    @classmethod
+    def empty(cls, shape: tuple[int, int], diagnostics: bool, n_dems: int) -> _Blocks:
+        diag: dict[str, np.ndarray] = {}
+        if diagnostics:
+            diag = {"elevation": np.full(shape, np.nan, np.float32),
+                    "elevation_source": np.full(shape, SOURCE_NONE, np.int8),
+                    "shift_east_m": np.full(shape, np.nan, np.float32),
+                    "shift_north_m": np.full(shape, np.nan, np.float32)}
+        return cls(np.full(shape, np.nan, np.float32), np.full(shape, np.nan, np.float32),
+                   np.full(shape, -1, np.int8), diag, np.zeros(n_dems + 1, np.int64))
+
+    def add(self, r0: int, r1: int, res: dict[str, Any], src: np.ndarray | None,
+            hmode: int) -> None:
+        """Store the solution of rows [r0, r1) (``src``: elevation source per point, None
+        when the heights are not the DEMs')."""
+        self.line[r0:r1], self.col[r0:r1] = res["line"], res["col"]
+        self.iters[r0:r1] = res["iterations"]
+        for k, v in res["search"].items():
+            self.search[k] = self.search.get(k, 0) + v
+        ok = res["iterations"] >= 0
+        if src is not None:
+            self.sources += np.bincount(src[ok].astype(np.int64) + 1,
+                                        minlength=self.sources.size)
+        else:
+            self.sources[0] += int(ok.sum())
+        if not self.diag:
+            return
+        if "elevation" in res:
+            for name in ("elevation", "shift_east_m", "shift_north_m"):
+                self.diag[name][r0:r1] = np.where(ok, res[name], np.nan)
+        code = (src if src is not None else np.full(ok.shape, SOURCE_TIEPOINTS
+                if hmode == predcorr.HEIGHT_TIEPOINTS else SOURCE_NONE, np.int8))
+        self.diag["elevation_source"][r0:r1] = np.where(ok, code, SOURCE_NONE)
+
+
 def _run(job: _Job, progress: ProgressCallback | None) -> Antecedents:
-    """Prediction/correction by blocks of output rows, then the resampling (section 3.2)."""
-    prod, grid, spans, stack, hmode = (job.prod, job.grid, job.spans, job.stack,
-                                           job.hmode)
-    opts = job.options
-    band_list, diagnostics = list(opts.bands), opts.diagnostics
-    nr, nc = grid.shape
-    line = np.full((nr, nc), np.nan, np.float32)
-    col = np.full((nr, nc), np.nan, np.float32)
-    iters = np.full((nr, nc), -1, np.int8)
-    diag: dict[str, np.ndarray] = {}
-    if diagnostics:
-        diag = {"elevation": np.full((nr, nc), np.nan, np.float32),
-                "elevation_source": np.full((nr, nc), SOURCE_NONE, np.int8),
-                "shift_east_m": np.full((nr, nc), np.nan, np.float32),
-                "shift_north_m": np.full((nr, nc), np.nan, np.float32)}
-    search: dict[str, int] = {}
-    sources = np.zeros(len(stack.sources) + 1 if stack is not None else 1, np.int64)
+    """Prediction/correction by blocks of output rows (section 3.2); the bands are sampled
+    later by the returned ``Antecedents``."""
+    grid, spans, stack, hmode, opts = job.grid, job.spans, job.stack, job.hmode, job.options
+    nr = grid.shape[0]
+    blocks = _Blocks.empty(grid.shape, opts.diagnostics,
+                           len(stack.sources) if stack is not None else 0)
     t_dem = t_lonlat = t_engine = 0.0
-    total = nr + len(band_list)
+    total = nr + len(opts.bands)
     for r0 in range(0, nr, _BLOCK_ROWS):
         r1 = min(r0 + _BLOCK_ROWS, nr)
         t0 = time.perf_counter()
@@ -521,8 +557,7 @@ def _run(job: _Job, progress: ProgressCallback | None) -> Antecedents:
         p0, p1 = spans.ptr[r0 - spans.row_start], spans.ptr[r1 - spans.row_start]
         ptr = spans.ptr[r0 - spans.row_start: r1 - spans.row_start + 1] - p0
         start, stop = spans.start[p0:p1], spans.stop[p0:p1]
-        h = None
-        src = None
+        h = src = None
         if hmode == predcorr.HEIGHT_GIVEN:
             t0 = time.perf_counter()
             mask = np.zeros(lon.shape, bool)
@@ -533,42 +568,36 @@ def _run(job: _Job, progress: ProgressCallback | None) -> Antecedents:
         t0 = time.perf_counter()
         res = _solve(job, lon, lat, h, (ptr, start, stop), r0)
         t_engine += time.perf_counter() - t0
-        line[r0:r1], col[r0:r1], iters[r0:r1] = res["line"], res["col"], res["iterations"]
-        for k, v in res["search"].items():
-            search[k] = search.get(k, 0) + v
-        ok = res["iterations"] >= 0
-        if src is not None:
-            sources += np.bincount(src[ok].astype(np.int64) + 1, minlength=sources.size)
-        else:
-            sources[0] += int(ok.sum())
-        if diagnostics:
-            if "elevation" in res:
-                diag["elevation"][r0:r1] = np.where(ok, res["elevation"], np.nan)
-                diag["shift_east_m"][r0:r1] = np.where(ok, res["shift_east_m"], np.nan)
-                diag["shift_north_m"][r0:r1] = np.where(ok, res["shift_north_m"], np.nan)
-            code = (src if src is not None else np.full(ok.shape, SOURCE_TIEPOINTS
-                    if hmode == predcorr.HEIGHT_TIEPOINTS else SOURCE_NONE, np.int8))
-            diag["elevation_source"][r0:r1] = np.where(ok, code, SOURCE_NONE)
+        blocks.add(r0, r1, res, src, hmode)
         if progress is not None:
             progress(r1, total)
+    seconds = {"lonlat": t_lonlat, "dem": t_dem, "prediction_correction": t_engine,
+               "read_bands": 0.0, "resample": 0.0, "engine": t_engine}
+    return _antecedents(job, blocks, seconds, progress)
+
+
+def _antecedents(job: _Job, blocks: _Blocks, seconds: dict[str, float],
+                 progress: ProgressCallback | None) -> Antecedents:
+    """The ``Antecedents`` of a run: diagnostics completed, the Appendix B statistics."""
+    prod, opts, hmode = job.prod, job.options, job.hmode
+    line, col, iters, diag = blocks.line, blocks.col, blocks.iters, blocks.diag
     window = antecedent_line_window(line, col, int(prod.height), int(prod.width),
                                     opts.sampling)
     valid = iters >= 0
     hist = predcorr.iteration_histogram(
         iters, pixelgeo.MAX_PIXEL_ITERATIONS if job.pixel is not None else predcorr.MAX_ITERATIONS)
-    if diagnostics:
+    if opts.diagnostics:
         diag.update(line=line, col=col, iterations=iters)
         if hmode == predcorr.HEIGHT_NONE and job.pixel is None:
             diag["elevation"] = np.where(valid, np.float32(0), np.float32(np.nan))
             diag["shift_east_m"] = diag["elevation"].copy()
             diag["shift_north_m"] = diag["elevation"].copy()
-    seconds = {"lonlat": t_lonlat, "dem": t_dem, "prediction_correction": t_engine,
-               "read_bands": 0.0, "resample": 0.0, "engine": t_engine,
-               "total": time.perf_counter() - job.t_start}
-    stats = _stats(job, search=search, hist=hist, processed=int(valid.sum()), window=window,
-                   sources=_source_counts(sources, stack, hmode), seconds=seconds)
-    return Antecedents(prod, grid, line, col, iters, opts.sampling, band_list, stats, diag,
-                       progress, job.t_start)
+    seconds = {**seconds, "total": time.perf_counter() - job.t_start}
+    stats = _stats(job, search=blocks.search, hist=hist, processed=int(valid.sum()),
+                   window=window, sources=_source_counts(blocks.sources, job.stack, hmode),
+                   seconds=seconds)
+    return Antecedents(prod, job.grid, line, col, iters, opts.sampling, list(opts.bands), stats,
+                       diag, progress, job.t_start)
 
 
 def _stats(job: _Job, *, search: dict[str, int], hist: np.ndarray, processed: int,
