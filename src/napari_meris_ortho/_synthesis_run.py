@@ -12,6 +12,7 @@ import contextlib
 import logging
 import os
 import uuid
+import warnings
 from collections import OrderedDict
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
@@ -150,9 +151,11 @@ def engine(workers: int, scheduler: str | None) -> Iterator[InProcess | Dask]:
                 raise OptionsError(f"cannot reach the dask scheduler at {scheduler} "
                                    f"({message_of(exc).splitlines()[0]})") from None
         else:
-            cluster = stack.enter_context(distributed.LocalCluster(
-                n_workers=workers, threads_per_worker=1, processes=True,
-                dashboard_address=None, env=WORKER_ENV, silence_logs=logging.ERROR))
+            with warnings.catch_warnings():  # "port 8787 in use": no dashboard is served
+                warnings.simplefilter("ignore", UserWarning)
+                cluster = stack.enter_context(distributed.LocalCluster(
+                    n_workers=workers, threads_per_worker=1, processes=True,
+                    dashboard_address=None, env=WORKER_ENV, silence_logs=logging.ERROR))
             client = distributed.Client(cluster, set_as_default=False)
         stack.callback(client.close)
         yield Dask(client)
