@@ -143,6 +143,9 @@ def engine(workers: int, scheduler: str | None) -> Iterator[InProcess | Dask]:
     import distributed
 
     with contextlib.ExitStack() as stack:
+        quiet = logging.getLogger("distributed")  # its INFO lines are not ours to print
+        stack.callback(quiet.setLevel, quiet.level)
+        quiet.setLevel(logging.ERROR)
         if scheduler is not None:
             try:
                 client = distributed.Client(scheduler, timeout=CONNECT_TIMEOUT_S,
