@@ -484,3 +484,58 @@ def test_progress_per_task_and_cancel_leave_the_store_untouched(products, tmp_pa
         synthesize([products["cloudy2"]], tmp_path / "new", grid=GRID, bands=(13,), tile=256,
                    elevation="tiepoints", progress=cancel)
     assert not (tmp_path / "new").exists()
+
+
+def test_tie_points_and_boundary_built_once_per_product(tmp_path, monkeypatch) -> None:
+    """Issue 13: the (product, tile) tasks share one tie-point grid, segment boundary and DEM
+    window per product and process; every tile still equals the product orthorectified alone
+    on that tile (DEM heights from the product-wide window = the tile's own)."""
+    from collections import Counter, OrderedDict
+
+    from napari_meris_ortho import _synthesis_run, ortho
+    from napari_meris_ortho.simulate.scene import generate_scene
+
+    scene = generate_scene({"base": "fr-small", "lines": 128, "columns": 193,
+                            "first_column": 1150, "exports": NO_EXPORTS, "clouds": None})
+    dem = scene.dem_paths["geotiff"]
+    builds: Counter[str] = Counter()
+    tasks: Counter[str] = Counter()
+    real_boundary, real_tp = ortho.segment_boundary, ortho.TiePointGrid.from_product.__func__
+    real_task = _synthesis_run.segment_task
+
+    def boundary(*args, **kwargs):
+        builds["boundary"] += 1
+        return real_boundary(*args, **kwargs)
+
+    def tie_points(cls, prod):
+        builds["tie_points"] += 1
+        return real_tp(cls, prod)
+
+    def task(spec, index, path, *args):
+        tasks[path] += 1
+        return real_task(spec, index, path, *args)
+
+    monkeypatch.setattr(_synthesis_run, "_SEGMENTS", OrderedDict())  # this run's builds only
+    monkeypatch.setattr(ortho, "segment_boundary", boundary)
+    monkeypatch.setattr(ortho.TiePointGrid, "from_product", classmethod(tie_points))
+    monkeypatch.setattr(_synthesis_run, "segment_task", task)
+    synthesize([scene.product_path], tmp_path / "s", grid=GRID, bands=(7,), tile=256,
+               dems=[dem])
+    assert tasks[str(scene.product_path)] >= 4  # the tiles of 256 x 256 holding its pixels
+    assert builds == {"boundary": 1, "tie_points": 1}
+    monkeypatch.undo()
+    band, compared = open_synthesis(tmp_path / "s").band(7), 0
+    for r0 in range(0, GRID.height, 256):
+        for c0 in range(0, GRID.width, 256):
+            window = (r0, min(r0 + 256, GRID.height), c0, min(c0 + 256, GRID.width))
+            try:
+                alone = orthorectify(scene.product_path, grid=GRID.window(*window), dems=[dem],
+                                     bands=[7])
+            except OptionsError:  # no pixel of the product there
+                continue
+            valid = validated_pixels(alone.valid, alone.flags, False)
+            tile = band[window[0]:window[1], window[2]:window[3]]
+            np.testing.assert_array_equal(tile[valid], alone.bands[7][valid])
+            assert not tile[~valid].any()
+            compared += 1
+    assert compared >= 4

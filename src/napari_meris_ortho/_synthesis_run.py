@@ -54,6 +54,8 @@ WORKER_ENV = {"NUMBA_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_TH
               "MKL_NUM_THREADS": "1"}
 
 Window = tuple[int, int, int, int]
+#: a segment task: product index, path, its piece of the grid, the product's whole window
+Job = tuple[int, str, Window, Window]
 
 
 # --------------------------------------------------------------------------- runners
@@ -215,6 +217,7 @@ class TileDone:
 
 _PRODUCTS: OrderedDict[str, Any] = OrderedDict()
 _GRIDS: OrderedDict[tuple[Any, ...], Any] = OrderedDict()
+_SEGMENTS: OrderedDict[tuple[Any, ...], Any] = OrderedDict()
 
 
 def _cached(cache: OrderedDict[Any, Any], key: Any, make: Callable[[], Any]) -> Any:
@@ -237,17 +240,35 @@ def _grid(spec: Spec) -> Any:
     return _cached(_GRIDS, spec.grid, lambda: grid_from_dict(dict(spec.grid)))
 
 
-def segment_task(spec: Spec, index: int, path: str, window: Window) -> Piece:
+def _segment(spec: Spec, path: str, extent: Window) -> Any:
+    """The product's ``ortho.Segment`` (tie points, segment boundary, DEMs read under its
+    whole ``extent`` of the grid), built once per worker process and product."""
+    from .options import OrthoOptions
+    from .ortho import open_segment
+
+    def make() -> Any:
+        opts = OrthoOptions.parse(elevation=spec.elevation, sampling=spec.sampling,
+                                  geolocation=spec.geolocation, bands=spec.needed,
+                                  n_dems=len(spec.dems))
+        segment = open_segment(_product(path), list(spec.dems), opts)
+        segment.prepare_dems(_grid(spec).window(*extent))
+        return segment
+
+    key = (path, extent, spec.grid, spec.dems, spec.elevation, spec.sampling, spec.needed,
+           spec.geolocation)
+    return _cached(_SEGMENTS, key, make)
+
+
+def segment_task(spec: Spec, index: int, path: str, window: Window,
+                 extent: Window | None = None) -> Piece:
     """Orthorectify product ``path`` on ``window`` of the grid: its contribution (cropped to
-    its validated pixels). Errors come back as text (exceptions may not survive pickling)."""
+    its validated pixels); ``extent``: the product's whole window of the grid (default
+    ``window``). Errors come back as text (exceptions may not survive pickling)."""
     from .engine.synthesis import segment_state, validated_pixels
-    from .ortho import orthorectify
 
     try:
-        result = orthorectify(_product(path), grid=_grid(spec).window(*window),
-                              dems=list(spec.dems), elevation=spec.elevation,
-                              sampling=spec.sampling, bands=spec.needed, allow_empty=True,
-                              geolocation=spec.geolocation)
+        segment = _segment(spec, path, window if extent is None else extent)
+        result = segment.precompute(_grid(spec).window(*window), allow_empty=True).result()
     except DemError as exc:
         return Piece(index, window, None, dem_error=message_of(exc))
     except (MerisOrthoError, OSError, ValueError) as exc:
@@ -414,12 +435,12 @@ class Synthesis:
             rank[index] = r + 1
         return rank
 
-    def _jobs(self, todo: list[_Product]) -> dict[Window, list[tuple[int, str, Window]]]:
-        """Output tile -> the (product index, path, piece) tasks it needs."""
+    def _jobs(self, todo: list[_Product]) -> dict[Window, list[Job]]:
+        """Output tile -> the (product index, path, piece, product window) tasks it needs."""
         from .engine.boundary import row_spans, segment_boundary
 
         shape = (self.grid.height, self.grid.width)
-        jobs: dict[Window, list[tuple[int, str, Window]]] = {}
+        jobs: dict[Window, list[Job]] = {}
         for item in todo:
             if item.window is None:
                 continue
@@ -429,7 +450,7 @@ class Synthesis:
                 if row_spans(boundary, self.grid.window(*piece), margin=item.margin).count == 0:
                     continue  # beyond any terrain point of the product
                 jobs.setdefault(tile_of(piece, self.tile, shape), []).append(
-                    (item.report.index, item.report.path, piece))
+                    (item.report.index, item.report.path, piece, item.window))
             item.product = None  # the workers open it themselves
         return dict(sorted(jobs.items()))
 
@@ -508,7 +529,7 @@ class Synthesis:
                 "radiance": RADIANCE_NOTE, "products": table}
 
     def _execute(self, runner: InProcess | Dask, session: Any, spec: Spec,
-                 jobs: dict[Window, list[tuple[int, str, Window]]], rank: np.ndarray,
+                 jobs: dict[Window, list[Job]], rank: np.ndarray,
                  exclude: frozenset[int]) -> list[TileDone]:
         """Submit every task (tile by tile), report progress, return the written tiles."""
         futures: list[Any] = []
@@ -516,9 +537,10 @@ class Synthesis:
         total = sum(len(v) + 1 for v in jobs.values())
         run = uuid.uuid4().hex[:8]
         for t, (window, tasks) in enumerate(jobs.items()):
-            pieces = [runner.submit(segment_task, spec, index, path, piece, priority=-t,
+            pieces = [runner.submit(segment_task, spec, index, path, piece, extent,
+                                    priority=-t,
                                     key=f"segment-{run}-{index}-{piece[0]}-{piece[2]}")
-                      for index, path, piece in tasks if index not in exclude]
+                      for index, path, piece, extent in tasks if index not in exclude]
             tile = runner.submit(tile_task, session.fork(), spec, window, pieces, rank, exclude,
                                  key=f"tile-{run}-{window[0]}-{window[2]}", priority=-t)
             inputs[id(tile)] = pieces

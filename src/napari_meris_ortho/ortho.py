@@ -244,20 +244,78 @@ def precompute(product: str | os.PathLike[str] | MerisProduct,
         crs = parse_crs(crs)
         if pixel_size is not None and not (math.isfinite(pixel_size) and pixel_size > 0):
             raise OptionsError(f"pixel size must be > 0, got {pixel_size}")
-    prod = _open_product(product)
-    stack = _open_dems(dems) if opts.elevation is Elevation.DEM else None
+    segment = open_segment(product, dems, opts)
     try:
-        job = _prepare(prod, grid, stack, opts, crs, pixel_size, t_start, max_pixels)
-        job.stats["dems"] = [str(d) for d in dems]
+        return segment.precompute(grid, progress, crs=crs, pixel_size=pixel_size,
+                                  allow_empty=allow_empty, max_pixels=max_pixels,
+                                  t_start=t_start)
+    finally:
+        segment.close()
+
+
+@dataclass
+class Segment:
+    """What a product needs before any output grid, built once and shared by every grid
+    (synthesis tiles): tie-point grid, zero-height segment boundary (section 3.1), the opened
+    DEM stack and the per-pixel geolocation grids. ``precompute`` then maps one grid."""
+
+    prod: MerisProduct
+    tp: TiePointGrid
+    boundary: Any
+    stack: DemStack | None
+    options: OrthoOptions
+    dems: list[str]
+    pixel: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+    #: the DEM stack was read under a grid holding every later one (``prepare_dems``)
+    dems_prepared: bool = False
+
+    def prepare_dems(self, extent: OutputGrid) -> None:
+        """Read the DEM window under ``extent`` once; the grids of later ``precompute`` calls
+        must lie inside it (points beyond are read lazily, same heights)."""
+        if self.stack is not None:
+            bounds = lonlat_bounds(extent)
+            if bounds is not None:
+                self.stack.prepare(*bounds)
+        self.dems_prepared = True
+
+    def precompute(self, grid: OutputGrid | None = None,
+                   progress: ProgressCallback | None = None, *, crs: Any = "EPSG:4326",
+                   pixel_size: float | None = None, allow_empty: bool = False,
+                   max_pixels: int | None = None, t_start: float | None = None
+                   ) -> Antecedents:
+        """The antecedents of ``grid`` (arguments as ``precompute``)."""
+        t0 = time.perf_counter() if t_start is None else t_start
+        job = _prepare(self, grid, crs, pixel_size, t0, max_pixels)
+        job.stats["dems"] = list(self.dems)
         if job.stats["points_in_boundary"] == 0 and not allow_empty:
             raise OptionsError(
                 f"the output extent {job.grid.bounds} misses the product footprint")
         if job.spans.count == 0:  # nothing to search: every point is background
             return _empty_antecedents(job)
         return _run(job, progress)
-    finally:
+
+    def close(self) -> None:
+        if self.stack is not None:
+            self.stack.close()
+
+
+def open_segment(product: str | os.PathLike[str] | MerisProduct,
+                 dems: Sequence[DemSource | str | os.PathLike[str]],
+                 opts: OrthoOptions) -> Segment:
+    """The ``Segment`` of a product (tie points, boundary, DEMs checked against it)."""
+    prod = _open_product(product)
+    stack = _open_dems(dems) if opts.elevation is Elevation.DEM else None
+    try:
+        tp = TiePointGrid.from_product(prod)
+        boundary = segment_boundary(tp.latitude, tp.longitude)
+        if stack is not None:
+            _check_dem_coverage(stack, boundary)
+        pixel = _pixel_grids(prod) if opts.geolocation is Geolocation.PIXEL else None
+    except BaseException:
         if stack is not None:
             stack.close()
+        raise
+    return Segment(prod, tp, boundary, stack, opts, [str(d) for d in dems], pixel)
 
 
 @dataclass
@@ -432,27 +490,23 @@ def bytes_per_output_pixel(opts: OrthoOptions) -> int:
     return 16 + 8 * len(opts.bands) + (48 if opts.diagnostics else 0)
 
 
-def _prepare(prod: MerisProduct, grid: OutputGrid | None, stack: DemStack | None,
-             opts: OrthoOptions, crs: Any, pixel_size: float | None, t_start: float,
-             max_pixels: int | None = None) -> _Job:
-    """Segment boundary, default grid (its size checked) and the spans to search (3.1)."""
-    tp = TiePointGrid.from_product(prod)
-    boundary = segment_boundary(tp.latitude, tp.longitude)
-    if stack is not None:
-        _check_dem_coverage(stack, boundary)
+def _prepare(seg: Segment, grid: OutputGrid | None, crs: Any, pixel_size: float | None,
+             t_start: float, max_pixels: int | None = None) -> _Job:
+    """Default grid (its size checked) and the spans of ``grid`` to search (3.1)."""
+    prod, tp, boundary, stack, opts, pixel = (seg.prod, seg.tp, seg.boundary, seg.stack,
+                                              seg.options, seg.pixel)
     res_m = float(getattr(getattr(prod, "resolution", None), "column_spacing_m", 260.0))
     if grid is None:
         grid = default_grid(boundary, res_m, crs, pixel_size=pixel_size)
     check_grid_size(grid.width, grid.height, (grid.dx, grid.dy), bytes_per_output_pixel(opts),
                     max_pixels)
-    if stack is not None:  # the DEM window under the output grid, read once
+    if stack is not None and not seg.dems_prepared:  # the DEM window under the grid, once
         bounds = lonlat_bounds(grid)
         if bounds is not None:
             stack.prepare(*bounds)
     # MERSYN processes the points inside the segment boundary; the primary-grid path also tries
     # a margin: the outer half pixel of the product and terrain seen obliquely beyond it (the
     # pixel geolocation always: its terrain points may lie outside the zero-height boundary)
-    pixel = _pixel_grids(prod) if opts.geolocation is Geolocation.PIXEL else None
     margin = (_margin_px(tp, grid, pixel is not None or opts.elevation is not Elevation.NONE,
                          res_m)
               if pixel is not None or opts.method is SearchMethod.PRIMARY else 0)
