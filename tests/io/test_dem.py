@@ -319,3 +319,13 @@ def test_geotiff_vertical_datum_from_its_crs_or_a_warning(tmp_path, caplog):
     np.testing.assert_allclose(both.sample(lon, lat), [500.0 + n[0], 500.0], atol=1e-6)
     forced = open_dem(f"{tmp_path / 'd'}:egm96")
     np.testing.assert_allclose(forced.sample(lon, lat), 500.0 + n, atol=1e-6)
+
+
+def test_multiband_raster_is_not_a_dem(tmp_path):
+    """A 3-band radiance GeoTIFF (an orthorectified RGB) is refused as a DEM (issue 14)."""
+    path = tmp_path / "radiance.tif"
+    with rasterio.open(path, "w", driver="GTiff", width=8, height=6, count=3, dtype="float32",
+                       crs="EPSG:4326", transform=from_origin(7.0, 46.0, 0.01, 0.01)) as ds:
+        ds.write(np.full((3, 6, 8), 80.0, np.float32))
+    with pytest.raises(DemError, match="3 bands, not a DEM"):
+        open_dem(path)

@@ -429,6 +429,9 @@ class RasterSource(DemSource):
             raise DemError(f"{path}: the DEM has no coordinate reference system")
         if not 1 <= band <= ds.count:
             raise DemError(f"{path}: no band {band}")
+        if ds.count > 1 and band == 1:
+            raise DemError(f"{path}: {ds.count} bands, not a DEM (a DEM has one band of "
+                           "heights; radiance GeoTIFFs are not DEMs)")
         self.n_rows, self.n_cols = ds.height, ds.width
         self.crs = pyproj.CRS.from_user_input(ds.crs.to_wkt())
         self.datum = _raster_datum(ds, self.crs)
