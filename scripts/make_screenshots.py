@@ -40,7 +40,7 @@ def _only(viewer, *names: str) -> None:
 def _zoom_on_peak(viewer, half_width_px: int = 70) -> tuple[float, float]:
     """Centre the camera on the highest DEM pixel, showing about 2 x half_width_px pixels."""
     dem = viewer.layers["DEM"]
-    valid = viewer.layers["orthorectified band 7"].data > 0
+    valid = viewer.layers["orthorectified b7"].data > 0
     heights = np.where(valid, dem.data, -np.inf)
     row, col = np.unravel_index(np.argmax(heights), heights.shape)
     centre = np.asarray(dem.translate) + np.asarray(dem.scale) * (row, col)
@@ -68,24 +68,24 @@ def main(argv: list[str] | None = None) -> int:
     viewer.open_sample("napari-meris-ortho", args.scene)
     wrote = []
 
-    _only(viewer, "orthorectified RGB 7-5-2", "footprint", "tie-point facets")
-    viewer.layers["tie-point facets"].visible = True
+    _only(viewer, "orthorectified RGB 7-5-2", "footprint", "facets")
+    viewer.layers["facets"].visible = True
     viewer.reset_view()
     viewer.screenshot(str(args.out / "ortho_rgb_footprint.png"), flash=False)
     wrote.append("ortho_rgb_footprint.png")
 
-    _only(viewer, "DEM", "parallax shift", "footprint")
+    _only(viewer, "DEM", "parallax ×10", "footprint")
     viewer.layers["DEM"].colormap = "gray"
-    viewer.layers["parallax shift"].opacity = 1.0
+    viewer.layers["parallax ×10"].opacity = 1.0
     _zoom_on_peak(viewer, half_width_px=600)
     viewer.screenshot(str(args.out / "parallax_vectors.png"), flash=False)
     wrote.append("parallax_vectors.png")
 
     peak, pixel = _zoom_on_peak(viewer)
     for name, pair in (("flicker_uncorrected_vs_reference.gif",
-                        ("uncorrected band 7", "reference band 7")),
+                        ("uncorrected b7", "reference b7")),
                        ("flicker_ortho_vs_reference.gif",
-                        ("orthorectified band 7", "reference band 7"))):
+                        ("orthorectified b7", "reference b7"))):
         _only(viewer, *pair)
         a, b = (viewer.layers[n] for n in pair)
         b.contrast_limits = a.contrast_limits
@@ -97,8 +97,8 @@ def main(argv: list[str] | None = None) -> int:
     viewer.window.add_plugin_dock_widget("napari-meris-ortho", "Orthorectify")
     _, flicker = viewer.window.add_plugin_dock_widget("napari-meris-ortho", "Flicker")
     assert isinstance(flicker, FlickerWidget)
-    flicker.layer_a.value = viewer.layers["reference band 7"]
-    flicker.layer_b.value = viewer.layers["orthorectified band 7"]
+    flicker.layer_a.value = viewer.layers["reference b7"]
+    flicker.layer_b.value = viewer.layers["orthorectified b7"]
     result = flicker.measure_disparity()
     viewer.layers[-1].visible = False
     viewer.window.resize(1900, 1150)

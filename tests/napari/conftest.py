@@ -63,3 +63,16 @@ def tiny_dem(tmp_path_factory):
                        transform=Affine(step, 0, lon0, 0, -step, lat0)) as ds:
         ds.write(h.astype(np.float32)[None])
     return path
+
+
+@pytest.fixture(autouse=True)
+def _plugin_settings_in_tmp(tmp_path_factory, monkeypatch):
+    """Widget settings (napari plugin settings) are saved under a fresh directory per test, never
+    in the user's napari config: a test's choices do not leak into the next test."""
+    from napari import settings as napari_settings
+
+    folder = tmp_path_factory.mktemp("napari-settings")
+    napari_settings._clear_plugin_settings_cache()
+    monkeypatch.setattr(napari_settings, "_CFG_PATH", str(folder / "settings.yaml"))
+    yield folder
+    napari_settings._clear_plugin_settings_cache()

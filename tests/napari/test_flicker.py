@@ -123,9 +123,14 @@ def test_measure_disparity_finds_known_shift(make_napari_viewer):
     dx, dy = result.global_displacement
     # a feature at column c of A is at column c + 2 of B
     assert dx == pytest.approx(2.0, abs=0.05) and dy == pytest.approx(0.0, abs=0.05)
-    vec = viewer.layers["disparity ortho"]
+    vec = viewer.layers["disparity ×10 ortho"]
     n = int(np.count_nonzero(result.candidate))
-    assert n > 1000 and len(vec.data) == n
+    assert n > 1000
+    # thinned: one vector per candidate on a grid as coarse as the arrows are long (20 px)
+    spacing = vec.metadata["spacing_px"]
+    rows, cols = np.nonzero(result.candidate)
+    assert spacing == 20
+    assert len(vec.data) == int(np.sum((rows % spacing == 0) & (cols % spacing == 0)))
     assert np.median(vec.data[:, 1, 1]) == pytest.approx(20.0, abs=0.5)  # dX x 10 exaggeration
     label = widget.disparity_label.value
     assert f"dX = {dx:+.2f} px" in label and f"({n} points)" in label

@@ -33,7 +33,7 @@ def test_manifest_found_through_entry_point():
 
 def test_every_command_exists_and_is_callable():
     commands = yaml.safe_load(MANIFEST.read_text())["contributions"]["commands"]
-    assert len(commands) == 5
+    assert len(commands) == 7
     for command in commands:
         module_name, attr = command["python_name"].split(":")
         target = getattr(importlib.import_module(module_name), attr)
@@ -43,4 +43,6 @@ def test_every_command_exists_and_is_callable():
     used = [r["command"] for r in contributions["readers"]]
     used += [s["command"] for s in contributions["sample_data"]]
     used += [w["command"] for w in contributions["widgets"]]
+    used += [w["command"] for w in contributions["writers"]]
+    used += [k["command"] for k in contributions["keybindings"]]
     assert set(used) == ids

@@ -35,12 +35,16 @@ def n1_path(tmp_path_factory):
     return path
 
 
-def test_reader_accepts_n1_and_tiff_only():
-    assert get_reader("x/MER_FR__1P.N1") is read_layers
-    assert get_reader("x/out.tif") is read_layers
-    assert get_reader(["a.tif", "b.N1"]) is read_layers
-    assert get_reader("x/image.png") is None
-    assert get_reader(["a.tif", "b.png"]) is None
+def test_reader_accepts_n1_and_geotiff_only(n1_path, tmp_path):
+    geo = _write_tif(tmp_path / "out.tif", np.ones((4, 5), np.float32), "EPSG:32632",
+                     Affine(260.0, 0, 400_000.0, 0, -260.0, 5_100_000.0))
+    png = tmp_path / "image.png"
+    png.write_bytes(b"\x89PNG")
+    assert get_reader(str(n1_path)) is read_layers
+    assert get_reader(str(geo)) is read_layers
+    assert get_reader([str(geo), str(n1_path)]) is read_layers
+    assert get_reader(str(png)) is None
+    assert get_reader([str(geo), str(png)]) is None
 
 
 def test_n1_reader_layers(n1_path):

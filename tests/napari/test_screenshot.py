@@ -32,10 +32,10 @@ def test_flicker_gif_of_sample(make_napari_viewer, tmp_path):
     show_viewer(viewer)
     viewer.open_sample("napari-meris-ortho", "fr-small")
     widget = FlickerWidget(viewer)
-    widget.layer_a.value = viewer.layers["orthorectified band 7"]
-    widget.layer_b.value = viewer.layers["reference band 7"]
+    widget.layer_a.value = viewer.layers["orthorectified b7"]
+    widget.layer_b.value = viewer.layers["reference b7"]
     for layer in viewer.layers:
-        layer.visible = layer.name in ("orthorectified band 7", "reference band 7")
+        layer.visible = layer.name in ("orthorectified b7", "reference b7")
     viewer.reset_view()
     out = widget.export_gif(tmp_path / "snap_ortho_anim.gif")
     frames = iio.imread(out, index=None)

@@ -18,6 +18,8 @@ from napari_meris_ortho.errors import OptionsError
 from napari_meris_ortho.geometry.grid import OutputGrid, default_grid
 from napari_meris_ortho.io.n1 import read_product
 
+STAMP = " · 2003-09-21 09:23"  # first line time of the tiny product
+
 
 def _run(widget, qtbot, timeout=60_000):
     worker = widget.start()
@@ -35,12 +37,11 @@ def test_widget_runs_end_to_end(make_napari_viewer, qtbot, tiny_n1, tiny_dem):
     widget.vector_step.value = 8
     _run(widget, qtbot)
     assert widget.status.value.startswith("done"), widget.status.value
-    stem = tiny_n1.stem
     names = [layer.name for layer in viewer.layers]
-    for suffix in ("RGB 7-5-2", "band 2", "band 5", "band 7", "iterations", "elevation",
-                   "elevation source", "tie-point facets", "footprint", "parallax shift"):
-        assert f"{stem} {suffix}" in names, suffix
-    rgb = viewer.layers[f"{stem} RGB 7-5-2"]
+    for name in ("ortho RGB 7-5-2", "ortho b2", "ortho b5", "ortho b7", "iterations",
+                 "elevation", "elevation source", "facets", "footprint", "parallax ×10"):
+        assert f"{name}{STAMP}" in names, name
+    rgb = viewer.layers[f"ortho RGB 7-5-2{STAMP}"]
     assert isinstance(rgb, Image) and rgb.rgb
 
     # the grid: UTM 32N (footprint centre ~7.6 E), smallest rectangle holding the boundary
@@ -58,17 +59,17 @@ def test_widget_runs_end_to_end(make_napari_viewer, qtbot, tiny_n1, tiny_dem):
     bottom_right = top_left + np.asarray(rgb.scale) * rgb.data.shape[:2]
     x_min, y_min, x_max, y_max = expected.bounds
     assert bottom_right == pytest.approx([-y_min, x_max])
-    band7 = viewer.layers[f"{stem} band 7"]
+    band7 = viewer.layers[f"ortho b7{STAMP}"]
     assert band7.data.shape == (expected.height, expected.width)
     assert np.count_nonzero(band7.data) > 0.5 * band7.data.size
 
     run = widget.last_run
     item = run.items[0]
     # elevation source: the DEM (label 1) everywhere it was valid
-    src = viewer.layers[f"{stem} elevation source"]
+    src = viewer.layers[f"elevation source{STAMP}"]
     assert isinstance(src, Labels)
     assert set(np.unique(src.data[item["valid"]])) == {1}
-    it = viewer.layers[f"{stem} iterations"].data
+    it = viewer.layers[f"iterations{STAMP}"].data
     assert it[item["valid"]].min() >= 1 and it[~item["valid"]].max() == -1
 
 
@@ -78,12 +79,11 @@ def test_footprint_and_facets_match_engine_boundary(make_napari_viewer, qtbot, t
     widget.products.value = [tiny_n1]
     widget.elevation.value = "tiepoints"
     _run(widget, qtbot)
-    stem = tiny_n1.stem
     tp = read_product(tiny_n1).tie_points
     lat, lon = tp["latitude"], tp["longitude"]
     to_utm = Transformer.from_crs("EPSG:4326", "EPSG:32632", always_xy=True)
 
-    footprint = viewer.layers[f"{stem} footprint"]
+    footprint = viewer.layers[f"footprint{STAMP}"]
     assert isinstance(footprint, Shapes) and len(footprint.data) == 1
     assert footprint.shape_type == ["polygon"]
     assert np.all(footprint.face_color[:, 3] == 0)  # transparent face
@@ -97,7 +97,7 @@ def test_footprint_and_facets_match_engine_boundary(make_napari_viewer, qtbot, t
     n_border = 2 * (lat.shape[0] - 1) + 2 * (lat.shape[1] - 1)
     assert len(vertices) in (n_border * 4, n_border * 4 + 1)  # densified x4
 
-    facets = viewer.layers[f"{stem} tie-point facets"]
+    facets = viewer.layers[f"facets{STAMP}"]
     n_lines, n_cols = lat.shape
     assert len(facets.data) == (n_lines - 1) * (n_cols - 1)
     x, y = to_utm.transform(lon, lat)
@@ -118,7 +118,7 @@ def test_parallax_vectors_count_and_direction(make_napari_viewer, qtbot, tiny_n1
     _run(widget, qtbot)
     item = widget.last_run.items[0]
     diag, valid, grid = item["diagnostics"], item["valid"], item["grid"]
-    vec = viewer.layers[f"{tiny_n1.stem} parallax shift"]
+    vec = viewer.layers[f"parallax ×5{STAMP}"]
     assert isinstance(vec, Vectors)
     rows = np.arange(5, grid.height, 10)
     cols = np.arange(5, grid.width, 10)
@@ -148,7 +148,7 @@ def test_geographic_and_epsg_output(make_napari_viewer, qtbot, tiny_n1, tmp_path
     out = tmp_path / "ortho.tif"
     widget.output.value = out
     _run(widget, qtbot)
-    layer = viewer.layers[f"{tiny_n1.stem} band 13"]
+    layer = viewer.layers[f"ortho b13{STAMP}"]
     frame = OutputGrid.from_transform(**layer.metadata["geo"])
     assert frame.is_geographic
     assert frame.dx == pytest.approx(np.degrees(260.0 / 6_370_997.0))
@@ -216,7 +216,7 @@ def test_bad_options_are_reported(make_napari_viewer, qtbot, tiny_n1, tiny_dem):
     widget.bands.value = "7"
     widget.add_dem(tiny_dem)
     widget.elevation.value = "none"
-    _run(widget, qtbot)
+    assert widget.start() is None
     assert "only used with elevation 'dem'" in widget.status.value
     assert len(viewer.layers) == 0
     assert widget.run_button.enabled and not widget.cancel_button.enabled

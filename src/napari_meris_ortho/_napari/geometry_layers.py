@@ -12,7 +12,7 @@ import numpy as np
 from ..engine.boundary import segment_boundary
 from ..geometry.earth import MEAN_EARTH_RADIUS
 from ..geometry.grid import OutputGrid
-from .world import crs_wkt, lonlat_to_crs, to_world
+from .world import crs_wkt, lonlat_to_crs, to_world, world_axes
 
 
 def footprint_polygons(tp_lat: np.ndarray, tp_lon: np.ndarray, crs: Any,
@@ -33,7 +33,7 @@ def footprint_layer_data(tp_lat: np.ndarray, tp_lon: np.ndarray, crs: Any,
     kwargs = {
         "shape_type": "polygon", "name": name, "face_color": "transparent",
         "edge_color": "yellow", "edge_width": _edge_width(np.concatenate(polys)), "opacity": 1.0,
-        "metadata": {"crs": crs_wkt(crs)},
+        "metadata": {"crs": crs_wkt(crs)}, **world_axes(crs),
     }
     return polys, kwargs, "shapes"
 
@@ -47,14 +47,14 @@ def facet_polygons(lat: np.ndarray, lon: np.ndarray, crs: Any) -> np.ndarray:
 
 
 def facets_layer_data(lat: np.ndarray, lon: np.ndarray, crs: Any,
-                      name: str = "tie-point facets") -> tuple[list[np.ndarray], dict, str]:
+                      name: str = "facets") -> tuple[list[np.ndarray], dict, str]:
     """A Shapes layer tuple: the grid of tie-point facets (transparent quads)."""
     quads = facet_polygons(lat, lon, crs)
     n_lines, n_cols = np.asarray(lat).shape
     kwargs = {
         "shape_type": "polygon", "name": name, "face_color": "transparent",
-        "edge_color": "cyan", "edge_width": _edge_width(quads[0]) * 0.5, "opacity": 0.6,
-        "visible": True,
+        "edge_color": "cyan", "edge_width": _edge_width(quads[0]) * 0.5, "opacity": 0.5,
+        "visible": True, **world_axes(crs),
         "features": {
             "tie_line": np.repeat(np.arange(n_lines - 1), n_cols - 1),
             "tie_column": np.tile(np.arange(n_cols - 1), n_lines - 1),
@@ -109,38 +109,46 @@ def parallax_vectors(frame: OutputGrid, shift_east: np.ndarray, shift_north: np.
     return vectors, h
 
 
+def parallax_name(exaggeration: float) -> str:
+    """'parallax ×10': the layer name carries the exaggeration of the vectors."""
+    return f"parallax ×{exaggeration:g}"
+
+
 def parallax_layer_data(frame: OutputGrid, shift_east: np.ndarray, shift_north: np.ndarray,
                         height: np.ndarray | None = None, *, step: int = 16,
                         exaggeration: float = 10.0, valid: np.ndarray | None = None,
-                        name: str = "parallax shift") -> tuple[np.ndarray, dict, str]:
-    """A Vectors layer tuple of the parallax shifts, coloured by height (viridis)."""
+                        name: str | None = None) -> tuple[np.ndarray, dict, str]:
+    """A Vectors layer tuple of the parallax shifts, one every ``step`` pixels, coloured by
+    height (viridis; the legend is in ``metadata["legend"]``, heights in the features)."""
     vectors, h = parallax_vectors(frame, shift_east, shift_north, height, step=step,
                                   exaggeration=exaggeration, valid=valid)
+    lo, hi = (float(h.min()), float(h.max())) if len(h) else (0.0, 1.0)
+    hi = hi if hi > lo else lo + 1.0
+    pixel = max(frame.dx, frame.dy)
     kwargs = {
-        "name": name, "edge_width": max(frame.dx, frame.dy) * step / 5.0,
+        "name": name or parallax_name(exaggeration), "edge_width": pixel * step / 5.0,
         "features": {"height": h}, "edge_color": "height", "edge_colormap": "viridis",
-        "vector_style": "arrow", "length": 1.0,
-        "metadata": {"exaggeration": exaggeration, "step": step},
+        "edge_contrast_limits": (lo, hi), "vector_style": "arrow", "length": 1.0,
+        "metadata": {"exaggeration": exaggeration, "step": step, "pixel_size": pixel,
+                     "legend": f"colour: height {lo:.0f}–{hi:.0f} m (viridis)"},
+        **world_axes(frame.crs),
     }
     return vectors, kwargs, "vectors"
 
 
-def geometry_layers(tie_points: dict[str, np.ndarray], frame: OutputGrid, name: str,
+def geometry_layers(tie_points: dict[str, np.ndarray], frame: OutputGrid, suffix: str = "",
                     diagnostics: dict[str, np.ndarray] | None = None, *,
                     valid: np.ndarray | None = None, exaggeration: float = 10.0,
                     step: int = 16) -> list[tuple[Any, dict, str]]:
-    """Footprint boundary, tie-point facets and (with diagnostics) parallax shift vectors."""
+    """Footprint boundary, tie-point facets and (with diagnostics) parallax shift vectors,
+    named "footprint", "facets", "parallax ×10" followed by ``suffix``."""
     lat, lon = tie_points["latitude"], tie_points["longitude"]
-    fp_data, fp_kwargs, fp_kind = footprint_layer_data(lat, lon, frame.crs,
-                                                       name=f"{name} footprint")
-    fa_data, fa_kwargs, fa_kind = facets_layer_data(lat, lon, frame.crs,
-                                                    name=f"{name} tie-point facets")
-    fa_kwargs["visible"] = False
-    layers: list[tuple[Any, dict, str]] = [(fa_data, fa_kwargs, fa_kind),
-                                            (fp_data, fp_kwargs, fp_kind)]
+    layers: list[tuple[Any, dict, str]] = [
+        facets_layer_data(lat, lon, frame.crs, name=f"facets{suffix}"),
+        footprint_layer_data(lat, lon, frame.crs, name=f"footprint{suffix}")]
     if diagnostics and "shift_east_m" in diagnostics:
         layers.append(parallax_layer_data(
             frame, diagnostics["shift_east_m"], diagnostics["shift_north_m"],
             diagnostics.get("elevation"), step=step, exaggeration=exaggeration, valid=valid,
-            name=f"{name} parallax shift"))
+            name=f"{parallax_name(exaggeration)}{suffix}"))
     return layers

@@ -40,49 +40,56 @@ def stretch_rgb(channels: Sequence[np.ndarray], valid: np.ndarray | None = None)
     return rgb
 
 
-def band_layers(bands: dict[int, np.ndarray], frame: OutputGrid, name: str,
-                meta: dict[str, Any] | None = None, valid: np.ndarray | None = None
-                ) -> list[tuple[Any, dict, str]]:
+def band_layers(bands: dict[int, np.ndarray], frame: OutputGrid, prefix: str,
+                meta: dict[str, Any] | None = None, valid: np.ndarray | None = None,
+                suffix: str = "") -> list[tuple[Any, dict, str]]:
     """Image layers of radiance bands on ``frame``: an RGB 7-5-2 quick-look when those bands
-    are present, then one grey layer per band (background 0)."""
+    are present ("<prefix> RGB 7-5-2<suffix>"), then one grey layer per band
+    ("<prefix> b7<suffix>", background 0)."""
     layers: list[tuple[Any, dict, str]] = []
     base = dict(meta or {})
     if all(b in bands for b in QUICKLOOK_BANDS):
         rgb = stretch_rgb([bands[b] for b in QUICKLOOK_BANDS], valid)
-        layers.append((rgb, geo_image_kwargs(frame, name=f"{name} RGB 7-5-2", rgb=True,
+        layers.append((rgb, geo_image_kwargs(frame, name=f"{prefix} RGB 7-5-2{suffix}", rgb=True,
                                              metadata=dict(base, bands=QUICKLOOK_BANDS)),
                        "image"))
     for b in sorted(bands):
         data = np.asarray(bands[b])
-        kwargs = geo_image_kwargs(frame, name=f"{name} band {b}", colormap="gray",
+        kwargs = geo_image_kwargs(frame, name=f"{prefix} b{b}{suffix}", colormap="gray",
                                   contrast_limits=contrast_limits(data),
                                   metadata=dict(base, band=b), visible=False)
         layers.append((data, kwargs, "image"))
     return layers
 
 
-def diagnostic_layers(diagnostics: dict[str, np.ndarray], frame: OutputGrid, name: str,
+def elevation_source_features(dem_names: Sequence[str]) -> dict[str, list[Any]]:
+    """Legend of the elevation-source labels: 0 none, 1..n the DEMs, n+1 the tie points."""
+    names = ["none", *(str(d) for d in dem_names), "tie points"]
+    return {"index": list(range(len(names))), "source": names}
+
+
+def diagnostic_layers(diagnostics: dict[str, np.ndarray], frame: OutputGrid, suffix: str = "",
                       dem_names: Sequence[str] = ()) -> list[tuple[Any, dict, str]]:
     """Iteration-count, elevation and elevation-source images of an OrthoResult (section 3.2,
-    Appendix B statistics). Elevation source codes: 0..n-1 DEM index, -1 tie points, -2 none;
-    shown as labels 1..n for the DEMs, n+1 tie points, 0 none."""
+    Appendix B statistics), named "iterations", "elevation", "elevation source" + ``suffix``.
+    Elevation source codes: 0..n-1 DEM index, -1 tie points, -2 none; shown as labels 1..n for
+    the DEMs, n+1 tie points, 0 none, with the DEM names as features (status bar)."""
     layers: list[tuple[Any, dict, str]] = []
     if "iterations" in diagnostics:
         it = np.asarray(diagnostics["iterations"]).astype(np.int16)
         layers.append((it, geo_image_kwargs(
-            frame, name=f"{name} iterations", colormap="turbo", visible=False,
+            frame, name=f"iterations{suffix}", colormap="turbo", visible=False,
             contrast_limits=(-1.0, float(max(int(it.max()), 1)))), "image"))
     if "elevation" in diagnostics:
         h = np.asarray(diagnostics["elevation"], np.float32)
         layers.append((h, geo_image_kwargs(
-            frame, name=f"{name} elevation", colormap="gist_earth", visible=False,
-            contrast_limits=contrast_limits(h, None)), "image"))
+            frame, name=f"elevation{suffix}", colormap="gist_earth", visible=False,
+            contrast_limits=contrast_limits(h, None), metadata={"units": "m"}), "image"))
     if "elevation_source" in diagnostics:
         src = np.asarray(diagnostics["elevation_source"]).astype(np.int16)
         n = len(dem_names)
         labels = np.where(src >= 0, src + 1, np.where(src == -1, n + 1, 0)).astype(np.uint8)
-        legend = {i + 1: str(d) for i, d in enumerate(dem_names)} | {n + 1: "tie points"}
         layers.append((labels, geo_image_kwargs(
-            frame, name=f"{name} elevation source", visible=False, opacity=0.5,
-            metadata={"legend": legend}), "labels"))
+            frame, name=f"elevation source{suffix}", visible=False, opacity=0.5,
+            features=elevation_source_features(dem_names)), "labels"))
     return layers

@@ -40,11 +40,11 @@ def _is_product(path: str | Path) -> bool:
 
 
 def get_reader(path: str | list[str]) -> Callable[[str | list[str]], list[LayerData]] | None:
-    """npe2 reader hook: a reader function for N1/SEN3 products and GeoTIFFs, else None."""
+    """npe2 reader hook: a reader function when every path is an N1 product (its header starts
+    with ``PRODUCT="``), a ``.SEN3`` product or a geocoded raster GDAL opens; None otherwise,
+    so that napari falls back to its own readers (a plain TIFF)."""
     paths = [path] if isinstance(path, str | Path) else list(path)
-    if not paths:
-        return None
-    if all(_is_product(p) or Path(p).suffix.lower() in TIFF_SUFFIXES for p in paths):
+    if paths and all(_readable(Path(p)) for p in paths):
         return read_layers
     from .synthesis_layers import is_store
 
@@ -60,6 +60,31 @@ def read_store(path: str | list[str]) -> list[LayerData]:
     return store_layers(path[0] if isinstance(path, list) else path)
 
 
+def _readable(path: Path) -> bool:
+    """True for an N1 header, a SEN3 product or a GeoTIFF with a CRS (a cheap look)."""
+    from ..io.sen3 import is_sen3
+
+    suffix = path.suffix.lower()
+    if suffix in N1_SUFFIXES:
+        try:
+            with open(path, "rb") as fh:
+                return fh.read(9) == b'PRODUCT="'
+        except OSError:
+            return False
+    if is_sen3(path):
+        return True
+    if suffix in TIFF_SUFFIXES:
+        import rasterio
+        from rasterio.errors import RasterioError
+
+        try:
+            with rasterio.open(path) as ds:
+                return ds.crs is not None
+        except (RasterioError, OSError):
+            return False
+    return False
+
+
 def read_layers(path: str | list[str]) -> list[LayerData]:
     """Read one or several N1 / GeoTIFF files into napari layer tuples."""
     paths = [path] if isinstance(path, str | Path) else list(path)
@@ -67,7 +92,7 @@ def read_layers(path: str | list[str]) -> list[LayerData]:
     layers: list[LayerData] = []
     for p in paths:
         if _is_product(p):
-            layers.extend(n1_layers(p))
+            layers.extend(n1_layers(p, frame))
         else:
             new = geotiff_layers(p, frame)
             layers.extend(new)
@@ -82,14 +107,20 @@ def _frame_args(kwargs: dict[str, Any]) -> dict[str, Any]:
 
 
 def _current_frame() -> OutputGrid | None:
-    """The world frame of the current napari viewer (None without viewer or geocoded layer)."""
+    """The world frame of the current napari viewer (None without viewer or geocoded layer);
+    the viewer's status bar then shows map coordinates (``status``)."""
     try:
         import napari
 
         viewer = napari.current_viewer()
     except Exception:  # no Qt app: plain reading
         return None
-    return None if viewer is None else viewer_frame(viewer.layers)
+    if viewer is None:
+        return None
+    from .status import show_map_coordinates
+
+    show_map_coordinates(viewer)
+    return viewer_frame(viewer.layers)
 
 
 # --------------------------------------------------------------------------------------------
@@ -166,10 +197,13 @@ def _contrast_limits(band: np.ndarray, nodata: float | None) -> tuple[float, flo
 # --------------------------------------------------------------------------------------------
 # N1
 # --------------------------------------------------------------------------------------------
-def n1_layers(path: str | Path) -> list[LayerData]:
-    """Radiance stack, RGB quick-look (bands 7, 5, 2) and flags of a MERIS L1b product (N1 or
-    .SEN3; FRG/FSG and SEN3 products also carry their per-pixel altitude in the metadata)."""
+def n1_layers(path: str | Path, frame: OutputGrid | None = None) -> list[LayerData]:
+    """Radiance stack (band axis = MERIS band numbers 1..15), RGB quick-look (bands 7, 5, 2)
+    and flags (named bits in the features) of a MERIS L1b product (N1 or .SEN3; FRG/FSG and
+    SEN3 products also carry their per-pixel altitude in the metadata), in product geometry;
+    over a map (``frame``) placed by an affine fit of its tie points (``tie_point_affine``)."""
     from ..io.product import read_product
+    from .ortho_run import product_stamp
 
     try:
         product = read_product(path)
@@ -178,17 +212,67 @@ def n1_layers(path: str | Path) -> list[LayerData]:
     except (OSError, ValueError) as exc:
         raise N1FormatError(path, str(exc)) from None
     meta = n1_metadata(product)
-    stem = str(getattr(product, "product_name", "") or Path(path).stem)
+    suffix = f" · {product_stamp(product)}"
+    place = _placement(product, frame, meta)
+    band_axis: dict[str, Any] = {"scale": (1.0, 1.0, 1.0), "translate": (1.0, 0.0, 0.0)}
+    if "affine" in place:
+        band_axis = {"affine": _with_band_axis(place["affine"]),
+                     "units": ("pixel", *place["units"])}
+    flags = np.asarray(product.flags)
     return [
-        (radiance_stack(product), {"name": f"{stem} radiance", "metadata": meta,
-                                   "colormap": "gray", "axis_labels": ("band", "line", "column"),
+        (radiance_stack(product), {"name": f"radiance{suffix}", "metadata": meta,
+                                   "colormap": "gray", **band_axis,
+                                   "axis_labels": ("MERIS band", "line", "column"),
                                    "contrast_limits": _contrast_limits(product.radiance(7), None)},
          "image"),
-        (quicklook_rgb(product), {"name": f"{stem} RGB 7-5-2", "rgb": True, "metadata": meta},
-         "image"),
-        (np.asarray(product.flags), {"name": f"{stem} flags", "metadata": meta,
-                                     "opacity": 0.4, "visible": False}, "labels"),
+        (quicklook_rgb(product), {"name": f"RGB 7-5-2{suffix}", "rgb": True, "metadata": meta,
+                                  **place}, "image"),
+        (flags, {"name": f"flags{suffix}", "metadata": meta, "opacity": 0.4, "visible": False,
+                 "features": flag_features(flags), **place}, "labels"),
     ]
+
+
+def flag_names(value: int) -> str:
+    """The L1b flag bits set in ``value`` (Flags MDS(16)), e.g. 'LAND_OCEAN|INVALID'."""
+    from ..io.n1 import FLAG_NAMES
+
+    names = [name for k, name in enumerate(FLAG_NAMES) if int(value) & (1 << k)]
+    return "|".join(names) if names else "none"
+
+
+def flag_features(flags: np.ndarray) -> dict[str, list[Any]]:
+    """Features of the flags labels layer: every flag value present and its bit names."""
+    values = np.flatnonzero(np.bincount(np.asarray(flags, np.uint8).ravel(), minlength=256))
+    values = sorted(set(values.tolist()) | {0})
+    return {"index": values, "flags": [flag_names(v) for v in values]}
+
+
+def _placement(product: Any, frame: OutputGrid | None, meta: dict[str, Any]) -> dict[str, Any]:
+    """napari placement of product-geometry layers over a map: an affine fit of the tie points
+    in the frame's CRS (warned about when it is coarse); nothing without a map."""
+    if frame is None:
+        return {}
+    from .world import tie_point_affine, world_axes
+
+    affine, rms = tie_point_affine(product.tie_points, product.lines_per_tie_point,
+                                   product.samples_per_tie_point, frame.crs)
+    meta["placement"] = {"affine": affine.tolist(), "rms_error": rms,
+                         "note": "approximate: affine fit of the tie points"}
+    if rms > 2.0 * max(frame.dx, frame.dy):
+        import warnings
+
+        warnings.warn(f"{Path(product.path).name}: placed on the map by an affine fit of its "
+                      f"tie points (RMS {rms:.3g} {'deg' if frame.is_geographic else 'm'}); "
+                      "orthorectify it for an exact overlay", stacklevel=2)
+    return {"affine": affine, **world_axes(frame.crs)}
+
+
+def _with_band_axis(affine: np.ndarray) -> np.ndarray:
+    """The 2-D placement with the band axis in front (world band = 1..15)."""
+    out = np.eye(4)
+    out[0, 3] = 1.0
+    out[1:, 1:] = affine
+    return out
 
 
 def n1_metadata(product: MerisL1bProduct) -> dict[str, Any]:
@@ -200,6 +284,7 @@ def n1_metadata(product: MerisL1bProduct) -> dict[str, Any]:
         "lines_per_tie_point": product.lines_per_tie_point,
         "samples_per_tie_point": product.samples_per_tie_point,
         "wavelengths": list(product.wavelengths),
+        "band_names": [f"band {b} ({w:.0f} nm)" for b, w in enumerate(product.wavelengths, 1)],
         "column_order": "stored (chronological/detector)",
         "pixel_geolocation": bool(getattr(product, "has_pixel_geolocation", False)),
     }

@@ -105,13 +105,13 @@ def sample_layers(sample: SampleScene) -> list[LayerData]:
                                _reference_band_index(scene.reference_path, REFERENCE_BAND), frame)
         ref[~sample.valid] = 0
         layers.append((ref, geo_image_kwargs(
-            frame, name=f"reference band {REFERENCE_BAND}", colormap="gray",
+            frame, name=f"reference b{REFERENCE_BAND}", colormap="gray",
             contrast_limits=contrast_limits(ref), metadata={"path": str(scene.reference_path)}),
             "image"))
     dem = _raster_on_frame(scene.dem_paths["geotiff"], 1, frame)
     layers.append((dem, geo_image_kwargs(frame, name="DEM", colormap="gist_earth",
                                          contrast_limits=contrast_limits(dem, None),
-                                         visible=False), "image"))
+                                         metadata={"units": "m"}, visible=False), "image"))
     layers += band_layers(sample.uncorrected, frame, "uncorrected",
                           {"elevation": "none"}, sample.uncorrected[7] > 0)
     layers += band_layers(sample.orthorectified, frame, "orthorectified",
@@ -119,7 +119,7 @@ def sample_layers(sample: SampleScene) -> list[LayerData]:
     layers += geometry_layers(sample.tie_points, frame, "", sample.diagnostics,
                               valid=sample.valid, exaggeration=10.0,
                               step=max(8, max(frame.width, frame.height) // 60))
-    return [(d, dict(k, name=k["name"].strip()), t) for d, k, t in layers]
+    return layers
 
 
 def _napari_progress(name: str) -> tuple[Any, ProgressCallback]:
@@ -135,11 +135,23 @@ def _napari_progress(name: str) -> tuple[Any, ProgressCallback]:
 
 
 def _make(name: str) -> list[LayerData]:
+    from .status import show_map_coordinates
+
+    show_map_coordinates(_current_viewer())
     bar, update = _napari_progress(name)
     try:
         return sample_layers(build_sample(name, update))
     finally:
         bar.close()
+
+
+def _current_viewer() -> Any:
+    try:
+        import napari
+
+        return napari.current_viewer()
+    except Exception:  # no Qt application
+        return None
 
 
 def make_sample_alps() -> list[LayerData]:

@@ -4,29 +4,63 @@ Like the REGIST "Flicker" tool of the handbook (fig. 33-35): two layers (orthore
 reference, or uncorrected vs orthorectified) are displayed alternately in the same frame at a
 chosen rate, so that sub-pixel displacements become visible; the flicker is exported as an
 animated GIF like ``snap0*_REGIST_Flicker_*_anim.gif``. A "Measure disparity" button runs the
-ZNCC disparity analysis and shows the global displacement (the handbook's (+1.2, -4.4) px).
+ZNCC disparity analysis in a thread worker and shows the global displacement (the handbook's
+(+1.2, -4.4) px) and the matched points as vectors.
+
+The flicker key (Shift-F) is declared in the manifest (``keybindings``, command
+``toggle_flicker``); the widget binds it on the viewer and unbinds it when it is closed.
 """
 
 from __future__ import annotations
 
+import weakref
+from functools import cache
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from magicgui.types import FileDialogMode
 from magicgui.widgets import ComboBox, Container, FileEdit, FloatSpinBox, Label, PushButton, SpinBox
+from qtpy.QtCore import QEvent, QObject
 
 from .._atomic import atomic_path
 from ..errors import MerisOrthoError, OptionsError
 from ..geometry.grid import OutputGrid
-from .world import layer_frame, layer_scale, layer_translate, reproject_onto
+from .settings import remember
+from .world import layer_frame, layer_scale, layer_translate, reproject_onto, world_axes
 
 if TYPE_CHECKING:
     import napari
 
-FLICKER_KEY = "Shift-F"
 DISPARITY_EXAGGERATION = 10.0
 DISPARITY_MAX_SIZE = 256  # analyse every step-th pixel above this many lines/columns
+DISPARITY_VECTORS_ACROSS = 60  # about this many matched-point vectors across the image
+
+#: the docked flicker widget of each viewer (for the manifest's toggle_flicker command)
+_WIDGETS: weakref.WeakValueDictionary[int, FlickerWidget] = weakref.WeakValueDictionary()
+
+
+@cache
+def flicker_key() -> str:
+    """The flicker key of the manifest (``keybindings``) in napari's spelling ("Shift-F")."""
+    from importlib.resources import files
+
+    import yaml
+
+    manifest = yaml.safe_load(files("napari_meris_ortho").joinpath("napari.yaml").read_text())
+    (binding,) = [k for k in manifest["contributions"]["keybindings"]
+                  if k["command"].endswith(".toggle_flicker")]
+    return str(binding["key"]).replace("+", "-")
+
+
+FLICKER_KEY = flicker_key()
+
+
+def toggle_flicker(viewer: napari.viewer.Viewer) -> None:
+    """Manifest command: start or stop the flicker of the viewer's Flicker widget."""
+    widget = _WIDGETS.get(id(viewer))
+    if widget is not None:
+        widget.toggle()
 
 
 def export_flicker_gif(viewer: Any, layer_a: Any, layer_b: Any, path: str | Path, *,
@@ -68,21 +102,46 @@ def show_viewer(viewer: Any) -> None:
         window.show()
 
 
+class _OnClose(QObject):
+    """Calls back when its widget loses its parent (removed from the dock) or is destroyed
+    (viewer closed)."""
+
+    def __init__(self, widget: Any, callback: Any) -> None:
+        super().__init__()
+        self._callback = callback
+        widget.installEventFilter(self)
+        widget.destroyed.connect(lambda _=None: callback())
+
+    def eventFilter(self, obj: Any, event: Any) -> bool:
+        if event.type() == QEvent.Type.ParentChange and obj.parent() is None:
+            self._callback()
+        return False
+
+
 class FlickerWidget(Container):
     """Alternate two layers at a chosen rate; start/stop, key binding, GIF export, disparity."""
 
     def __init__(self, viewer: napari.viewer.Viewer) -> None:
         self.viewer = viewer
-        self.layer_a = ComboBox(label="layer A", choices=self._layer_choices, nullable=True)
-        self.layer_b = ComboBox(label="layer B", choices=self._layer_choices, nullable=True)
-        self.rate = FloatSpinBox(label="rate (Hz)", value=2.0, min=0.2, max=30.0, step=0.5)
-        self.start_button = PushButton(text=f"Start ({FLICKER_KEY})")
-        self.stop_button = PushButton(text="Stop")
-        self.cycles = SpinBox(label="GIF cycles", value=2, min=1, max=50)
+        self._closed = False
+        self.layer_a = ComboBox(label="layer A", choices=self._layer_choices, nullable=True,
+                                tooltip="first layer (e.g. orthorectified or uncorrected)")
+        self.layer_b = ComboBox(label="layer B", choices=self._layer_choices, nullable=True,
+                                tooltip="second layer (e.g. the reference)")
+        self.rate = FloatSpinBox(label="rate (Hz)", value=2.0, min=0.2, max=30.0, step=0.5,
+                                 tooltip="frames per second of the flicker")
+        self.start_button = PushButton(text=f"Start ({FLICKER_KEY})",
+                                       tooltip=f"alternate A and B ({FLICKER_KEY} toggles)")
+        self.stop_button = PushButton(text="Stop", tooltip="stop and restore the visibility")
+        self.cycles = SpinBox(label="GIF cycles", value=2, min=1, max=50,
+                              tooltip="A/B cycles in the exported GIF")
         self.gif_path = FileEdit(label="GIF file", mode=FileDialogMode.OPTIONAL_FILE,
-                                 filter="*.gif", value=Path("flicker_anim.gif"))
-        self.export_button = PushButton(text="Export GIF")
-        self.disparity_button = PushButton(text="Measure disparity")
+                                 filter="*.gif", value=Path("flicker_anim.gif"),
+                                 tooltip="animated GIF to write")
+        self.export_button = PushButton(text="Export GIF", tooltip="write the flicker as a GIF")
+        self.disparity_button = PushButton(
+            text="Measure disparity", tooltip="ZNCC disparity of B against A (section 4.6), "
+                                              "in the background")
         self.status = Label(value="stopped")
         self.disparity_label = Label(value="")
         super().__init__(widgets=[
@@ -90,9 +149,13 @@ class FlickerWidget(Container):
             self.status, self.cycles, self.gif_path, self.export_button,
             self.disparity_button, self.disparity_label,
         ])
+        self.settings_widgets = [self.layer_a, self.layer_b, self.rate, self.cycles,
+                                 self.gif_path]
+        remember("flicker", {"rate": self.rate, "cycles": self.cycles})
         self._timer = self._make_timer()
         self._showing_a = True
         self._saved_visibility: tuple[bool, bool] | None = None
+        self.disparity_worker: Any = None
         self.start_button.changed.connect(self.start)
         self.stop_button.changed.connect(self.stop)
         self.rate.changed.connect(self._set_interval)
@@ -101,7 +164,22 @@ class FlickerWidget(Container):
         viewer.layers.events.inserted.connect(self._refresh_choices)
         viewer.layers.events.removed.connect(self._refresh_choices)
         viewer.bind_key(FLICKER_KEY, self._toggle_key, overwrite=True)
+        _WIDGETS[id(viewer)] = self
+        self._closer = _OnClose(self.native, self.close_widget)
         self._default_pair()
+
+    def close_widget(self) -> None:
+        """The widget was removed or destroyed: stop, unbind the key, forget the viewer."""
+        if self._closed:
+            return
+        self._closed = True
+        self._timer.stop()
+        if any(func == self._toggle_key for func in self.viewer.keymap.values()):
+            self.viewer.bind_key(FLICKER_KEY, None)
+        if _WIDGETS.get(id(self.viewer)) is self:
+            del _WIDGETS[id(self.viewer)]
+        for event in (self.viewer.layers.events.inserted, self.viewer.layers.events.removed):
+            event.disconnect(self._refresh_choices)
 
     # ---------------------------------------------------------------- layer choices
     def _layer_choices(self, _widget: Any = None) -> list[tuple[str, Any]]:
@@ -184,8 +262,12 @@ class FlickerWidget(Container):
         self._showing_a = not self._showing_a
         a.visible, b.visible = self._showing_a, not self._showing_a
 
-    def _toggle_key(self, _viewer: Any = None) -> None:
+    def toggle(self) -> None:
+        """Start the flicker, or stop it when it runs."""
         self.stop() if self.running else self.start()
+
+    def _toggle_key(self, _viewer: Any = None) -> None:
+        self.toggle()
 
     # ---------------------------------------------------------------- GIF
     def export_gif(self, path: str | Path | None = None) -> Path:
@@ -212,14 +294,9 @@ class FlickerWidget(Container):
         self.status.value = f"wrote {out}"
 
     # ---------------------------------------------------------------- disparity
-    def measure_disparity(self) -> Any:
-        """ZNCC disparity of layer A against layer B (analysis.disparity, section 4.4).
-
-        Layer B is reprojected onto layer A's grid when they differ. Adds a Vectors layer of the
-        matched points (displacements exaggerated x10) and returns the DisparityResult.
-        """
-        from ..analysis.disparity import disparity
-
+    def _disparity_inputs(self) -> tuple[Any, OutputGrid | None, dict[str, Any]]:
+        """Layer A, its grid and the arguments of ``analysis.disparity`` (GUI thread): layer B
+        is reprojected onto layer A's grid when they differ."""
         a, b = self._pair()
         frame_a, frame_b = layer_frame(a), layer_frame(b)
         image_a, image_b = np.asarray(a.data, np.float32), np.asarray(b.data, np.float32)
@@ -232,29 +309,82 @@ class FlickerWidget(Container):
         pixel_size = None
         if frame_a is not None and not frame_a.is_geographic:
             pixel_size = (frame_a.dx, frame_a.dy)
-        result = disparity(image_a, image_b, step=step, pixel_size_m=pixel_size)
-        self._add_disparity_vectors(result, a, frame_a)
-        self.disparity_label.value = _disparity_summary(result)
+        return a, frame_a, {"a": image_a, "b": image_b, "step": step, "pixel_size_m": pixel_size}
+
+    def measure_disparity(self) -> Any:
+        """ZNCC disparity of layer A against layer B (analysis.disparity, section 4.4), here
+        and now (scripts). Adds a Vectors layer of the matched points (displacements
+        exaggerated x10) and returns the DisparityResult."""
+        from ..analysis.disparity import disparity
+
+        a, frame, args = self._disparity_inputs()
+        result = disparity(args.pop("a"), args.pop("b"), **args)
+        self._show_disparity(result, a, frame)
         return result
 
+    def start_disparity(self) -> Any:
+        """Measure the disparity in a napari thread worker; returns the worker (None when the
+        layers are not a valid pair: the reason is shown)."""
+        from napari.qt.threading import create_worker
+
+        from ..analysis.disparity import disparity
+
+        try:
+            a, frame, args = self._disparity_inputs()
+        except MerisOrthoError as exc:
+            self.disparity_label.value = str(exc)
+            return None
+        self.disparity_button.enabled = False
+        self.disparity_label.value = f"measuring the disparity of {a.name!r}..."
+        image_a, image_b = args.pop("a"), args.pop("b")
+        self.disparity_worker = create_worker(
+            disparity, image_a, image_b, **args, _start_thread=False,
+            _progress={"desc": "Disparity"},
+            _connect={"returned": lambda result: self._show_disparity(result, a, frame),
+                      "errored": self._disparity_failed, "finished": self._disparity_done})
+        self.disparity_worker.start()
+        return self.disparity_worker
+
+    def _disparity_failed(self, exc: BaseException) -> None:
+        if not self._closed:
+            self.disparity_label.value = f"disparity failed: {exc}"
+
+    def _disparity_done(self) -> None:
+        if not self._closed:
+            self.disparity_button.enabled = True
+
+    def _show_disparity(self, result: Any, layer_a: Any, frame: OutputGrid | None) -> None:
+        if self._closed:
+            return
+        self._add_disparity_vectors(result, layer_a, frame)
+        self.disparity_label.value = _disparity_summary(result)
+
     def _add_disparity_vectors(self, result: Any, layer_a: Any, frame: OutputGrid | None) -> None:
+        """The matched points on layer A's grid, thinned to at most 60 across and one per
+        (exaggerated) vector length; edge widths are in data pixels (napari scales them)."""
         vectors = result.napari_vectors(scale=DISPARITY_EXAGGERATION)
         if len(vectors) == 0:
             return
+        longest = np.percentile(np.hypot(vectors[:, 1, 0], vectors[:, 1, 1]), 90)
+        spacing = max(1, int(np.ceil(max(result.dx.shape) / DISPARITY_VECTORS_ACROSS)),
+                      int(np.ceil(longest)))
+        keep = (vectors[:, 0, 0] % spacing == 0) & (vectors[:, 0, 1] % spacing == 0)
+        vectors = vectors[keep]
+        if len(vectors) == 0:
+            return
         kwargs: dict[str, Any] = {
-            "name": f"disparity {layer_a.name}", "edge_color": "magenta", "edge_width": 1.0,
-            "vector_style": "arrow", "metadata": {"exaggeration": DISPARITY_EXAGGERATION},
+            "name": f"disparity ×{DISPARITY_EXAGGERATION:g} {layer_a.name}",
+            "edge_color": "magenta", "edge_width": max(1.0, spacing / 10.0),
+            "vector_style": "arrow",
+            "metadata": {"exaggeration": DISPARITY_EXAGGERATION, "spacing_px": spacing},
         }
         if frame is not None:
-            kwargs.update(scale=layer_scale(frame), translate=layer_translate(frame))
-            kwargs["edge_width"] = max(frame.dx, frame.dy)
+            kwargs.update(scale=layer_scale(frame), translate=layer_translate(frame),
+                          **world_axes(frame.crs))
         self.viewer.add_vectors(vectors, **kwargs)
 
     def _disparity_clicked(self, _value: Any = None) -> None:
-        try:
-            self.measure_disparity()
-        except MerisOrthoError as exc:
-            self.disparity_label.value = str(exc)
+        self.start_disparity()
 
 
 def _disparity_summary(result: Any) -> str:

@@ -98,12 +98,22 @@ def geo_metadata(frame: OutputGrid) -> dict[str, Any]:
             "shape": (frame.height, frame.width)}
 
 
+def world_axes(crs: Any) -> dict[str, Any]:
+    """napari ``units`` and ``axis_labels`` of the world frame of ``crs``: metres (the scale bar
+    then reads m/km) or degrees; world y is minus the northing (module doc)."""
+    from pyproj import CRS
+
+    if CRS.from_user_input(crs_wkt(crs)).is_geographic:
+        return {"units": ("degree", "degree"), "axis_labels": ("-latitude", "longitude")}
+    return {"units": ("m", "m"), "axis_labels": ("-northing", "easting")}
+
+
 def geo_image_kwargs(frame: OutputGrid, **extra: Any) -> dict[str, Any]:
     """napari layer kwargs placing an image of ``frame`` in the world frame (see module doc)."""
     metadata = dict(extra.pop("metadata", {}) or {})
     metadata[GEO_KEY] = geo_metadata(frame)
     return {"scale": layer_scale(frame), "translate": layer_translate(frame),
-            "metadata": metadata, **extra}
+            "metadata": metadata, **world_axes(frame.crs), **extra}
 
 
 def reproject_onto(data: np.ndarray, source: OutputGrid, target: OutputGrid, *,
@@ -140,6 +150,24 @@ def place_on_frame(data: np.ndarray, source: OutputGrid, frame: OutputGrid | Non
     return reproject_onto(data, source, frame, nearest=nearest), frame
 
 
+def tie_point_affine(tie_points: dict[str, np.ndarray], lines_per_tie_point: int,
+                     samples_per_tie_point: int, crs: Any) -> tuple[np.ndarray, float]:
+    """The affine map (3 x 3, napari ``affine``) from product (line, column) to the world frame
+    of ``crs`` fitted by least squares to the tie points (pixel (i DF, k DJ), section 2.3),
+    and its RMS error in CRS units: an approximate placement of a product-geometry layer."""
+    lat, lon = tie_points["latitude"], tie_points["longitude"]
+    i, k = np.mgrid[0:lat.shape[0], 0:lat.shape[1]].astype(np.float64)
+    x, y = lonlat_to_crs(lon, lat, crs)
+    world = to_world(x, y).reshape(-1, 2)
+    design = np.column_stack([(i * lines_per_tie_point).ravel(),
+                              (k * samples_per_tie_point).ravel(), np.ones(i.size)])
+    coef, *_ = np.linalg.lstsq(design, world, rcond=None)
+    rms = float(np.sqrt(np.mean(np.sum((design @ coef - world) ** 2, axis=1))))
+    affine = np.eye(3)
+    affine[:2, :] = coef.T
+    return affine, rms
+
+
 # --------------------------------------------------------------------------------------------
 # Moving layers into another world frame (another CRS)
 # --------------------------------------------------------------------------------------------
@@ -173,6 +201,7 @@ def move_to_frame(layer: tuple[Any, dict, str], source: OutputGrid, target: Outp
         meta["reprojected_from"] = geo_metadata(source)
         kwargs.update(geo_image_kwargs(target, metadata=meta))
         return out, kwargs, kind
+    kwargs.update(world_axes(target.crs))
     if kind == "shapes":
         return [transform_world(p, source.crs, target.crs) for p in data], kwargs, kind
     if kind == "vectors":

@@ -1,0 +1,324 @@
+"""What the Orthorectify widget runs, without Qt: the checked options, the mapping of every
+product (MERSYN use case 3) or a synthesis (use cases 1-2, handbook section 3.1), and the napari
+layer tuples of the result in the viewer's world frame (``world``).
+
+Layer names are short and distinct: "ortho b7 · 2003-09-21 09:23" (the product's first line
+time), "footprint · ...", "parallax ×10 · ..."; the full product name and path are in the
+layer metadata ("product", "path").
+"""
+
+from __future__ import annotations
+
+import shutil
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..errors import MerisOrthoError, OptionsError
+from ..geometry.grid import OutputGrid
+from ..options import Elevation, MergeRule, choices
+from ..progress import ProgressCallback
+from .geometry_layers import geometry_layers
+from .product_layers import band_layers, diagnostic_layers
+from .world import geo_image_kwargs, move_to_frame, same_crs
+
+#: "mapping" orthorectifies every product on its own; the merge rules build a synthesis
+MAPPING = "mapping"
+ALGORITHMS = (MAPPING, *choices(MergeRule))
+#: location models offered: the tie points (parallax from the DEMs) or the product's per-pixel
+#: terrain-corrected geolocation (FRG/FSG N1, .SEN3)
+GEOLOCATIONS = ("tiepoints", "pixel")
+CRS_UTM = "UTM zone of the footprint"
+CRS_GEOGRAPHIC = "geographic (EPSG:4326)"
+CRS_EPSG = "EPSG code"
+LayerData = tuple[Any, dict[str, Any], str]
+
+
+class Cancelled(MerisOrthoError):
+    """The user pressed Cancel (or closed the viewer)."""
+
+
+@dataclass
+class RunSettings:
+    """Everything the Orthorectify widget asks for (defaults = MERSYN's)."""
+
+    products: list[Path]
+    dems: list[Path] = field(default_factory=list)
+    elevation: str = "dem"
+    algorithm: str = MAPPING
+    sampling: str = "nearest"
+    crs: str = CRS_UTM
+    epsg: int | None = None
+    pixel_size_m: float = 0.0  # 0: the nominal FR 260 m / RR 1040 m
+    bands: tuple[int, ...] | None = (7, 5, 2)
+    #: location model: "tiepoints" (with the parallax) or "pixel" (FRG/FSG/SEN3 per-pixel
+    #: terrain-corrected geolocation, no DEM)
+    geolocation: str = "tiepoints"
+    output: Path | None = None
+    geometry: bool = True
+    exaggeration: float = 10.0
+    vector_step: int = 16
+
+    @property
+    def pixel(self) -> bool:
+        """True with the product's per-pixel geolocation (FRG/FSG/SEN3)."""
+        return self.geolocation == "pixel"
+
+    def ortho_kwargs(self) -> dict[str, Any]:
+        """The DEM and location-model arguments of orthorectify/synthesize."""
+        return {"dems": [] if self.pixel else list(self.dems), "elevation": self.elevation,
+                "sampling": self.sampling, "bands": self.bands,
+                "geolocation": "pixel" if self.pixel else None}
+
+    def check(self) -> None:
+        """OptionsError naming the first missing or inconsistent input."""
+        if not self.products:
+            raise OptionsError("choose at least one N1 product")
+        missing = [str(p) for p in self.products if not Path(p).is_file()]
+        if missing:
+            raise OptionsError(f"N1 product not found: {', '.join(missing)}")
+        if self.pixel:
+            return  # the product's own terrain-corrected geolocation: no DEM
+        if self.elevation != Elevation.DEM and self.dems:
+            raise OptionsError(f"DEMs are only used with elevation 'dem', not {self.elevation!r}")
+        if self.elevation == Elevation.DEM and not self.dems:
+            raise OptionsError("elevation 'dem' needs a DEM: add one, or choose elevation "
+                               "'tiepoints' (the product's tie-point heights) or 'none'")
+
+
+def parse_bands(text: str) -> tuple[int, ...] | None:
+    """"7,5,2" -> (7, 5, 2); "all" or "" -> None (all 15 bands). Raises OptionsError."""
+    text = text.strip().lower()
+    if text in ("", "all"):
+        return None
+    try:
+        bands = tuple(int(t) for t in text.replace(" ", ",").split(",") if t)
+    except ValueError:
+        raise OptionsError(f"bands must be numbers 1..15 separated by commas, got {text!r}"
+                           ) from None
+    if not bands or any(not 1 <= b <= 15 for b in bands):
+        raise OptionsError(f"bands must be 1..15, got {text!r}")
+    return bands
+
+
+def output_crs(options: RunSettings, tie_points: dict[str, np.ndarray]) -> Any:
+    """The output CRS: the UTM zone of the footprint centre, EPSG:4326 or the given EPSG code."""
+    from ..geometry.grid import parse_crs, utm_crs_for
+
+    if options.crs == CRS_GEOGRAPHIC:
+        return parse_crs("EPSG:4326")
+    if options.crs == CRS_EPSG:
+        if not options.epsg:
+            raise OptionsError("output CRS 'EPSG code' needs an EPSG code")
+        return parse_crs(f"EPSG:{int(options.epsg)}")
+    lat, lon = tie_points["latitude"], tie_points["longitude"]
+    centre_lon = float(np.degrees(np.angle(np.mean(np.exp(1j * np.radians(lon))))))
+    return utm_crs_for(centre_lon, float(np.mean(lat)))
+
+
+def _pixel_size(options: RunSettings, product: Any, crs: Any) -> float:
+    from ..geometry.grid import pixel_size_for
+
+    metres = options.pixel_size_m or float(
+        getattr(getattr(product, "resolution", None), "column_spacing_m", 260.0))
+    return pixel_size_for(metres, crs)
+
+
+def product_stamp(product: Any) -> str:
+    """'2003-09-21 09:23': the first line time of a product (its file stem if unknown)."""
+    t = getattr(product, "first_line_time", None)
+    if t is None:
+        return Path(product.path).stem
+    return str(np.datetime_as_string(np.datetime64(t, "m"))).replace("T", " ")
+
+
+@dataclass
+class OrthoRun:
+    """What a run produced: per product (or synthesis) its layers' names, values and grid."""
+
+    items: list[dict[str, Any]]
+    options: RunSettings
+    written: list[Path] = field(default_factory=list)
+    skipped: list[str] = field(default_factory=list)  # "name: reason" of skipped products
+
+    def summary(self) -> str:
+        """The status line of a finished run."""
+        if self.options.algorithm == MAPPING:
+            n = len(self.items)
+            text = f"done: {n} product{'s' if n != 1 else ''} orthorectified"
+        else:
+            n = sum(1 for item in self.items if item["tie_points"] is not None)
+            text = (f"done: synthesis ({self.options.algorithm}) of {n} "
+                    f"product{'s' if n != 1 else ''}")
+        if self.skipped:
+            text += f"; skipped {'; '.join(self.skipped)}"
+        if self.written:
+            text += f"; wrote {', '.join(str(p) for p in self.written)}"
+        return text
+
+
+def _item(product: Any, prefix: str = "ortho", **values: Any) -> dict[str, Any]:
+    meta = {"product": getattr(product, "product_name", ""), "path": str(product.path)}
+    return {"prefix": prefix, "suffix": f" · {product_stamp(product)}", "meta": meta,
+            "tie_points": product.tie_points, "bands": {}, "extra": [], "valid": None,
+            "diagnostics": {}, "stats": {}, **values}
+
+
+def run_orthorectify(options: RunSettings, progress: ProgressCallback | None = None) -> OrthoRun:
+    """Run the chosen algorithm (no Qt): mapping of every product, or a synthesis."""
+    options.check()
+    if options.algorithm == MAPPING:
+        return _run_mapping(options, progress)
+    return _run_synthesis(options, progress)
+
+
+def _run_mapping(options: RunSettings, progress: ProgressCallback | None) -> OrthoRun:
+    from ..io.product import read_product
+    from ..ortho import orthorectify
+
+    products = [read_product(p) for p in options.products]
+    crs = output_crs(options, products[0].tie_points)
+    items, written = [], []
+    n = len(products)
+    for k, product in enumerate(products):
+        def part(done: int, total: int, k: int = k) -> None:
+            if progress is not None:
+                progress(k * 1000 + int(1000 * done / max(total, 1)), n * 1000)
+
+        result = orthorectify(
+            product, diagnostics=options.geometry, progress=part, crs=crs,
+            grid=_grid_for(product, crs, options), **options.ortho_kwargs())
+        prefix = "ortho pixel-geolocation" if options.pixel else "ortho"
+        items.append(_item(product, prefix, bands=result.bands, grid=result.grid,
+                           valid=result.valid, diagnostics=result.diagnostics,
+                           stats=result.stats))
+        if options.output is not None:
+            written.append(_write_mapping(result, product, options.output, k, n))
+    return OrthoRun(items, options, written)
+
+
+def _grid_for(product: Any, crs: Any, options: RunSettings) -> Any:
+    """The default grid (smallest rectangle holding the segment boundary, section 3.1)."""
+    from ..engine.boundary import segment_boundary
+    from ..geometry.grid import default_grid
+
+    boundary = segment_boundary(product.tie_points["latitude"], product.tie_points["longitude"])
+    return default_grid(boundary, crs=crs, pixel_size=_pixel_size(options, product, crs))
+
+
+def _write_mapping(result: Any, product: Any, output: Path, k: int, n: int) -> Path:
+    from ..io.geotiff import meris_band_description, write_geotiff
+
+    path = Path(output)
+    if n > 1:
+        path = path.with_name(f"{path.stem}_{k + 1}{path.suffix or '.tif'}")
+    bands = sorted(result.bands)
+    return write_geotiff(path, [result.bands[b] for b in bands], result.grid,
+                         descriptions=[meris_band_description(b, product.wavelengths[b - 1])
+                                       for b in bands])
+
+
+def _readable(paths: list[Path]) -> tuple[list[Any], list[str]]:
+    """The products that open, and "name: reason" of those that do not (skipped, like the CLI)."""
+    from ..io.product import read_product
+
+    products, skipped = [], []
+    for p in paths:
+        try:
+            products.append(read_product(p))
+        except (MerisOrthoError, OSError) as exc:
+            skipped.append(f"{Path(p).name}: {exc}")
+    return products, skipped
+
+
+def _run_synthesis(options: RunSettings, progress: ProgressCallback | None) -> OrthoRun:
+    """A synthesis of the readable products; read back into memory; a temporary store (no
+    output chosen) is removed afterwards."""
+    from ..synthesis import synthesize
+
+    products, skipped = _readable(options.products)
+    if not products:
+        raise OptionsError(f"no product could be read ({'; '.join(skipped)})")
+    crs = output_crs(options, products[0].tie_points)
+    temporary = options.output is None
+    out = Path(tempfile.mkdtemp(prefix="synthesis-")) / "store" if temporary else options.output
+    try:
+        result = synthesize(
+            [p.path for p in products], out, algorithm=options.algorithm, crs=crs,
+            pixel_size=_pixel_size(options, products[0], crs), progress=progress,
+            **options.ortho_kwargs())
+        skipped += [f"{Path(r.path).name}: {r.error}" for r in result.failed]
+        if not result.merged:
+            raise OptionsError(f"no product could be merged into the synthesis "
+                               f"({'; '.join(skipped)})")
+        item = _synthesis_item(out, options.algorithm)
+    finally:
+        if temporary:
+            shutil.rmtree(out.parent, ignore_errors=True)
+    merged = {str(Path(r.path)) for r in result.merged}
+    items = [item] + [_item(p, grid=item["grid"]) for p in products if str(p.path) in merged]
+    return OrthoRun(items, options, [] if temporary else [out], skipped)
+
+
+def _synthesis_item(path: Path, algorithm: str) -> dict[str, Any]:
+    """The synthesis layers read into memory: bands, NDVI (maximum-NDVI rule), count."""
+    from ..synthesis import open_synthesis
+
+    store = open_synthesis(path)
+    grid, prefix = store.grid, f"synthesis {algorithm}"
+    count = np.asarray(store.read("count"))
+    extra = []
+    if algorithm == MergeRule.MAX_NDVI:
+        ndvi = np.asarray(store.ndvi(), np.float32)
+        extra.append((np.nan_to_num(ndvi, nan=0.0), geo_image_kwargs(
+            grid, name=f"{prefix} NDVI", colormap="RdYlGn", contrast_limits=(-1.0, 1.0),
+            metadata={"units": "NDVI (band 13 - band 7) / (band 13 + band 7)"}), "image"))
+    extra.append((count, geo_image_kwargs(
+        grid, name=f"{prefix} count", colormap="viridis", visible=False,
+        contrast_limits=(0.0, float(max(int(count.max()), 1))),
+        metadata={"units": "products"}), "image"))
+    return {"prefix": prefix, "suffix": "", "meta": {"synthesis": str(path)},
+            "tie_points": None, "bands": {b: np.asarray(store.band(b)) for b in store.bands},
+            "extra": extra, "grid": grid, "valid": count > 0, "diagnostics": {}, "stats": {}}
+
+
+def run_layers(run: OrthoRun, world: OutputGrid | None = None) -> list[LayerData]:
+    """napari layer tuples of a run: bands, diagnostics and geometry, in the world frame.
+
+    ``world``: the viewer's frame; results in another CRS are moved into it (reprojected).
+    """
+    layers: list[LayerData] = []
+    for item in run.items:
+        frame = item["grid"]
+        item_layers = _item_layers(item, frame, run.options)
+        if world is not None and not same_crs(world.crs, frame.crs):
+            item_layers = [move_to_frame(layer, frame, world) for layer in item_layers]
+        layers += item_layers
+    return layers
+
+
+def _item_layers(item: dict[str, Any], frame: OutputGrid, opts: RunSettings) -> list[LayerData]:
+    """Layers of one product (or of the synthesis) on its own grid."""
+    layers: list[LayerData] = []
+    meta = {"stats": item["stats"], "algorithm": opts.algorithm, "elevation": opts.elevation,
+            **item["meta"]}
+    if item["bands"]:
+        layers += band_layers(item["bands"], frame, item["prefix"], meta, item["valid"],
+                              suffix=item["suffix"])
+    layers += item["extra"]
+    if opts.geometry and item["diagnostics"]:
+        layers += diagnostic_layers(item["diagnostics"], frame, item["suffix"],
+                                    [Path(d).name for d in opts.dems])
+    if opts.geometry and item["tie_points"] is not None:
+        layers += geometry_layers(item["tie_points"], frame, item["suffix"], item["diagnostics"],
+                                  valid=item["valid"], exaggeration=opts.exaggeration,
+                                  step=opts.vector_step)
+    return layers
+
+
+__all__ = ["ALGORITHMS", "GEOLOCATIONS", "CRS_EPSG", "CRS_GEOGRAPHIC", "CRS_UTM", "Cancelled", "RunSettings",
+           "OrthoRun", "output_crs", "parse_bands", "run_layers",
+           "run_orthorectify"]

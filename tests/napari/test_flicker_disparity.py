@@ -1,0 +1,84 @@
+"""Flicker widget's "Measure disparity" on geocoded layers (issue 14, defects 1 and 7): the
+matched-point vectors are drawn a pixel or two wide, and the analysis runs in a worker."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import rasterio
+from rasterio.transform import Affine
+
+PIXEL = 260.0
+X0, Y0 = 400_000.0, 5_100_000.0  # UTM 32N, upper-left corner
+
+
+def _write(path, data):
+    with rasterio.open(path, "w", driver="GTiff", width=data.shape[1], height=data.shape[0],
+                       count=1, dtype="float32", crs="EPSG:32632",
+                       transform=Affine(PIXEL, 0, X0, 0, -PIXEL, Y0)) as ds:
+        ds.write(data.astype(np.float32)[None])
+    return path
+
+
+@pytest.fixture
+def shifted_pair(tmp_path):
+    """Two geocoded 120 x 160 textures, B = A moved by +2 columns (east)."""
+    from scipy.ndimage import gaussian_filter
+
+    texture = gaussian_filter(np.random.default_rng(7).random((120, 164)), 1.5) * 100 + 10
+    return (_write(tmp_path / "ortho.tif", texture[:, 2:162]),
+            _write(tmp_path / "reference.tif", texture[:, 0:160]))
+
+
+def _flicker(viewer, a_path, b_path):
+    (a,) = viewer.open(str(a_path), plugin="napari-meris-ortho")
+    (b,) = viewer.open(str(b_path), plugin="napari-meris-ortho")
+    _, widget = viewer.window.add_plugin_dock_widget("napari-meris-ortho", "Flicker")
+    widget.layer_a.value, widget.layer_b.value = a, b
+    return widget, a, b
+
+
+def _measure(widget, qtbot, viewer):
+    n_before = len(viewer.layers)
+    widget.disparity_button.clicked.emit()
+    # the button returns at once: the analysis runs in a worker, the GUI thread is free
+    assert len(viewer.layers) == n_before
+    assert "measuring" in widget.disparity_label.value
+    qtbot.waitUntil(lambda: len(viewer.layers) == n_before + 1, timeout=120_000)
+    return viewer.layers[-1]
+
+
+def test_disparity_runs_in_a_worker(make_napari_viewer, qtbot, shifted_pair):
+    viewer = make_napari_viewer()
+    widget, a, _ = _flicker(viewer, *shifted_pair)
+    vectors = _measure(widget, qtbot, viewer)
+    assert vectors.name.startswith("disparity")
+    assert "dX = +2.00 px" in widget.disparity_label.value, widget.disparity_label.value
+    # vectors in world metres on layer A's grid: dX = 2 px = 520 m east, x10 exaggeration
+    world_dx = vectors.data[:, 1, 1] * vectors.scale[1]
+    assert np.median(world_dx) == pytest.approx(10 * 2 * PIXEL, rel=0.02)
+    np.testing.assert_allclose(vectors.scale, a.scale)
+    np.testing.assert_allclose(vectors.translate, a.translate)
+
+
+def test_disparity_vectors_are_thin_on_screen(make_napari_viewer, qtbot, shifted_pair, tmp_path):
+    import imageio.v3 as iio
+
+    viewer = make_napari_viewer()
+    viewer.window.show()
+    widget, a, b = _flicker(viewer, *shifted_pair)
+    widget.measure_disparity()  # the synchronous API (scripts)
+    vectors = viewer.layers[-1]
+    # edge width in world units = data units x scale: one or two pixels of A, not 260 pixels
+    assert vectors.edge_width * vectors.scale[0] <= 2 * PIXEL
+    viewer.reset_view()
+    for layer in viewer.layers:
+        layer.visible = layer is vectors
+    shot = viewer.screenshot(canvas_only=True, flash=False)[..., :3].astype(int)
+    magenta = (shot[..., 0] > 150) & (shot[..., 1] < 100) & (shot[..., 2] > 150)
+    assert 0.0 < magenta.mean() < 0.25, magenta.mean()
+    # a GIF exported afterwards still shows the images (the two frames differ)
+    a.visible = b.visible = True
+    out = widget.export_gif(tmp_path / "after_disparity.gif")
+    frames = iio.imread(out, index=None)[..., :3].astype(float)
+    assert np.abs(frames[0] - frames[1]).mean() > 5.0

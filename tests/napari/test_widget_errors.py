@@ -1,0 +1,74 @@
+"""The Orthorectify widget says what is wrong (issue 14, defect 5)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def _ortho_widget(viewer):
+    _, widget = viewer.window.add_plugin_dock_widget("napari-meris-ortho", "Orthorectify")
+    return widget
+
+
+def _run(widget, qtbot):
+    worker = widget.start()
+    if worker is not None:
+        qtbot.waitUntil(lambda: not widget.running, timeout=120_000)
+    return worker
+
+
+def test_missing_product_is_named(make_napari_viewer, qtbot, tiny_n1, tmp_path):
+    viewer = make_napari_viewer()
+    widget = _ortho_widget(viewer)
+    missing = tmp_path / "MER_FR__1PGONE.N1"
+    widget.products.value = [tiny_n1, missing]
+    widget.elevation.value = "tiepoints"
+    assert _run(widget, qtbot) is None
+    assert "not found" in widget.status.value and str(missing) in widget.status.value
+    assert len(viewer.layers) == 0
+
+
+def test_dem_elevation_without_dem_is_refused(make_napari_viewer, qtbot, tiny_n1):
+    viewer = make_napari_viewer()
+    widget = _ortho_widget(viewer)
+    widget.products.value = [tiny_n1]
+    assert widget.elevation.value == "dem" and widget.dems == []
+    assert _run(widget, qtbot) is None
+    assert "DEM" in widget.status.value and "tiepoints" in widget.status.value
+    assert len(viewer.layers) == 0
+
+
+def test_radiance_geotiff_is_not_a_dem(make_napari_viewer, qtbot, tiny_n1, tiny_dem, tmp_path):
+    viewer = make_napari_viewer()
+    widget = _ortho_widget(viewer)
+    widget.products.value = [tiny_n1]
+    widget.elevation.value = "none"
+    widget.bands.value = "7,5,2"
+    widget.output.value = tmp_path / "radiance.tif"
+    _run(widget, qtbot)
+    assert widget.status.value.startswith("done"), widget.status.value
+    widget.add_dem(tmp_path / "radiance.tif")
+    assert widget.dems == []
+    assert "3 bands" in widget.status.value, widget.status.value
+    widget.add_dem(tiny_dem)
+    assert widget.dems == [tiny_dem]
+
+
+def test_success_clears_an_old_error(make_napari_viewer, qtbot, tiny_n1, tiny_dem):
+    viewer = make_napari_viewer()
+    widget = _ortho_widget(viewer)
+    widget.add_dem(tiny_dem.parent / "absent.tif")
+    assert "not found" in widget.status.value
+    widget.add_dem(tiny_dem)  # a success replaces the old error
+    assert "not found" not in widget.status.value
+    assert tiny_dem.name in widget.status.value
+    widget.products.value = [tiny_n1]
+    widget.elevation.value = "none"  # DEMs with elevation "none": refused
+    _run(widget, qtbot)
+    assert "only used with elevation 'dem'" in widget.status.value
+    widget.elevation.value = "dem"
+    widget.bands.value = "7"
+    _run(widget, qtbot)
+    assert widget.status.value.startswith("done"), widget.status.value
+    assert "only used" not in widget.status.value
+    assert np.count_nonzero(viewer.layers[-1].data) > 0
