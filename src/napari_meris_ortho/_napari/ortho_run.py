@@ -244,7 +244,8 @@ def _run_synthesis(options: RunSettings, progress: ProgressCallback | None) -> O
         raise OptionsError(f"no product could be read ({'; '.join(skipped)})")
     crs = output_crs(options, products[0].tie_points)
     temporary = options.output is None
-    out = Path(tempfile.mkdtemp(prefix="synthesis-")) / "store" if temporary else options.output
+    out = (Path(tempfile.mkdtemp(prefix="synthesis-")) / "store" if options.output is None
+           else Path(options.output))
     try:
         result = synthesize(
             [p.path for p in products], out, algorithm=options.algorithm, crs=crs,

@@ -242,8 +242,8 @@ def flag_names(value: int) -> str:
 
 def flag_features(flags: np.ndarray) -> dict[str, list[Any]]:
     """Features of the flags labels layer: every flag value present and its bit names."""
-    values = np.flatnonzero(np.bincount(np.asarray(flags, np.uint8).ravel(), minlength=256))
-    values = sorted(set(values.tolist()) | {0})
+    present = np.flatnonzero(np.bincount(np.asarray(flags, np.uint8).ravel(), minlength=256))
+    values = sorted({int(v) for v in present} | {0})
     return {"index": values, "flags": [flag_names(v) for v in values]}
 
 
