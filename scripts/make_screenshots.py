@@ -14,6 +14,7 @@ import argparse
 import os
 import shutil
 import sys
+import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -37,18 +38,71 @@ def _only(viewer, *names: str) -> None:
         layer.visible = layer.name in names
 
 
+def _centre_on(viewer, layer, row: int, col: int, half_width_px: int) -> None:
+    """Centre the camera on pixel (row, col) of ``layer``, about 2 x half_width_px across."""
+    centre = np.asarray(layer.translate) + np.asarray(layer.scale) * (row, col)
+    camera = viewer.scene.camera if hasattr(viewer, "scene") else viewer.camera
+    camera.center = tuple(centre)
+    canvas_px = min(viewer.window._qt_viewer.canvas.size)
+    camera.zoom = canvas_px / (2 * half_width_px * layer.scale[0])
+
+
 def _zoom_on_peak(viewer, half_width_px: int = 70) -> tuple[float, float]:
     """Centre the camera on the highest DEM pixel, showing about 2 x half_width_px pixels."""
     dem = viewer.layers["DEM"]
     valid = viewer.layers["orthorectified b7"].data > 0
     heights = np.where(valid, dem.data, -np.inf)
     row, col = np.unravel_index(np.argmax(heights), heights.shape)
-    centre = np.asarray(dem.translate) + np.asarray(dem.scale) * (row, col)
-    camera = viewer.scene.camera if hasattr(viewer, "scene") else viewer.camera
-    camera.center = tuple(centre)
-    canvas_px = min(viewer.window._qt_viewer.canvas.size)
-    camera.zoom = canvas_px / (2 * half_width_px * dem.scale[0])
+    _centre_on(viewer, dem, int(row), int(col), half_width_px)
     return float(heights[row, col]), float(dem.scale[0])
+
+
+def _zoom_on_large_shifts(viewer, half_width_px: int) -> None:
+    """Centre the camera on the parallax vectors of the largest shifts (top fifth)."""
+    vectors = viewer.layers["parallax ×10"]
+    length = np.hypot(vectors.data[:, 1, 0], vectors.data[:, 1, 1])
+    top = vectors.data[length >= np.percentile(length, 80), 0]
+    ref = viewer.layers["reference b7"]
+    row, col = np.round((top.mean(axis=0) - np.asarray(ref.translate)) / np.asarray(ref.scale))
+    _centre_on(viewer, ref, int(row), int(col), half_width_px)
+
+
+def _zoom_on_parallax(viewer, half_width_px: int = 70) -> tuple[float, float]:
+    """Centre the camera where the parallax is large and the uncorrected mapping differs most
+    from the reference: among the vectors of the largest shifts (top fifth), the window of
+    least correlation between "uncorrected b7" and "reference b7". Returns (shift in m,
+    correlation)."""
+    vectors = viewer.layers["parallax ×10"]
+    ref, flat = viewer.layers["reference b7"], viewer.layers["uncorrected b7"]
+    ends = vectors.data[:, 0] + vectors.data[:, 1]  # terrain positions (world)
+    shift = np.hypot(vectors.data[:, 1, 0], vectors.data[:, 1, 1]) / vectors.metadata[
+        "exaggeration"]
+    pixels = np.round((ends - np.asarray(ref.translate)) / np.asarray(ref.scale)).astype(int)
+    best = None
+    for k in np.argsort(shift)[::-1][: max(10, len(shift) // 5)]:
+        r, c = pixels[k]
+        win = (slice(max(r - half_width_px, 0), r + half_width_px),
+               slice(max(c - half_width_px, 0), c + half_width_px))
+        a, b = ref.data[win], flat.data[win]
+        inside = (a > 0) & (b > 0)
+        if inside.size == 0 or inside.mean() < 0.95:
+            continue
+        corr = float(np.corrcoef(a[inside], b[inside])[0, 1])
+        if best is None or corr < best[0]:
+            best = (corr, int(r), int(c), float(shift[k]))
+    if best is None:
+        raise SystemExit("make_screenshots: no area of large parallax inside the footprint")
+    corr, row, col, metres = best
+    _centre_on(viewer, ref, row, col, half_width_px)
+    return metres, corr
+
+
+def _gif_correlation(path: Path) -> float:
+    """Correlation of the two frames of a flicker GIF (grey levels): 1 = no visible jump."""
+    import imageio.v3 as iio
+
+    frames = iio.imread(path, index=None)[..., :3].astype(np.float64).mean(axis=-1)
+    return float(np.corrcoef(frames[0].ravel(), frames[1].ravel())[0, 1])
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -57,6 +111,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", type=Path, default=ROOT / "docs" / "images")
     args = parser.parse_args(argv)
     _ensure_display()
+    # fresh napari settings: the widgets show their defaults, not remembered values
+    os.environ["NAPARI_CONFIG"] = str(Path(tempfile.mkdtemp(prefix="napari-")) / "settings.yaml")
 
     import napari
     from napari_meris_ortho._napari.widget_flicker import FlickerWidget, export_flicker_gif
@@ -66,6 +122,9 @@ def main(argv: list[str] | None = None) -> int:
     viewer.window.show()
     viewer.window.resize(*SIZE)
     viewer.open_sample("napari-meris-ortho", args.scene)
+    viewer.scale_bar.visible = True  # layers in metres: the bar reads km
+    viewer.scale_bar.font_size = 14
+    viewer.scale_bar.box = True
     wrote = []
 
     _only(viewer, "orthorectified RGB 7-5-2", "footprint", "facets")
@@ -77,11 +136,13 @@ def main(argv: list[str] | None = None) -> int:
     _only(viewer, "DEM", "parallax ×10", "footprint")
     viewer.layers["DEM"].colormap = "gray"
     viewer.layers["parallax ×10"].opacity = 1.0
-    _zoom_on_peak(viewer, half_width_px=600)
+    _zoom_on_large_shifts(viewer, half_width_px=450)
     viewer.screenshot(str(args.out / "parallax_vectors.png"), flash=False)
     wrote.append("parallax_vectors.png")
 
     peak, pixel = _zoom_on_peak(viewer)
+    shift_m, window_corr = _zoom_on_parallax(viewer)
+    correlations = {}
     for name, pair in (("flicker_uncorrected_vs_reference.gif",
                         ("uncorrected b7", "reference b7")),
                        ("flicker_ortho_vs_reference.gif",
@@ -90,7 +151,16 @@ def main(argv: list[str] | None = None) -> int:
         a, b = (viewer.layers[n] for n in pair)
         b.contrast_limits = a.contrast_limits
         export_flicker_gif(viewer, a, b, args.out / name, rate=2.0, cycles=2)
+        correlations[name] = _gif_correlation(args.out / name)
         wrote.append(name)
+    jump, still = (correlations["flicker_uncorrected_vs_reference.gif"],
+                   correlations["flicker_ortho_vs_reference.gif"])
+    print(f"flicker area: parallax shift {shift_m:.0f} m, window correlation {window_corr:.3f}; "
+          f"frame correlation uncorrected "
+          f"{jump:.3f}, orthorectified {still:.3f}")
+    if not jump < still - 0.05:
+        print("make_screenshots: the uncorrected flicker does not jump visibly", file=sys.stderr)
+        return 1
 
     viewer.reset_view()
     _only(viewer, "orthorectified RGB 7-5-2", "footprint")
@@ -107,6 +177,10 @@ def main(argv: list[str] | None = None) -> int:
     from qtpy.QtWidgets import QApplication
 
     notification_manager.records.clear()
+    from napari._qt.dialogs.qt_notification import NapariQtNotification
+
+    for toast in viewer.window._qt_window.findChildren(NapariQtNotification):
+        toast.close()  # e.g. the PyQt5 deprecation notice over the canvas
     for _ in range(20):
         QApplication.processEvents()
     viewer.screenshot(str(args.out / "widgets.png"), canvas_only=False, flash=False)

@@ -55,6 +55,7 @@ def test_closing_the_viewer_mid_run_exits_cleanly(tiny_n1, tiny_dem, tmp_path):
     script.write_text(SCRIPT)
     env = dict(os.environ)  # DISPLAY of pytest-xvfb's Xvfb
     env["PYTHONPATH"] = os.pathsep.join(p for p in sys.path if p)
+    env["NAPARI_CONFIG"] = str(tmp_path / "napari" / "settings.yaml")  # not the user's settings
     proc = subprocess.run([sys.executable, str(script), str(tiny_n1), str(tiny_dem)],
                           capture_output=True, text=True, env=env, timeout=600)
     assert proc.returncode == 0, proc.stdout + proc.stderr[-3000:]

@@ -53,7 +53,7 @@ def facets_layer_data(lat: np.ndarray, lon: np.ndarray, crs: Any,
     n_lines, n_cols = np.asarray(lat).shape
     kwargs = {
         "shape_type": "polygon", "name": name, "face_color": "transparent",
-        "edge_color": "cyan", "edge_width": _edge_width(quads[0]) * 0.5, "opacity": 0.5,
+        "edge_color": "cyan", "edge_width": _edge_width(quads) * 0.6, "opacity": 0.6,
         "visible": True, **world_axes(crs),
         "features": {
             "tie_line": np.repeat(np.arange(n_lines - 1), n_cols - 1),
