@@ -58,12 +58,15 @@ def _zoom_on_peak(viewer, half_width_px: int = 70) -> tuple[float, float]:
 
 
 def _zoom_on_large_shifts(viewer, half_width_px: int) -> None:
-    """Centre the camera on the parallax vectors of the largest shifts (top fifth)."""
+    """Centre the camera on the window of largest total parallax shift (vectors of the top
+    fifth of lengths as candidate centres)."""
     vectors = viewer.layers["parallax ×10"]
-    length = np.hypot(vectors.data[:, 1, 0], vectors.data[:, 1, 1])
-    top = vectors.data[length >= np.percentile(length, 80), 0]
     ref = viewer.layers["reference b7"]
-    row, col = np.round((top.mean(axis=0) - np.asarray(ref.translate)) / np.asarray(ref.scale))
+    pixels = (vectors.data[:, 0] - np.asarray(ref.translate)) / np.asarray(ref.scale)
+    length = np.hypot(vectors.data[:, 1, 0], vectors.data[:, 1, 1])
+    candidates = pixels[length >= np.percentile(length, 80)]
+    inside = np.all(np.abs(candidates[:, None, :] - pixels[None, :, :]) < half_width_px, axis=2)
+    row, col = np.round(candidates[np.argmax(inside @ length)])
     _centre_on(viewer, ref, int(row), int(col), half_width_px)
 
 
