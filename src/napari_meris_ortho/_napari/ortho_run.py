@@ -320,6 +320,6 @@ def _item_layers(item: dict[str, Any], frame: OutputGrid, opts: RunSettings) -> 
     return layers
 
 
-__all__ = ["ALGORITHMS", "GEOLOCATIONS", "CRS_EPSG", "CRS_GEOGRAPHIC", "CRS_UTM", "Cancelled", "RunSettings",
-           "OrthoRun", "output_crs", "parse_bands", "run_layers",
+__all__ = ["ALGORITHMS", "CRS_EPSG", "CRS_GEOGRAPHIC", "CRS_UTM", "GEOLOCATIONS", "Cancelled",
+           "OrthoRun", "RunSettings", "output_crs", "parse_bands", "run_layers",
            "run_orthorectify"]
