@@ -13,6 +13,7 @@ The flicker key (Shift-F) is declared in the manifest (``keybindings``, command
 
 from __future__ import annotations
 
+import contextlib
 import weakref
 from functools import cache
 from pathlib import Path
@@ -170,10 +171,11 @@ class FlickerWidget(Container):
 
     def close_widget(self) -> None:
         """The widget was removed or destroyed: stop, unbind the key, forget the viewer."""
-        if self._closed:
+        if getattr(self, "_closed", True):  # closed, or being garbage-collected
             return
         self._closed = True
-        self._timer.stop()
+        with contextlib.suppress(RuntimeError):  # the timer may be deleted already
+            self._timer.stop()
         if any(func == self._toggle_key for func in self.viewer.keymap.values()):
             self.viewer.bind_key(FLICKER_KEY, None)
         if _WIDGETS.get(id(self.viewer)) is self:
@@ -346,15 +348,15 @@ class FlickerWidget(Container):
         return self.disparity_worker
 
     def _disparity_failed(self, exc: BaseException) -> None:
-        if not self._closed:
+        if not getattr(self, "_closed", True):
             self.disparity_label.value = f"disparity failed: {exc}"
 
     def _disparity_done(self) -> None:
-        if not self._closed:
+        if not getattr(self, "_closed", True):
             self.disparity_button.enabled = True
 
     def _show_disparity(self, result: Any, layer_a: Any, frame: OutputGrid | None) -> None:
-        if self._closed:
+        if getattr(self, "_closed", True):
             return
         self._add_disparity_vectors(result, layer_a, frame)
         self.disparity_label.value = _disparity_summary(result)

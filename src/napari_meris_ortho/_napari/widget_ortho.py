@@ -331,6 +331,8 @@ class OrthorectifyWidget(Container):
     def _shutdown(self, _obj: Any = None) -> None:
         """The widget is destroyed (viewer closed): cancel the job and wait for its thread,
         so that nothing runs or reports into deleted Qt objects."""
+        if not hasattr(self, "_cancel"):  # being garbage-collected
+            return
         self._closed = True
         self._cancel.set()
         if self._job is not None and self._job.thread.is_alive():
