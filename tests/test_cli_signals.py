@@ -87,4 +87,4 @@ def test_signals_at_many_offsets_leave_nothing(scene, tmp_path):
         assert "Traceback" not in text and "Error" not in text, (fraction, text[-2000:])
         assert _left(out_dir) == ["out.tif"], (fraction, _left(out_dir))
         assert (out_dir / "out.tif").read_bytes() == OLD
-    assert interrupted >= len(FRACTIONS) - 2
+    assert interrupted >= len(FRACTIONS) - 3  # the last offsets may fall after the end
