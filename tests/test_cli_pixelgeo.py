@@ -6,24 +6,9 @@ from __future__ import annotations
 import shutil
 
 import numpy as np
-import pytest
 
 from napari_meris_ortho.cli import main
 from napari_meris_ortho.io.geotiff import read_geotiff
-
-
-@pytest.fixture(scope="module")
-def scene():
-    from napari_meris_ortho.simulate.scene import generate_scene
-
-    return generate_scene("fr-small")
-
-
-@pytest.fixture(scope="module")
-def products(scene, tmp_path_factory):
-    from napari_meris_ortho.simulate.geocorrected import write_geocorrected
-
-    return write_geocorrected(scene, out_dir=tmp_path_factory.mktemp("cli_pixel"))
 
 
 def _run(capsys, *argv):
@@ -44,48 +29,48 @@ def test_sample_writes_the_geolocated_products(tmp_path, capsys):
     assert code == 2 and err.startswith("meris-ortho: error: AMORGOS FRG/FSG")
 
 
-def test_info_describes_both(products, capsys):
-    code, out, _ = _run(capsys, "info", products["fsg"])
+def test_info_describes_both(geolocated, capsys):
+    code, out, _ = _run(capsys, "info", geolocated["fsg"])
     assert code == 0
     assert "Product type   MER_FRG_1P" in out and "33 DSDs" in out
     assert "Corrected Longitude MDS(17)" in out and "Altitude MDS(19)" in out
     assert "Geolocation    per pixel, terrain-corrected" in out
-    code, out, _ = _run(capsys, "info", products["sen3"])
+    code, out, _ = _run(capsys, "info", geolocated["sen3"])
     assert code == 0
     assert "Product type   ME_1_FRG___" in out and "Format         SAFE .SEN3" in out
     assert "geo_coordinates.nc" in out and "Size           513 columns x 320 lines" in out
     assert "Geolocation    per pixel" in out and "No.  Date" in out
 
 
-def test_map_with_the_pixel_geolocation(products, tmp_path, capsys):
+def test_map_with_the_pixel_geolocation(geolocated, tmp_path, capsys):
     out = tmp_path / "pixel.tif"
-    code, _, _ = _run(capsys, "map", products["sen3"], "-o", out, "--geolocation", "pixel",
+    code, _, _ = _run(capsys, "map", geolocated["sen3"], "-o", out, "--geolocation", "pixel",
                       "--bands", "7", "--crs", "EPSG:32632", "--pixel-size", "300")
     assert code == 0
     arrays, grid, _ = read_geotiff(out)
     assert grid.crs.to_epsg() == 32632 and np.count_nonzero(arrays[0]) > 100_000
 
 
-def test_synthesize_with_the_pixel_geolocation(products, tmp_path, capsys):
+def test_synthesize_with_the_pixel_geolocation(geolocated, tmp_path, capsys):
     from napari_meris_ortho.synthesis import open_synthesis
 
     out = tmp_path / "syn"
-    code, _, _ = _run(capsys, "synthesize", products["fsg"], products["sen3"], "--out", out,
+    code, _, _ = _run(capsys, "synthesize", geolocated["fsg"], geolocated["sen3"], "--out", out,
                       "--geolocation", "pixel", "--bands", "7")
     assert code == 0
     count = open_synthesis(out).read("count")
     assert count.max() == 2 and np.count_nonzero(count == 2) > 100_000
 
 
-def test_bad_inputs_exit_2(scene, products, tmp_path, capsys):
-    code, _, err = _run(capsys, "map", products["sen3"], "-o", tmp_path / "a.tif",
-                        "--geolocation", "pixel", "--dem", scene.dem_paths["geotiff"])
+def test_bad_inputs_exit_2(fr_small, geolocated, tmp_path, capsys):
+    code, _, err = _run(capsys, "map", geolocated["sen3"], "-o", tmp_path / "a.tif",
+                        "--geolocation", "pixel", "--dem", fr_small.dem_paths["geotiff"])
     assert code == 2 and "DEMs given with geolocation 'pixel'" in err
-    code, _, err = _run(capsys, "map", scene.product_path, "-o", tmp_path / "b.tif",
+    code, _, err = _run(capsys, "map", fr_small.product_path, "-o", tmp_path / "b.tif",
                         "--geolocation", "pixel")
     assert code == 2 and "per-pixel geolocation" in err and err.count("\n") == 1
-    broken = tmp_path / products["sen3"].name
-    shutil.copytree(products["sen3"], broken)
+    broken = tmp_path / geolocated["sen3"].name
+    shutil.copytree(geolocated["sen3"], broken)
     (broken / "time_coordinates.nc").unlink()
     for argv in (["info", broken], ["map", broken, "-o", tmp_path / "c.tif"]):
         code, _, err = _run(capsys, *argv)
@@ -95,20 +80,20 @@ def test_bad_inputs_exit_2(scene, products, tmp_path, capsys):
     assert not list(tmp_path.glob("*.tif"))
 
 
-def test_broken_fsg_and_misshapen_sen3_exit_2(products, tmp_path, capsys):
+def test_broken_fsg_and_misshapen_sen3_exit_2(geolocated, tmp_path, capsys):
     import netCDF4
 
-    data = bytearray(products["fsg"].read_bytes())
+    data = bytearray(geolocated["fsg"].read_bytes())
     i = data.index(b'DS_NAME="Corrected Latitude MDS(18)')
     data[i + 9: i + 36] = b"Corrected Latitude MDS(99)"[:27].ljust(27)
-    bad = tmp_path / products["fsg"].name
+    bad = tmp_path / geolocated["fsg"].name
     bad.write_bytes(bytes(data))
     code, _, err = _run(capsys, "info", bad)
     assert code == 2 and err.count("\n") == 1
     assert err.startswith(f"meris-ortho: error: {bad}: MER_FRG_1P product without Corrected "
                           "Latitude MDS(18)")
-    broken = tmp_path / products["sen3"].name
-    shutil.copytree(products["sen3"], broken)
+    broken = tmp_path / geolocated["sen3"].name
+    shutil.copytree(geolocated["sen3"], broken)
     with netCDF4.Dataset(broken / "qualityFlags.nc", "a") as ds:
         ds.createDimension("few", 3)
         ds.renameVariable("quality_flags", "old")
