@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from napari_meris_ortho.engine.resample import resample, resample_bands
+from napari_meris_ortho.engine.resample import overview_level, resample, resample_bands
 from napari_meris_ortho.errors import OptionsError
 
 
@@ -83,3 +83,30 @@ def test_big_endian_memmap_and_out_argument(tmp_path):
 def test_unknown_method_is_an_options_error():
     with pytest.raises(OptionsError, match="sampling method"):
         resample(np.zeros((3, 3)), np.zeros(1), np.zeros(1), "lanczos")
+
+
+def test_overview_level_averages_2x2_ignoring_nodata_and_rounds_half_up():
+    a = np.array([[4, 0, 7], [6, 0, 9], [0, 0, 2]], np.uint16)
+    np.testing.assert_array_equal(overview_level(a, 0), [[5, 8], [0, 2]])  # (4+6)/2, (7+9)/2
+    np.testing.assert_array_equal(overview_level(a, 0, "nearest"), [[4, 7], [0, 2]])
+    b = np.array([[1, 2], [2, 2]], np.uint16)  # 7/4 = 1.75 -> 2; [[1, 2]] 1.5 -> 2
+    assert overview_level(b, 0)[0, 0] == 2 and overview_level(b[:1], 0)[0, 0] == 2
+    f = np.array([[1.0, 2.0, 3.0], [3.0, 4.0, np.nan]], np.float32)
+    np.testing.assert_allclose(overview_level(f, None), [[2.5, 3.0]])  # NaN and padding skipped
+    assert overview_level(f, None).dtype == np.float32
+    with pytest.raises(ValueError, match="resampling"):
+        overview_level(a, 0, "cubic")
+
+
+def test_overview_level_matches_a_numpy_reference_on_random_counts():
+    rng = np.random.default_rng(5)
+    a = rng.integers(0, 4, (37, 51)).astype(np.uint16) * rng.integers(1, 9000, (37, 51)).astype(
+        np.uint16)
+    p = np.zeros((38, 52))
+    p[:37, :51] = a
+    v = np.zeros_like(p)
+    v[:37, :51] = a != 0
+    s = p[0::2, 0::2] + p[1::2, 0::2] + p[0::2, 1::2] + p[1::2, 1::2]
+    n = v[0::2, 0::2] + v[1::2, 0::2] + v[0::2, 1::2] + v[1::2, 1::2]
+    ref = np.where(n > 0, np.floor(s / np.maximum(n, 1) + 0.5), 0)
+    np.testing.assert_array_equal(overview_level(a, 0), ref)

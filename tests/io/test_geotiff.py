@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 import rasterio
 
+from napari_meris_ortho.engine.resample import overview_level
 from napari_meris_ortho.errors import OutputError
 from napari_meris_ortho.geometry.grid import OutputGrid
 from napari_meris_ortho.io.geotiff import (
-    halve,
     meris_band_description,
     overview_levels,
     radiance_to_counts,
@@ -128,7 +128,7 @@ def test_cog_of_counts_validates_with_overviews_and_scale(tmp_path):
     out = write_cog(tmp_path / "c.tif", stream(), g, count=2, scales=scales, offsets=[0.0, 0.0],
                     units=["W m-2 sr-1 um-1"] * 2, descriptions=["b7", "b13"],
                     band_metadata=[{"sf_rad": s} for s in scales], metadata={"product": "p"},
-                    progress=lambda d, t: calls.append((d, t)))
+                    halve=overview_level, progress=lambda d, t: calls.append((d, t)))
     assert calls == [(1, 3), (2, 3), (3, 3)] and consumed == scales
     valid, errors, warnings = cog_validate(out, quiet=True)
     assert valid and not errors, errors
@@ -165,7 +165,8 @@ def test_cog_float32_deflate_and_errors_leave_no_file(tmp_path):
     g = OutputGrid("EPSG:32631", 500000.0, 5000000.0, 260.0, 260.0, 600, 520)
     bands = bands_for(g)
     out = write_cog(tmp_path / "f.tif", iter(bands), g, count=2, dtype="float32",
-                    nodata=None, compress="deflate", overview_resampling="nearest")
+                    nodata=None, compress="deflate", overview_resampling="nearest",
+                    halve=overview_level)
     assert cog_validate(out, quiet=True)[0]
     with rasterio.open(out) as ds:
         assert ds.compression.name.lower() == "deflate" and ds.nodata is None
@@ -184,10 +185,20 @@ def test_cog_float32_deflate_and_errors_leave_no_file(tmp_path):
     assert [p.name for p in tmp_path.iterdir()] == ["f.tif"]
 
 
-def test_overview_levels_and_halving_ignore_nodata():
+def test_overview_levels():
     assert overview_levels(3758, 2944) == [2, 4, 8] and overview_levels(512, 300) == []
-    a = np.array([[4, 0, 7], [6, 0, 9], [0, 0, 2]], np.uint16)
-    np.testing.assert_array_equal(halve(a, 0), [[5, 8], [0, 2]])  # (4+6)/2, (7+9)/2, 0, 2
-    np.testing.assert_array_equal(halve(a, 0, "nearest"), [[4, 7], [0, 2]])
-    f = np.array([[1.0, 2.0, 3.0], [3.0, 4.0, 5.0]], np.float32)
-    np.testing.assert_allclose(halve(f, None), [[2.5, 4.0]])  # the padding is not counted
+
+
+def test_cog_without_a_halving_kernel_lets_gdal_build_the_overviews(tmp_path):
+    from rio_cogeo.cogeo import cog_validate
+
+    g = OutputGrid("EPSG:4326", 10.0, 47.0, 0.002, 0.002, 1300, 1100)
+    counts, _ = radiances_for(g, [0.01])
+    out = write_cog(tmp_path / "g.tif", iter(counts), g, count=1)
+    assert cog_validate(out, quiet=True)[0]
+    with rasterio.open(out) as ds:
+        assert ds.overviews(1) == [2, 4]
+        np.testing.assert_array_equal(ds.read(1), counts[0])
+        ov = ds.read(1, out_shape=(g.height // 2, g.width // 2)).astype(float)
+    mine = overview_level(counts[0], 0).astype(float)  # the same 2 x 2 average, nodata ignored
+    assert np.max(np.abs(ov - mine)) <= 1.0

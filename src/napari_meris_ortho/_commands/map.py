@@ -155,6 +155,7 @@ def _write(args: argparse.Namespace, ante: Any, progress: Any) -> None:
     """The bands streamed into a Cloud-Optimized GeoTIFF, then the diagnostics."""
     import numpy as np
 
+    from ..engine.resample import overview_level
     from ..io.geotiff import meris_band_description, write_cog
     from ..ortho import RADIANCE_UNITS, band_metadata
 
@@ -168,6 +169,7 @@ def _write(args: argparse.Namespace, ante: Any, progress: Any) -> None:
               units=[RADIANCE_UNITS] * len(bands),
               descriptions=[meris_band_description(b, wl.get(b)) for b in bands],
               band_metadata=band_metadata(stats, bands), compress=args.compress,
+              halve=overview_level,
               metadata={"product": stats["product"],
                         "product_name": stats.get("product_name", ""),
                         "radiance": RADIANCE_NOTE[args.dtype], "elevation": args.elevation,
@@ -181,7 +183,7 @@ def _write(args: argparse.Namespace, ante: Any, progress: Any) -> None:
                   for n in names)
         write_cog(_diagnostics_path(Path(args.output)), arrays, ante.grid, count=len(names),
                   nodata=None, descriptions=list(names), dtype="float32",
-                  compress=args.compress, overview_resampling="nearest",
+                  compress=args.compress, overview_resampling="nearest", halve=overview_level,
                   metadata={"elevation_source": "k >= 0: DEM k; -1: tie points; -2: none"})
 
 

@@ -182,3 +182,50 @@ def _apply(image, il, wl, ip, wp, valid, out):  # pragma: no cover
                 row += wp[i, b] * image[il[i, a], ip[i, b]]
             acc += wl[i, a] * row
         out[i] = acc
+
+
+def overview_level(a: np.ndarray, nodata: float | None, resampling: str = "average"
+                   ) -> np.ndarray:
+    """The next overview level of a 2-D band (GDAL ``AVERAGE``): the mean of each 2 x 2 block
+    ignoring ``nodata`` and NaN (integers rounded half up; a block of nodata gives nodata; odd
+    sizes: the last row/column averages what there is), or its upper-left pixel ("nearest")."""
+    if resampling == "nearest":
+        return np.ascontiguousarray(a[0::2, 0::2])
+    if resampling != "average":
+        raise ValueError(f"unknown overview resampling {resampling!r}")
+    src = _native(a)
+    out = np.empty(((src.shape[0] + 1) // 2, (src.shape[1] + 1) // 2), src.dtype)
+    _halve_average(np.ascontiguousarray(src), out, 0.0 if nodata is None else float(nodata),
+                   nodata is not None, src.dtype.kind in "iu")
+    return out
+
+
+@njit(cache=True, inline="always")
+def _add(v, fill, skip_fill, s, n):  # pragma: no cover
+    if (skip_fill and v == fill) or v != v:
+        return s, n
+    return s + v, n + 1
+
+
+@njit(cache=True)  # serial: memory bound (15 ms for 11 M pixels); parallel costs compile time
+def _halve_average(a, out, fill, skip_fill, rounded):  # pragma: no cover
+    h, w = a.shape
+    for i in range(out.shape[0]):
+        r0 = 2 * i
+        r1 = r0 + 1 if r0 + 1 < h else -1
+        for j in range(out.shape[1]):
+            c0 = 2 * j
+            c1 = c0 + 1
+            s, n = _add(a[r0, c0], fill, skip_fill, 0.0, 0)
+            if c1 < w:
+                s, n = _add(a[r0, c1], fill, skip_fill, s, n)
+            if r1 >= 0:
+                s, n = _add(a[r1, c0], fill, skip_fill, s, n)
+                if c1 < w:
+                    s, n = _add(a[r1, c1], fill, skip_fill, s, n)
+            if n == 0:
+                out[i, j] = fill
+            elif rounded:
+                out[i, j] = math.floor(s / n + 0.5)
+            else:
+                out[i, j] = s / n

@@ -7,9 +7,9 @@ metadata tags (radiance scale factors...), 256 x 256 tiles, deflate compression,
 temporary file renamed at the end (``_atomic.atomic_path``).
 ``write_cog(path, bands, grid, count=...)`` writes a Cloud-Optimized GeoTIFF from an iterable of
 bands (a generator: one band in memory at a time): each band and its overview levels (2 x 2
-average, nodata ignored: ``halve``) staged into tiled GeoTIFFs (ZSTD level 1), then copied by
-GDAL's COG driver with those internal overviews, ZSTD or DEFLATE with a predictor and
-``NUM_THREADS=ALL_CPUS``. Integer bands carry
+average, nodata ignored: the caller's ``halve`` kernel) staged into uncompressed tiled GeoTIFFs,
+then copied by GDAL's COG driver with those internal overviews, ZSTD or DEFLATE with a predictor
+and ``NUM_THREADS=ALL_CPUS`` (compressed once). Integer bands carry
 GDAL scale/offset (``counts_to_radiance``: radiance = counts x scale + offset), so GDAL, QGIS
 and rasterio (``masked=True`` and the scales) read physical values.
 ``read_geotiff(path)`` -> ``(arrays, grid, metadata)`` with metadata = {"tags": dataset tags,
@@ -20,7 +20,7 @@ and rasterio (``masked=True`` and the scales) read physical values.
 from __future__ import annotations
 
 import contextlib
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -39,6 +39,8 @@ COMPRESSIONS = ("zstd", "deflate")
 #: compression levels: fast, most of the size gain (ZSTD 1 ~ DEFLATE 6 in size here)
 _LEVEL = {"zstd": 1, "deflate": 6}
 COUNT_MAX = 65535
+#: one overview level from the previous: (array, nodata, "average" | "nearest") -> array
+Halve = Callable[[np.ndarray, float | None, str], np.ndarray]
 
 
 def meris_band_description(band: int, wavelength_nm: float | None = None) -> str:
@@ -116,8 +118,7 @@ def _stage_profile(grid: OutputGrid, count: int, dtype: np.dtype, nodata: float 
     return dict(driver="GTiff", width=grid.width, height=grid.height, count=count,
                 dtype=dtype.name, crs=rasterio.crs.CRS.from_wkt(grid.crs.to_wkt()),
                 transform=grid.transform, nodata=nodata, tiled=True, blockxsize=COG_BLOCK,
-                blockysize=COG_BLOCK, compress="zstd", zstd_level=1, num_threads="ALL_CPUS",
-                interleave="band", BIGTIFF="IF_SAFER")
+                blockysize=COG_BLOCK, interleave="band", BIGTIFF="IF_SAFER")
 
 
 def _cog_options(compress: str, level: int | None) -> dict[str, Any]:
@@ -125,7 +126,7 @@ def _cog_options(compress: str, level: int | None) -> dict[str, Any]:
         raise OutputError(f"unknown compression {compress!r}: choose {', '.join(COMPRESSIONS)}")
     return dict(driver="COG", compress=compress.upper(), level=level or _LEVEL[compress],
                 predictor="YES", num_threads="ALL_CPUS", blocksize=COG_BLOCK,
-                overviews="FORCE_USE_EXISTING", bigtiff="IF_SAFER")
+                bigtiff="IF_SAFER")
 
 
 def overview_levels(width: int, height: int, block: int = COG_BLOCK) -> list[int]:
@@ -135,28 +136,6 @@ def overview_levels(width: int, height: int, block: int = COG_BLOCK) -> list[int
         f *= 2
         levels.append(f)
     return levels
-
-
-def halve(a: np.ndarray, nodata: float | None, resampling: str = "average") -> np.ndarray:
-    """One overview level: 2 x 2 average ignoring ``nodata`` (integers rounded half up) or the
-    upper-left pixel ("nearest"); odd sizes padded with nodata."""
-    if resampling == "nearest":
-        return a[0::2, 0::2].copy()
-    h, w = a.shape
-    fill = 0.0 if nodata is None else float(nodata)
-    p = np.full((h + h % 2, w + w % 2), fill, np.float64)
-    p[:h, :w] = a
-    v = np.ones(p.shape, np.float64) if nodata is None else (p != fill).astype(np.float64)
-    if nodata is None:
-        v[h:, :] = 0.0
-        v[:, w:] = 0.0
-    q = p * v
-    s = q[0::2, 0::2] + q[1::2, 0::2] + q[0::2, 1::2] + q[1::2, 1::2]
-    n = v[0::2, 0::2] + v[1::2, 0::2] + v[0::2, 1::2] + v[1::2, 1::2]
-    m = s / np.maximum(n, 1.0)
-    if a.dtype.kind in "iu":
-        m = np.floor(m + 0.5)
-    return np.where(n > 0, m, fill).astype(a.dtype)
 
 
 def _optional(seq: Sequence[Any] | None, count: int, name: str, out: Path) -> None:
@@ -170,16 +149,18 @@ def write_cog(
     offsets: Sequence[float] | None = None, units: Sequence[str] | None = None,
     descriptions: Sequence[str] | None = None, metadata: Mapping[str, Any] | None = None,
     band_metadata: Sequence[Mapping[str, Any]] | None = None, compress: str = "zstd",
-    level: int | None = None, overview_resampling: str = "average",
+    level: int | None = None, overview_resampling: str = "average", halve: Halve | None = None,
     progress: ProgressCallback | None = None,
 ) -> Path:
     """Write ``count`` bands (an iterable, consumed one band at a time) as a Cloud-Optimized
     GeoTIFF with internal overviews (module docstring); atomic (tmp file + rename).
 
-    Each band is staged with its overview levels (``halve``, computed from the band in memory:
-    GDAL's own overview pass over 15 pixel-interleaved bands costs ten times more), then a VRT
-    holding them is copied by the COG driver. Raises OutputError for an unwritable directory,
-    bands not matching the grid or ``count``.
+    Each band is staged uncompressed with its overview levels (``halve(level, nodata,
+    overview_resampling)`` gives the next level from the band in memory, e.g.
+    ``engine.resample.overview_level``; GDAL's own overview pass costs ten times more), then a
+    VRT holding them is copied, compressed once, by the COG driver; without ``halve`` GDAL
+    builds the overviews. Raises OutputError for an unwritable directory, bands not matching
+    the grid or ``count``.
     """
     import rasterio
     import rasterio.shutil
@@ -194,7 +175,16 @@ def write_cog(
     if overview_resampling not in ("average", "nearest"):
         raise OutputError(f"unknown overview resampling {overview_resampling!r}")
     options = _cog_options(compress, level)
-    levels = overview_levels(grid.width, grid.height)
+    levels = overview_levels(grid.width, grid.height) if halve is not None else []
+    if halve is None:
+        options.update(overviews="AUTO", resampling=overview_resampling.upper())
+    else:
+        options.update(overviews="FORCE_USE_EXISTING")
+
+    def next_level(a: np.ndarray) -> np.ndarray:
+        assert halve is not None  # only called when there are staged levels
+        return halve(a, nodata, overview_resampling)
+
     try:
         with atomic_path(out, suffix=".tif") as tmp, _stage_dir(out) as stage:
             pyramid = [stage / f"ov{f}.tif" for f in levels]
@@ -205,8 +195,7 @@ def write_cog(
                     p, "w", **_stage_profile(_shrunk(grid, f), count, dt, nodata)))
                     for p, f in zip(pyramid, levels, strict=True)]
                 ds.update_tags(**_tag_values(metadata))
-                n = _write_bands(ds, ovs, bands, grid, dt, out, count, nodata,
-                                 overview_resampling, progress)
+                n = _write_bands(ds, ovs, bands, grid, dt, out, count, next_level, progress)
                 if n != count:
                     raise OutputError(f"{out}: {n} bands given, {count} expected")
                 _band_info(ds, descriptions, band_metadata, units)
@@ -263,7 +252,7 @@ def _stage_dir(out: Path) -> Any:
 
 
 def _write_bands(ds: Any, ovs: Sequence[Any], bands: Iterable[np.ndarray], grid: OutputGrid,
-                 dt: np.dtype, out: Path, count: int, nodata: float | None, resampling: str,
+                 dt: np.dtype, out: Path, count: int, halve: Callable[[np.ndarray], np.ndarray],
                  progress: ProgressCallback | None) -> int:
     n = 0
     for n, b in enumerate(bands, start=1):
@@ -274,7 +263,7 @@ def _write_bands(ds: Any, ovs: Sequence[Any], bands: Iterable[np.ndarray], grid:
         a = np.asarray(b).astype(dt, copy=False)
         ds.write(a, n)
         for ov in ovs:
-            a = halve(a, nodata, resampling)
+            a = halve(a)
             ov.write(a, n)
         if progress is not None:
             progress(n, count + 1)
