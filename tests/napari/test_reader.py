@@ -108,13 +108,14 @@ def test_geotiff_layers_in_world_frame(tmp_path):
 
 def test_geotiff_counts_with_scale_read_as_radiances(tmp_path):
     """``meris-ortho map`` writes uint16 counts with GDAL scale = sf_rad: layers hold radiances."""
+    from napari_meris_ortho.engine.resample import overview_level
     from napari_meris_ortho.geometry.grid import OutputGrid
     from napari_meris_ortho.io.geotiff import write_cog
 
     g = OutputGrid("EPSG:32632", 400_000.0, 5_100_000.0, 300.0, 300.0, 30, 20)
     counts = np.arange(20 * 30, dtype=np.uint16).reshape(20, 30)  # 0 = background
     path = write_cog(tmp_path / "c.tif", [counts, counts], g, count=2, scales=[0.01, 0.5],
-                     offsets=[0.0, 0.0])
+                     offsets=[0.0, 0.0], halve=overview_level)
     layers = read_layers(str(path))
     assert layers[0][0].dtype == np.float32
     np.testing.assert_allclose(layers[1][0], counts * np.float32(0.5))

@@ -5,13 +5,13 @@ of the ``OutputGrid``, nodata 0 (the MERSYN background), band descriptions (e.g.
 ``meris_band_description(7, 665.0)`` -> "MERIS band 7 (665.0 nm)"), dataset and per-band
 metadata tags (radiance scale factors...), 256 x 256 tiles, deflate compression, written to a
 temporary file renamed at the end (``_atomic.atomic_path``).
-``write_cog(path, bands, grid, count=...)`` writes a Cloud-Optimized GeoTIFF from an iterable of
-bands (a generator: one band in memory at a time): each band and its overview levels (2 x 2
-average, nodata ignored: the caller's ``halve`` kernel) staged into uncompressed tiled GeoTIFFs,
-then copied by GDAL's COG driver with those internal overviews, ZSTD or DEFLATE with a predictor
-and ``NUM_THREADS=ALL_CPUS`` (compressed once). Integer bands carry
-GDAL scale/offset (``counts_to_radiance``: radiance = counts x scale + offset), so GDAL, QGIS
-and rasterio (``masked=True`` and the scales) read physical values.
+``write_cog(path, bands, grid, count=..., halve=...)`` writes a Cloud-Optimized GeoTIFF from an
+iterable of bands (a generator: one band in memory at a time): each band and its overview levels
+(2 x 2 average, nodata ignored: the caller's ``halve`` kernel) cut into 512 x 512 tiles,
+predicted and compressed (ZSTD or DEFLATE) on all cores while the next band is computed, laid
+out as GDAL's COG driver does (``io.cog``), with GDAL's own georeferencing and metadata tags.
+Integer bands carry GDAL scale/offset (``counts_to_radiance``: radiance = counts x scale +
+offset), so GDAL, QGIS and rasterio (``masked=True`` and the scales) read physical values.
 ``read_geotiff(path)`` -> ``(arrays, grid, metadata)`` with metadata = {"tags": dataset tags,
 "descriptions": per band, "band_tags": per band, "nodata": value, "dtype": name, "scales",
 "offsets"}; ``scaled=True`` applies scale/offset (float32, background stays 0).
@@ -19,7 +19,6 @@ and rasterio (``masked=True`` and the scales) read physical values.
 
 from __future__ import annotations
 
-import contextlib
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -31,6 +30,7 @@ from .._atomic import atomic_path, scratch_dir
 from ..errors import OutputError
 from ..geometry.grid import OutputGrid
 from ..progress import ProgressCallback
+from .cog import EVERY_IFD_TAGS, GEO_TAGS, CogWriter, Tag, template_tags
 
 TILE = 256
 #: block size of the Cloud-Optimized GeoTIFFs (COG driver default)
@@ -111,24 +111,6 @@ def radiance_to_counts(radiance: np.ndarray, scale: float, offset: float = 0.0) 
     return c
 
 
-def _stage_profile(grid: OutputGrid, count: int, dtype: np.dtype, nodata: float | None
-                   ) -> dict[str, Any]:
-    import rasterio
-
-    return dict(driver="GTiff", width=grid.width, height=grid.height, count=count,
-                dtype=dtype.name, crs=rasterio.crs.CRS.from_wkt(grid.crs.to_wkt()),
-                transform=grid.transform, nodata=nodata, tiled=True, blockxsize=COG_BLOCK,
-                blockysize=COG_BLOCK, interleave="band", BIGTIFF="IF_SAFER")
-
-
-def _cog_options(compress: str, level: int | None) -> dict[str, Any]:
-    if compress not in COMPRESSIONS:
-        raise OutputError(f"unknown compression {compress!r}: choose {', '.join(COMPRESSIONS)}")
-    return dict(driver="COG", compress=compress.upper(), level=level or _LEVEL[compress],
-                predictor="YES", num_threads="ALL_CPUS", blocksize=COG_BLOCK,
-                bigtiff="IF_SAFER")
-
-
 def overview_levels(width: int, height: int, block: int = COG_BLOCK) -> list[int]:
     """Decimation factors 2, 4, ... until the overview fits one block (GDAL COG ``AUTO``)."""
     levels, f = [], 1
@@ -145,129 +127,106 @@ def _optional(seq: Sequence[Any] | None, count: int, name: str, out: Path) -> No
 
 def write_cog(
     path: str | Path, bands: Iterable[np.ndarray], grid: OutputGrid, *, count: int,
-    dtype: Any = np.uint16, nodata: float | None = 0, scales: Sequence[float] | None = None,
-    offsets: Sequence[float] | None = None, units: Sequence[str] | None = None,
-    descriptions: Sequence[str] | None = None, metadata: Mapping[str, Any] | None = None,
+    halve: Halve, dtype: Any = np.uint16, nodata: float | None = 0,
+    scales: Sequence[float] | None = None, offsets: Sequence[float] | None = None,
+    units: Sequence[str] | None = None, descriptions: Sequence[str] | None = None,
+    metadata: Mapping[str, Any] | None = None,
     band_metadata: Sequence[Mapping[str, Any]] | None = None, compress: str = "zstd",
-    level: int | None = None, overview_resampling: str = "average", halve: Halve | None = None,
+    level: int | None = None, overview_resampling: str = "average",
     progress: ProgressCallback | None = None,
 ) -> Path:
     """Write ``count`` bands (an iterable, consumed one band at a time) as a Cloud-Optimized
     GeoTIFF with internal overviews (module docstring); atomic (tmp file + rename).
 
-    Each band is staged uncompressed with its overview levels (``halve(level, nodata,
-    overview_resampling)`` gives the next level from the band in memory, e.g.
-    ``engine.resample.overview_level``; GDAL's own overview pass costs ten times more), then a
-    VRT holding them is copied, compressed once, by the COG driver; without ``halve`` GDAL
-    builds the overviews. Raises OutputError for an unwritable directory, bands not matching
-    the grid or ``count``.
+    ``halve(level, nodata, overview_resampling)`` gives the next overview level of a band
+    (``engine.resample.overview_level``). Each band's tiles are compressed on worker threads
+    while the next band is computed (``io.cog``); GDAL writes the georeferencing and metadata
+    tags into a 1 x 1 template that is copied. Raises OutputError for an unwritable directory,
+    bands not matching the grid or ``count``.
     """
-    import rasterio
-    import rasterio.shutil
-    from rasterio._err import CPLE_BaseError
-    from rasterio.errors import RasterioError
-
     out = Path(path)
     dt = np.dtype(dtype)
     for name, seq in (("descriptions", descriptions), ("band_metadata", band_metadata),
                       ("scales", scales), ("offsets", offsets), ("units", units)):
         _optional(seq, count, name, out)
+    if compress not in COMPRESSIONS:
+        raise OutputError(f"unknown compression {compress!r}: choose {', '.join(COMPRESSIONS)}")
     if overview_resampling not in ("average", "nearest"):
         raise OutputError(f"unknown overview resampling {overview_resampling!r}")
-    options = _cog_options(compress, level)
-    levels = overview_levels(grid.width, grid.height) if halve is not None else []
-    if halve is None:
-        options.update(overviews="AUTO", resampling=overview_resampling.upper())
-    else:
-        options.update(overviews="FORCE_USE_EXISTING")
-
-    def next_level(a: np.ndarray) -> np.ndarray:
-        assert halve is not None  # only called when there are staged levels
-        return halve(a, nodata, overview_resampling)
-
+    n_levels = len(overview_levels(grid.width, grid.height))
+    tags = _template(out, grid, count, dt, nodata, scales, offsets, units, descriptions,
+                     metadata, band_metadata)
+    main = {k: v for k, v in tags.items() if k in GEO_TAGS}
+    every = {k: v for k, v in tags.items() if k in EVERY_IFD_TAGS}
     try:
         with atomic_path(out, suffix=".tif") as tmp, _stage_dir(out) as stage:
-            pyramid = [stage / f"ov{f}.tif" for f in levels]
-            with contextlib.ExitStack() as stack:
-                ds = stack.enter_context(rasterio.open(
-                    stage / "full.tif", "w", **_stage_profile(grid, count, dt, nodata)))
-                ovs = [stack.enter_context(rasterio.open(
-                    p, "w", **_stage_profile(_shrunk(grid, f), count, dt, nodata)))
-                    for p, f in zip(pyramid, levels, strict=True)]
-                ds.update_tags(**_tag_values(metadata))
-                n = _write_bands(ds, ovs, bands, grid, dt, out, count, next_level, progress)
+            writer = CogWriter(grid.shape, n_levels, dt, stage / "full.tiles",
+                               compress=compress, level=level or _LEVEL[compress],
+                               block=COG_BLOCK)
+            try:
+                n = 0
+                for n, b in enumerate(bands, start=1):
+                    writer.add_band(_levels(b, n, grid, dt, out, count, n_levels,
+                                            lambda a: halve(a, nodata, overview_resampling)))
+                    if progress is not None:
+                        progress(n, count + 1)
                 if n != count:
                     raise OutputError(f"{out}: {n} bands given, {count} expected")
-                _band_info(ds, descriptions, band_metadata, units)
-                if scales is not None:
-                    ds.scales = [float(v) for v in scales]
-                if offsets is not None:
-                    ds.offsets = [float(v) for v in offsets]
-            vrt = _vrt_with_overviews(stage / "full.tif", pyramid, stage / "full.vrt",
-                                      {"Scale": scales, "Offset": offsets})
-            rasterio.shutil.copy(vrt, tmp, **options)
-    except (RasterioError, CPLE_BaseError, OSError) as exc:
+                with open(tmp, "wb") as f:
+                    writer.finish(f, main, every)
+            finally:
+                writer.close()
+    except OSError as exc:
         raise OutputError(f"{out}: cannot write GeoTIFF ({exc})") from exc
     if progress is not None:
         progress(count + 1, count + 1)
     return out
 
 
-def _shrunk(grid: OutputGrid, f: int) -> OutputGrid:
-    """The grid of overview level ``f`` (ceil of the sizes; only the shape matters here)."""
-    return OutputGrid(grid.crs, grid.x0, grid.y0, grid.dx * f, grid.dy * f,
-                      -(-grid.width // f), -(-grid.height // f))
+def _levels(b: np.ndarray, n: int, grid: OutputGrid, dt: np.dtype, out: Path, count: int,
+            n_levels: int, halve: Callable[[np.ndarray], np.ndarray]) -> list[np.ndarray]:
+    """Band ``n`` and its overview levels, checked against the grid and ``count``."""
+    if n > count:
+        raise OutputError(f"{out}: more than {count} bands given")
+    if np.shape(b) != grid.shape:
+        raise OutputError(f"{out}: band {n} has shape {np.shape(b)}, grid is {grid.shape}")
+    levels = [np.asarray(b).astype(dt, copy=False)]
+    for _ in range(n_levels):
+        levels.append(halve(levels[-1]))
+    return levels
 
 
-def _vrt_with_overviews(full: Path, pyramid: Sequence[Path], vrt: Path,
-                        exact: Mapping[str, Sequence[float] | None]) -> Path:
-    """A VRT of ``full`` (GDAL writes it with every band's metadata) whose bands list the
-    staged overview levels; ``exact`` values (Scale, Offset) written with all their digits."""
-    import xml.etree.ElementTree as ET
+def _template(out: Path, grid: OutputGrid, count: int, dt: np.dtype, nodata: float | None,
+              scales: Sequence[float] | None, offsets: Sequence[float] | None,
+              units: Sequence[str] | None, descriptions: Sequence[str] | None,
+              metadata: Mapping[str, Any] | None,
+              band_metadata: Sequence[Mapping[str, Any]] | None) -> dict[int, Tag]:
+    """The TIFF fields GDAL writes for this grid and metadata, from a 1 x 1 GeoTIFF in memory
+    (CRS GeoKeys, transform, GDAL_METADATA with scales/offsets/units/descriptions, nodata)."""
+    import rasterio
+    from rasterio.errors import RasterioError
+    from rasterio.io import MemoryFile
 
-    import rasterio.shutil
-
-    rasterio.shutil.copy(full, vrt, driver="VRT")
-    tree = ET.parse(vrt)
-    for band in tree.getroot().iter("VRTRasterBand"):
-        k = int(band.get("band", "1")) - 1
-        for tag, values in exact.items():
-            if values is not None:
-                node = band.find(tag)
-                node = ET.SubElement(band, tag) if node is None else node
-                node.text = repr(float(values[k]))
-        for p in pyramid:
-            ov = ET.SubElement(band, "Overview")
-            src = ET.SubElement(ov, "SourceFilename", relativeToVRT="0")
-            src.text = str(p)
-            ET.SubElement(ov, "SourceBand").text = band.get("band")
-    tree.write(vrt)
-    return vrt
+    try:
+        with MemoryFile() as mem:
+            with mem.open(driver="GTiff", width=1, height=1, count=count, dtype=dt.name,
+                          crs=rasterio.crs.CRS.from_wkt(grid.crs.to_wkt()),
+                          transform=grid.transform, nodata=nodata) as ds:
+                ds.update_tags(**_tag_values(metadata))
+                _band_info(ds, descriptions, band_metadata, units)
+                if scales is not None:
+                    ds.scales = [float(v) for v in scales]
+                if offsets is not None:
+                    ds.offsets = [float(v) for v in offsets]
+            return template_tags(bytes(mem.getbuffer()))
+    except (RasterioError, ValueError) as exc:
+        raise OutputError(f"{out}: cannot write GeoTIFF ({exc})") from exc
 
 
 def _stage_dir(out: Path) -> Any:
-    """A hidden staging directory next to the output, removed in any case (also on a signal;
-    after a SIGKILL by the next write there)."""
+    """A hidden scratch directory next to the output (the full-resolution tiles spill there),
+    removed in any case (also on a signal; after a SIGKILL by the next write there)."""
     return scratch_dir(out, suffix=".stage")
-
-
-def _write_bands(ds: Any, ovs: Sequence[Any], bands: Iterable[np.ndarray], grid: OutputGrid,
-                 dt: np.dtype, out: Path, count: int, halve: Callable[[np.ndarray], np.ndarray],
-                 progress: ProgressCallback | None) -> int:
-    n = 0
-    for n, b in enumerate(bands, start=1):
-        if n > count:
-            raise OutputError(f"{out}: more than {count} bands given")
-        if np.shape(b) != grid.shape:
-            raise OutputError(f"{out}: band {n} has shape {np.shape(b)}, grid is {grid.shape}")
-        a = np.asarray(b).astype(dt, copy=False)
-        ds.write(a, n)
-        for ov in ovs:
-            a = halve(a)
-            ov.write(a, n)
-        if progress is not None:
-            progress(n, count + 1)
-    return n
 
 
 def _band_info(ds: Any, descriptions: Sequence[str] | None,
