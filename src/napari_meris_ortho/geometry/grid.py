@@ -330,6 +330,10 @@ class OutputGrid:
         cols = np.arange(self.width, dtype=np.float64)
         rows = np.arange(row_start, row_stop, dtype=np.float64)
         x, y = self.xy(rows[:, None], cols[None, :])
+        shape = (rows.size, cols.size)
+        if self.is_lonlat:  # separable: one row of longitudes, one column of latitudes
+            lon, lat = self._xy_to_lonlat(x, y)
+            return np.broadcast_to(lon, shape).copy(), np.broadcast_to(lat, shape).copy()
         x, y = np.broadcast_arrays(x, y)
         return self._xy_to_lonlat(x, y)
 
