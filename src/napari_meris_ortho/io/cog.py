@@ -128,7 +128,7 @@ class CogWriter:
 
     def __init__(self, shape: tuple[int, int], n_levels: int, dtype: Any, spill: Path, *,
                  compress: str = "zstd", level: int = 1, block: int = 512,
-                 threads: int | None = None, memory_budget: int = 768 * 2 ** 20) -> None:
+                 threads: int | None = None, memory_budget: int = 256 * 2 ** 20) -> None:
         if compress not in COMPRESSION_CODE:
             raise ValueError(f"unknown compression {compress!r}")
         self.dtype = np.dtype(dtype)
