@@ -357,8 +357,8 @@ class Antecedents:
 
         if self._index is None:
             first, stop = self.window
-            self._index = nearest_pixel(self.line.astype(np.float64) - first, self.col,
-                                        stop - first, int(self.prod.width))
+            self._index = nearest_pixel(self.line, self.col, stop - first,
+                                        int(self.prod.width), line_offset=first)
         return self._index
 
     def _timed(self, key: str, t0: float) -> None:

@@ -17,12 +17,13 @@ vertices projected by pyproj. ``margin`` dilates the spans by whole output pixel
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 import pyproj
-from numba import njit, prange
+from numba import njit
 
 from ..geometry.grid import OutputGrid, parse_crs
 
@@ -201,29 +202,18 @@ def row_spans(boundary: Boundary, grid: OutputGrid, row_start: int = 0,
     return RowSpans(row_start, grid.width, rptr, start, stop)
 
 
-@njit(cache=True)
-def _sorted_small(x):  # pragma: no cover
-    """A sorted copy of ``x`` (insertion sort: a few edge crossings per line; numba's own sort
-    costs seconds of compilation per dtype)."""
-    out = x.copy()
-    for i in range(1, out.size):
-        v = out[i]
-        k = i - 1
-        while k >= 0 and out[k] > v:
-            out[k + 1] = out[k]
-            k -= 1
-        out[k + 1] = v
-    return out
-
-
 @njit(cache=True)  # serial: a few crossings per line; a parallel loop costs compile time
 def _scan(xv, yv, ptr, shifts, x0, y0, dx, dy, width, r0, margin, counts, start, stop, rptr,
           fill):  # pragma: no cover
-    """Scanline fill: for each line y = y0 - (i + 0.5) dy, pixel-centre intervals inside."""
+    """Scanline fill: for each line y = y0 - (i + 0.5) dy, pixel-centre intervals inside.
+
+    The crossings of a line are sorted in place by insertion (a few per line; numba's own sort
+    costs seconds of compilation per dtype), in one buffer for all lines.
+    """
     n_edges = xv.size
+    xs = np.empty(n_edges * shifts.size + 1)
     for r in range(counts.size):
         y = y0 - (r0 + r + 0.5) * dy
-        xs = np.empty(n_edges * shifts.size + 1)
         n = 0
         for p in range(ptr.size - 1):
             for e in range(ptr[p], ptr[p + 1] - 1):
@@ -231,15 +221,19 @@ def _scan(xv, yv, ptr, shifts, x0, y0, dx, dy, width, r0, margin, counts, start,
                 if (ya <= y) != (yb <= y):
                     x = xv[e] + (y - ya) * (xv[e + 1] - xv[e]) / (yb - ya)
                     for s in range(shifts.size):
-                        xs[n] = x + shifts[s]
+                        v = x + shifts[s]
+                        m = n - 1
+                        while m >= 0 and xs[m] > v:
+                            xs[m + 1] = xs[m]
+                            m -= 1
+                        xs[m + 1] = v
                         n += 1
-        xs_sorted = _sorted_small(xs[:n])
         k = 0
         w = rptr[r] if fill else 0
         last_stop = -1
         for m in range(0, n - 1, 2):
-            a = int(np.ceil((xs_sorted[m] - x0) / dx - 0.5)) - margin
-            b = int(np.ceil((xs_sorted[m + 1] - x0) / dx - 0.5)) + margin
+            a = math.ceil((xs[m] - x0) / dx - 0.5) - margin
+            b = math.ceil((xs[m + 1] - x0) / dx - 0.5) + margin
             a = min(max(a, 0), width)
             b = min(max(b, 0), width)
             if b <= a:
@@ -324,8 +318,8 @@ def _union_pair(rptr, start, stop, shift, counts, ostart, ostop, optr, fill):  #
             counts[r] = k
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True)  # serial: memory bound
 def _fill_mask(ptr, start, stop, out):  # pragma: no cover
-    for r in prange(ptr.size - 1):
+    for r in range(ptr.size - 1):
         for k in range(ptr[r], ptr[r + 1]):
             out[r, start[k]:stop[k]] = True

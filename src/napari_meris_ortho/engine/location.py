@@ -18,11 +18,12 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 
 from ..geometry.earth import MEAN_EARTH_RADIUS, WGS84_A, WGS84_E2
 from ..geometry.tiepoints import TiePointGrid
 from ..options import Geolocation, Parallax, parse
+from .threads import split_range
 
 
 def parallax_code(model: str) -> int:
@@ -145,18 +146,13 @@ def direct_point(line: float, col: float, h: float, coef: np.ndarray, df: float,
     return lo, la, h, e, n, dlo_du / df, dlo_dv / dj, dla_du / df, dla_dv / dj
 
 
-@njit(cache=True, parallel=True)
-def _direct_many(line, col, h, coef, df, dj, model, geo):
-    n = line.size
-    out_lon = np.empty(n)
-    out_lat = np.empty(n)
-    out_h = np.empty(n)
-    for i in prange(n):
+@njit(cache=True, nogil=True)
+def _direct_range(lo, hi, line, col, h, coef, df, dj, model, geo, out_lon, out_lat):
+    """Points [lo, hi) of ``direct_location`` (flat arrays)."""
+    for i in range(lo, hi):
         r = direct_point(line[i], col[i], h[i], coef, df, dj, model, geo)
         out_lon[i] = r[0]
         out_lat[i] = r[1]
-        out_h[i] = r[2]
-    return out_lon, out_lat, out_h
 
 
 def wrap_longitude(lon: np.ndarray) -> np.ndarray:
@@ -179,10 +175,13 @@ def direct_location(grid: TiePointGrid, line: np.ndarray, col: np.ndarray,
     h = np.full(shape, np.nan) if height is None else np.broadcast_to(
         np.asarray(height, np.float64), shape)
     _, _, coef, df, dj = grid.kernel_args()
-    lo, la, _ = _direct_many(np.ascontiguousarray(line_a.ravel()),
-                             np.ascontiguousarray(col_a.ravel()),
-                             np.ascontiguousarray(h.ravel()), coef, df, dj,
-                             parallax_code(parallax), geolocation_code(geolocation, parallax))
+    n = line_a.size
+    lo, la = np.empty(n), np.empty(n)
+    args = (np.ascontiguousarray(line_a.ravel()), np.ascontiguousarray(col_a.ravel()),
+            np.ascontiguousarray(h.ravel()), coef, float(df), float(dj),
+            np.int64(parallax_code(parallax)),
+            np.int64(geolocation_code(geolocation, parallax)), lo, la)
+    split_range(lambda a, b: _direct_range(a, b, *args), n, min_size=4096)
     return wrap_longitude(lo).reshape(shape), la.reshape(shape)
 
 

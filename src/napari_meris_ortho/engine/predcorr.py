@@ -32,10 +32,11 @@ import math
 from typing import TYPE_CHECKING
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 
 from .inverse import search_facet, wrap180
 from .location import direct_point
+from .threads import split_range
 
 if TYPE_CHECKING:
     from ..geometry.grid import OutputGrid
@@ -161,11 +162,50 @@ def full_spans(n_rows: int, width: int) -> tuple[np.ndarray, np.ndarray, np.ndar
             np.full(n_rows, width, np.int64))
 
 
-@njit(cache=True, parallel=True)
-def find_antecedents(lon, lat, height, hmode, ptr, start, stop, cl, cp, step,
-                     coef, df, dj, n_lines, n_cols, model, geo, tol, max_iter, diagnostics):
-    """Antecedents of output points: rows in parallel, row i over the column spans
-    ``[start[k], stop[k])`` for k in ``ptr[i]:ptr[i + 1]`` (``boundary.RowSpans``).
+@njit(cache=True, nogil=True)
+def _antecedent_rows(lo, hi, lon, lat, height, hmode, ptr, start, stop, cl, cp, step, coef, df,
+                     dj, n_lines, n_cols, model, geo, tol, max_iter, diagnostics, out_l, out_p,
+                     iters, h_used, sh_e, sh_n):  # pragma: no cover
+    """Rows [lo, hi) of ``find_antecedents`` into its (pre-filled) outputs."""
+    for i in range(lo, hi):
+        for k in range(ptr[i], ptr[i + 1]):
+            for j in range(start[k], stop[k]):
+                tlon = lon[i, j]
+                tlat = lat[i, j]
+                if math.isnan(tlon) or math.isnan(tlat):
+                    continue
+                gl, gp = _predict(cl, cp, step, i, j)
+                if math.isnan(gl):
+                    continue
+                if gl < -_FAR or gl > n_lines + _FAR or gp < -_FAR or gp > n_cols + _FAR:
+                    continue
+                if hmode == 0:
+                    h = 0.0
+                elif hmode == 1:
+                    h = math.nan
+                else:
+                    h = np.float64(height[i, j])
+                l2, p2, it = _newton(tlon, tlat, gl, gp, h, coef, df, dj, model, geo, tol,
+                                     max_iter)
+                if not (-0.5 <= l2 < n_lines - 0.5 and -0.5 <= p2 < n_cols - 0.5):
+                    continue
+                out_l[i, j] = l2
+                out_p[i, j] = p2
+                iters[i, j] = it
+                if diagnostics:
+                    r = direct_point(l2, p2, h, coef, df, dj, model, geo)
+                    h_used[i, j] = r[2]
+                    sh_e[i, j] = r[2] * r[3]
+                    sh_n[i, j] = r[2] * r[4]
+
+
+def find_antecedents(lon: np.ndarray, lat: np.ndarray, height: np.ndarray, hmode: int,
+                     ptr: np.ndarray, start: np.ndarray, stop: np.ndarray, cl: np.ndarray,
+                     cp: np.ndarray, step: float, coef: np.ndarray, df: float, dj: float,
+                     n_lines: int, n_cols: int, model: int, geo: int, tol: float,
+                     max_iter: int, diagnostics: bool) -> tuple[np.ndarray, ...]:
+    """Antecedents of output points: row i over the column spans ``[start[k], stop[k])`` for
+    k in ``ptr[i]:ptr[i + 1]`` (``boundary.RowSpans``), rows split over threads.
 
     Returns line, col (float32, NaN when dropped), iterations (int8, -1 when dropped), and when
     ``diagnostics``: elevation used (m), parallax shift east and north (m) — else 1x1 arrays.
@@ -178,115 +218,125 @@ def find_antecedents(lon, lat, height, hmode, ptr, start, stop, cl, cp, step,
     h_used = np.full(dshape, np.nan, np.float32)
     sh_e = np.full(dshape, np.nan, np.float32)
     sh_n = np.full(dshape, np.nan, np.float32)
-    for i0 in prange(nr):
-        i = np.int64(i0)  # one specialisation of the callees (a prange index is unsigned)
-        for j in _columns(ptr, start, stop, i):
-            tlon = lon[i, j]
-            tlat = lat[i, j]
-            if math.isnan(tlon) or math.isnan(tlat):
-                continue
-            gl, gp = _predict(cl, cp, step, i, j)
-            if math.isnan(gl):
-                continue
-            if gl < -_FAR or gl > n_lines + _FAR or gp < -_FAR or gp > n_cols + _FAR:
-                continue
-            if hmode == 0:
-                h = 0.0
-            elif hmode == 1:
-                h = math.nan
-            else:
-                h = height[i, j]
-            l2, p2, it = _newton(tlon, tlat, gl, gp, h, coef, df, dj, model, geo, tol, max_iter)
-            if not (-0.5 <= l2 < n_lines - 0.5 and -0.5 <= p2 < n_cols - 0.5):
-                continue
-            out_l[i, j] = l2
-            out_p[i, j] = p2
-            iters[i, j] = it
-            if diagnostics:
-                r = direct_point(l2, p2, h, coef, df, dj, model, geo)
-                h_used[i, j] = r[2]
-                sh_e[i, j] = r[2] * r[3]
-                sh_n[i, j] = r[2] * r[4]
+    args = (lon, lat, height, np.int64(hmode), ptr, start, stop, cl, cp, float(step), coef,
+            float(df), float(dj), np.int64(n_lines), np.int64(n_cols), np.int64(model),
+            np.int64(geo), float(tol), np.int64(max_iter), bool(diagnostics), out_l, out_p,
+            iters, h_used, sh_e, sh_n)
+    split_range(lambda lo, hi: _antecedent_rows(lo, hi, *args), nr)
     return out_l, out_p, iters, h_used, sh_e, sh_n
 
 
-@njit(cache=True, parallel=True)
-def find_antecedents_handbook(lon, lat, height, hmode, ptr, start, stop, lat_tp, lon_tp, coef,
-                              df, dj, n_lines, n_cols, model, geo, tol, max_iter):
+@njit(cache=True, nogil=True)
+def _handbook_rows(lo, hi, lon, lat, height, hmode, ptr, start, stop, lat_tp, lon_tp, coef,
+                   df, dj, n_lines, n_cols, model, geo, tol, max_iter, out_l, out_p, iters,
+                   paths):  # pragma: no cover
+    """Rows [lo, hi) of ``find_antecedents_handbook`` into its (pre-filled) outputs."""
+    for i in range(lo, hi):
+        f = np.int64(-1)
+        g = np.int64(-1)
+        for k in range(ptr[i], ptr[i + 1]):
+            for j in range(start[k], stop[k]):
+                tlon = lon[i, j]
+                tlat = lat[i, j]
+                if math.isnan(tlon) or math.isnan(tlat):
+                    continue
+                f2, g2, u, v, path = search_facet(tlon, tlat, f, g, lat_tp, lon_tp)
+                paths[i, path + 1] += 1
+                if path < 0:
+                    continue
+                f = f2
+                g = g2
+                l0 = (f + u) * df
+                p0 = (g + v) * dj
+                x = l0
+                y = p0
+                it = 0
+                ok = True
+                while (hmode != 0 or geo != 0) and it < max_iter:
+                    it += 1
+                    if hmode == 0:
+                        h = 0.0
+                    elif hmode == 1:
+                        h = math.nan
+                    else:
+                        h = np.float64(height[i, j])
+                    r = direct_point(x, y, h, coef, df, dj, model, geo)
+                    f3, g3, u3, v3, path3 = search_facet(r[0], r[1], f, g, lat_tp, lon_tp)
+                    paths[i, path3 + 1] += 1
+                    if path3 < 0:
+                        ok = False
+                        break
+                    x1 = (f3 + u3) * df
+                    y1 = (g3 + v3) * dj
+                    x += l0 - x1
+                    y += p0 - y1
+                    if abs(l0 - x1) <= tol and abs(p0 - y1) <= tol:
+                        break
+                if not ok or not (-0.5 <= x < n_lines - 0.5 and -0.5 <= y < n_cols - 0.5):
+                    continue
+                out_l[i, j] = x
+                out_p[i, j] = y
+                iters[i, j] = it
+
+
+def find_antecedents_handbook(lon: np.ndarray, lat: np.ndarray, height: np.ndarray, hmode: int,
+                              ptr: np.ndarray, start: np.ndarray, stop: np.ndarray,
+                              lat_tp: np.ndarray, lon_tp: np.ndarray, coef: np.ndarray,
+                              df: float, dj: float, n_lines: int, n_cols: int, model: int,
+                              geo: int, tol: float, max_iter: int
+                              ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """MERSYN's prediction/correction loop (Appendix C) with the handbook facet search.
 
-    Rows run in parallel, each keeping its last facet. Returns line, col (float32), iterations
-    (int8, -1 dropped) and the facet-search counts per path ([not found, same, 4, 8, all]).
+    Rows split over threads, each row keeping its last facet. Returns line, col (float32),
+    iterations (int8, -1 dropped) and the facet-search counts per path ([not found, same, 4,
+    8, all]).
     """
     nr, nc = lon.shape
     out_l = np.full((nr, nc), np.nan, np.float32)
     out_p = np.full((nr, nc), np.nan, np.float32)
     iters = np.full((nr, nc), -1, np.int8)
     paths = np.zeros((nr, 5), np.int64)
-    for i0 in prange(nr):
-        i = np.int64(i0)  # one specialisation of the callees (a prange index is unsigned)
-        f = np.int64(-1)
-        g = np.int64(-1)
-        for j in _columns(ptr, start, stop, i):
-            tlon = lon[i, j]
-            tlat = lat[i, j]
-            if math.isnan(tlon) or math.isnan(tlat):
-                continue
-            f2, g2, u, v, path = search_facet(tlon, tlat, f, g, lat_tp, lon_tp)
-            paths[i, path + 1] += 1
-            if path < 0:
-                continue
-            f = f2
-            g = g2
-            l0 = (f + u) * df
-            p0 = (g + v) * dj
-            x = l0
-            y = p0
-            it = 0
-            ok = True
-            while (hmode != 0 or geo != 0) and it < max_iter:
-                it += 1
-                h = 0.0 if hmode == 0 else (math.nan if hmode == 1 else height[i, j])
-                r = direct_point(x, y, h, coef, df, dj, model, geo)
-                f3, g3, u3, v3, path3 = search_facet(r[0], r[1], f, g, lat_tp, lon_tp)
-                paths[i, path3 + 1] += 1
-                if path3 < 0:
-                    ok = False
-                    break
-                x1 = (f3 + u3) * df
-                y1 = (g3 + v3) * dj
-                x += l0 - x1
-                y += p0 - y1
-                if abs(l0 - x1) <= tol and abs(p0 - y1) <= tol:
-                    break
-            if not ok or not (-0.5 <= x < n_lines - 0.5 and -0.5 <= y < n_cols - 0.5):
-                continue
-            out_l[i, j] = x
-            out_p[i, j] = y
-            iters[i, j] = it
-    total = np.zeros(5, np.int64)
-    for r in range(nr):
-        total += paths[r]
-    return out_l, out_p, iters, total
+    args = (lon, lat, height, np.int64(hmode), ptr, start, stop, lat_tp, lon_tp, coef,
+            float(df), float(dj), np.int64(n_lines), np.int64(n_cols), np.int64(model),
+            np.int64(geo), float(tol), np.int64(max_iter), out_l, out_p, iters, paths)
+    split_range(lambda lo, hi: _handbook_rows(lo, hi, *args), nr)
+    return out_l, out_p, iters, paths.sum(axis=0)
 
 
-@njit(cache=True, parallel=True)
-def parallax_at(line, col, height, hmode, coef, df, dj, model, geo):
+@njit(cache=True, nogil=True)
+def _parallax_rows(lo, hi, line, col, height, hmode, coef, df, dj, model, geo, h_used, sh_e,
+                   sh_n):  # pragma: no cover
+    """Rows [lo, hi) of ``parallax_at`` into its (NaN-filled) outputs."""
+    nc = line.shape[1]
+    for i in range(lo, hi):
+        for j in range(nc):
+            if math.isnan(line[i, j]):
+                continue
+            if hmode == 0:
+                h = 0.0
+            elif hmode == 1:
+                h = math.nan
+            else:
+                h = np.float64(height[i, j])
+            r = direct_point(np.float64(line[i, j]), np.float64(col[i, j]), h, coef, df, dj,
+                             model, geo)
+            h_used[i, j] = r[2]
+            sh_e[i, j] = r[2] * r[3]
+            sh_n[i, j] = r[2] * r[4]
+
+
+def parallax_at(line: np.ndarray, col: np.ndarray, height: np.ndarray, hmode: int,
+                coef: np.ndarray, df: float, dj: float, model: int, geo: int
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Elevation used (m) and parallax shift east/north (m) at the antecedents (NaN where
     dropped): the diagnostics of ``find_antecedents`` for any path (eq. 6a, 2c')."""
     nr, nc = line.shape
     h_used = np.full((nr, nc), np.nan, np.float32)
     sh_e = np.full((nr, nc), np.nan, np.float32)
     sh_n = np.full((nr, nc), np.nan, np.float32)
-    for i in prange(nr):
-        for j in range(nc):
-            if math.isnan(line[i, j]):
-                continue
-            h = 0.0 if hmode == 0 else (math.nan if hmode == 1 else height[i, j])
-            r = direct_point(line[i, j], col[i, j], h, coef, df, dj, model, geo)
-            h_used[i, j] = r[2]
-            sh_e[i, j] = r[2] * r[3]
-            sh_n[i, j] = r[2] * r[4]
+    args = (line, col, height, np.int64(hmode), coef, float(df), float(dj), np.int64(model),
+            np.int64(geo), h_used, sh_e, sh_n)
+    split_range(lambda lo, hi: _parallax_rows(lo, hi, *args), nr)
     return h_used, sh_e, sh_n
 
 

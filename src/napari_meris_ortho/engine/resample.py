@@ -21,10 +21,11 @@ import math
 from collections.abc import Sequence
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 
 from ..geometry.interpolation import keys_weights
 from ..options import Sampling, parse
+from .threads import split_range
 
 _CHUNK = 1 << 18
 
@@ -94,34 +95,50 @@ def resample_bands(images: Sequence[np.ndarray], lines: np.ndarray, cols: np.nda
 _keys_weights = njit(cache=True, inline="always")(keys_weights)
 
 
-def nearest_pixel(lines: np.ndarray, cols: np.ndarray, n_lines: int, n_cols: int
-                  ) -> np.ndarray:
-    """Flat index ``round(l) * W + round(p)`` of the antecedent pixel of every point (Appendix C:
-    iline_segment = TimRound(mer_x0), ties rounded up), -1 where the point is NaN or outside
-    the product; any shape in, 1-D int64 out."""
-    return _nearest_pixel(np.ascontiguousarray(lines, dtype=np.float64).reshape(-1),
-                          np.ascontiguousarray(cols, dtype=np.float64).reshape(-1),
-                          int(n_lines), int(n_cols))
-
-
-@njit(cache=True)  # serial: memory bound; a parallel loop costs compile time
-def _nearest_pixel(line, col, n_lines, n_cols):  # pragma: no cover
-    out = np.full(line.size, -1, np.int64)
-    for i in range(line.size):
-        x = line[i]
-        y = col[i]
-        if x >= -0.5 and x < n_lines - 0.5 and y >= -0.5 and y < n_cols - 0.5:
-            out[i] = int(math.floor(x + 0.5)) * n_cols + int(math.floor(y + 0.5))
+def nearest_pixel(lines: np.ndarray, cols: np.ndarray, n_lines: int, n_cols: int,
+                  line_offset: int = 0) -> np.ndarray:
+    """Flat index ``round(l - line_offset) * W + round(p)`` of the antecedent pixel of every
+    point (Appendix C: iline_segment = TimRound(mer_x0), ties rounded up) in a window of
+    ``n_lines`` product lines starting at ``line_offset``; -1 where the point is NaN or outside
+    the window. float32 antecedents are taken as they are (no float64 copy; the arithmetic is
+    float64 either way). Any shape in, 1-D int64 out."""
+    dtype = np.float32 if np.asarray(lines).dtype == np.float32 else np.float64
+    line = np.ascontiguousarray(lines, dtype=dtype).reshape(-1)
+    col = np.ascontiguousarray(cols, dtype=dtype).reshape(-1)
+    if line.size != col.size:
+        raise ValueError(f"lines ({line.size}) and cols ({col.size}) differ in size")
+    out = np.empty(line.size, np.int64)
+    args = (line, col, float(line_offset), np.int64(n_lines), np.int64(n_cols), out)
+    split_range(lambda lo, hi: _nearest_range(lo, hi, *args), line.size, min_size=1 << 16)
     return out
 
 
-@njit(cache=True, parallel=True)
-def gather(images, index, out):  # pragma: no cover
+@njit(cache=True, nogil=True)
+def _nearest_range(lo, hi, line, col, offset, n_lines, n_cols, out):  # pragma: no cover
+    """Points [lo, hi) of ``nearest_pixel``."""
+    for i in range(lo, hi):
+        x = np.float64(line[i]) - offset
+        y = np.float64(col[i])
+        if x >= -0.5 and x < n_lines - 0.5 and y >= -0.5 and y < n_cols - 0.5:
+            out[i] = int(math.floor(x + 0.5)) * n_cols + int(math.floor(y + 0.5))
+        else:
+            out[i] = -1
+
+
+def gather(images: np.ndarray, index: np.ndarray, out: np.ndarray) -> None:
     """Nearest neighbour of all bands in one pass: ``out[b, i] = images[b, pixel index[i]]``,
     0 where the index is -1; ``images`` (bands, lines, cols), ``out`` (bands, points) of the
-    same dtype (uint16 counts, uint8 flags: no conversion), ``index`` 1-D."""
+    same dtype (uint16 counts, uint8 flags: no conversion), ``index`` 1-D; points split over
+    threads."""
+    split_range(lambda lo, hi: _gather_range(lo, hi, images, index, out), index.size,
+                min_size=1 << 16)
+
+
+@njit(cache=True, nogil=True)
+def _gather_range(lo, hi, images, index, out):  # pragma: no cover
+    """Points [lo, hi) of ``gather``."""
     n_bands, _, n_cols = images.shape
-    for i in prange(index.size):
+    for i in range(lo, hi):
         k = index[i]
         if k < 0:
             for b in range(n_bands):
@@ -150,28 +167,42 @@ def _axis(x: float, n: int, k: int, idx, w, i) -> None:  # pragma: no cover
         w[i, m] = weights[m]
 
 
-@njit(cache=True, parallel=True)
-def _weights(lines, cols, h, wd, k):  # pragma: no cover
+def _weights(lines: np.ndarray, cols: np.ndarray, h: int, wd: int, k: int
+             ) -> tuple[np.ndarray, ...]:
+    """Neighbour indices and weights along lines and columns, and validity, of every point."""
     n = lines.size
     il = np.zeros((n, k), np.int64)
     ip = np.zeros((n, k), np.int64)
     wl = np.zeros((n, k), np.float64)
     wp = np.zeros((n, k), np.float64)
     valid = np.zeros(n, np.bool_)
-    for i in prange(n):
+    args = (lines, cols, np.int64(h), np.int64(wd), np.int64(k), il, wl, ip, wp, valid)
+    split_range(lambda lo, hi: _weights_range(lo, hi, *args), n, min_size=1 << 14)
+    return il, wl, ip, wp, valid
+
+
+@njit(cache=True, nogil=True)
+def _weights_range(lo, hi, lines, cols, h, wd, k, il, wl, ip, wp, valid):  # pragma: no cover
+    for i in range(lo, hi):
         l_ = lines[i]
         p_ = cols[i]
         if l_ >= -0.5 and l_ < h - 0.5 and p_ >= -0.5 and p_ < wd - 0.5:
             valid[i] = True
             _axis(l_, h, k, il, wl, i)
             _axis(p_, wd, k, ip, wp, i)
-    return il, wl, ip, wp, valid
 
 
-@njit(cache=True, parallel=True)
-def _apply(image, il, wl, ip, wp, valid, out):  # pragma: no cover
+def _apply(image: np.ndarray, il: np.ndarray, wl: np.ndarray, ip: np.ndarray, wp: np.ndarray,
+           valid: np.ndarray, out: np.ndarray) -> None:
+    """Separable weighted sum of the neighbours of every point of ``out`` (0 where invalid)."""
+    split_range(lambda lo, hi: _apply_range(lo, hi, image, il, wl, ip, wp, valid, out),
+                out.size, min_size=1 << 14)
+
+
+@njit(cache=True, nogil=True)
+def _apply_range(lo, hi, image, il, wl, ip, wp, valid, out):  # pragma: no cover
     k = il.shape[1]
-    for i in prange(out.size):
+    for i in range(lo, hi):
         if not valid[i]:
             out[i] = 0.0
             continue

@@ -1,0 +1,54 @@
+"""Index ranges of a serial kernel run on a few Python threads.
+
+The engine's loops over rows or points are serial ``@njit(cache=True, nogil=True)`` kernels that
+take an index range ``[lo, hi)``; ``split_range`` calls them on contiguous ranges from a thread
+pool (the kernels release the GIL, so the ranges run at the same time). numba's
+``parallel=True`` gives the same speed-up but costs a second or more of compilation per kernel
+(first run). Each index is processed by exactly one call, so results equal one whole-range call.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
+
+#: ranges per thread: small enough pieces that unequal rows (e.g. spans) balance
+_PIECES_PER_THREAD = 4
+
+
+def n_threads() -> int:
+    """Cores this process may run on (``os.sched_getaffinity``; ``os.cpu_count`` elsewhere)."""
+    try:
+        return max(len(os.sched_getaffinity(0)), 1)
+    except AttributeError:  # pragma: no cover - not Linux
+        return max(os.cpu_count() or 1, 1)
+
+
+def ranges(n: int, pieces: int, min_size: int = 1) -> list[tuple[int, int]]:
+    """[lo, hi) ranges covering [0, n) in order: ``pieces`` of them at most, none smaller than
+    ``min_size`` (except when n itself is), sizes differing by one at most."""
+    n = max(int(n), 0)
+    if n == 0:
+        return []
+    k = max(1, min(int(pieces), n // max(int(min_size), 1)))
+    bounds = [n * i // k for i in range(k + 1)]
+    return [(bounds[i], bounds[i + 1]) for i in range(k)]
+
+
+def split_range(kernel: Callable[[int, int], object], n: int, *, threads: int | None = None,
+                min_size: int = 1) -> None:
+    """Call ``kernel(lo, hi)`` on ranges covering [0, n) exactly once each, on up to ``threads``
+    threads (default ``n_threads()``); ranges of at least ``min_size`` indices. One thread or
+    one range: a single direct call. Exceptions of the kernel are raised here."""
+    threads = n_threads() if threads is None else max(int(threads), 1)
+    parts = ranges(n, threads * _PIECES_PER_THREAD if threads > 1 else 1, min_size)
+    if not parts:
+        return
+    if threads == 1 or len(parts) == 1:
+        for lo, hi in parts:
+            kernel(lo, hi)
+        return
+    with ThreadPoolExecutor(max_workers=min(threads, len(parts))) as pool:
+        for f in [pool.submit(kernel, lo, hi) for lo, hi in parts]:
+            f.result()
