@@ -4,7 +4,8 @@ numba compiles each kernel on its first call and caches the machine code (``cach
 ``__pycache__`` next to the sources, or ``NUMBA_CACHE_DIR``). ``warm_up()`` orthorectifies a
 tiny synthetic product (``geometry.tiepoints.analytic_swath``, written as a real N1 file) with
 every elevation source, sampling method and search method, on a geographic and a UTM grid, so
-that the kernels and specialisations a ``meris-ortho map`` uses are compiled once.
+that the kernels and specialisations a ``meris-ortho map`` uses are compiled once (and the
+COG overview kernel of its output dtypes).
 ``scripts/setup.sh`` runs ``python -m napari_meris_ortho.warmup`` in the background after
 installing; the napari Orthorectify widget starts ``warm_up_in_background()`` when it opens.
 """
@@ -58,13 +59,21 @@ def _tiny_product(directory: Path) -> tuple[Path, Path]:
     return product, dem
 
 
+#: band dtypes of ``meris-ortho map`` outputs (``--dtype``): their COG overview kernel
+OVERVIEW_DTYPES = (np.uint16, np.float32)
+
+
 def warm_up() -> float:
-    """Run ``orthorectify`` on a tiny product in every configuration of ``RUNS``; seconds."""
+    """Run ``orthorectify`` on a tiny product in every configuration of ``RUNS``, and the
+    overview kernel of the map outputs (``engine.resample.overview_level``); seconds."""
+    from .engine.resample import overview_level
     from .geometry.grid import utm_crs_for
     from .io.n1 import read_product
     from .ortho import orthorectify
 
     t0 = time.perf_counter()
+    for dtype in OVERVIEW_DTYPES:
+        overview_level(np.ones((3, 3), dtype), 0.0)
     with tempfile.TemporaryDirectory(prefix="meris-ortho-warmup-") as tmp:
         product, dem = _tiny_product(Path(tmp))
         tp = read_product(product).tie_points

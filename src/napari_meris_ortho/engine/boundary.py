@@ -190,13 +190,15 @@ def row_spans(boundary: Boundary, grid: OutputGrid, row_start: int = 0,
     yv = np.concatenate(ys) if ys else np.empty(0)
     r0, r1 = row_start - margin, row_stop + margin
     counts = np.zeros(max(r1 - r0, 0), np.int64)
+    buf = np.empty(xv.size * shifts.size + 1)  # the crossings of one line
+    none = np.empty(0, np.int64)
     _scan(xv, yv, ptr, shifts, grid.x0, grid.y0, grid.dx, grid.dy, grid.width, r0, margin,
-          counts, np.empty(0, np.int64), np.empty(0, np.int64), np.zeros(1, np.int64), False)
+          counts, none, none, np.zeros(1, np.int64), False, buf)
     rptr = np.r_[0, np.cumsum(counts)].astype(np.int64)
     start = np.empty(rptr[-1], np.int64)
     stop = np.empty(rptr[-1], np.int64)
     _scan(xv, yv, ptr, shifts, grid.x0, grid.y0, grid.dx, grid.dy, grid.width, r0, margin,
-          counts, start, stop, rptr, True)
+          counts, start, stop, rptr, True, buf)
     if margin:
         rptr, start, stop = _dilate_rows(rptr, start, stop, margin, row_stop - row_start)
     return RowSpans(row_start, grid.width, rptr, start, stop)
@@ -204,14 +206,12 @@ def row_spans(boundary: Boundary, grid: OutputGrid, row_start: int = 0,
 
 @njit(cache=True)  # serial: a few crossings per line; a parallel loop costs compile time
 def _scan(xv, yv, ptr, shifts, x0, y0, dx, dy, width, r0, margin, counts, start, stop, rptr,
-          fill):  # pragma: no cover
+          fill, xs):  # pragma: no cover
     """Scanline fill: for each line y = y0 - (i + 0.5) dy, pixel-centre intervals inside.
 
     The crossings of a line are sorted in place by insertion (a few per line; numba's own sort
-    costs seconds of compilation per dtype), in one buffer for all lines.
+    costs seconds of compilation per dtype), in the buffer ``xs`` (edges x shifts values).
     """
-    n_edges = xv.size
-    xs = np.empty(n_edges * shifts.size + 1)
     for r in range(counts.size):
         y = y0 - (r0 + r + 0.5) * dy
         n = 0
@@ -234,8 +234,8 @@ def _scan(xv, yv, ptr, shifts, x0, y0, dx, dy, width, r0, margin, counts, start,
         for m in range(0, n - 1, 2):
             a = math.ceil((xs[m] - x0) / dx - 0.5) - margin
             b = math.ceil((xs[m + 1] - x0) / dx - 0.5) + margin
-            a = min(max(a, 0), width)
-            b = min(max(b, 0), width)
+            a = 0 if a < 0 else (a if a < width else width)
+            b = 0 if b < 0 else (b if b < width else width)
             if b <= a:
                 continue
             if k > 0 and a <= last_stop:

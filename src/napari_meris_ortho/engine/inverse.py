@@ -113,13 +113,9 @@ def _inside(u: float, v: float) -> bool:
     return -_EPS <= u <= 1.0 + _EPS and -_EPS <= v <= 1.0 + _EPS
 
 
-@njit(cache=True)
-def _try(lon, lat, f, j, lat_tp, lon_tp):
-    nl, nc = lat_tp.shape
-    if f < 0 or j < 0 or f > nl - 2 or j > nc - 2:
-        return False, 0.0, 0.0
-    u, v = facet_offsets(lon, lat, f, j, lat_tp, lon_tp)
-    return _inside(u, v), u, v
+#: facets tried around the last one, in the handbook's order: same, 4-connex, 8-connex
+_NEAR_DF = (0, -1, 1, 0, 0, -1, -1, 1, 1)
+_NEAR_DJ = (0, 0, 0, -1, 1, -1, 1, -1, 1)
 
 
 @njit(cache=True)
@@ -129,23 +125,16 @@ def search_facet(lon: float, lat: float, f0: int, j0: int, lat_tp: np.ndarray,
 
     Returns (f, j, u, v, path) with path 0..3 as ``PATH_NAMES`` or -1 when no facet holds the point.
     """
-    if f0 >= 0:
-        ok, u, v = _try(lon, lat, f0, j0, lat_tp, lon_tp)
-        if ok:
-            return f0, j0, u, v, 0
-        for k in range(4):
-            df = (-1, 1, 0, 0)[k]
-            dj = (0, 0, -1, 1)[k]
-            ok, u, v = _try(lon, lat, f0 + df, j0 + dj, lat_tp, lon_tp)
-            if ok:
-                return f0 + df, j0 + dj, u, v, 1
-        for k in range(4):
-            df = (-1, -1, 1, 1)[k]
-            dj = (-1, 1, -1, 1)[k]
-            ok, u, v = _try(lon, lat, f0 + df, j0 + dj, lat_tp, lon_tp)
-            if ok:
-                return f0 + df, j0 + dj, u, v, 2
     nl, nc = lat_tp.shape
+    if f0 >= 0:
+        for k in range(9):
+            f = f0 + _NEAR_DF[k]
+            j = j0 + _NEAR_DJ[k]
+            if f < 0 or j < 0 or f > nl - 2 or j > nc - 2:
+                continue
+            u, v = facet_offsets(lon, lat, f, j, lat_tp, lon_tp)
+            if _inside(u, v):
+                return f, j, u, v, (k + 3) // 4
     for f in range(nl - 1):
         for j in range(nc - 1):
             # quick bounding-box reject before the exact test

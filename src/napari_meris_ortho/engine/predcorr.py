@@ -29,7 +29,7 @@ antecedent leaves the product (-0.5 <= l < H-0.5, -0.5 <= p < W-0.5). Heights (`
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numba import njit
@@ -72,18 +72,30 @@ def _newton(tlon, tlat, line, col, h, coef, df, dj, model, geo, tol, max_iter):
     return line, col, it
 
 
-@njit(cache=True)
-def primary_grid(lon, lat, lat_tp, lon_tp, coef, df, dj, geo):
+def primary_grid(lon: np.ndarray, lat: np.ndarray, lat_tp: np.ndarray, lon_tp: np.ndarray,
+                 coef: np.ndarray, df: float, dj: float, geo: int
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Exact zero-height inverse (section 3.4) at the primary-grid nodes (2-D lon/lat arrays).
 
     Nodes held by a facet come from the handbook search (warm-started from the previous node);
     nodes outside the tie-point grid from Newton on the extended edge facets (they are needed to
     predict output points near the swath border). Returns (line, col, path counts[5]).
     """
-    nr, nc = lon.shape
-    line = np.full((nr, nc), np.nan)
-    col = np.full((nr, nc), np.nan)
+    lon = np.ascontiguousarray(lon, dtype=np.float64)
+    lat = np.ascontiguousarray(lat, dtype=np.float64)
+    line = np.full(lon.shape, np.nan)
+    col = np.full(lon.shape, np.nan)
     paths = np.zeros(5, np.int64)
+    _primary_nodes(lon, lat, lat_tp, lon_tp, coef, float(df), float(dj), np.int64(geo), line,
+                   col, paths)
+    return line, col, paths
+
+
+@njit(cache=True)
+def _primary_nodes(lon, lat, lat_tp, lon_tp, coef, df, dj, geo, line, col,
+                   paths):  # pragma: no cover
+    """``primary_grid`` into its (NaN-filled) outputs."""
+    nr, nc = lon.shape
     # typed constants: a literal argument would compile a second specialisation of the callee
     f = np.int64(-1)
     j = np.int64(-1)
@@ -116,7 +128,6 @@ def primary_grid(lon, lat, lat_tp, lon_tp, coef, df, dj, geo):
             if not math.isnan(line[r, c]):
                 last_l = line[r, c]
                 last_p = col[r, c]
-    return line, col, paths
 
 
 @njit(cache=True)
@@ -390,7 +401,7 @@ def solve(tp, grid, lon: np.ndarray, lat: np.ndarray, height: np.ndarray | None,
         line, col, iters, paths = find_antecedents_handbook(
             lon, lat, h, hmode, ptr, start, stop, lat_tp, lon_tp, coef, df, dj,
             tp.height, tp.width, model, geo, tolerance, max_iter)
-        out = {"line": line, "col": col, "iterations": iters}
+        out: dict[str, Any] = {"line": line, "col": col, "iterations": iters}
         if diagnostics:
             h_used, sh_e, sh_n = parallax_at(line, col, h, hmode, coef, df, dj, model, geo)
             out.update(elevation=h_used, shift_east_m=sh_e, shift_north_m=sh_n)
