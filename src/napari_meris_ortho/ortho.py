@@ -415,8 +415,8 @@ class Antecedents:
         sf = self.prod.scaling.radiance
         nr, nc = self.grid.shape
         if self.sampling is Sampling.NEAREST or self.window[1] <= self.window[0]:
-            counts = self.counts(bands)
-            return {b: counts[k].astype(np.float32) * np.float32(sf[b - 1])
+            counts = self.counts(bands)  # one float32 product per band, no float32 copy first
+            return {b: np.multiply(counts[k], np.float32(sf[b - 1]), dtype=np.float32)
                     for k, b in enumerate(bands)}
         out = {}
         for b, v in zip(bands, self._interpolated(bands), strict=True):
