@@ -21,7 +21,7 @@ import numpy as np
 import pyproj
 from affine import Affine
 
-from .engine import pixelgeo, predcorr
+from .engine import pixelgeo, predcorr, terrain
 from .engine.boundary import RowSpans, row_spans, segment_boundary
 from .errors import DemError, OptionsError
 from .geometry.grid import (
@@ -36,7 +36,7 @@ from .options import Elevation, Geolocation, OrthoOptions, Sampling, SearchMetho
 from .progress import ProgressCallback
 
 if TYPE_CHECKING:
-    from .io.dem import DemSource, DemStack
+    from .io.dem import DemSource, DemStack, LatticeWindow
 
 log = logging.getLogger(__name__)
 
@@ -175,16 +175,66 @@ def lonlat_bounds(grid: OutputGrid, n: int = 65) -> tuple[float, float, float, f
     return float(lon.min()), float(lat.min()), float(lon.max()), float(lat.max())
 
 
-def _heights(stack: DemStack, lon: np.ndarray, lat: np.ndarray, mask: np.ndarray
-             ) -> tuple[np.ndarray, np.ndarray]:
-    """DEM heights at the output points in ``mask`` (NaN elsewhere or without data: tie points)."""
+def _heights(stack: DemStack, lon: np.ndarray, lat: np.ndarray, mask: np.ndarray,
+             method: str = "bilinear") -> tuple[np.ndarray, np.ndarray]:
+    """DEM heights at the output points in ``mask`` (NaN elsewhere or without data: tie points),
+    the DEMs tried in order (``DemStack.sample``): a DEM with a prepared window in memory by the
+    compiled lookup (``engine.terrain``), any other by its ``sample``."""
     h = np.full(lon.shape, np.nan, np.float32)
     src = np.full(lon.shape, SOURCE_TIEPOINTS, np.int8)
-    if mask.any():
-        hv, iv = stack.sample(lon[mask], lat[mask])
-        h[mask] = hv
-        src[mask] = np.where(iv >= 0, iv, SOURCE_TIEPOINTS)
+    fh, fsrc = h.reshape(-1), src.reshape(-1)
+    flon = np.ascontiguousarray(lon, dtype=np.float64).reshape(-1)
+    flat = np.ascontiguousarray(lat, dtype=np.float64).reshape(-1)
+    todo = np.array(mask, dtype=bool, copy=True).reshape(-1)
+    for i, dem in enumerate(stack.sources):
+        if not todo.any():
+            break
+        window = dem.lattice_window()
+        if window is None:
+            _sample_into(dem, i, method, np.flatnonzero(todo), flon, flat, todo, fh, fsrc)
+            continue
+        miss = np.zeros(todo.size, bool)
+        n_miss = _window_heights(window, i, method, flon, flat, todo, fh, fsrc, miss)
+        if n_miss:  # points whose posts lie beyond the window: read by the source
+            _sample_into(dem, i, method, np.flatnonzero(miss), flon, flat, todo, fh, fsrc)
     return h, src
+
+
+def _window_heights(window: LatticeWindow, index: int, method: str, lon: np.ndarray,
+                    lat: np.ndarray, todo: np.ndarray, h: np.ndarray, src: np.ndarray,
+                    miss: np.ndarray) -> int:
+    """``engine.terrain.window_heights`` at the ``todo`` points (flat arrays): DEM x/y by the
+    window's transformation (projected DEMs), geoid N for EGM96 heights (``io.geoid``)."""
+    x, y = lon, lat
+    sel: np.ndarray | None = None
+    if window.transform is not None:
+        sel = np.flatnonzero(todo)
+        x, y = np.empty_like(lon), np.empty_like(lat)
+        x[sel], y[sel] = window.transform(lon[sel], lat[sel])
+    undulation = np.empty(0)
+    if window.datum not in (None, "ellipsoid"):
+        from .io.geoid import to_ellipsoid
+
+        sel = np.flatnonzero(todo) if sel is None else sel
+        undulation = np.empty_like(lon)
+        undulation[sel] = to_ellipsoid(np.zeros(sel.size), lon[sel], lat[sel], window.datum)
+    return int(terrain.window_heights(
+        window.data, window.inv, window.lattice, window.wrap_centre,
+        terrain.METHOD_CODES[method], x, y, todo, undulation, index, h, src, miss))
+
+
+def _sample_into(dem: DemSource, index: int, method: str, sel: np.ndarray, lon: np.ndarray,
+                 lat: np.ndarray, todo: np.ndarray, h: np.ndarray, src: np.ndarray) -> None:
+    """Heights of DEM ``index`` at the flat points ``sel`` by its ``sample``: where it has
+    data, written to ``h``/``src`` and cleared from ``todo``."""
+    if sel.size == 0:
+        return
+    v = dem.sample(lon[sel], lat[sel], method)
+    got = np.isfinite(v)
+    sel = sel[got]
+    h[sel] = v[got]
+    src[sel] = index
+    todo[sel] = False
 
 
 def orthorectify(product: str | os.PathLike[str] | MerisProduct,

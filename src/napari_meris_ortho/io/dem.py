@@ -32,7 +32,9 @@ DEM). Methods "nearest", "bilinear" (2x2 posts), "bicubic" (4x4 posts, Keys a = 
 index -1 (and NaN) where none has data (the caller then falls back to the tie points).
 ``prepare(lon_min, lat_min, lon_max, lat_max)`` (sources and stacks) reads once the window of
 a GDAL raster that covers a footprint, decoding its blocks on all cores; later lookups inside it
-read nothing more (bilinear: four flat gathers).
+read nothing more (bilinear: four flat gathers). ``lattice_window()`` then gives that window as
+plain data (``LatticeWindow``) for the compiled lookup of ``engine.terrain`` (called by
+``ortho``; None for the other sources, which keep ``sample``).
 """
 
 from __future__ import annotations
@@ -42,7 +44,8 @@ import os
 import re
 import stat
 import zipfile
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -77,6 +80,11 @@ def getasse_tile_name(lat0: int, lon0: int) -> str:
 
 
 # ---------------------------------------------------------------------- interpolation
+def _plausible(v: np.ndarray) -> np.ndarray:
+    """``v`` with NaN where a height is outside MIN_TERRAIN_M..MAX_TERRAIN_M (no data)."""
+    return np.where((v >= MIN_TERRAIN_M) & (v <= MAX_TERRAIN_M), v, np.nan)
+
+
 def _kernel(frac: np.ndarray, method: str) -> tuple[np.ndarray, np.ndarray]:
     """Integer offsets from floor(x) and weights (n, k) of the 1-D kernel of ``method``."""
     if method == "nearest":
@@ -85,6 +93,26 @@ def _kernel(frac: np.ndarray, method: str) -> tuple[np.ndarray, np.ndarray]:
     if method == "bilinear":
         return np.array([[0, 1]]), np.stack([1.0 - frac, frac], axis=1)
     return np.array([[-1, 0, 1, 2]]), np.stack(keys_weights(frac), axis=1)
+
+
+@dataclass(frozen=True)
+class LatticeWindow:
+    """Posts of a DEM already in memory, as plain data for a compiled lookup
+    (``engine.terrain.window_heights``; same heights as ``DemSource.sample``)."""
+
+    #: float32 (rows, cols) C-contiguous posts; NaN = no data (implausible heights not screened)
+    data: np.ndarray
+    #: float64 inverse geotransform (a, b, c, d, e, f): col + 0.5 = a x + b y + c,
+    #: row + 0.5 = d x + e y + f (posts at integer (row, col))
+    inv: np.ndarray
+    #: int64 (first row, first column of the window, lattice rows, lattice columns)
+    lattice: np.ndarray
+    #: geographic DEM: x moved by whole turns of 360 deg next to this longitude; NaN: none
+    wrap_centre: float
+    #: WGS84 (lon, lat) -> DEM (x, y), float64; None: x, y are lon, lat
+    transform: Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]] | None
+    #: vertical datum of the posts (``io.geoid``: "egm96" heights get N added)
+    datum: str | None
 
 
 class DemSource:
@@ -158,6 +186,10 @@ class DemSource:
 
     def prepare(self, lon_min: float, lat_min: float, lon_max: float, lat_max: float) -> None:
         """Read what lookups inside these WGS84 bounds need, once (no-op: memmapped tiles)."""
+
+    def lattice_window(self) -> LatticeWindow | None:
+        """The prepared window as plain data (``LatticeWindow``), None without one."""
+        return None
 
     def close(self) -> None:
         """Release open files (memmaps, datasets)."""
@@ -441,6 +473,8 @@ class RasterSource(DemSource):
         self._offset = float((ds.offsets or (0.0,))[band - 1] or 0.0)
         self._tr = pyproj.Transformer.from_crs(_WGS84, self.crs, always_xy=True)
         self._geographic = self.crs.is_geographic
+        #: lon/lat are the DEM's x/y (WGS84 geographic DEM): no transformation needed
+        self._lonlat = self.crs.equals(_WGS84, ignore_axis_order=True)
         left, bottom, right, top = ds.bounds
         self._x_centre = 0.5 * (left + right)
         self._window: tuple[int, int, np.ndarray] | None = None
@@ -453,9 +487,13 @@ class RasterSource(DemSource):
         b = self._ds.bounds
         return tuple(transform_bounds(self._ds.crs, "EPSG:4326", *b, densify_pts=21))
 
-    def _to_lattice(self, lon, lat):
+    def _to_xy(self, lon: np.ndarray, lat: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """DEM CRS (x, y) of WGS84 (lon, lat), float64."""
         x, y = self._tr.transform(lon, lat, errcheck=False)
-        x, y = np.asarray(x, dtype=np.float64), np.asarray(y, dtype=np.float64)
+        return np.asarray(x, dtype=np.float64), np.asarray(y, dtype=np.float64)
+
+    def _to_lattice(self, lon, lat):
+        x, y = self._to_xy(lon, lat)
         if self._geographic:
             x = x + 360.0 * np.round((self._x_centre - x) / 360.0)
         a = self._inv
@@ -465,26 +503,34 @@ class RasterSource(DemSource):
         return r, c, inside
 
     def _read(self, r0: int, r1: int, c0: int, c1: int) -> np.ndarray:
-        """Posts [r0, r1) x [c0, c1) as float heights (float32, float64 for float64 rasters;
-        NaN = no data), blocks decoded on all cores (``GDAL_NUM_THREADS``)."""
+        """Posts [r0, r1) x [c0, c1) as float heights (float32, float64 for rasters float32
+        does not hold exactly; NaN = no data; implausible heights are screened at lookup),
+        blocks decoded on all cores (``GDAL_NUM_THREADS``)."""
         import rasterio
         from rasterio.errors import RasterioError
         from rasterio.windows import Window
 
+        raw = np.dtype(self._ds.dtypes[self._band - 1])
+        scaled = self._scale != 1.0 or self._offset != 0.0
+        direct = not scaled and raw.kind in "iuf" and np.can_cast(raw, np.float32, "safe")
         try:
-            with rasterio.Env(GDAL_NUM_THREADS="ALL_CPUS"):
-                data = self._ds.read(self._band, window=Window(c0, r0, c1 - c0, r1 - r0))
+            with rasterio.Env(GDAL_NUM_THREADS="ALL_CPUS"):  # float32 straight from GDAL
+                data = self._ds.read(self._band, window=Window(c0, r0, c1 - c0, r1 - r0),
+                                     out_dtype=np.float32 if direct else None)
         except (RasterioError, OSError) as exc:
             raise DemError(f"{self.name}: cannot read DEM ({exc})") from exc
+        if direct:  # exact conversion: no data compares the same before and after it
+            if self._nodata is not None and not np.isnan(self._nodata):
+                np.putmask(data, data == self._nodata, np.float32(np.nan))
+            return data
         nodata = np.isnan(data) if data.dtype.kind == "f" else np.zeros(data.shape, bool)
         if self._nodata is not None:
             nodata |= data == self._nodata
         dtype = np.result_type(data.dtype, np.float32)
-        if self._scale != 1.0 or self._offset != 0.0:
+        if scaled:
             data = data * self._scale + self._offset
-        data = data.astype(dtype)
+        data = data.astype(dtype, copy=False)
         data[nodata] = np.nan
-        data[~((data >= MIN_TERRAIN_M) & (data <= MAX_TERRAIN_M))] = np.nan  # implausible
         return data
 
     def _covers(self, r0: int, r1: int, c0: int, c1: int) -> bool:
@@ -532,6 +578,20 @@ class RasterSource(DemSource):
         self._window = (r0, c0, self._read(r0, r1, c0, c1))
         self._prepared = True
 
+    def lattice_window(self) -> LatticeWindow | None:
+        """The prepared float32 window (``prepare``) as plain data; None before ``prepare``
+        or for a float64 raster."""
+        w = self._window
+        if not self._prepared or w is None or w[2].dtype != np.float32:
+            return None
+        a = self._inv
+        return LatticeWindow(
+            data=np.ascontiguousarray(w[2]),
+            inv=np.array([a.a, a.b, a.c, a.d, a.e, a.f], dtype=np.float64),
+            lattice=np.array([w[0], w[1], self.n_rows, self.n_cols], dtype=np.int64),
+            wrap_centre=self._x_centre if self._geographic else float("nan"),
+            transform=None if self._lonlat else self._to_xy, datum=self.datum)
+
     def _sample_chunk(self, lon: np.ndarray, lat: np.ndarray, method: str) -> np.ndarray:
         """Bilinear lookups inside the prepared window: four flat gathers (same numbers as the
         generic 2x2 kernel); anything else: the generic path."""
@@ -555,8 +615,8 @@ class RasterSource(DemSource):
         ra, rb = (ra - w0) * data.shape[1], (rb - w0) * data.shape[1]
         ca, cb = ca - wc0, cb - wc0
         fr, fc = r - rf, c - cf
-        top = flat[ra + ca] * (1.0 - fc) + flat[ra + cb] * fc
-        bottom = flat[rb + ca] * (1.0 - fc) + flat[rb + cb] * fc
+        top = _plausible(flat[ra + ca]) * (1.0 - fc) + _plausible(flat[ra + cb]) * fc
+        bottom = _plausible(flat[rb + ca]) * (1.0 - fc) + _plausible(flat[rb + cb]) * fc
         out[idx] = top * (1.0 - fr) + bottom * fr
         return out
 
@@ -746,5 +806,6 @@ def heights_or_fallback(stack: DemStack | None, lon: np.ndarray, lat: np.ndarray
     return np.where(idx >= 0, h, fallback), idx
 
 
-__all__ = ["CompositeSource", "DemSource", "DemStack", "GetasseSource", "RasterSource",
+__all__ = ["CompositeSource", "DemSource", "DemStack", "GetasseSource", "LatticeWindow",
+           "RasterSource",
            "SrtmTile", "getasse_tile_name", "heights_or_fallback", "open_dem"]
