@@ -345,3 +345,68 @@ def test_accuracy_across_the_antimeridian():
     assert r.valid.mean() > 0.99  # the box lies inside the swath: no hole, no seam at 180
     e = _truth_error(s, r)
     assert np.sqrt(np.mean(e ** 2)) <= 0.05 and e.max() <= 0.25
+
+
+def _write_dem(path, data, transform, crs="EPSG:4326", nodata=None):
+    import rasterio
+
+    with rasterio.open(path, "w", driver="GTiff", width=data.shape[1], height=data.shape[0],
+                       count=1, dtype=data.dtype.name, crs=crs, transform=transform,
+                       nodata=nodata, tiled=True, blockxsize=64, blockysize=64) as ds:
+        ds.write(data, 1)
+    return str(path)
+
+
+def _old_heights(stack, lon, lat, mask, method):
+    """The heights as before the compiled lookup: ``DemStack.sample`` at the masked points."""
+    h = np.full(lon.shape, np.nan, np.float32)
+    src = np.full(lon.shape, -1, np.int8)
+    hv, iv = stack.sample(lon[mask], lat[mask], method)
+    h[mask], src[mask] = hv, iv
+    return h, src
+
+
+@pytest.mark.parametrize("method", ["bilinear", "nearest", "bicubic"])
+def test_dem_heights_by_the_window_kernel_equal_the_dem_stack(tmp_path, method):
+    """``_heights`` (compiled lookup in the prepared windows) gives the heights and DEM indices
+    of ``DemStack.sample``: nodata holes and implausible posts sending points to the next DEM,
+    points beyond the prepared window, a UTM DEM, EGM96 heights, a 0..360 deg global DEM."""
+    from rasterio.transform import from_origin
+
+    from napari_meris_ortho.io.dem import DemStack
+    from napari_meris_ortho.ortho import _heights
+
+    rng = np.random.default_rng(12)
+    geo = rng.uniform(0.0, 3000.0, (200, 300)).astype(np.float32)
+    geo[rng.integers(0, 200, 300), rng.integers(0, 300, 300)] = -32768.0  # holes
+    geo[rng.integers(0, 200, 50), rng.integers(0, 300, 50)] = 9999.0  # implausible
+    tif = _write_dem(tmp_path / "geo.tif", geo, from_origin(10.0, 47.0, 0.01, 0.01),
+                     nodata=-32768.0)
+    x0, y0 = 560000.0, 5230000.0  # UTM 32N around (9.8, 47.2)
+    utm = (1500.0 + 0.01 * np.arange(260)[None, :] - 0.02 * np.arange(300)[:, None]
+           + rng.normal(0.0, 5.0, (300, 260))).astype(np.float32)
+    utm_tif = _write_dem(tmp_path / "utm.tif", utm, from_origin(x0, y0, 1000.0, 1000.0),
+                         "EPSG:32632")
+    world = rng.uniform(-100.0, 2000.0, (90, 180)).astype(np.int16)  # 2 deg posts, 0..360 E
+    world_tif = _write_dem(tmp_path / "world.tif", world, from_origin(0.0, 90.0, 2.0, 2.0))
+    egm = _write_dem(tmp_path / "egm.tif", geo[::-1].copy(), from_origin(10.0, 47.0, 0.01, 0.01),
+                     nodata=-32768.0)
+    dems = [tif, f"{egm}:egm96", f"{utm_tif}:ellipsoid", f"{world_tif}:ellipsoid"]
+    lon, lat = np.meshgrid(np.linspace(9.5, 13.5, 400), np.linspace(48.0, 44.5, 300))
+    lon = np.where(lon > 12.0, lon - 360.0, lon)  # a turn away: the same points
+    mask = rng.random(lon.shape) < 0.9
+    new_stack, old_stack = DemStack(dems), DemStack(dems)
+    for stack in (new_stack, old_stack):  # windows smaller than the points' extent
+        stack.prepare(10.3, 45.3, 12.6, 46.9)
+    assert all(s.lattice_window() is not None for s in new_stack.sources)
+    h, src = _heights(new_stack, lon, lat, mask, method)
+    h_old, src_old = _old_heights(old_stack, lon, lat, mask, method)
+    np.testing.assert_array_equal(src, src_old)
+    assert set(np.unique(src).tolist()) == {-1, 0, 1, 2, 3}
+    assert np.all(np.isnan(h[src < 0])) and np.all(np.isfinite(h[src >= 0]))
+    ok = src >= 0
+    if method == "bicubic":  # other float64 summation order than numpy's einsum
+        np.testing.assert_array_max_ulp(h[ok], h_old[ok], maxulp=1)
+    else:
+        np.testing.assert_array_equal(h, h_old)
+    assert np.mean(h[ok] == h_old[ok]) > 0.95

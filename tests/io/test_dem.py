@@ -329,3 +329,39 @@ def test_multiband_raster_is_not_a_dem(tmp_path):
         ds.write(np.full((3, 6, 8), 80.0, np.float32))
     with pytest.raises(DemError, match="3 bands, not a DEM"):
         open_dem(path)
+
+
+def test_lattice_window_is_the_prepared_window_as_plain_data(tmp_path):
+    """``lattice_window``: None before ``prepare``; then the float32 posts (no data NaN, an
+    int16 raster read exactly), the inverse geotransform, the window's place in the lattice,
+    the wrap centre of a geographic DEM and the transformation of a projected one."""
+    data = np.arange(200 * 300, dtype=np.int16).reshape(200, 300) % 3000
+    data[50, 60] = -9999
+    data[52, 61] = 9500  # implausible: kept in the window, screened at lookup
+    path = write_geotiff_dem(tmp_path / "geo.tif", "EPSG:4326",
+                             from_origin(10.0, 47.0, 0.01, 0.01), data, -9999)
+    dem = open_dem(f"{path}:ellipsoid")
+    assert dem.lattice_window() is None
+    dem.prepare(10.5, 45.5, 12.5, 46.8)
+    w = dem.lattice_window()
+    assert w is not None and w.data.dtype == np.float32 and w.data.flags.c_contiguous
+    assert w.lattice.tolist() == [17, 47, 200, 300] and w.data.shape == (136, 206)
+    expected = data[17:153, 47:253].astype(np.float32)
+    expected[data[17:153, 47:253] == -9999] = np.nan
+    np.testing.assert_array_equal(w.data, expected)
+    np.testing.assert_allclose(w.inv, [100.0, 0.0, -1000.0, 0.0, -100.0, 4700.0], atol=1e-9)
+    assert w.wrap_centre == pytest.approx(11.5) and w.transform is None
+    assert w.datum == "ellipsoid"
+    # the flat bilinear lookups of the prepared window still screen implausible posts
+    assert np.isnan(dem.sample(10.615, 46.475)) and np.isfinite(dem.sample(10.65, 46.45))
+    utm_path = write_geotiff_dem(tmp_path / "utm.tif", "EPSG:32633",
+                                 from_origin(400000.0, 5200000.0, 1000.0, 1000.0),
+                                 np.full((100, 120), 700.0, np.float32))
+    utm = open_dem(f"{utm_path}:egm96")
+    utm.prepare(13.8, 46.1, 14.9, 46.9)
+    wu = utm.lattice_window()
+    assert wu is not None and np.isnan(wu.wrap_centre) and wu.transform is not None
+    assert wu.datum == "egm96"
+    x, y = wu.transform(np.array([15.0]), np.array([46.5]))
+    ref = pyproj.Transformer.from_crs(4326, 32633, always_xy=True).transform(15.0, 46.5)
+    assert (x[0], y[0]) == ref and x[0] == pytest.approx(500000.0)
