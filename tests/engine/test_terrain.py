@@ -128,3 +128,24 @@ def test_only_todo_points_undulation_and_wrap(posts):
     # without the wrap a longitude a turn away is outside the lattice
     _, _, left, _, _ = run(posts, (0, 0, N_ROWS, N_COLS), x, y, "bilinear")
     assert left[2] and left[3] and not left[1]
+
+
+@pytest.mark.parametrize("method", ["bilinear", "bicubic"])
+def test_ranges_on_threads_equal_one_whole_range_call(posts, method):
+    from napari_meris_ortho.engine import terrain
+
+    rng = np.random.default_rng(7)
+    n = 300_000  # several ranges of at least 1 << 16 points
+    x, y = rng.uniform(9.99, 10.81, n), rng.uniform(46.39, 47.01, n)
+    window = np.ascontiguousarray(posts[5:55, 5:75])
+    lattice = (5, 5, N_ROWS, N_COLS)
+    h, src, todo, miss, n_miss = run(window, lattice, x, y, method, index=2)
+    todo1, h1 = np.ones(n, bool), np.full(n, -1.0, np.float32)
+    src1, miss1 = np.full(n, -1, np.int8), np.zeros(n, bool)
+    kernel = terrain._bicubic if method == "bicubic" else terrain._linear
+    extra = () if method == "bicubic" else (False,)
+    n1 = kernel(0, n, window, INV, np.asarray(lattice, np.int64), np.nan, *extra, x, y, todo1,
+                np.empty(0), 2, h1, src1, miss1)
+    assert n_miss == n1 == int(miss.sum()) > 1000
+    for got, want in ((h, h1), (src, src1), (todo, todo1), (miss, miss1)):
+        np.testing.assert_array_equal(got, want)

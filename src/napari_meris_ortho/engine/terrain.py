@@ -1,6 +1,6 @@
 """DEM heights looked up in a window of posts already in memory (handbook section 3.1
-"Digital elevation data", Appendix C ``TimMersynGetAltitudeFromDem``): one serial compiled
-pass over the output points, no temporaries.
+"Digital elevation data", Appendix C ``TimMersynGetAltitudeFromDem``): serial compiled loops
+over the output points, no temporaries.
 
 The window is plain data (``io.dem.LatticeWindow`` gives it; engine and io never import each
 other): float32 posts, NaN = no data, and the inverse geotransform of the DEM, (a, b, c, d, e,
@@ -9,7 +9,8 @@ centres). Interpolation as ``io.dem.DemSource.sample``: "nearest", "bilinear" (2
 "bicubic" (4x4 posts, Keys a = -0.5, ``geometry.interpolation``); a post outside the lattice is
 clamped to its edge, a post that is no data or outside -500..9000 m makes the point no data (it
 goes to the next DEM). Nearest/bilinear and bicubic are two kernels: a run compiles only the
-one it uses (``ortho`` asks bilinear).
+one it uses (``ortho`` asks bilinear); both run on ranges of points on a few threads
+(``engine.threads``).
 """
 
 from __future__ import annotations
@@ -21,6 +22,7 @@ from numba import njit
 
 from ..geometry.earth import MAX_TERRAIN_M, MIN_TERRAIN_M
 from ..geometry.interpolation import keys_weights
+from .threads import split_range
 
 #: interpolation codes of :func:`window_heights` (order of ``options.Sampling``)
 NEAREST, BILINEAR, BICUBIC = 0, 1, 2
@@ -52,29 +54,35 @@ def window_heights(data: np.ndarray, inv: np.ndarray, lattice: np.ndarray, wrap_
     posts outside the window are flagged in ``miss`` (the caller reads them); outside the
     lattice or no data: left ``todo``. Returns the number of ``miss`` points.
     """
+    counts: list[int] = []  # misses of each range (list.append: thread-safe)
     if method == BICUBIC:
-        return int(_bicubic(data, inv, lattice, wrap_centre, x, y, todo, undulation, index, h,
-                            src, miss))
-    return int(_linear(data, inv, lattice, wrap_centre, method == NEAREST, x, y, todo,
-                       undulation, index, h, src, miss))
+        args_b = (data, inv, lattice, wrap_centre, x, y, todo, undulation, index, h, src, miss)
+        split_range(lambda lo, hi: counts.append(_bicubic(lo, hi, *args_b)), x.size,
+                    min_size=1 << 16)
+    else:
+        args_l = (data, inv, lattice, wrap_centre, method == NEAREST, x, y, todo, undulation,
+                  index, h, src, miss)
+        split_range(lambda lo, hi: counts.append(_linear(lo, hi, *args_l)), x.size,
+                    min_size=1 << 16)
+    return int(sum(counts))
 
 
 @njit(cache=True, nogil=True)
-def _linear(data: np.ndarray, inv: np.ndarray, lattice: np.ndarray, wrap_centre: float,
-            nearest: bool, x: np.ndarray, y: np.ndarray, todo: np.ndarray,
+def _linear(lo: int, hi: int, data: np.ndarray, inv: np.ndarray, lattice: np.ndarray,
+            wrap_centre: float, nearest: bool, x: np.ndarray, y: np.ndarray, todo: np.ndarray,
             undulation: np.ndarray, index: int, h: np.ndarray, src: np.ndarray,
             miss: np.ndarray) -> int:
-    """``window_heights`` bilinear (2x2 posts) or ``nearest`` (the post of the nearest
-    centre, as a bilinear of weights 1, 0 on that post: the same number). No helper calls:
-    each costs compile time."""
+    """``window_heights`` at points [lo, hi): bilinear (2x2 posts) or ``nearest`` (the post of
+    the nearest centre, as a bilinear of weights 1, 0 on that post: the same number). No
+    helper calls: each costs compile time."""
     n_win_r, n_win_c = data.shape
     r_off, c_off, n_rows, n_cols = lattice[0], lattice[1], lattice[2], lattice[3]
     geoid = undulation.size > 0
     k = 0 if nearest else 1
-    lo, hi = MIN_TERRAIN_M, MAX_TERRAIN_M
+    h_min, h_max = MIN_TERRAIN_M, MAX_TERRAIN_M
     a, b, c, d, e, f = inv[0], inv[1], inv[2], inv[3], inv[4], inv[5]
     n_miss = 0
-    for i in range(x.size):
+    for i in range(lo, hi):
         if not todo[i]:
             continue
         xi = x[i]
@@ -99,8 +107,8 @@ def _linear(data: np.ndarray, inv: np.ndarray, lattice: np.ndarray, wrap_centre:
             continue
         v00, v01 = data[r_lo, c_lo], data[r_lo, c_hi]
         v10, v11 = data[r_hi, c_lo], data[r_hi, c_hi]
-        if not (v00 >= lo and v00 <= hi and v01 >= lo and v01 <= hi and v10 >= lo
-                and v10 <= hi and v11 >= lo and v11 <= hi):
+        if not (v00 >= h_min and v00 <= h_max and v01 >= h_min and v01 <= h_max
+                and v10 >= h_min and v10 <= h_max and v11 >= h_min and v11 <= h_max):
             continue  # a background post (no data or implausible): the next DEM
         top = v00 * (1.0 - fc) + v01 * fc
         bottom = v10 * (1.0 - fc) + v11 * fc
@@ -115,16 +123,17 @@ def _linear(data: np.ndarray, inv: np.ndarray, lattice: np.ndarray, wrap_centre:
 
 
 @njit(cache=True, nogil=True)
-def _bicubic(data: np.ndarray, inv: np.ndarray, lattice: np.ndarray, wrap_centre: float,
-             x: np.ndarray, y: np.ndarray, todo: np.ndarray, undulation: np.ndarray,
-             index: int, h: np.ndarray, src: np.ndarray, miss: np.ndarray) -> int:
-    """``window_heights`` bicubic: 4x4 posts from floor - 1, Keys weights; each row's sum
-    weighted by its row weight."""
+def _bicubic(lo: int, hi: int, data: np.ndarray, inv: np.ndarray, lattice: np.ndarray,
+             wrap_centre: float, x: np.ndarray, y: np.ndarray, todo: np.ndarray,
+             undulation: np.ndarray, index: int, h: np.ndarray, src: np.ndarray,
+             miss: np.ndarray) -> int:
+    """``window_heights`` at points [lo, hi), bicubic: 4x4 posts from floor - 1, Keys weights;
+    each row's sum weighted by its row weight."""
     n_win_r, n_win_c = data.shape
     r_off, c_off, n_rows, n_cols = lattice[0], lattice[1], lattice[2], lattice[3]
     geoid = undulation.size > 0
     n_miss = 0
-    for i in range(x.size):
+    for i in range(lo, hi):
         if not todo[i]:
             continue
         xi = x[i]  # lattice (row, col) as in _linear (written out: compile time)
