@@ -30,3 +30,53 @@ def test_warm_up_runs_every_configuration(monkeypatch):
 def test_no_background_warm_up_when_disabled(monkeypatch):
     monkeypatch.setenv("MERIS_ORTHO_NO_WARMUP", "1")
     assert warmup.warm_up_in_background() is None
+
+
+LATE = ("_linear", "_antecedent_rows", "_nearest_range", "_gather_range", "_halve_average")
+_COMPILED = """
+import json, sys
+from numba.core import event
+names = []
+class Listener(event.Listener):
+    def on_start(self, e): pass
+    def on_end(self, e): names.append(e.data["dispatcher"].py_func.__name__)
+event.register("numba:compile", Listener())
+from napari_meris_ortho.cli import main
+code = main(sys.argv[1:])
+print(json.dumps(names))
+sys.exit(code)
+"""
+
+
+def test_late_kernels_compiled_by_the_child_are_not_compiled_again_by_map(tmp_path):
+    """A first ``map`` (cold cache) starts ``compile_late`` in a child: with the child's cache,
+    the map itself compiles none of the late kernels (same types), only the early ones."""
+    import json
+    import os
+    import subprocess
+    import sys
+
+    product, dem = warmup._tiny_product(tmp_path)
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "cache"),
+           "MERIS_ORTHO_NO_WARMUP": "1"}
+    cold = [sys.executable, "-c", "from napari_meris_ortho import warmup; "
+            "print(warmup.cache_is_cold())"]
+    assert subprocess.run(cold, env=env, capture_output=True, text=True).stdout.strip() == "True"
+    subprocess.run([sys.executable, "-m", "napari_meris_ortho.warmup", "--late"], env=env,
+                   check=True)
+    assert subprocess.run(cold, env=env, capture_output=True, text=True).stdout.strip() == "False"
+    out = subprocess.run([sys.executable, "-c", _COMPILED, "-q", "map", str(product), "-o",
+                          str(tmp_path / "o.tif"), "--dem", f"{dem}:ellipsoid"], env=env,
+                         capture_output=True, text=True, check=True)
+    compiled = set(json.loads(out.stdout.strip().splitlines()[-1]))
+    assert "_primary_nodes" in compiled  # the map compiled its early kernels itself
+    assert not compiled & set(LATE), compiled & set(LATE)
+
+
+def test_no_background_compilation_on_a_warm_cache_or_when_disabled(monkeypatch):
+    monkeypatch.setattr(warmup, "cache_is_cold", lambda: False)
+    assert warmup.compile_late_in_background() is None
+    monkeypatch.setattr(warmup, "cache_is_cold", lambda: True)
+    monkeypatch.setenv("MERIS_ORTHO_NO_WARMUP", "1")
+    assert warmup.compile_late_in_background() is None
+    warmup.stop(None)

@@ -12,8 +12,11 @@ installing; the napari Orthorectify widget starts ``warm_up_in_background()`` wh
 
 from __future__ import annotations
 
+import contextlib
 import datetime as dt
 import os
+import subprocess
+import sys
 import tempfile
 import threading
 import time
@@ -85,6 +88,69 @@ def warm_up() -> float:
     return time.perf_counter() - t0
 
 
+def compile_late() -> float:
+    """Compile, on tiny inputs of the types ``meris-ortho map`` gives them, the kernels a map
+    calls after the primary grid: the DEM lookup, the prediction/correction rows, the
+    nearest-pixel index and gather of counts, the COG overview kernel (the numba cache keeps
+    them); seconds."""
+    from .engine import terrain
+    from .engine.predcorr import find_antecedents
+    from .engine.resample import gather, nearest_pixel, overview_level
+    from .geometry.tiepoints import analytic_swath
+
+    t0 = time.perf_counter()
+    one = np.zeros(1)
+    terrain.window_heights(np.zeros((2, 2), np.float32), np.zeros(6), np.zeros(4, np.int64),
+                           0.0, terrain.METHOD_CODES["bilinear"], one, one,
+                           np.zeros(1, bool), np.empty(0), 0, np.zeros(1, np.float32),
+                           np.zeros(1, np.int8), np.zeros(1, bool))
+    overview_level(np.ones((3, 3), np.uint16), 0.0)
+    index = nearest_pixel(np.zeros(4, np.float32), np.zeros(4, np.float32), 2, 2,
+                          line_offset=1)
+    gather(np.zeros((1, 2, 2), np.uint16), index, np.zeros((1, 4), np.uint16))
+    tp = analytic_swath(height=70, width=129)
+    _, _, coef, df, dj = tp.kernel_args()
+    z = np.zeros((2, 2))
+    spans = (np.array([0, 1, 2], np.int64), np.zeros(2, np.int64), np.full(2, 2, np.int64))
+    find_antecedents(z, z, np.zeros((2, 2), np.float32), 2, *spans, z, z, 16.0, coef, df, dj,
+                     tp.height, tp.width, 0, 0, 0.01, 10, False)
+    return time.perf_counter() - t0
+
+
+def cache_is_cold() -> bool:
+    """True when numba's cache holds no machine code of the prediction/correction kernel for
+    this installation (a first run): its index file is missing."""
+    from .engine import predcorr
+
+    cache_file = getattr(getattr(predcorr._antecedent_rows, "_cache", None), "_cache_file", None)
+    index = getattr(cache_file, "_index_path", None)  # numba's IndexDataCacheFile
+    return index is not None and not os.path.exists(index)
+
+
+def compile_late_in_background() -> subprocess.Popen[bytes] | None:
+    """On a cold cache (``cache_is_cold``), ``compile_late`` in a child process, on the other
+    core, while this process compiles and runs the first kernels of a map; the map then loads
+    the late ones from the cache. None when the cache is warm or ``MERIS_ORTHO_NO_WARMUP`` is
+    set. The caller ends the child with ``stop``."""
+    if os.environ.get("MERIS_ORTHO_NO_WARMUP") or not cache_is_cold():
+        return None
+    try:
+        return subprocess.Popen([sys.executable, "-m", "napari_meris_ortho.warmup", "--late"],
+                                stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+                                stderr=subprocess.DEVNULL)
+    except OSError:  # best effort: a cold cache only costs time
+        return None
+
+
+def stop(child: subprocess.Popen[bytes] | None) -> None:
+    """End a background compilation that is still running (numba writes its cache files
+    atomically: an interrupted compilation leaves nothing half written)."""
+    if child is not None and child.poll() is None:
+        child.terminate()
+        with contextlib.suppress(subprocess.TimeoutExpired):
+            child.wait(timeout=5)
+
+
 def warm_up_in_background() -> threading.Thread | None:
     """``warm_up`` once per process in a daemon thread (errors are ignored: a cold cache
     only costs time); nothing when ``MERIS_ORTHO_NO_WARMUP`` is set (tests)."""
@@ -104,4 +170,7 @@ def warm_up_in_background() -> threading.Thread | None:
 
 
 if __name__ == "__main__":
-    print(f"numba kernels compiled in {warm_up():.1f} s")
+    if sys.argv[1:] == ["--late"]:
+        compile_late()
+    else:
+        print(f"numba kernels compiled in {warm_up():.1f} s")

@@ -197,13 +197,11 @@ def _warn_unused_dems(dems: list[str], sources: dict[str, int]) -> None:
                         "or only no data / heights outside -500..9000 m)", dems[int(index)])
 
 
-def run(args: argparse.Namespace) -> int:
-    """Run ``meris-ortho map``."""
-    from .._atomic import atomic_path
+def _map(args: argparse.Namespace, grid: Any) -> Any:
+    """Precompute the antecedents and stream the bands into the output (``Antecedents``)."""
     from ..ortho import precompute
     from ..progress import tqdm_progress
 
-    grid = _check(args)
     show = log.isEnabledFor(logging.INFO)
     with tqdm_progress("map", enabled=show, unit="step") as progress:
         ante = precompute(args.product, grid=grid, dems=args.dem, elevation=args.elevation,
@@ -214,6 +212,20 @@ def run(args: argparse.Namespace) -> int:
                           max_pixels=args.max_pixels)
         _warn_unused_dems(args.dem, ante.stats.get("elevation_sources") or {})
         _write(args, ante, progress)
+    return ante
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run ``meris-ortho map``."""
+    from .._atomic import atomic_path
+    from ..warmup import compile_late_in_background, stop
+
+    grid = _check(args)
+    late = compile_late_in_background()  # first run: the other core compiles the late kernels
+    try:
+        ante = _map(args, grid)
+    finally:
+        stop(late)
     stats = ante.finish()
     if args.stats_json:
         with atomic_path(args.stats_json) as tmp:
