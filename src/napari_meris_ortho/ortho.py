@@ -444,9 +444,9 @@ class Antecedents:
         bands = self.bands if bands is None else [int(b) for b in bands]
         nr, nc = self.grid.shape
         first, stop = self.window
-        out = np.zeros((len(bands), nr * nc), np.uint16)
         if stop <= first or not bands:
-            return out.reshape(len(bands), nr, nc)
+            return np.zeros((len(bands), nr, nc), np.uint16)
+        out = np.empty((len(bands), nr * nc), np.uint16)  # every point is written below
         if self.sampling is Sampling.NEAREST:
             stack = self._stack([self.prod.counts(b) for b in bands], np.uint16)
             index = self._nearest_index()

@@ -85,16 +85,21 @@ def predicted_tile(a: np.ndarray, i0: int, j0: int, block: int) -> np.ndarray:
     with its TIFF predictor applied, as contiguous bytes (TIFF 6.0 section 14; Adobe's
     floating-point predictor: bytes split into planes, most significant first, then differenced).
     """
-    t = np.zeros((block, block), a.dtype)
     part = a[i0:i0 + block, j0:j0 + block]
-    t[:part.shape[0], :part.shape[1]] = part
+    h, w = part.shape
     if a.dtype.kind == "f":
+        t = np.zeros((block, block), a.dtype)
+        t[:h, :w] = part
         size = a.dtype.itemsize
         planes = t.view(np.uint8).reshape(block, block, size)[:, :, ::-1]
         rows = np.ascontiguousarray(planes.transpose(0, 2, 1)).reshape(block, block * size)
         rows[:, 1:] = rows[:, 1:] - rows[:, :-1]
         return rows
-    t[:, 1:] = t[:, 1:] - t[:, :-1]  # unsigned and two's complement arithmetic wrap as TIFF's
+    # differences straight from the band (one pass); the padding past its edge stays 0
+    t = np.empty((block, block), a.dtype) if (h, w) == (block, block) else np.zeros(
+        (block, block), a.dtype)
+    t[:h, 0] = part[:, 0]
+    np.subtract(part[:, 1:], part[:, :-1], out=t[:h, 1:w])  # unsigned/two's complement wrap
     return t
 
 
