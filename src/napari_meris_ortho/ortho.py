@@ -617,8 +617,9 @@ class _Blocks:
                     "elevation_source": np.full(shape, SOURCE_NONE, np.int8),
                     "shift_east_m": np.full(shape, np.nan, np.float32),
                     "shift_north_m": np.full(shape, np.nan, np.float32)}
-        return cls(np.full(shape, np.nan, np.float32), np.full(shape, np.nan, np.float32),
-                   np.full(shape, -1, np.int8), diag, np.zeros(n_dems + 1, np.int64))
+        # line, col, iterations: every row is written by ``add`` (blocks cover the grid)
+        return cls(np.empty(shape, np.float32), np.empty(shape, np.float32),
+                   np.empty(shape, np.int8), diag, np.zeros(n_dems + 1, np.int64))
 
     def add(self, r0: int, r1: int, res: dict[str, Any], src: np.ndarray | None,
             hmode: int) -> None:

@@ -143,12 +143,25 @@ def log_lines(stats: dict[str, Any], default_pixel: bool) -> list[str]:
     return out
 
 
+#: bands gathered together (one pass over the antecedent index for several bands)
+GATHER_GROUP = 4
+
+
 def _bands_streamed(args: argparse.Namespace, ante: Any, progress: Any) -> Any:
-    """One band at a time (uint16 counts or float32 radiances), reporting progress."""
+    """One band at a time (uint16 counts or float32 radiances), gathered ``GATHER_GROUP`` at
+    a time, reporting progress."""
     nr, bands = ante.grid.height, ante.bands
-    for k, b in enumerate(bands):
-        yield ante.counts([b])[0] if args.dtype == "uint16" else ante.radiance([b])[b]
-        progress(nr + k + 1, nr + len(bands))
+    for g in range(0, len(bands), GATHER_GROUP):
+        group = bands[g:g + GATHER_GROUP]
+        if args.dtype == "uint16":
+            values = list(ante.counts(group))
+        else:
+            radiance = ante.radiance(group)
+            values = [radiance[b] for b in group]
+        for k in range(len(group)):
+            yield values[k]
+            values[k] = None  # the writer holds it no longer than it needs it
+            progress(nr + g + k + 1, nr + len(bands))
 
 
 def _write(args: argparse.Namespace, ante: Any, progress: Any) -> None:
