@@ -464,10 +464,18 @@ class Antecedents:
         bands = self.bands if bands is None else [int(b) for b in bands]
         sf = self.prod.scaling.radiance
         nr, nc = self.grid.shape
-        if self.sampling is Sampling.NEAREST or self.window[1] <= self.window[0]:
-            counts = self.counts(bands)  # one float32 product per band, no float32 copy first
-            return {b: np.multiply(counts[k], np.float32(sf[b - 1]), dtype=np.float32)
-                    for k, b in enumerate(bands)}
+        if self.window[1] <= self.window[0]:
+            return {b: np.zeros((nr, nc), np.float32) for b in bands}
+        if self.sampling is Sampling.NEAREST:  # counts x sf_rad in one pass, no uint16 copy
+            from .engine.resample import gather_scaled
+
+            stack = self._stack([self.prod.counts(b) for b in bands], np.uint16)
+            values = np.empty((len(bands), nr * nc), np.float32)
+            t0 = time.perf_counter()
+            gather_scaled(stack, self._nearest_index(), np.array([sf[b - 1] for b in bands]),
+                          values)
+            self._timed("resample", t0)
+            return {b: values[k].reshape(nr, nc) for k, b in enumerate(bands)}
         out = {}
         for b, v in zip(bands, self._interpolated(bands), strict=True):
             v *= np.float32(sf[b - 1])

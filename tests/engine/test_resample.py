@@ -110,3 +110,21 @@ def test_overview_level_matches_a_numpy_reference_on_random_counts():
     n = v[0::2, 0::2] + v[1::2, 0::2] + v[0::2, 1::2] + v[1::2, 1::2]
     ref = np.where(n > 0, np.floor(s / np.maximum(n, 1) + 0.5), 0)
     np.testing.assert_array_equal(overview_level(a, 0), ref)
+
+
+def test_gather_scaled_equals_counts_times_scale_in_float32():
+    from napari_meris_ortho.engine.resample import gather, gather_scaled, nearest_pixel
+
+    rng = np.random.default_rng(2)
+    images = rng.integers(0, 65535, (3, 40, 50)).astype(np.uint16)
+    lines = rng.uniform(-3, 43, 5000).astype(np.float32)
+    cols = rng.uniform(-3, 53, 5000).astype(np.float32)
+    index = nearest_pixel(lines, cols, 40, 50)
+    counts = np.empty((3, 5000), np.uint16)
+    gather(images, index, counts)
+    scales = np.array([0.0123456, 0.5, 1e-3])
+    out = np.empty((3, 5000), np.float32)
+    gather_scaled(images, index, scales, out)
+    ref = counts.astype(np.float32) * scales.astype(np.float32)[:, None]
+    np.testing.assert_array_equal(out, ref)
+    assert np.all(out[:, index < 0] == 0) and (index < 0).any()

@@ -136,6 +136,32 @@ def gather(images: np.ndarray, index: np.ndarray, out: np.ndarray) -> None:
                 min_size=1 << 16)
 
 
+def gather_scaled(images: np.ndarray, index: np.ndarray, scales: np.ndarray,
+                  out: np.ndarray) -> None:
+    """``gather`` of counts straight into float32 physical values:
+    ``out[b, i] = float32(images[b, pixel index[i]]) * scales[b]`` (float32 arithmetic, the
+    numbers of ``counts.astype(float32) * float32(scale)``), 0 where the index is -1."""
+    sc = np.ascontiguousarray(scales, dtype=np.float32)
+    split_range(lambda lo, hi: _gather_scaled_range(lo, hi, images, index, sc, out),
+                index.size, min_size=1 << 16)
+
+
+@njit(cache=True, nogil=True)
+def _gather_scaled_range(lo, hi, images, index, scales, out):  # pragma: no cover
+    """Points [lo, hi) of ``gather_scaled``."""
+    n_bands, _, n_cols = images.shape
+    for i in range(lo, hi):
+        k = index[i]
+        if k < 0:
+            for b in range(n_bands):
+                out[b, i] = 0.0
+        else:
+            r = k // n_cols
+            c = k - r * n_cols
+            for b in range(n_bands):
+                out[b, i] = np.float32(images[b, r, c]) * scales[b]
+
+
 @njit(cache=True, nogil=True)
 def _gather_range(lo, hi, images, index, out):  # pragma: no cover
     """Points [lo, hi) of ``gather``."""
