@@ -31,9 +31,6 @@ COMMANDS = ("info", "sample", "map", "synthesize", "synthesis-log", "export", "d
             "demcheck")
 
 log = logging.getLogger("napari_meris_ortho")
-# no linear algebra here: no OpenBLAS server threads (numpy's and scipy's each spin about 0.1 s
-# of a core at start-up); set before numpy is first imported, a user's own setting wins
-os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 
 class _Parser(argparse.ArgumentParser):
@@ -99,6 +96,9 @@ def _few_collections() -> Iterator[None]:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    # no linear algebra here: no OpenBLAS server threads (numpy's and scipy's each spin about
+    # 0.1 s of a core at start-up); numpy is first imported below, a user's own setting wins
+    os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
     with _signals_handled(), _few_collections():
         try:
             parser = build_parser()

@@ -415,6 +415,22 @@ class Antecedents:
         sec = self.stats["seconds"]
         sec[key] += time.perf_counter() - t0
 
+    def _gather(self, images: Sequence[Any], dtype: Any, out: np.ndarray,
+                scales: np.ndarray | None = None) -> None:
+        """The nearest pixel of every point from ``images`` (their window, as ``dtype``) into
+        ``out`` (images, points): as they are (``gather``), or times ``scales`` as float32
+        (``gather_scaled``)."""
+        from .engine.resample import gather, gather_scaled
+
+        stack = self._stack(images, dtype)
+        index = self._nearest_index()
+        t0 = time.perf_counter()
+        if scales is None:
+            gather(stack, index, out)
+        else:
+            gather_scaled(stack, index, scales, out)
+        self._timed("resample", t0)
+
     def _stack(self, images: Sequence[Any], dtype: Any) -> np.ndarray:
         """(n, window lines, W) native copy of the window of each image (memmaps read here)."""
         t0 = time.perf_counter()
@@ -439,8 +455,6 @@ class Antecedents:
     def counts(self, bands: Sequence[int] | None = None) -> np.ndarray:
         """uint16 counts (len(bands), rows, cols) at the antecedents, 0 = background; nearest:
         the product's counts; bilinear/bicubic: interpolated counts rounded half up."""
-        from .engine.resample import gather
-
         bands = self.bands if bands is None else [int(b) for b in bands]
         nr, nc = self.grid.shape
         first, stop = self.window
@@ -448,11 +462,7 @@ class Antecedents:
             return np.zeros((len(bands), nr, nc), np.uint16)
         out = np.empty((len(bands), nr * nc), np.uint16)  # every point is written below
         if self.sampling is Sampling.NEAREST:
-            stack = self._stack([self.prod.counts(b) for b in bands], np.uint16)
-            index = self._nearest_index()
-            t0 = time.perf_counter()
-            gather(stack, index, out)
-            self._timed("resample", t0)
+            self._gather([self.prod.counts(b) for b in bands], np.uint16, out)
             return out.reshape(len(bands), nr, nc)
         for k, v in enumerate(self._interpolated(bands)):
             out[k] = np.clip(np.floor(v.reshape(-1) + np.float32(0.5)), 0, 65535)
@@ -467,14 +477,9 @@ class Antecedents:
         if self.window[1] <= self.window[0]:
             return {b: np.zeros((nr, nc), np.float32) for b in bands}
         if self.sampling is Sampling.NEAREST:  # counts x sf_rad in one pass, no uint16 copy
-            from .engine.resample import gather_scaled
-
-            stack = self._stack([self.prod.counts(b) for b in bands], np.uint16)
             values = np.empty((len(bands), nr * nc), np.float32)
-            t0 = time.perf_counter()
-            gather_scaled(stack, self._nearest_index(), np.array([sf[b - 1] for b in bands]),
-                          values)
-            self._timed("resample", t0)
+            self._gather([self.prod.counts(b) for b in bands], np.uint16, values,
+                         scales=np.array([sf[b - 1] for b in bands]))
             return {b: values[k].reshape(nr, nc) for k, b in enumerate(bands)}
         out = {}
         for b, v in zip(bands, self._interpolated(bands), strict=True):
@@ -484,16 +489,11 @@ class Antecedents:
 
     def flags(self) -> np.ndarray:
         """L1b flags (uint8) of the nearest pixel, 0 = background (any sampling)."""
-        from .engine.resample import gather
-
         nr, nc = self.grid.shape
         out = np.zeros((1, nr * nc), np.uint8)
         first, stop = self.window
         if stop > first:
-            stack = self._stack([self.prod.flags], np.uint8)
-            t0 = time.perf_counter()
-            gather(stack, self._nearest_index(), out)
-            self._timed("resample", t0)
+            self._gather([self.prod.flags], np.uint8, out)
         return out.reshape(nr, nc)
 
     def finish(self) -> dict[str, Any]:

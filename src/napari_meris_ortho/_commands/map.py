@@ -158,9 +158,8 @@ def _bands_streamed(args: argparse.Namespace, ante: Any, progress: Any) -> Any:
         else:
             radiance = ante.radiance(group)
             values = [radiance[b] for b in group]
-        for k in range(len(group)):
-            yield values[k]
-            values[k] = None  # the writer holds it no longer than it needs it
+        for k, v in enumerate(values):
+            yield v
             progress(nr + g + k + 1, nr + len(bands))
 
 

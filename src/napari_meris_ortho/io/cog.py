@@ -179,7 +179,9 @@ class CogWriter:
         self._drain(keep=2)
 
     def _drain(self, keep: int) -> None:
-        """Write the finished full-resolution bands (all but the last ``keep``) to the spill."""
+        """Collect the finished full-resolution bands (all but the last ``keep``): held in
+        memory while within the budget, then (and once spilling has begun, always: the file
+        order) written to the spill."""
         full = self.levels[0].tiles
         while self._drained < len(full) - keep:
             for fut in full[self._drained]:
