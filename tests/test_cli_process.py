@@ -1,0 +1,64 @@
+"""The ``meris-ortho`` process tuning (``cli.console_main``): freed memory kept for reuse, no
+collection on the way out; a library user's process is left as it is."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+
+import pytest
+
+_PROBE = """
+import ctypes, gc, json, sys
+import numpy as np
+from napari_meris_ortho import cli
+
+class MallInfo2(ctypes.Structure):
+    _fields_ = [(n, ctypes.c_size_t) for n in ("arena", "ordblks", "smblks", "hblks", "hblkhd",
+                "usmblks", "fsmblks", "uordblks", "fordblks", "keepcost")]
+
+libc = ctypes.CDLL(None)
+libc.mallinfo2.restype = MallInfo2
+if sys.argv[1] == "tuned":
+    cli._keep_freed_memory()
+start = libc.mallinfo2()
+a = np.ones(64 * 2 ** 20, np.uint8)
+live = libc.mallinfo2()
+del a
+freed = libc.mallinfo2()
+print(json.dumps({"mmapped_live": live.hblkhd - start.hblkhd,
+                  "heap_free_after": freed.fordblks - start.fordblks,
+                  "gc_enabled": gc.isenabled()}))
+"""
+
+
+def _probe(mode: str) -> dict:
+    env = {**os.environ, "MALLOC_MMAP_THRESHOLD_": "", "MALLOC_TRIM_THRESHOLD_": ""}
+    out = subprocess.run([sys.executable, "-c", _PROBE, mode], capture_output=True, text=True,
+                         check=True, env=env).stdout
+    return json.loads(out)
+
+
+@pytest.mark.skipif(not (os.confstr("CS_GNU_LIBC_VERSION") or "").startswith("glibc"),
+                    reason="glibc malloc only")
+def test_freed_band_sized_arrays_stay_in_the_heap():
+    plain, tuned = _probe("plain"), _probe("tuned")
+    # glibc's default: a 64 MiB array is a fresh mmap, unmapped (and zeroed again) when freed
+    assert plain["mmapped_live"] >= 64 * 2 ** 20
+    assert plain["heap_free_after"] < 64 * 2 ** 20
+    # tuned: it comes from the heap and stays there, free for the next band
+    assert tuned["mmapped_live"] < 2 ** 20
+    assert tuned["heap_free_after"] >= 64 * 2 ** 20
+    assert tuned["gc_enabled"]  # the tuning itself leaves the collector alone
+
+
+def test_main_restores_the_collector_for_a_library_caller(tmp_path, capsys):
+    import gc
+
+    from napari_meris_ortho.cli import main
+
+    before = gc.get_threshold()
+    assert main(["info", str(tmp_path / "missing.N1")]) == 2
+    assert gc.isenabled() and gc.get_threshold() == before
