@@ -62,3 +62,22 @@ def test_main_restores_the_collector_for_a_library_caller(tmp_path, capsys):
     before = gc.get_threshold()
     assert main(["info", str(tmp_path / "missing.N1")]) == 2
     assert gc.isenabled() and gc.get_threshold() == before
+
+
+def test_a_map_process_does_not_import_scipy_linalg(tmp_path):
+    import rasterio
+
+    from ortho_samples import make_product
+
+    prod = make_product(tmp_path / "p.N1", height=60, width=129)
+    out = tmp_path / "out.tif"
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(sys.path))
+    done = subprocess.run([sys.executable, "-X", "importtime", "-m", "napari_meris_ortho.cli",
+                           "-q", "map", str(prod), "-o", str(out), "--elevation", "tiepoints"],
+                          capture_output=True, text=True, env=env)
+    assert done.returncode == 0, done.stderr[-2000:]
+    imported = {line.split("|")[-1].strip() for line in done.stderr.splitlines()
+                if line.startswith("import time:")}
+    assert "numba.np.arraymath" in imported and "scipy.linalg" not in imported
+    with rasterio.open(out) as ds:  # and the map is whole: band 2 = product column
+        assert ds.count == 15 and ds.read(2).max() > 100

@@ -80,3 +80,32 @@ def test_no_background_compilation_on_a_warm_cache_or_when_disabled(monkeypatch)
     monkeypatch.setenv("MERIS_ORTHO_NO_WARMUP", "1")
     assert warmup.compile_late_in_background() is None
     warmup.stop(None)
+
+
+_NO_BLAS = """
+import json, sys
+import numpy as np
+from numba import njit
+from napari_meris_ortho.warmup import start_numba_without_blas
+from napari_meris_ortho.engine.resample import overview_level
+
+start_numba_without_blas()
+after_start = "scipy.linalg" in sys.modules
+half = overview_level(np.array([[1, 3], [5, 7]], np.uint16), 0.0)  # a kernel of ours runs
+dot = njit(lambda a, b: np.dot(a, b))(np.ones(3), np.ones(3))  # BLAS still there on demand
+print(json.dumps({"after_start": after_start, "half": int(half[0, 0]), "dot": float(dot),
+                  "linalg_after_dot": "scipy.linalg" in sys.modules}))
+"""
+
+
+def test_numba_starts_without_scipy_linalg_and_blas_still_works(tmp_path):
+    import json
+    import os
+    import subprocess
+    import sys
+
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path)}  # np.dot compiles here
+    out = subprocess.run([sys.executable, "-c", _NO_BLAS], capture_output=True, text=True,
+                         check=True, env=env).stdout
+    got = json.loads(out)
+    assert got == {"after_start": False, "half": 4, "dot": 3.0, "linalg_after_dot": True}

@@ -30,6 +30,8 @@ from .errors import MerisOrthoError
 #: subcommand modules; each defines ``register(subparsers)`` which sets ``func`` on its parser.
 COMMANDS = ("info", "sample", "map", "synthesize", "synthesis-log", "export", "disparity",
             "demcheck")
+#: subcommands that run numba kernels in this process
+NUMBA_COMMANDS = ("sample", "map", "synthesize", "disparity", "demcheck")
 
 log = logging.getLogger("napari_meris_ortho")
 
@@ -141,6 +143,10 @@ def main(argv: Sequence[str] | None = None, *, last: bool = False) -> int:
             quiet = logging.WARNING if args.quiet else logging.INFO
             level = logging.DEBUG if args.verbose else quiet
             logging.basicConfig(level=level, format="%(message)s", stream=sys.stderr)
+            if last and args.command in NUMBA_COMMANDS:
+                from .warmup import start_numba_without_blas
+
+                start_numba_without_blas()
             with output_run():
                 return int(args.func(args) or 0)
         except MerisOrthoError as exc:

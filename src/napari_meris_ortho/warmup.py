@@ -117,6 +117,26 @@ def compile_late() -> float:
     return time.perf_counter() - t0
 
 
+def start_numba_without_blas() -> None:
+    """Start numba's CPU target without importing scipy.linalg (0.13-0.2 s of every run).
+    numba's first compilation or cache load imports its array implementations, and one of
+    them imports scipy.linalg only to learn whether BLAS is there (without it, compiled
+    ``np.correlate`` / ``np.convolve`` use a plain loop instead of BLAS). No kernel of this
+    package calls BLAS, and a kernel with ``np.dot`` still gets it: numba imports
+    scipy.linalg again when it compiles one. For a process this package owns
+    (``cli.console_main``), before its first kernel and before it starts other threads;
+    no-op once scipy.linalg or numba's array implementations are imported."""
+    if "scipy.linalg" in sys.modules or "numba.np.arraymath" in sys.modules:
+        return
+    sys.modules["scipy.linalg"] = None  # type: ignore[assignment]  # import raises ImportError
+    try:
+        from numba.core.registry import cpu_target
+
+        cpu_target.target_context.refresh()
+    finally:
+        del sys.modules["scipy.linalg"]
+
+
 def cache_is_cold() -> bool:
     """True when numba's cache holds no machine code of the prediction/correction kernel for
     this installation (a first run): its index file is missing."""
