@@ -637,14 +637,14 @@ class _Blocks:
         self.iters[r0:r1] = res["iterations"]
         for k, v in res["search"].items():
             self.search[k] = self.search.get(k, 0) + v
-        ok = res["iterations"] >= 0
-        if src is not None:
-            self.sources += np.bincount(src[ok].astype(np.int64) + 1,
-                                        minlength=self.sources.size)
+        if src is not None:  # DEM k counted at k + 1; tie points (-1) at 0
+            self.sources += predcorr.solved_counts(src, res["iterations"], -1,
+                                                   self.sources.size)
         else:
-            self.sources[0] += int(ok.sum())
+            self.sources[0] += int(np.count_nonzero(res["iterations"] >= 0))
         if not self.diag:
             return
+        ok = res["iterations"] >= 0
         if "elevation" in res:
             for name in ("elevation", "shift_east_m", "shift_north_m"):
                 self.diag[name][r0:r1] = np.where(ok, res[name], np.nan)
@@ -768,13 +768,14 @@ def antecedent_line_window(line: np.ndarray, col: np.ndarray, n_lines: int, n_co
     inside the product reads (section 3.1 "Retrieve the antecedent"): min..max antecedent line
     plus the kernel margin (nearest/bilinear: 0 and +1 line, bicubic: -1 and +2); (0, 0) when
     no antecedent is inside."""
-    inside = (line >= -0.5) & (line < n_lines - 0.5) & (col >= -0.5) & (col < n_cols - 0.5)
-    if not inside.any():
+    from .engine.resample import inside_line_range
+
+    span = inside_line_range(line, col, n_lines, n_cols)
+    if span is None:
         return 0, 0
-    lines = line[inside]
     before, after = Sampling(sampling).margin
-    first = int(math.floor(float(lines.min()))) - before
-    stop = int(math.floor(float(lines.max()))) + 1 + after
+    first = int(math.floor(span[0])) - before
+    stop = int(math.floor(span[1])) + 1 + after
     return max(first, 0), min(stop, n_lines)
 
 

@@ -90,12 +90,12 @@ def warm_up() -> float:
 
 def compile_late() -> float:
     """Compile, on tiny inputs of the types ``meris-ortho map`` gives them, the kernels a map
-    calls after the primary grid: the DEM lookup, the prediction/correction rows, the
-    nearest-pixel index and gather of counts, the COG overview kernel (the numba cache keeps
-    them); seconds."""
+    calls after the primary grid: the DEM lookup, the prediction/correction rows, the counts
+    of solved points, the antecedent line window, the nearest-pixel index and gather of
+    counts, the COG overview kernel (the numba cache keeps them); seconds."""
     from .engine import terrain
-    from .engine.predcorr import find_antecedents
-    from .engine.resample import gather, nearest_pixel, overview_level
+    from .engine.predcorr import find_antecedents, solved_counts
+    from .engine.resample import gather, inside_line_range, nearest_pixel, overview_level
     from .geometry.tiepoints import analytic_swath
 
     t0 = time.perf_counter()
@@ -105,6 +105,8 @@ def compile_late() -> float:
                            np.zeros(1, bool), np.empty(0), 0, np.zeros(1, np.float32),
                            np.zeros(1, np.int8), np.zeros(1, bool))
     overview_level(np.ones((3, 3), np.uint16), 0.0)
+    solved_counts(np.zeros(2, np.int8), np.zeros(2, np.int8), -1, 2)
+    inside_line_range(np.zeros(2, np.float32), np.zeros(2, np.float32), 2, 2)
     index = nearest_pixel(np.zeros(4, np.float32), np.zeros(4, np.float32), 2, 2,
                           line_offset=1)
     gather(np.zeros((1, 2, 2), np.uint16), index, np.zeros((1, 4), np.uint16))

@@ -176,3 +176,19 @@ def test_handbook_loop_returns_the_elevation_diagnostics(scene):
     for key in ("shift_east_m", "shift_north_m"):
         assert np.max(np.abs(ref[key][both] - fast[key][both])) < 1.0
     assert np.abs(ref["shift_east_m"][both]).max() > 200.0  # nadir swath: up to ~290 m
+
+
+def test_solved_counts_counts_only_solved_points_in_range():
+    from napari_meris_ortho.engine.predcorr import solved_counts
+
+    rng = np.random.default_rng(3)
+    iters = rng.integers(-1, 11, (500, 7)).astype(np.int8)
+    source = rng.integers(-1, 3, (500, 7)).astype(np.int8)
+    ok = iters >= 0
+    expected = np.bincount(source[ok].astype(np.int64) + 1, minlength=4)
+    assert solved_counts(source, iters, -1, 4).tolist() == expected.tolist()
+    assert solved_counts(source, iters, 0, 2).tolist() == expected[1:3].tolist()
+    assert iteration_histogram(iters).tolist() == np.bincount(
+        iters[ok].astype(np.int64), minlength=11).tolist()
+    with pytest.raises(ValueError, match="differ in size"):
+        solved_counts(source, iters[:10], -1, 4)

@@ -128,3 +128,20 @@ def test_gather_scaled_equals_counts_times_scale_in_float32():
     ref = counts.astype(np.float32) * scales.astype(np.float32)[:, None]
     np.testing.assert_array_equal(out, ref)
     assert np.all(out[:, index < 0] == 0) and (index < 0).any()
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_inside_line_range_equals_the_masked_min_and_max(dtype):
+    from napari_meris_ortho.engine.resample import inside_line_range
+
+    rng = np.random.default_rng(7)
+    line = (rng.random((300, 40)) * 70 - 5).astype(dtype)
+    col = (rng.random((300, 40)) * 140 - 5).astype(dtype)
+    line[rng.random(line.shape) < 0.1] = np.nan
+    inside = (line >= -0.5) & (line < 59.5) & (col >= -0.5) & (col < 128.5)
+    assert inside_line_range(line, col, 60, 129) == (float(line[inside].min()),
+                                                     float(line[inside].max()))
+    assert inside_line_range(line, col + 200, 60, 129) is None
+    # the edges: -0.5 is inside, H - 0.5 is not
+    edge = np.array([-0.5, 59.5, 10.0], dtype)
+    assert inside_line_range(edge, np.zeros(3, dtype), 60, 129) == (-0.5, 10.0)

@@ -127,6 +127,33 @@ def _nearest_range(lo, hi, line, col, offset, n_lines, n_cols, out):  # pragma: 
             out[i] = -1
 
 
+def inside_line_range(lines: np.ndarray, cols: np.ndarray, n_lines: int, n_cols: int
+                      ) -> tuple[float, float] | None:
+    """Smallest and largest line of the antecedents inside the product (-0.5 <= l < H - 0.5,
+    -0.5 <= p < W - 0.5; NaN is outside), None when there is none; one pass (float32 or
+    float64, any shape)."""
+    line = np.asarray(lines).reshape(-1)
+    col = np.asarray(cols).reshape(-1)
+    if line.size != col.size:
+        raise ValueError(f"lines ({line.size}) and cols ({col.size}) differ in size")
+    dtype = np.float32 if line.dtype == np.float32 and col.dtype == np.float32 else np.float64
+    lo, hi = _inside_line_range(np.ascontiguousarray(line, dtype), np.ascontiguousarray(
+        col, dtype), float(n_lines), float(n_cols))
+    return None if lo > hi else (lo, hi)
+
+
+@njit(cache=True, nogil=True)
+def _inside_line_range(line, col, n_lines, n_cols):  # pragma: no cover
+    lo, hi = np.inf, -np.inf
+    for i in range(line.size):
+        x = np.float64(line[i])
+        y = np.float64(col[i])
+        if x >= -0.5 and x < n_lines - 0.5 and y >= -0.5 and y < n_cols - 0.5:
+            lo = min(lo, x)
+            hi = max(hi, x)
+    return lo, hi
+
+
 def gather(images: np.ndarray, index: np.ndarray, out: np.ndarray) -> None:
     """Nearest neighbour of all bands in one pass: ``out[b, i] = images[b, pixel index[i]]``,
     0 where the index is -1; ``images`` (bands, lines, cols), ``out`` (bands, points) of the
