@@ -67,7 +67,7 @@ def test_layout_reads_back_in_gdal_and_validates(tmp_path, dtype, compress, bigt
             for _ in range(2):
                 lv.append(overview_level(lv[-1], 0))
             levels.append(lv)
-            writer.add_band(lv)
+            writer.add_band(b, lambda a: overview_level(a, 0))
         with open(tmp_path / "c.tif", "wb") as f:
             writer.finish(f, main, every, bigtiff=bigtiff)
     finally:

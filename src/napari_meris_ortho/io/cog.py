@@ -28,7 +28,7 @@ import os
 import shutil
 import struct
 import zlib
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -122,8 +122,8 @@ class _Level:
 
 
 class CogWriter:
-    """Streams bands into a COG file (module docstring): ``add_band(levels)`` per band, in
-    order (full resolution then each overview), ``finish(path, ...)`` once, ``close()`` always.
+    """Streams bands into a COG file (module docstring): ``add_band(band, halve)`` per band,
+    ``finish(path, ...)`` once, ``close()`` always.
 
     Compressed tiles stay in memory up to ``memory_budget`` bytes (writing a file costs about
     3 ms per MB here: a detour through a scratch file costs as much as the final write); beyond
@@ -151,6 +151,7 @@ class CogWriter:
         self._held_bytes = 0
         self._budget = int(memory_budget)
         self._drained = 0
+        self._overview_jobs: list[Future[None]] = []
         self._encoder = self._make_encoder()
 
     def _make_encoder(self) -> Any:
@@ -165,18 +166,36 @@ class CogWriter:
     def _encode(self, a: np.ndarray, i0: int, j0: int) -> bytes:
         return self._encoder(predicted_tile(a, i0, j0, self.block))
 
-    def add_band(self, levels: Sequence[np.ndarray]) -> None:
-        """Queue the tiles of one band: its full resolution and overview arrays."""
-        if len(levels) != len(self.levels):
-            raise ValueError(f"{len(levels)} levels given, {len(self.levels)} expected")
-        for lev, a in zip(self.levels, levels, strict=True):
-            if a.shape != (lev.height, lev.width):
-                raise ValueError(f"level of shape {a.shape}, expected {(lev.height, lev.width)}")
-            a = np.ascontiguousarray(a, dtype=self.dtype)
-            b = self.block
-            lev.tiles.append([self._pool.submit(self._encode, a, i * b, j * b)
-                              for i in range(lev.tiles_down) for j in range(lev.tiles_across)])
+    def add_band(self, band: np.ndarray, halve: Callable[[np.ndarray], np.ndarray]) -> None:
+        """Queue one band: the tiles of its full resolution now; its overview levels
+        (``halve`` of the level above, one after the other) and their tiles on a worker, so
+        that the caller computes the next band meanwhile. The band must not change after."""
+        full = self.levels[0]
+        if band.shape != (full.height, full.width):
+            raise ValueError(f"band of shape {band.shape}, expected {(full.height, full.width)}")
+        a = np.ascontiguousarray(band, dtype=self.dtype)
+        full.tiles.append(self._submit_tiles(full, a))
+        for lev in self.levels[1:]:
+            lev.tiles.append([])  # filled by the band's overview job, in band order
+        k = len(full.tiles) - 1
+        self._overview_jobs.append(self._pool.submit(self._overviews, a, halve, k))
         self._drain(keep=2)
+
+    def _submit_tiles(self, lev: _Level, a: np.ndarray) -> list[Future[bytes]]:
+        b = self.block
+        return [self._pool.submit(self._encode, a, i * b, j * b)
+                for i in range(lev.tiles_down) for j in range(lev.tiles_across)]
+
+    def _overviews(self, a: np.ndarray, halve: Callable[[np.ndarray], np.ndarray],
+                   k: int) -> None:
+        """The overview levels of band ``k`` (from its full resolution ``a``), their tiles
+        queued (a worker's job: it never waits for other jobs)."""
+        for lev in self.levels[1:]:
+            a = np.ascontiguousarray(halve(a), dtype=self.dtype)
+            if a.shape != (lev.height, lev.width):
+                raise ValueError(f"overview of shape {a.shape}, expected "
+                                 f"{(lev.height, lev.width)}")
+            lev.tiles[k] = self._submit_tiles(lev, a)
 
     def _drain(self, keep: int) -> None:
         """Collect the finished full-resolution bands (all but the last ``keep``): held in
@@ -202,6 +221,8 @@ class CogWriter:
         ``tags`` go to the full-resolution IFD, ``nodata_tags`` to every IFD; ``bigtiff``: None
         = when the file would pass 4 GiB."""
         self._drain(keep=0)
+        for job in self._overview_jobs:  # every overview tile queued (or the job's error)
+            job.result()
         count = self._drained
         over = [[f.result() for band in lev.tiles for f in band] for lev in self.levels[1:]]
         sizes = [self._sizes] + [[len(t) for t in lev] for lev in over]

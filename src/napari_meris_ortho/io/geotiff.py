@@ -166,8 +166,8 @@ def write_cog(
             try:
                 n = 0
                 for n, b in enumerate(bands, start=1):
-                    writer.add_band(_levels(b, n, grid, dt, out, count, n_levels,
-                                            lambda a: halve(a, nodata, overview_resampling)))
+                    writer.add_band(_checked(b, n, grid, dt, out, count),
+                                    lambda a: halve(a, nodata, overview_resampling))
                     if progress is not None:
                         progress(n, count + 1)
                 if n != count:
@@ -183,17 +183,14 @@ def write_cog(
     return out
 
 
-def _levels(b: np.ndarray, n: int, grid: OutputGrid, dt: np.dtype, out: Path, count: int,
-            n_levels: int, halve: Callable[[np.ndarray], np.ndarray]) -> list[np.ndarray]:
-    """Band ``n`` and its overview levels, checked against the grid and ``count``."""
+def _checked(b: np.ndarray, n: int, grid: OutputGrid, dt: np.dtype, out: Path,
+             count: int) -> np.ndarray:
+    """Band ``n`` as ``dt``, checked against the grid and ``count``."""
     if n > count:
         raise OutputError(f"{out}: more than {count} bands given")
     if np.shape(b) != grid.shape:
         raise OutputError(f"{out}: band {n} has shape {np.shape(b)}, grid is {grid.shape}")
-    levels = [np.asarray(b).astype(dt, copy=False)]
-    for _ in range(n_levels):
-        levels.append(halve(levels[-1]))
-    return levels
+    return np.asarray(b).astype(dt, copy=False)
 
 
 def _template(out: Path, grid: OutputGrid, count: int, dt: np.dtype, nodata: float | None,
