@@ -210,7 +210,7 @@ class CogWriter:
                     self._held.append(data)
                     self._held_bytes += len(data)
                 else:
-                    self._spill.write(_with_leader(data))
+                    _write_tile(self._spill, data)
             full[self._drained] = []
             self._drained += 1
 
@@ -252,7 +252,7 @@ class CogWriter:
             out.write(layout.ifd_bytes(fields, positions[k], nxt))
         for tiles in [*reversed(over), self._held]:
             for t in tiles:
-                out.write(_with_leader(t))
+                _write_tile(out, t)
         self._held = []
         self._spill.flush()
         out.flush()
@@ -310,9 +310,12 @@ def _append(src: BinaryIO, dst: BinaryIO) -> None:
         shutil.copyfileobj(src, dst, 16 * 2 ** 20)
 
 
-def _with_leader(data: bytes) -> bytes:
-    """A tile as GDAL's COG stores it: its size (uint32), the bytes, its last 4 bytes again."""
-    return struct.pack("<I", len(data)) + data + data[-4:]
+def _write_tile(f: BinaryIO, data: bytes) -> None:
+    """A tile as GDAL's COG stores it: its size (uint32), the bytes, its last 4 bytes again
+    (written in pieces: no copy of the tile)."""
+    f.write(struct.pack("<I", len(data)))
+    f.write(data)
+    f.write(data[-4:])
 
 
 def _ghost_area() -> bytes:
