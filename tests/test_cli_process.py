@@ -81,3 +81,27 @@ def test_a_map_process_does_not_import_scipy_linalg(tmp_path):
     assert "numba.np.arraymath" in imported and "scipy.linalg" not in imported
     with rasterio.open(out) as ds:  # and the map is whole: band 2 = product column
         assert ds.count == 15 and ds.read(2).max() > 100
+
+
+_HUGEPAGES = """
+import sys
+from napari_meris_ortho import cli
+
+def probe(argv=None, *, last=False):
+    import numpy._core.multiarray as m  # numpy first imported here, as in a real run
+    print(m._get_madvise_hugepage(), last)
+    return 0
+
+cli.main = probe
+cli.console_main()
+"""
+
+
+@pytest.mark.parametrize(("setting", "expected"), [(None, "False True"), ("1", "True True")])
+def test_the_process_keeps_numpy_arrays_off_huge_pages_unless_asked(setting, expected):
+    env = {k: v for k, v in os.environ.items() if k != "NUMPY_MADVISE_HUGEPAGE"}
+    if setting is not None:
+        env["NUMPY_MADVISE_HUGEPAGE"] = setting
+    done = subprocess.run([sys.executable, "-c", _HUGEPAGES], capture_output=True, text=True,
+                          env=env, check=True)
+    assert done.stdout.strip() == expected
