@@ -154,12 +154,20 @@ def _inside_line_range(line, col, n_lines, n_cols):  # pragma: no cover
     return lo, hi
 
 
+def _pixels(images: np.ndarray) -> np.ndarray:
+    """(bands, lines, cols) as (bands, lines x cols): the flat pixel index addresses a pixel
+    directly (no division per point); a copy only when the images are not C-contiguous."""
+    a = np.ascontiguousarray(images)
+    return a.reshape(a.shape[0], -1)
+
+
 def gather(images: np.ndarray, index: np.ndarray, out: np.ndarray) -> None:
     """Nearest neighbour of all bands in one pass: ``out[b, i] = images[b, pixel index[i]]``,
     0 where the index is -1; ``images`` (bands, lines, cols), ``out`` (bands, points) of the
     same dtype (uint16 counts, uint8 flags: no conversion), ``index`` 1-D; points split over
     threads."""
-    split_range(lambda lo, hi: _gather_range(lo, hi, images, index, out), index.size,
+    pixels = _pixels(images)
+    split_range(lambda lo, hi: _gather_range(lo, hi, pixels, index, out), index.size,
                 min_size=1 << 16)
 
 
@@ -169,40 +177,37 @@ def gather_scaled(images: np.ndarray, index: np.ndarray, scales: np.ndarray,
     ``out[b, i] = float32(images[b, pixel index[i]]) * scales[b]`` (float32 arithmetic, the
     numbers of ``counts.astype(float32) * float32(scale)``), 0 where the index is -1."""
     sc = np.ascontiguousarray(scales, dtype=np.float32)
-    split_range(lambda lo, hi: _gather_scaled_range(lo, hi, images, index, sc, out),
+    pixels = _pixels(images)
+    split_range(lambda lo, hi: _gather_scaled_range(lo, hi, pixels, index, sc, out),
                 index.size, min_size=1 << 16)
 
 
 @njit(cache=True, nogil=True)
-def _gather_scaled_range(lo, hi, images, index, scales, out):  # pragma: no cover
-    """Points [lo, hi) of ``gather_scaled``."""
-    n_bands, _, n_cols = images.shape
+def _gather_scaled_range(lo, hi, pixels, index, scales, out):  # pragma: no cover
+    """Points [lo, hi) of ``gather_scaled`` (``pixels``: bands x flat pixels)."""
+    n_bands = pixels.shape[0]
     for i in range(lo, hi):
         k = index[i]
         if k < 0:
             for b in range(n_bands):
                 out[b, i] = 0.0
         else:
-            r = k // n_cols
-            c = k - r * n_cols
             for b in range(n_bands):
-                out[b, i] = np.float32(images[b, r, c]) * scales[b]
+                out[b, i] = np.float32(pixels[b, k]) * scales[b]
 
 
 @njit(cache=True, nogil=True)
-def _gather_range(lo, hi, images, index, out):  # pragma: no cover
-    """Points [lo, hi) of ``gather``."""
-    n_bands, _, n_cols = images.shape
+def _gather_range(lo, hi, pixels, index, out):  # pragma: no cover
+    """Points [lo, hi) of ``gather`` (``pixels``: bands x flat pixels)."""
+    n_bands = pixels.shape[0]
     for i in range(lo, hi):
         k = index[i]
         if k < 0:
             for b in range(n_bands):
                 out[b, i] = 0
         else:
-            r = k // n_cols
-            c = k - r * n_cols
             for b in range(n_bands):
-                out[b, i] = images[b, r, c]
+                out[b, i] = pixels[b, k]
 
 
 @njit(cache=True)
