@@ -94,7 +94,7 @@ def compile_late() -> float:
     of solved points, the antecedent line window, the nearest-pixel index and gather of
     counts, the COG overview kernel (the numba cache keeps them); seconds."""
     from .engine import terrain
-    from .engine.predcorr import find_antecedents, solved_counts
+    from .engine.predcorr import find_antecedents, height_rates, solved_counts
     from .engine.resample import gather, inside_line_range, nearest_pixel, overview_level
     from .geometry.tiepoints import analytic_swath
 
@@ -114,8 +114,9 @@ def compile_late() -> float:
     _, _, coef, df, dj = tp.kernel_args()
     z = np.zeros((2, 2))
     spans = (np.array([0, 1, 2], np.int64), np.zeros(2, np.int64), np.full(2, 2, np.int64))
-    find_antecedents(z, z, np.zeros((2, 2), np.float32), 2, *spans, z, z, 16.0, coef, df, dj,
-                     tp.height, tp.width, 0, 0, 0.01, 10, False)
+    rates = height_rates(z, z, coef, df, dj, 0, 0)
+    find_antecedents(z, z, np.zeros((2, 2), np.float32), 2, *spans, z, z, rates, 16.0, coef,
+                     df, dj, tp.height, tp.width, 0, 0, 0.01, 10, False)
     return time.perf_counter() - t0
 
 

@@ -173,13 +173,14 @@ def find_pixel_antecedents(tlon_a, tlat_a, ptr, start, stop, cl, cp, step, lon, 
     out_p = np.full((nr, nc), np.nan, np.float32)
     iters = np.full((nr, nc), -1, np.int8)
     h_used = np.full((nr, nc) if diagnostics else (1, 1), np.nan, np.float32)
+    no_rates = np.zeros((3, 1, 1))  # the pixel geolocation has no height rates: h = 0
     for i in prange(nr):
         for j in _columns(ptr, start, stop, i):
             tlon = tlon_a[i, j]
             tlat = tlat_a[i, j]
             if math.isnan(tlon) or math.isnan(tlat):
                 continue
-            gl, gp = _predict(cl, cp, step, i, j)
+            gl, gp = _predict(cl, cp, no_rates, step, i, j, 0.0)
             if math.isnan(gl) or gl < -_FAR or gl > nl + _FAR or gp < -_FAR or gp > npx + _FAR:
                 continue
             l2, p2, it, ok = correct(tlon, tlat, gl, gp, lon, lat, tol, max_iter)
