@@ -192,3 +192,34 @@ def test_solved_counts_counts_only_solved_points_in_range():
         iters[ok].astype(np.int64), minlength=11).tolist()
     with pytest.raises(ValueError, match="differ in size"):
         solved_counts(source, iters[:10], -1, 4)
+
+
+def test_height_rates_put_the_prediction_within_one_newton_step(scene):
+    """The prediction moved by h x the nodes' height rates lands within the tolerance of the
+    antecedent for most points: one correction, where the zero-height prediction needs two."""
+    from napari_meris_ortho.engine.location import direct_point
+    from napari_meris_ortho.engine.predcorr import height_rates, primary_grid, primary_nodes
+
+    tp, grid, lon, lat, spans = scene
+    h = _terrain(lon, lat).astype(np.float32)
+    hist = iteration_histogram(solve(tp, grid, lon, lat, h, HEIGHT_GIVEN, spans)["iterations"])
+    assert hist[1] > 0.8 * hist.sum(), hist
+    # at every node, the antecedent moved by 1000 m x its rate keeps f(l, p, 1000 m) on the
+    # node's lon/lat (residual in product pixels, through the model's Jacobian there)
+    lat_tp, lon_tp, coef, df, dj = tp.kernel_args()
+    nlon, nlat = primary_nodes(grid, 0, lon.shape, 16)
+    cl, cp, _ = primary_grid(nlon, nlat, lat_tp, lon_tp, coef, df, dj, 0)
+    rates = height_rates(cl, cp, coef, df, dj, 0, 0)
+    nodes = np.argwhere(np.isfinite(rates[0]))
+    assert len(nodes) > 100 and np.isfinite(rates[2][tuple(nodes.T)]).all()
+    shifts, residuals = [], []
+    for a, b in nodes[::7]:
+        moved = (cl[a, b] + 1000.0 * rates[0, a, b], cp[a, b] + 1000.0 * rates[1, a, b])
+        r = direct_point(*moved, 1000.0, coef, df, dj, 0, 0)
+        dlon, dlat = nlon[a, b] - r[0], nlat[a, b] - r[1]
+        det = r[5] * r[8] - r[6] * r[7]
+        residuals.append(np.hypot((dlon * r[8] - dlat * r[6]) / det,
+                                  (r[5] * dlat - r[7] * dlon) / det))
+        shifts.append(1000.0 * np.hypot(rates[0, a, b], rates[1, a, b]))
+    assert max(shifts) > 1.0  # the parallax of 1000 m is pixels at the swath edge ...
+    assert max(residuals) < 0.01  # ... and the rates predict it to a hundredth of a pixel
