@@ -145,3 +145,18 @@ def test_inside_line_range_equals_the_masked_min_and_max(dtype):
     # the edges: -0.5 is inside, H - 0.5 is not
     edge = np.array([-0.5, 59.5, 10.0], dtype)
     assert inside_line_range(edge, np.zeros(3, dtype), 60, 129) == (-0.5, 10.0)
+
+
+@pytest.mark.parametrize("shape", [(37, 51), (38, 52), (1, 9), (9, 1)])
+def test_overview_level_of_floats_matches_a_nan_skipping_mean(shape):
+    rng = np.random.default_rng(11)
+    a = rng.normal(50.0, 20.0, shape).astype(np.float32)
+    a[rng.random(shape) < 0.25] = np.nan
+    a[rng.random(shape) < 0.2] = -1.0  # nodata
+    h, w = shape
+    p = np.full((h + h % 2, w + w % 2), np.nan)
+    p[:h, :w] = np.where(a == -1.0, np.nan, a)
+    blocks = np.stack([p[0::2, 0::2], p[0::2, 1::2], p[1::2, 0::2], p[1::2, 1::2]])
+    n = np.isfinite(blocks).sum(axis=0)
+    ref = np.where(n > 0, np.nansum(blocks, axis=0) / np.maximum(n, 1), -1.0)
+    np.testing.assert_allclose(overview_level(a, -1.0), ref.astype(np.float32), rtol=1e-6)

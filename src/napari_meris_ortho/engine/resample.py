@@ -298,25 +298,66 @@ def _add(v, fill, skip_fill, s, n):  # pragma: no cover
     return s + v, n + 1
 
 
-@njit(cache=True, nogil=True)  # serial (15 ms for 11 M pixels); nogil: the COG workers go on
+@njit(cache=True, nogil=True)  # serial (5 ms for 11 M pixels); nogil: the COG workers go on
 def _halve_average(a, out, fill, skip_fill, rounded):  # pragma: no cover
+    """``overview_level`` "average" into ``out``: whole 2 x 2 blocks row by row
+    (``_whole_blocks``, branch-free: the compiler vectorises it), the last row and column of
+    odd sizes pixel by pixel (``_edge_block``)."""
     h, w = a.shape
-    for i in range(out.shape[0]):
-        r0 = 2 * i
-        r1 = r0 + 1 if r0 + 1 < h else -1
+    for i in range(h // 2):
+        _whole_blocks(a, out, i, fill, skip_fill, rounded)
+        if w % 2:
+            _edge_block(a, out, i, w // 2, fill, skip_fill, rounded)
+    if h % 2:
         for j in range(out.shape[1]):
-            c0 = 2 * j
-            c1 = c0 + 1
-            s, n = _add(a[r0, c0], fill, skip_fill, 0.0, 0)
-            if c1 < w:
-                s, n = _add(a[r0, c1], fill, skip_fill, s, n)
-            if r1 >= 0:
-                s, n = _add(a[r1, c0], fill, skip_fill, s, n)
-                if c1 < w:
-                    s, n = _add(a[r1, c1], fill, skip_fill, s, n)
-            if n == 0:
-                out[i, j] = fill
-            elif rounded:
-                out[i, j] = math.floor(s / n + 0.5)
-            else:
-                out[i, j] = s / n
+            _edge_block(a, out, h // 2, j, fill, skip_fill, rounded)
+
+
+@njit(cache=True)
+def _whole_blocks(a, out, i, fill, skip_fill, rounded):  # pragma: no cover
+    """Output row i from input rows 2i, 2i + 1, every whole 2 x 2 block: the mean of the
+    pixels that are not ``fill`` (when ``skip_fill``) nor NaN, in the order and arithmetic of
+    ``_edge_block`` (adding 0.0 for a skipped pixel changes no sum), ``fill`` when none is."""
+    r0 = 2 * i
+    r1 = r0 + 1
+    for j in range(a.shape[1] // 2):
+        c = 2 * j
+        v00 = np.float64(a[r0, c])
+        v01 = np.float64(a[r0, c + 1])
+        v10 = np.float64(a[r1, c])
+        v11 = np.float64(a[r1, c + 1])
+        k00 = not ((skip_fill and v00 == fill) or v00 != v00)
+        k01 = not ((skip_fill and v01 == fill) or v01 != v01)
+        k10 = not ((skip_fill and v10 == fill) or v10 != v10)
+        k11 = not ((skip_fill and v11 == fill) or v11 != v11)
+        n = np.float64(k00) + np.float64(k01) + np.float64(k10) + np.float64(k11)
+        s = (0.0 + (v00 if k00 else 0.0) + (v01 if k01 else 0.0) + (v10 if k10 else 0.0)
+             + (v11 if k11 else 0.0))
+        m = s / max(n, 1.0)
+        if rounded:
+            m = math.floor(m + 0.5)
+        out[i, j] = m if n > 0.0 else fill
+
+
+@njit(cache=True)
+def _edge_block(a, out, i, j, fill, skip_fill, rounded):  # pragma: no cover
+    """Output pixel (i, j) from the up to 2 x 2 input pixels there (past the last row or
+    column: the ones there are)."""
+    h, w = a.shape
+    r0 = 2 * i
+    r1 = r0 + 1 if r0 + 1 < h else -1
+    c0 = 2 * j
+    c1 = c0 + 1
+    s, n = _add(a[r0, c0], fill, skip_fill, 0.0, 0)
+    if c1 < w:
+        s, n = _add(a[r0, c1], fill, skip_fill, s, n)
+    if r1 >= 0:
+        s, n = _add(a[r1, c0], fill, skip_fill, s, n)
+        if c1 < w:
+            s, n = _add(a[r1, c1], fill, skip_fill, s, n)
+    if n == 0:
+        out[i, j] = fill
+    elif rounded:
+        out[i, j] = math.floor(s / n + 0.5)
+    else:
+        out[i, j] = s / n
