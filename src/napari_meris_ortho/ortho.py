@@ -591,9 +591,11 @@ def _pixel_grids(prod: MerisProduct) -> tuple[np.ndarray, np.ndarray, np.ndarray
 
 
 def _solve(job: _Job, lon: np.ndarray, lat: np.ndarray, h: np.ndarray | None,
-           spans: tuple[np.ndarray, np.ndarray, np.ndarray], r0: int) -> dict:
-    """Antecedents of one block of output rows: tie-point model (``predcorr``) or the
-    product's pixel geolocation (``pixelgeo``)."""
+           spans: tuple[np.ndarray, np.ndarray, np.ndarray], r0: int,
+           out: tuple[np.ndarray, np.ndarray, np.ndarray]) -> dict:
+    """Antecedents of one block of output rows: tie-point model (``predcorr``; primary search
+    straight into ``out``, the block's rows of the whole grid) or the product's pixel
+    geolocation (``pixelgeo``)."""
     opts = job.options
     if job.pixel is not None:
         return pixelgeo.solve_pixel(job.pixel[0], job.pixel[1], job.grid, lon, lat, spans,
@@ -602,7 +604,8 @@ def _solve(job: _Job, lon: np.ndarray, lat: np.ndarray, h: np.ndarray | None,
     return predcorr.solve(job.tp, job.grid, lon, lat, h, job.hmode, spans, row_start=r0,
                           tolerance=opts.tolerance, model=opts.parallax.code,
                           geo=opts.geolocation.code, method=opts.method.value,
-                          diagnostics=opts.diagnostics)
+                          diagnostics=opts.diagnostics,
+                          out=out if opts.method is SearchMethod.PRIMARY else None)
 
 
 @dataclass
@@ -633,8 +636,10 @@ class _Blocks:
             hmode: int) -> None:
         """Store the solution of rows [r0, r1) (``src``: elevation source per point, None
         when the heights are not the DEMs')."""
-        self.line[r0:r1], self.col[r0:r1] = res["line"], res["col"]
-        self.iters[r0:r1] = res["iterations"]
+        for whole, part in ((self.line, res["line"]), (self.col, res["col"]),
+                            (self.iters, res["iterations"])):
+            if not np.shares_memory(whole[r0:r1], part):  # (solved in place: nothing to do)
+                whole[r0:r1] = part
         for k, v in res["search"].items():
             self.search[k] = self.search.get(k, 0) + v
         if src is not None:  # DEM k counted at k + 1; tie points (-1) at 0
@@ -679,7 +684,8 @@ def _run(job: _Job, progress: ProgressCallback | None) -> Antecedents:
             h, src = _heights(stack, lon, lat, mask)
             t_dem += time.perf_counter() - t0
         t0 = time.perf_counter()
-        res = _solve(job, lon, lat, h, (ptr, start, stop), r0)
+        res = _solve(job, lon, lat, h, (ptr, start, stop), r0,
+                     (blocks.line[r0:r1], blocks.col[r0:r1], blocks.iters[r0:r1]))
         t_engine += time.perf_counter() - t0
         blocks.add(r0, r1, res, src, hmode)
         if progress is not None:

@@ -223,3 +223,21 @@ def test_height_rates_put_the_prediction_within_one_newton_step(scene):
         shifts.append(1000.0 * np.hypot(rates[0, a, b], rates[1, a, b]))
     assert max(shifts) > 1.0  # the parallax of 1000 m is pixels at the swath edge ...
     assert max(residuals) < 0.01  # ... and the rates predict it to a hundredth of a pixel
+
+
+def test_solve_into_rows_of_a_whole_grid_equals_new_arrays(scene):
+    tp, grid, lon, lat, spans = scene
+    h = _terrain(lon, lat).astype(np.float32)
+    ref = solve(tp, grid, lon, lat, h, HEIGHT_GIVEN, spans)
+    whole = (np.zeros((lon.shape[0] + 4, lon.shape[1]), np.float32),
+             np.zeros((lon.shape[0] + 4, lon.shape[1]), np.float32),
+             np.zeros((lon.shape[0] + 4, lon.shape[1]), np.int8))
+    rows = tuple(a[2:-2] for a in whole)
+    got = solve(tp, grid, lon, lat, h, HEIGHT_GIVEN, spans, out=rows)
+    for key, a in zip(("line", "col", "iterations"), rows, strict=True):
+        assert got[key] is a
+        np.testing.assert_array_equal(a, ref[key])  # NaN / -1 where dropped, as new arrays
+    assert not whole[2][:2].any() and not whole[2][-2:].any()  # the other rows untouched
+    with pytest.raises(ValueError, match="C-contiguous"):
+        solve(tp, grid, lon, lat, h, HEIGHT_GIVEN, spans,
+              out=(rows[0], rows[1], rows[2].astype(np.int16)))

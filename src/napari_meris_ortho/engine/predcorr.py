@@ -225,6 +225,22 @@ def full_spans(n_rows: int, width: int) -> tuple[np.ndarray, np.ndarray, np.ndar
             np.full(n_rows, width, np.int64))
 
 
+def _outputs(shape: tuple[int, int], out: tuple[np.ndarray, np.ndarray, np.ndarray] | None
+             ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """line, col (NaN) and iterations (-1) arrays of ``shape``: new, or ``out`` checked and
+    filled."""
+    if out is None:
+        return (np.full(shape, np.nan, np.float32), np.full(shape, np.nan, np.float32),
+                np.full(shape, -1, np.int8))
+    for a, dtype in zip(out, (np.float32, np.float32, np.int8), strict=True):
+        if a.shape != shape or a.dtype != dtype or not a.flags.c_contiguous:
+            raise ValueError(f"out arrays must be C-contiguous {shape} float32, float32, int8")
+    out[0].fill(np.nan)
+    out[1].fill(np.nan)
+    out[2].fill(-1)
+    return out
+
+
 @njit(cache=True, nogil=True)
 def _antecedent_rows(lo, hi, lon, lat, height, hmode, ptr, start, stop, cl, cp, rates, step,
                      coef, df, dj, n_lines, n_cols, model, geo, tol, max_iter, diagnostics,
@@ -267,18 +283,20 @@ def find_antecedents(lon: np.ndarray, lat: np.ndarray, height: np.ndarray, hmode
                      cp: np.ndarray, rates: np.ndarray, step: float, coef: np.ndarray,
                      df: float, dj: float,
                      n_lines: int, n_cols: int, model: int, geo: int, tol: float,
-                     max_iter: int, diagnostics: bool) -> tuple[np.ndarray, ...]:
+                     max_iter: int, diagnostics: bool,
+                     out: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+                     ) -> tuple[np.ndarray, ...]:
     """Antecedents of output points: row i over the column spans ``[start[k], stop[k])`` for
     k in ``ptr[i]:ptr[i + 1]`` (``boundary.RowSpans``), rows split over threads; predicted from
     the primary grid (cl, cp) and its ``height_rates``, then corrected by Newton.
 
     Returns line, col (float32, NaN when dropped), iterations (int8, -1 when dropped), and when
     ``diagnostics``: elevation used (m), parallax shift east and north (m) — else 1x1 arrays.
+    ``out``: C-contiguous (line, col, iterations) arrays of the points' shape to fill and
+    return instead of new ones (rows of the caller's whole grid: no copy afterwards).
     """
     nr, nc = lon.shape
-    out_l = np.full((nr, nc), np.nan, np.float32)
-    out_p = np.full((nr, nc), np.nan, np.float32)
-    iters = np.full((nr, nc), -1, np.int8)
+    out_l, out_p, iters = _outputs((nr, nc), out)
     dshape = (nr, nc) if diagnostics else (1, 1)
     h_used = np.full(dshape, np.nan, np.float32)
     sh_e = np.full(dshape, np.nan, np.float32)
@@ -453,7 +471,8 @@ def solve(tp, grid, lon: np.ndarray, lat: np.ndarray, height: np.ndarray | None,
           spans: tuple[np.ndarray, np.ndarray, np.ndarray], *, row_start: int = 0,
           tolerance: float = 0.01, max_iter: int = MAX_ITERATIONS, model: int = 0,
           geo: int = 0, method: str = "primary", step: int = 16,
-          diagnostics: bool = False) -> dict:
+          diagnostics: bool = False,
+          out: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> dict:
     """Antecedents of output rows [row_start, row_start + lon.shape[0]) of ``grid`` (section 3.2).
 
     ``tp``: ``TiePointGrid``; ``lon``/``lat``: WGS84 degrees of the pixel centres of those rows;
@@ -462,7 +481,7 @@ def solve(tp, grid, lon: np.ndarray, lat: np.ndarray, height: np.ndarray | None,
     geolocation codes (``location``). ``method``: "primary" (primary grid +
     Newton) or "handbook" (MERSYN's loop and facet search). Returns a dict with "line", "col",
     "iterations" and, with ``diagnostics``, "elevation", "shift_east_m", "shift_north_m"; plus
-    "search" (facet-search counts by path).
+    "search" (facet-search counts by path). ``out``: as ``find_antecedents`` (primary path).
     """
     lat_tp, lon_tp, coef, df, dj = tp.kernel_args()
     lon = np.ascontiguousarray(lon, dtype=np.float64)
@@ -478,12 +497,12 @@ def solve(tp, grid, lon: np.ndarray, lat: np.ndarray, height: np.ndarray | None,
         line, col, iters, paths = find_antecedents_handbook(
             lon, lat, h, hmode, ptr, start, stop, lat_tp, lon_tp, coef, df, dj,
             tp.height, tp.width, model, geo, tolerance, max_iter)
-        out: dict[str, Any] = {"line": line, "col": col, "iterations": iters}
+        result: dict[str, Any] = {"line": line, "col": col, "iterations": iters}
         if diagnostics:
             h_used, sh_e, sh_n = parallax_at(line, col, h, hmode, coef, df, dj, model, geo)
-            out.update(elevation=h_used, shift_east_m=sh_e, shift_north_m=sh_n)
-        out["search"] = {n: int(c) for n, c in zip(names, paths, strict=True)}
-        return out
+            result.update(elevation=h_used, shift_east_m=sh_e, shift_north_m=sh_n)
+        result["search"] = {n: int(c) for n, c in zip(names, paths, strict=True)}
+        return result
     if method != "primary":
         raise ValueError(f"unknown prediction/correction method {method!r}")
     nlon, nlat = primary_nodes(grid, row_start, lon.shape, step)
@@ -492,11 +511,11 @@ def solve(tp, grid, lon: np.ndarray, lat: np.ndarray, height: np.ndarray | None,
              else np.zeros((3, 1, 1)))
     line, col, iters, h_used, sh_e, sh_n = find_antecedents(
         lon, lat, h, hmode, ptr, start, stop, cl, cp, rates, float(step), coef, df, dj,
-        tp.height, tp.width, model, geo, tolerance, max_iter, diagnostics)
-    out = {"line": line, "col": col, "iterations": iters}
+        tp.height, tp.width, model, geo, tolerance, max_iter, diagnostics, out)
+    result = {"line": line, "col": col, "iterations": iters}
     if diagnostics:
-        out.update(elevation=h_used, shift_east_m=sh_e, shift_north_m=sh_n)
+        result.update(elevation=h_used, shift_east_m=sh_e, shift_north_m=sh_n)
     search = {n: int(c) for n, c in zip(names, paths, strict=True)}
     search["primary grid"] = int(np.count_nonzero(iters >= 0))
-    out["search"] = search
-    return out
+    result["search"] = search
+    return result
