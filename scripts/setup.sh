@@ -42,3 +42,7 @@ if [[ ! -f $stamp ]]; then
         nohup .venv/bin/python -m napari_meris_ortho.warmup >/dev/null 2>&1 &
     fi
 fi
+# bytecode of our own (editable) sources, as pip writes it for installed packages: a run then
+# does not compile 75 modules first (0.08 s of every `meris-ortho` call), also where
+# PYTHONDONTWRITEBYTECODE keeps Python from caching it; only changed sources are compiled
+.venv/bin/python -m compileall -q src >/dev/null
