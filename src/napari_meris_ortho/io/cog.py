@@ -4,7 +4,7 @@ GDAL's COG driver only copies a finished dataset (``CreateCopy``): staging every
 it back and compressing it after the engine has finished cost a third of a ``map``. Here each
 band and its overview levels are cut into square tiles, predicted (TIFF predictor 2, horizontal
 differencing, for integers; 3, floating point, for floats) and compressed (ZSTD through
-numcodecs, DEFLATE through zlib; both release the GIL) on worker threads while the caller
+zstandard, DEFLATE through zlib; both release the GIL) on worker threads while the caller
 computes the next band. ``CogWriter.finish`` then lays the file out as GDAL's COG driver does:
 
 - TIFF (BigTIFF when the file would pass 4 GiB) header, then the ghost area
@@ -27,6 +27,7 @@ from __future__ import annotations
 import os
 import shutil
 import struct
+import threading
 import zlib
 from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
@@ -155,13 +156,21 @@ class CogWriter:
         self._encoder = self._make_encoder()
 
     def _make_encoder(self) -> Any:
-        if self.compress == "zstd":
-            from numcodecs import Zstd
-
-            codec = Zstd(level=self.level)
-            return lambda buf: bytes(codec.encode(buf))
+        """bytes -> compressed bytes, callable from any worker thread: ZSTD by a compressor
+        kept per thread (python-zstandard's are not shared between threads), or DEFLATE."""
         lvl = self.level
-        return lambda buf: zlib.compress(buf, lvl)
+        if self.compress != "zstd":
+            return lambda buf: zlib.compress(buf, lvl)
+        import zstandard
+
+        local = threading.local()
+
+        def encode(buf: bytes) -> bytes:
+            if not hasattr(local, "compressor"):
+                local.compressor = zstandard.ZstdCompressor(level=lvl)
+            return local.compressor.compress(buf)
+
+        return encode
 
     def _encode(self, a: np.ndarray, i0: int, j0: int) -> bytes:
         return self._encoder(predicted_tile(a, i0, j0, self.block))
