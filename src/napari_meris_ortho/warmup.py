@@ -90,26 +90,17 @@ def warm_up() -> float:
 
 def compile_late() -> float:
     """Compile, on tiny inputs of the types ``meris-ortho map`` gives them, the kernels a map
-    calls after the primary grid: the DEM lookup, the prediction/correction rows, the counts
-    of solved points, the antecedent line window, the nearest-pixel index and gather of
-    counts, the COG overview kernel (the numba cache keeps them); seconds."""
+    calls after its first ones, in the order it needs them (while the map compiles the
+    primary-grid search, this compiles what comes next): the height rates and
+    prediction/correction rows, the counts of solved points, the antecedent line window, the
+    nearest-pixel index and gather of counts, the COG overview kernel, and the DEM lookup
+    (the numba cache keeps them); seconds."""
     from .engine import terrain
     from .engine.predcorr import find_antecedents, height_rates, solved_counts
     from .engine.resample import gather, inside_line_range, nearest_pixel, overview_level
     from .geometry.tiepoints import analytic_swath
 
     t0 = time.perf_counter()
-    one = np.zeros(1)
-    terrain.window_heights(np.zeros((2, 2), np.float32), np.zeros(6), np.zeros(4, np.int64),
-                           0.0, terrain.METHOD_CODES["bilinear"], one, one,
-                           np.zeros(1, bool), np.empty(0), 0, np.zeros(1, np.float32),
-                           np.zeros(1, np.int8), np.zeros(1, bool))
-    overview_level(np.ones((3, 3), np.uint16), 0.0)
-    solved_counts(np.zeros(2, np.int8), np.zeros(2, np.int8), -1, 2)
-    inside_line_range(np.zeros(2, np.float32), np.zeros(2, np.float32), 2, 2)
-    index = nearest_pixel(np.zeros(4, np.float32), np.zeros(4, np.float32), 2, 2,
-                          line_offset=1)
-    gather(np.zeros((1, 2, 2), np.uint16), index, np.zeros((1, 4), np.uint16))
     tp = analytic_swath(height=70, width=129)
     _, _, coef, df, dj = tp.kernel_args()
     z = np.zeros((2, 2))
@@ -117,6 +108,17 @@ def compile_late() -> float:
     rates = height_rates(z, z, coef, df, dj, 0, 0)
     find_antecedents(z, z, np.zeros((2, 2), np.float32), 2, *spans, z, z, rates, 16.0, coef,
                      df, dj, tp.height, tp.width, 0, 0, 0.01, 10, False)
+    solved_counts(np.zeros(2, np.int8), np.zeros(2, np.int8), -1, 2)
+    inside_line_range(np.zeros(2, np.float32), np.zeros(2, np.float32), 2, 2)
+    index = nearest_pixel(np.zeros(4, np.float32), np.zeros(4, np.float32), 2, 2,
+                          line_offset=1)
+    gather(np.zeros((1, 2, 2), np.uint16), index, np.zeros((1, 4), np.uint16))
+    overview_level(np.ones((3, 3), np.uint16), 0.0)
+    one = np.zeros(1)  # last: a map needs it early, before this child is up (it compiles it)
+    terrain.window_heights(np.zeros((2, 2), np.float32), np.zeros(6), np.zeros(4, np.int64),
+                           0.0, terrain.METHOD_CODES["bilinear"], one, one,
+                           np.zeros(1, bool), np.empty(0), 0, np.zeros(1, np.float32),
+                           np.zeros(1, np.int8), np.zeros(1, bool))
     return time.perf_counter() - t0
 
 
@@ -193,7 +195,8 @@ def warm_up_in_background() -> threading.Thread | None:
 
 
 if __name__ == "__main__":
-    if sys.argv[1:] == ["--late"]:
+    if sys.argv[1:] == ["--late"]:  # a child of `meris-ortho map`: a process of ours
+        start_numba_without_blas()
         compile_late()
     else:
         print(f"numba kernels compiled in {warm_up():.1f} s")
