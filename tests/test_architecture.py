@@ -17,10 +17,11 @@ PACKAGE = "napari_meris_ortho"
 ROOT = Path(napari_meris_ortho.__file__).parent
 
 #: rooms (first component under the package) each room may import, besides itself
-BOTTOM = {"errors", "options", "flags", "geometry", "progress", "_atomic"}
+BOTTOM = {"errors", "options", "flags", "geometry", "progress", "_atomic", "cores"}
 ALLOWED = {
     "errors": set(),
     "flags": set(),
+    "cores": set(),
     "options": {"errors"},
     "geometry": {"errors"},
     "io": BOTTOM,

@@ -54,8 +54,10 @@ def test_split_range_raises_the_kernels_error():
         threads.split_range(kernel, 100, threads=2)
 
 
-def test_n_threads_is_the_affinity():
-    assert threads.n_threads() == len(os.sched_getaffinity(0)) >= 1
+def test_usable_cores_is_the_affinity():
+    from napari_meris_ortho.cores import usable_cores
+
+    assert usable_cores() == len(os.sched_getaffinity(0)) >= 1
 
 
 @pytest.fixture(scope="module")
@@ -98,13 +100,13 @@ def _run_all(scene):
 def test_engine_results_equal_one_whole_range_call(scene, monkeypatch):
     """Rows and points split over 1, 2 or 3 threads (ranges as small as the kernels allow)
     give the same numbers, bit for bit."""
-    monkeypatch.setattr(threads, "n_threads", lambda: 1)
+    monkeypatch.setattr(threads, "usable_cores", lambda: 1)
     ref = _run_all(scene)
     assert np.count_nonzero(ref["primary", "iterations"] >= 0) > 10000
     assert np.count_nonzero(ref["index"] >= 0) > 10000
     assert ref["index"].size > 1 << 17  # points in more than one gather/nearest range
     for n in (2, 3):
-        monkeypatch.setattr(threads, "n_threads", lambda n=n: n)
+        monkeypatch.setattr(threads, "usable_cores", lambda n=n: n)
         got = _run_all(scene)
         assert got.keys() == ref.keys()
         for k, v in ref.items():

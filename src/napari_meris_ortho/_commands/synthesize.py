@@ -13,6 +13,7 @@ import logging
 import os
 from typing import Any
 
+from ..cores import usable_cores
 from ..errors import OptionsError
 from ..options import Geolocation, MergeRule, choices
 from ._options import (
@@ -83,7 +84,7 @@ def run(args: argparse.Namespace) -> int:
     if args.scheduler and args.workers is not None:
         raise OptionsError("--workers and --scheduler exclude each other (the cluster of the "
                            "scheduler has its own workers)")
-    workers = (os.cpu_count() or 1) if args.workers is None else args.workers
+    workers = usable_cores() if args.workers is None else args.workers
     with tqdm_progress("tasks", enabled=not args.quiet, unit="task") as progress:
         result = synthesize(
             args.products, args.out, algorithm=args.algorithm, input=args.input, grid=grid,

@@ -14,16 +14,10 @@ import threading
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 
+from ..cores import usable_cores
+
 #: ranges per thread: small enough pieces that unequal rows (e.g. spans) balance
 _PIECES_PER_THREAD = 4
-
-
-def n_threads() -> int:
-    """Cores this process may run on (``os.sched_getaffinity``; ``os.cpu_count`` elsewhere)."""
-    try:
-        return max(len(os.sched_getaffinity(0)), 1)
-    except AttributeError:  # pragma: no cover - not Linux
-        return max(os.cpu_count() or 1, 1)
 
 
 def ranges(n: int, pieces: int, min_size: int = 1) -> list[tuple[int, int]]:
@@ -40,9 +34,9 @@ def ranges(n: int, pieces: int, min_size: int = 1) -> list[tuple[int, int]]:
 def split_range(kernel: Callable[[int, int], object], n: int, *, threads: int | None = None,
                 min_size: int = 1) -> None:
     """Call ``kernel(lo, hi)`` on ranges covering [0, n) exactly once each, on up to ``threads``
-    threads (default ``n_threads()``); ranges of at least ``min_size`` indices. One thread or
-    one range: a single direct call. Exceptions of the kernel are raised here."""
-    threads = n_threads() if threads is None else max(int(threads), 1)
+    threads (default ``cores.usable_cores()``); ranges of at least ``min_size`` indices. One
+    thread or one range: a single direct call. Exceptions of the kernel are raised here."""
+    threads = usable_cores() if threads is None else max(int(threads), 1)
     parts = ranges(n, threads * _PIECES_PER_THREAD if threads > 1 else 1, min_size)
     if not parts:
         return

@@ -37,6 +37,8 @@ from typing import Any, BinaryIO
 
 import numpy as np
 
+from ..cores import usable_cores
+
 #: TIFF field types: size in bytes
 _TYPE_SIZE = {1: 1, 2: 1, 3: 2, 4: 4, 5: 8, 6: 1, 7: 1, 8: 2, 9: 4, 10: 8, 11: 4, 12: 8,
               16: 8, 17: 8, 18: 8}
@@ -145,7 +147,7 @@ class CogWriter:
         for k in range(n_levels + 1):
             f = 2 ** k
             self.levels.append(_Level(-(-w // f), -(-h // f), self.block))
-        n = threads or len(os.sched_getaffinity(0))
+        n = threads or usable_cores()
         self._pool = ThreadPoolExecutor(max_workers=max(n, 1), thread_name_prefix="cog")
         self._spill: BinaryIO = open(spill, "w+b")  # closed by close()
         self._sizes: list[int] = []  # full-resolution tiles done, in file order
