@@ -11,7 +11,7 @@ from napari_meris_ortho.errors import DemError, N1FormatError, OptionsError
 from napari_meris_ortho.geometry.grid import OutputGrid
 from napari_meris_ortho.geometry.tiepoints import TiePointGrid
 from napari_meris_ortho.io.n1 import read_product
-from ortho_samples import make_dem, make_product, terrain
+from ortho_samples import COPERNICUS_SCENE, make_dem, make_product, terrain
 
 
 @pytest.fixture(scope="module")
@@ -410,3 +410,38 @@ def test_dem_heights_by_the_window_kernel_equal_the_dem_stack(tmp_path, method):
     else:
         np.testing.assert_array_equal(h, h_old)
     assert np.mean(h[ok] == h_old[ok]) > 0.95
+
+
+@pytest.mark.parametrize("method", ["bilinear", "bicubic"])
+def test_tile_directory_heights_by_the_window_kernel_equal_the_dem_stack(method):
+    """GETASSE30 (both variants), SRTM30 and Copernicus tile directories get prepared windows
+    of posts (per Copernicus zone, per SRTM tile; a tile the bounds miss: an empty window) and
+    ``_heights`` gives ``DemStack.sample``'s heights and sources, also for points beyond the
+    windows and where no tile is."""
+    from napari_meris_ortho.io.dem import DemStack, open_dem
+    from napari_meris_ortho.ortho import _heights
+    from napari_meris_ortho.simulate.scene import generate_scene
+
+    scene = generate_scene({"base": "fr-small", "lines": 128, "columns": 193,
+                            "first_column": 1150})
+    cop = generate_scene(COPERNICUS_SCENE)
+    for sc, keys in ((scene, ["getasse30", "srtm30"]), (scene, ["getasse30_beam"]),
+                     (cop, ["copernicus"])):
+        dems = [sc.dem_paths[k] for k in keys]
+        b = open_dem(sc.dem_paths["geotiff"]).bounds
+        new_stack, old_stack = DemStack(dems), DemStack(dems)
+        for stack in (new_stack, old_stack):  # windows smaller than the points' extent
+            stack.prepare(b[0] + 0.2, b[1] + 0.2, b[2] - 0.2, b[3] - 0.2)
+        windows = [part.lattice_window() for dem in new_stack.sources for part, _ in dem.parts()]
+        assert windows and all(w is not None for w in windows), keys
+        assert any(w.data.size > 1000 for w in windows), keys
+        rng = np.random.default_rng(5)
+        lon = rng.uniform(b[0] - 0.1, b[2] + 0.1, (60, 70))
+        lat = rng.uniform(b[1] - 0.1, b[3] + 0.1, (60, 70))
+        mask = rng.random(lon.shape) < 0.9
+        h, src = _heights(new_stack, lon, lat, mask, method)
+        h_old, src_old = _old_heights(old_stack, lon, lat, mask, method)
+        np.testing.assert_array_equal(src, src_old)
+        ok = src >= 0
+        assert ok.mean() > 0.5 and np.all(np.isnan(h[~ok])), keys
+        np.testing.assert_allclose(h[ok], h_old[ok], rtol=0, atol=1e-3)  # float32 heights

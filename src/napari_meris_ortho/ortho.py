@@ -13,7 +13,7 @@ import math
 import os
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Protocol
 
@@ -178,8 +178,9 @@ def lonlat_bounds(grid: OutputGrid, n: int = 65) -> tuple[float, float, float, f
 def _heights(stack: DemStack, lon: np.ndarray, lat: np.ndarray, mask: np.ndarray,
              method: str = "bilinear") -> tuple[np.ndarray, np.ndarray]:
     """DEM heights at the output points in ``mask`` (NaN elsewhere or without data: tie points),
-    the DEMs tried in order (``DemStack.sample``): a DEM with a prepared window in memory by the
-    compiled lookup (``engine.terrain``), any other by its ``sample``."""
+    the DEMs tried in order (``DemStack.sample``): each lattice of a DEM with a prepared window
+    in memory by the compiled lookup (``engine.terrain``), anything else by the DEM's
+    ``sample``."""
     h = np.full(lon.shape, np.nan, np.float32)
     src = np.full(lon.shape, SOURCE_TIEPOINTS, np.int8)
     fh, fsrc = h.reshape(-1), src.reshape(-1)
@@ -189,14 +190,23 @@ def _heights(stack: DemStack, lon: np.ndarray, lat: np.ndarray, mask: np.ndarray
     for i, dem in enumerate(stack.sources):
         if not todo.any():
             break
-        window = dem.lattice_window()
-        if window is None:
-            _sample_into(dem, i, method, np.flatnonzero(todo), flon, flat, todo, fh, fsrc)
-            continue
-        miss = np.zeros(todo.size, bool)
-        n_miss = _window_heights(window, i, method, flon, flat, todo, fh, fsrc, miss)
-        if n_miss:  # points whose posts lie beyond the window: read by the source
-            _sample_into(dem, i, method, np.flatnonzero(miss), flon, flat, todo, fh, fsrc)
+        # each lattice of the DEM in its order (``DemSource.parts``) in its prepared window;
+        # a point whose posts lie beyond a window, or every point left when a lattice has no
+        # window, is read by the DEM itself (which tries its lattices in the same order)
+        deferred = np.zeros(todo.size, bool)
+        for part, datum in dem.parts():
+            window = part.lattice_window()
+            if window is None:
+                deferred |= todo
+                break
+            miss = np.zeros(todo.size, bool)
+            if _window_heights(replace(window, datum=datum), i, method, flon, flat, todo, fh,
+                               fsrc, miss):
+                deferred |= miss
+                todo &= ~miss
+        if deferred.any():
+            todo |= deferred
+            _sample_into(dem, i, method, np.flatnonzero(deferred), flon, flat, todo, fh, fsrc)
     return h, src
 
 

@@ -167,6 +167,15 @@ class _Zone(DemSource):
         inside = (lat >= self.lat_range[0]) & (lat <= self.lat_range[1])
         return r, c, inside
 
+    def _lattice_inv(self) -> tuple[tuple[float, ...], float] | None:
+        """Posts on whole multiples of dx, dy (pixel-is-point): col + 0.5 = (lon + 180) / dx
+        + 0.5, row + 0.5 = (90 - lat) / dy + 0.5; lookups next to the prepared window's
+        middle (it never spans the wrap)."""
+        mid = 0.0 if self._posts is None else (
+            (self._posts[1] + 0.5 * self._posts[2].shape[1]) * self.dx - 180.0)
+        return ((1.0 / self.dx, 0.0, 180.0 / self.dx + 0.5, 0.0, -1.0 / self.dy,
+                 90.0 / self.dy + 0.5), mid)
+
     def _fetch(self, rows, cols):
         out = np.full(rows.size, np.nan)
         n, m = self.rows_per_tile, self.cols_per_tile
@@ -184,6 +193,7 @@ class _Zone(DemSource):
     def close(self) -> None:
         for t in self.tiles.values():
             t.close()
+        super().close()
 
 
 class CopernicusSource(DemSource):
@@ -238,6 +248,14 @@ class CopernicusSource(DemSource):
             ok = np.isfinite(out)
             out[ok] = to_ellipsoid(out[ok], lon[ok], lat[ok], self.datum)
         return out
+
+    def prepare(self, lon_min: float, lat_min: float, lon_max: float, lat_max: float) -> None:
+        for z in self.zones:
+            z.prepare(lon_min, lat_min, lon_max, lat_max)
+
+    def parts(self) -> list[tuple[DemSource, str | None]]:
+        """The zones in order; their raw heights are above this source's datum."""
+        return [(z, self.datum) for z in self.zones]
 
     def check_covers(self, bounds: tuple[float, float, float, float]) -> None:
         """DemError unless a tile meets ``bounds`` (lon_min, lat_min, lon_max, lat_max; lon may

@@ -184,15 +184,60 @@ class DemSource:
         out[idx] = np.einsum("nij,ni,nj->n", vals, rw, cw)
         return out
 
+    #: posts read by ``prepare``: (first row, first column, float32 posts, NaN = no data)
+    _posts: tuple[int, int, np.ndarray] | None = None
+
+    def _lattice_inv(self) -> tuple[tuple[float, ...], float] | None:
+        """For a lattice regular in WGS84 lon/lat: the inverse geotransform (a, b, c, d, e, f),
+        col + 0.5 = a lon + b lat + c, row + 0.5 = d lon + e lat + f, and the longitude the
+        lookups' longitudes are moved next to (NaN: none); None: ``prepare`` keeps no posts."""
+        return None
+
     def prepare(self, lon_min: float, lat_min: float, lon_max: float, lat_max: float) -> None:
-        """Read what lookups inside these WGS84 bounds need, once (no-op: memmapped tiles)."""
+        """Read the posts lookups inside these WGS84 bounds need (plus the bicubic margin),
+        once, by ``_fetch`` (tile directories, memmapped tiles): the compiled lookup then
+        finds them in memory (``lattice_window``). Nothing for a window over the lattice's
+        wrap (the generic lookup wraps) or beyond the memory."""
+        if self._lattice_inv() is None or not (
+                lon_max > lon_min and lat_max > lat_min and lon_max - lon_min < 360.0):
+            return
+        t = np.linspace(0.0, 1.0, 21)  # the edges of the bounds
+        lons, lats = lon_min + (lon_max - lon_min) * t, lat_min + (lat_max - lat_min) * t
+        r, c, _ = self._to_lattice(np.r_[lons, lons, np.full(21, lon_min), np.full(21, lon_max)],
+                                   np.r_[np.full(21, lat_min), np.full(21, lat_max), lats, lats])
+        r0 = max(int(np.floor(r.min())) - 3, 0)
+        r1 = min(int(np.ceil(r.max())) + 4, self.n_rows)
+        c0 = max(int(np.floor(c.min())) - 3, 0)
+        c1 = min(int(np.ceil(c.max())) + 4, self.n_cols)
+        if r1 <= r0 or c1 <= c0:  # the bounds miss this lattice: an empty window
+            self._posts = (0, 0, np.zeros((0, 0), np.float32))
+            return
+        if self.wrap_cols and (c0 == 0 or c1 == self.n_cols):
+            return
+        if (r1 - r0) * (c1 - c0) > pixel_limit(16):  # beyond the memory: read lazily
+            return
+        rows, cols = np.meshgrid(np.arange(r0, r1), np.arange(c0, c1), indexing="ij")
+        posts = self._fetch(rows.reshape(-1), cols.reshape(-1)).astype(np.float32)
+        self._posts = (r0, c0, posts.reshape(r1 - r0, c1 - c0))
 
     def lattice_window(self) -> LatticeWindow | None:
         """The prepared window as plain data (``LatticeWindow``), None without one."""
-        return None
+        geo = self._lattice_inv()
+        if self._posts is None or geo is None:
+            return None
+        r0, c0, posts = self._posts
+        return LatticeWindow(data=posts, inv=np.array(geo[0], dtype=np.float64),
+                             lattice=np.array([r0, c0, self.n_rows, self.n_cols], np.int64),
+                             wrap_centre=geo[1], transform=None, datum=self.datum)
+
+    def parts(self) -> list[tuple[DemSource, str | None]]:
+        """The lattices this DEM tries in order, with the vertical datum of their heights (a
+        compiled lookup goes through each one's ``lattice_window``): itself."""
+        return [(self, self.datum)]
 
     def close(self) -> None:
-        """Release open files (memmaps, datasets)."""
+        """Release open files (memmaps, datasets) and prepared posts."""
+        self._posts = None
 
 
 # ---------------------------------------------------------------------- GETASSE30
@@ -329,6 +374,16 @@ class GetasseSource(DemSource):
         c = (((lon + 180.0) % 360.0) * GETASSE_PER_DEG) - 0.5
         return r, c, (lat >= -90.0) & (lat <= 90.0)
 
+    def _lattice_inv(self) -> tuple[tuple[float, ...], float] | None:
+        """Posts every 30": col + 0.5 = 120 (lon + 180), row + 0.5 = 120 (lat + 90); lookups
+        next to the prepared window's middle (it never spans the wrap)."""
+        if self._posts is None:
+            return ((GETASSE_PER_DEG, 0.0, 180.0 * GETASSE_PER_DEG, 0.0, GETASSE_PER_DEG,
+                     90.0 * GETASSE_PER_DEG), 0.0)
+        c_mid = self._posts[1] + 0.5 * self._posts[2].shape[1]
+        return ((GETASSE_PER_DEG, 0.0, 180.0 * GETASSE_PER_DEG, 0.0, GETASSE_PER_DEG,
+                 90.0 * GETASSE_PER_DEG), (c_mid + 0.5) / GETASSE_PER_DEG - 180.0)
+
     def _fetch(self, rows, cols):
         out = np.full(rows.size, np.nan)
         n_tc = self.n_cols // GETASSE_POSTS
@@ -423,6 +478,12 @@ class SrtmTile(DemSource):
         inside = (r >= -0.5) & (r < self.n_rows - 0.5) & (c >= -0.5) & (c < self.n_cols - 0.5)
         return r, c, inside
 
+    def _lattice_inv(self) -> tuple[tuple[float, ...], float] | None:
+        """col + 0.5 = (lon - ULXMAP) / XDIM + 0.5, row + 0.5 = (ULYMAP - lat) / YDIM + 0.5;
+        lookups next to the tile's middle longitude."""
+        return ((1.0 / self.xdim, 0.0, 0.5 - self.ulx / self.xdim, 0.0, -1.0 / self.ydim,
+                 0.5 + self.uly / self.ydim), 0.5 * (self.bounds[0] + self.bounds[2]))
+
     def _fetch(self, rows, cols):
         if self._data is None:
             try:
@@ -436,6 +497,7 @@ class SrtmTile(DemSource):
 
     def close(self) -> None:
         self._data = None
+        super().close()
 
 
 # ---------------------------------------------------------------------- GDAL rasters
@@ -666,6 +728,9 @@ class CompositeSource(DemSource):
     def prepare(self, lon_min: float, lat_min: float, lon_max: float, lat_max: float) -> None:
         for s in self.sources:
             s.prepare(lon_min, lat_min, lon_max, lat_max)
+
+    def parts(self) -> list[tuple[DemSource, str | None]]:
+        return [part for s in self.sources for part in s.parts()]
 
     def close(self) -> None:
         for s in self.sources:
