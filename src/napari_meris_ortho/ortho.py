@@ -223,14 +223,33 @@ def _window_heights(window: LatticeWindow, index: int, method: str, lon: np.ndar
         x[sel], y[sel] = window.transform(lon[sel], lat[sel])
     undulation = np.empty(0)
     if window.datum not in (None, "ellipsoid"):
-        from .io.geoid import to_ellipsoid
-
-        sel = np.flatnonzero(todo) if sel is None else sel
-        undulation = np.empty_like(lon)
-        undulation[sel] = to_ellipsoid(np.zeros(sel.size), lon[sel], lat[sel], window.datum)
+        undulation = _undulation(window.datum, lon, lat, todo)
     return int(terrain.window_heights(
         window.data, window.inv, window.lattice, window.wrap_centre,
         terrain.METHOD_CODES[method], x, y, todo, undulation, index, h, src, miss))
+
+
+def _undulation(datum: str, lon: np.ndarray, lat: np.ndarray, todo: np.ndarray) -> np.ndarray:
+    """Geoid undulation N of ``datum`` at the ``todo`` points (flat arrays): EGM96 by the
+    compiled bilinear between the grid nodes under them (``io.geoid.nodes_between``,
+    ``engine.terrain.geoid_bilinear``: ``io.geoid.geoid_undulation``'s numbers)."""
+    from .io.geoid import EGM96, GRID_STEP_DEG, node_indices, nodes_between, to_ellipsoid
+
+    out = np.full(lon.shape, np.nan)
+    sel = np.flatnonzero(todo)
+    if sel.size == 0:
+        return out
+    if datum != EGM96:  # (no other geoid: one message for an unknown datum)
+        out[sel] = to_ellipsoid(np.zeros(sel.size), lon[sel], lat[sel], datum)
+        return out
+    lo, la = lon[sel], lat[sel]
+    if not (lo.min() >= -180.0 and lo.max() < 180.0):
+        lon = (lon + 180.0) % 360.0 - 180.0
+        lo = lon[sel]
+    i, j = node_indices(np.array([lo.min(), lo.max()]), np.array([la.min(), la.max()]))
+    nodes = nodes_between(int(i[0]), int(i[1]) + 1, int(j[0]), int(j[1]) + 1)
+    terrain.geoid_bilinear(nodes, int(i[0]), int(j[0]), GRID_STEP_DEG, lon, lat, todo, out)
+    return out
 
 
 def _sample_into(dem: DemSource, index: int, method: str, sel: np.ndarray, lon: np.ndarray,

@@ -93,8 +93,8 @@ def compile_late() -> float:
     calls after its first ones, in the order it needs them (while the map compiles the
     primary-grid search, this compiles what comes next): the height rates and
     prediction/correction rows, the counts of solved points, the antecedent line window, the
-    nearest-pixel index and gather of counts, the COG overview kernel, and the DEM lookup
-    (the numba cache keeps them); seconds."""
+    nearest-pixel index and gather of counts, the COG overview kernel, and the DEM lookup and
+    geoid interpolation (the numba cache keeps them); seconds."""
     from .engine import terrain
     from .engine.predcorr import find_antecedents, height_rates, solved_counts
     from .engine.resample import gather, inside_line_range, nearest_pixel, overview_level
@@ -119,6 +119,7 @@ def compile_late() -> float:
                            0.0, terrain.METHOD_CODES["bilinear"], one, one,
                            np.zeros(1, bool), np.empty(0), 0, np.zeros(1, np.float32),
                            np.zeros(1, np.int8), np.zeros(1, bool))
+    terrain.geoid_bilinear(np.zeros((2, 2)), 0, 0, 0.25, one, one, np.ones(1, bool), one)
     return time.perf_counter() - t0
 
 

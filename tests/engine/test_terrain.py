@@ -149,3 +149,27 @@ def test_ranges_on_threads_equal_one_whole_range_call(posts, method):
     assert n_miss == n1 == int(miss.sum()) > 1000
     for got, want in ((h, h1), (src, src1), (todo, todo1), (miss, miss1)):
         np.testing.assert_array_equal(got, want)
+
+
+def test_geoid_bilinear_equals_the_numpy_undulation():
+    from napari_meris_ortho.engine.terrain import geoid_bilinear
+    from napari_meris_ortho.io.geoid import (
+        GRID_STEP_DEG,
+        geoid_undulation,
+        node_indices,
+        nodes_between,
+    )
+
+    rng = np.random.default_rng(9)
+    lon = rng.uniform(5.0, 12.0, 20000)
+    lat = rng.uniform(42.0, 48.0, 20000)
+    i, j = node_indices(np.array([5.0, 12.0]), np.array([42.0, 48.0]))
+    nodes = nodes_between(int(i[0]), int(i[1]) + 1, int(j[0]), int(j[1]) + 1)
+    todo = rng.random(lon.size) < 0.8
+    out = np.full(lon.size, -1.0)
+    geoid_bilinear(nodes, int(i[0]), int(j[0]), GRID_STEP_DEG, lon, lat, todo, out)
+    np.testing.assert_array_equal(out[todo], geoid_undulation(lon[todo], lat[todo]))
+    assert np.all(out[~todo] == -1.0) and np.ptp(out[todo]) > 5.0  # N varies over the Alps
+    beyond = np.full(lon.size, np.nan)  # points past the nodes: NaN, not a wrong node
+    geoid_bilinear(nodes, int(i[0]), int(j[0]), GRID_STEP_DEG, lon + 20.0, lat, todo, beyond)
+    assert np.all(np.isnan(beyond[todo]))

@@ -67,6 +67,37 @@ def window_heights(data: np.ndarray, inv: np.ndarray, lattice: np.ndarray, wrap_
     return int(sum(counts))
 
 
+def geoid_bilinear(nodes: np.ndarray, i0: int, j0: int, step: float, lon: np.ndarray,
+                   lat: np.ndarray, todo: np.ndarray, out: np.ndarray) -> None:
+    """Geoid undulation N at the ``todo`` points (flat WGS84 lon in [-180, 180), lat): the
+    bilinear of ``nodes`` (N at grid nodes from row ``i0``, column ``j0``, every ``step``
+    degrees; ``io.geoid.nodes_between``), the float64 numbers of ``io.geoid``'s numpy
+    bilinear; NaN for a point beyond the nodes. Points split over threads."""
+    split_range(lambda lo, hi: _geoid_range(lo, hi, nodes, np.int64(i0), np.int64(j0),
+                                            float(step), lon, lat, todo, out), lon.size,
+                min_size=1 << 16)
+
+
+@njit(cache=True, nogil=True)
+def _geoid_range(lo, hi, nodes, i0, j0, step, lon, lat, todo, out):  # pragma: no cover
+    """Points [lo, hi) of ``geoid_bilinear``."""
+    n_r, n_c = nodes.shape
+    for k in range(lo, hi):
+        if not todo[k]:
+            continue
+        i = min(max(math.floor((lat[k] + 90.0) / step), 0), 719)
+        j = math.floor((lon[k] + 180.0) / step)
+        r = int(i) - i0
+        c = int(j) - j0
+        if r < 0 or c < 0 or r + 1 >= n_r or c + 1 >= n_c:
+            out[k] = math.nan
+            continue
+        u = (lat[k] + 90.0) / step - i
+        v = (lon[k] + 180.0) / step - j
+        out[k] = ((1.0 - u) * ((1.0 - v) * nodes[r, c] + v * nodes[r, c + 1])
+                  + u * ((1.0 - v) * nodes[r + 1, c] + v * nodes[r + 1, c + 1]))
+
+
 @njit(cache=True, nogil=True)
 def _linear(lo: int, hi: int, data: np.ndarray, inv: np.ndarray, lattice: np.ndarray,
             wrap_centre: float, nearest: bool, x: np.ndarray, y: np.ndarray, todo: np.ndarray,

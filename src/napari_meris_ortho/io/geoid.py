@@ -106,16 +106,30 @@ def _nodes(lon: np.ndarray, lat: np.ndarray) -> np.ndarray:
     return z
 
 
+def node_indices(lon: np.ndarray, lat: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(row i, column j) of the grid node south-west of each point (lon in [-180, 180)):
+    i = floor((lat + 90) / step) within 0..719, j = floor((lon + 180) / step)."""
+    i = np.clip(np.floor((lat + 90.0) / GRID_STEP_DEG).astype(np.int64), 0, 719)
+    j = np.floor((lon + 180.0) / GRID_STEP_DEG).astype(np.int64)
+    return i, j
+
+
+def nodes_between(i0: int, i1: int, j0: int, j1: int) -> np.ndarray:
+    """N (m) at the grid nodes rows i0..i1, columns j0..j1 (inclusive), float64, through PROJ
+    (exact there); for a compiled bilinear lookup (``engine.terrain.geoid_bilinear``) that
+    gives ``geoid_undulation``'s numbers."""
+    rows = np.arange(i0, i1 + 1)
+    cols = np.arange(j0, j1 + 1)
+    node_lon, node_lat = np.meshgrid(-180.0 + cols * GRID_STEP_DEG, -90.0 + rows * GRID_STEP_DEG)
+    return _nodes(node_lon.ravel(), node_lat.ravel()).reshape(node_lon.shape)
+
+
 def _bilinear_on_nodes(lon: np.ndarray, lat: np.ndarray) -> np.ndarray:
     """PROJ's bilinear interpolation of the 15' grid, done here between the nodes under the
     points (PROJ is asked only for those few nodes; same values to 1e-11 m)."""
-    i = np.clip(np.floor((lat + 90.0) / GRID_STEP_DEG).astype(np.int64), 0, 719)
-    j = np.floor((lon + 180.0) / GRID_STEP_DEG).astype(np.int64)
+    i, j = node_indices(lon, lat)
     i0, j0 = int(i.min()), int(j.min())
-    rows = np.arange(i0, int(i.max()) + 2)
-    cols = np.arange(j0, int(j.max()) + 2)
-    node_lon, node_lat = np.meshgrid(-180.0 + cols * GRID_STEP_DEG, -90.0 + rows * GRID_STEP_DEG)
-    grid = _nodes(node_lon.ravel(), node_lat.ravel()).reshape(node_lon.shape)
+    grid = nodes_between(i0, int(i.max()) + 1, j0, int(j.max()) + 1)
     u = (lat + 90.0) / GRID_STEP_DEG - i
     v = (lon + 180.0) / GRID_STEP_DEG - j
     r, c = i - i0, j - j0
