@@ -112,9 +112,10 @@ _M_TRIM_THRESHOLD, _M_MMAP_THRESHOLD = -1, -3
 def _keep_freed_memory() -> None:
     """Let glibc's malloc keep the memory the run frees and hand it out again: arrays up to
     1 GiB from the heap instead of fresh ``mmap`` pages, and no trimming. Every fresh page
-    is zeroed by the kernel on first touch; a map frees and allocates its band-sized arrays
-    over and over (0.5 s of a 3.5 s map zeroing pages). For the ``meris-ortho`` process only
-    (``console_main``), never for a library user's process; no-op off glibc."""
+    is zeroed by the kernel on first touch, and a map frees and allocates its band-sized
+    arrays over and over (measured: 3.9 -> 3.6 s median of a fr-alps map). For the
+    ``meris-ortho`` process only (``console_main``), never for a library user's process;
+    no-op off glibc."""
     with contextlib.suppress(OSError, AttributeError, ValueError):
         if not (os.confstr("CS_GNU_LIBC_VERSION") or "").startswith("glibc"):
             return
@@ -127,7 +128,7 @@ def console_main() -> NoReturn:
     """The ``meris-ortho`` process (console script and ``python -m``): ``main`` in a process
     tuned for one run: ``_keep_freed_memory``; numpy arrays on ordinary pages (numpy asks
     for transparent huge pages for arrays of 4 MiB and more: the kernel then compacts and
-    zeroes 2 MiB at each first touch, 0.6 s of a 3.5 s map here; a user's own
+    zeroes 2 MiB at each first touch, 0.4-0.6 s of a 3.4-3.9 s map here; a user's own
     ``NUMPY_MADVISE_HUGEPAGE`` wins, numpy reads it when first imported, below); no garbage
     collection on the way out."""
     os.environ.setdefault("NUMPY_MADVISE_HUGEPAGE", "0")

@@ -126,7 +126,7 @@ class _Level:
 
 class CogWriter:
     """Streams bands into a COG file (module docstring): ``add_band(band, halve)`` per band,
-    ``finish(path, ...)`` once, ``close()`` always.
+    ``finish(out, ...)`` once, ``close()`` always.
 
     Compressed tiles stay in memory up to ``memory_budget`` bytes (writing a file costs about
     2-3 ms per MB here: a detour through a scratch file costs as much as the final write, and

@@ -377,12 +377,10 @@ class GetasseSource(DemSource):
     def _lattice_inv(self) -> tuple[tuple[float, ...], float] | None:
         """Posts every 30": col + 0.5 = 120 (lon + 180), row + 0.5 = 120 (lat + 90); lookups
         next to the prepared window's middle (it never spans the wrap)."""
-        if self._posts is None:
-            return ((GETASSE_PER_DEG, 0.0, 180.0 * GETASSE_PER_DEG, 0.0, GETASSE_PER_DEG,
-                     90.0 * GETASSE_PER_DEG), 0.0)
-        c_mid = self._posts[1] + 0.5 * self._posts[2].shape[1]
-        return ((GETASSE_PER_DEG, 0.0, 180.0 * GETASSE_PER_DEG, 0.0, GETASSE_PER_DEG,
-                 90.0 * GETASSE_PER_DEG), (c_mid + 0.5) / GETASSE_PER_DEG - 180.0)
+        k = float(GETASSE_PER_DEG)
+        mid = 0.0 if self._posts is None else (
+            (self._posts[1] + 0.5 * self._posts[2].shape[1] + 0.5) / k - 180.0)
+        return (k, 0.0, 180.0 * k, 0.0, k, 90.0 * k), mid
 
     def _fetch(self, rows, cols):
         out = np.full(rows.size, np.nan)
