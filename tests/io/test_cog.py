@@ -82,6 +82,11 @@ def test_layout_reads_back_in_gdal_and_validates(tmp_path, dtype, compress, bigt
         assert ds.scales == (0.5,) * count and ds.tags()["product"] == "p"
         assert ds.overviews(1) == [2, 4] and ds.block_shapes[0] == (block, block)
         assert ds.compression.name.lower() == compress
+        # the file ends with the last band's last tile and its 4-byte trailer: the blocks
+        # preallocated beyond it are gone
+        last = {n: int(ds.get_tag_item(f"BLOCK_{n}_{(w - 1) // block}_{(h - 1) // block}",
+                                       "TIFF", bidx=count)) for n in ("OFFSET", "SIZE")}
+        assert (tmp_path / "c.tif").stat().st_size == last["OFFSET"] + last["SIZE"] + 4
         for k in range(count):
             np.testing.assert_array_equal(ds.read(k + 1), bands[k])
             for lv in levels[k][1:]:

@@ -24,6 +24,7 @@ as they are. Nothing here imports GDAL.
 
 from __future__ import annotations
 
+import ctypes
 import os
 import shutil
 import struct
@@ -155,7 +156,7 @@ class CogWriter:
         self._held_bytes = 0
         self._budget = int(memory_budget)
         self._drained = 0
-        self._overview_jobs: list[Future[None]] = []
+        self._overview_jobs: list[Future[list[list[bytes]]]] = []
         self._encoder = self._make_encoder()
 
     def _make_encoder(self) -> Any:
@@ -179,35 +180,35 @@ class CogWriter:
         return self._encoder(predicted_tile(a, i0, j0, self.block))
 
     def add_band(self, band: np.ndarray, halve: Callable[[np.ndarray], np.ndarray]) -> None:
-        """Queue one band: the tiles of its full resolution now; its overview levels
-        (``halve`` of the level above, one after the other) and their tiles on a worker, so
-        that the caller computes the next band meanwhile. The band must not change after."""
+        """Queue one band: a worker job for its overview levels (``halve`` of the level above,
+        one after the other) and their compressed tiles, queued first (``finish`` can lay out
+        the file once every band's overviews are done), then the tiles of its full
+        resolution; the caller computes the next band meanwhile. The band must not change
+        after."""
         full = self.levels[0]
         if band.shape != (full.height, full.width):
             raise ValueError(f"band of shape {band.shape}, expected {(full.height, full.width)}")
         a = np.ascontiguousarray(band, dtype=self.dtype)
-        full.tiles.append(self._submit_tiles(full, a))
-        for lev in self.levels[1:]:
-            lev.tiles.append([])  # filled by the band's overview job, in band order
-        k = len(full.tiles) - 1
-        self._overview_jobs.append(self._pool.submit(self._overviews, a, halve, k))
+        self._overview_jobs.append(self._pool.submit(self._overviews, a, halve))
+        b = self.block
+        full.tiles.append([self._pool.submit(self._encode, a, i * b, j * b)
+                           for i in range(full.tiles_down) for j in range(full.tiles_across)])
         self._drain(keep=2)
 
-    def _submit_tiles(self, lev: _Level, a: np.ndarray) -> list[Future[bytes]]:
+    def _overviews(self, a: np.ndarray, halve: Callable[[np.ndarray], np.ndarray]
+                   ) -> list[list[bytes]]:
+        """The compressed tiles of each overview level of a band (from its full resolution
+        ``a``), in one worker job: small next to the full resolution, and known early."""
+        out = []
         b = self.block
-        return [self._pool.submit(self._encode, a, i * b, j * b)
-                for i in range(lev.tiles_down) for j in range(lev.tiles_across)]
-
-    def _overviews(self, a: np.ndarray, halve: Callable[[np.ndarray], np.ndarray],
-                   k: int) -> None:
-        """The overview levels of band ``k`` (from its full resolution ``a``), their tiles
-        queued (a worker's job: it never waits for other jobs)."""
         for lev in self.levels[1:]:
             a = np.ascontiguousarray(halve(a), dtype=self.dtype)
             if a.shape != (lev.height, lev.width):
                 raise ValueError(f"overview of shape {a.shape}, expected "
                                  f"{(lev.height, lev.width)}")
-            lev.tiles[k] = self._submit_tiles(lev, a)
+            out.append([self._encode(a, i * b, j * b)
+                        for i in range(lev.tiles_down) for j in range(lev.tiles_across)])
+        return out
 
     def _drain(self, keep: int) -> None:
         """Collect the finished full-resolution bands (all but the last ``keep``): held in
@@ -229,17 +230,15 @@ class CogWriter:
     def finish(self, out: BinaryIO, tags: Mapping[int, Tag], nodata_tags: Mapping[int, Tag],
                bigtiff: bool | None = None) -> None:
         """Lay the file out (module docstring) into ``out``: header, ghost, IFDs, overview
-        tiles (smallest first), then the full-resolution tiles (memory, then the spill).
+        tiles (smallest first), then the full-resolution tiles (memory, the spill, then the
+        ones still being compressed, each written as it is done: the write overlaps the last
+        compressions; the IFDs, which list every tile, are written last, into their place).
         ``tags`` go to the full-resolution IFD, ``nodata_tags`` to every IFD; ``bigtiff``: None
-        = when the file would pass 4 GiB."""
-        self._drain(keep=0)
-        for job in self._overview_jobs:  # every overview tile queued (or the job's error)
-            job.result()
-        count = self._drained
-        over = [[f.result() for band in lev.tiles for f in band] for lev in self.levels[1:]]
-        sizes = [self._sizes] + [[len(t) for t in lev] for lev in over]
-        total = 16 + len(_GHOST) + 64 + sum(sum(s) + 8 * len(s) for s in sizes) + 2 ** 20
-        layout = _Layout(total >= _CLASSIC_LIMIT if bigtiff is None else bigtiff)
+        = when the file could pass 4 GiB."""
+        over_by_band = [job.result() for job in self._overview_jobs]  # (or a job's error)
+        over = [[t for band in over_by_band for t in band[k]] for k in range(len(self.levels) - 1)]
+        count = len(self.levels[0].tiles)
+        layout = _Layout(self._could_pass_4gib(count) if bigtiff is None else bigtiff)
         ifds = [self._ifd_fields(k, count, layout, tags if k == 0 else {}, nodata_tags)
                 for k in range(len(self.levels))]
         ifd_start = layout.header_size + len(_ghost_area())
@@ -248,27 +247,59 @@ class CogWriter:
         for fields in ifds:
             positions.append(pos)
             pos += layout.ifd_size(fields)
-        offsets: list[list[int]] = [[] for _ in self.levels]
-        for k in range(len(self.levels) - 1, -1, -1):  # smallest overview first
-            for s in sizes[k]:
-                offsets[k].append(pos + 4)
-                pos += s + 8
-        for k, fields in enumerate(ifds):
-            fields[324] = layout.offsets_tag(offsets[k])
-            fields[325] = layout.offsets_tag(sizes[k])
+        _preallocate(out, self._size_bound(pos, over))
         out.write(layout.header(ifd_start))
         out.write(_ghost_area())
-        out.write(b"\x00" * (ifd_start - out.tell()))
-        for k, fields in enumerate(ifds):
-            nxt = positions[k + 1] if k + 1 < len(ifds) else 0
-            out.write(layout.ifd_bytes(fields, positions[k], nxt))
-        for tiles in [*reversed(over), self._held]:
-            for t in tiles:
+        out.write(b"\x00" * (pos - out.tell()))  # the IFDs' place
+        sizes: list[list[int]] = [[] for _ in self.levels]
+        offsets: list[list[int]] = [[] for _ in self.levels]
+        for k in range(len(self.levels) - 1, 0, -1):  # smallest overview first
+            for t in over[k - 1]:
+                offsets[k].append(pos + 4)
+                sizes[k].append(len(t))
+                pos += len(t) + 8
                 _write_tile(out, t)
+        for t in self._held:
+            _write_tile(out, t)
         self._held = []
         self._spill.flush()
         out.flush()
         _append(self._spill, out)
+        full = self.levels[0].tiles
+        for band in full[self._drained:]:  # the last bands: written as they are compressed
+            for fut in band:
+                data = fut.result()
+                self._sizes.append(len(data))
+                _write_tile(out, data)
+        for s in self._sizes:
+            offsets[0].append(pos + 4)
+            pos += s + 8
+        sizes[0] = self._sizes
+        for k, fields in enumerate(ifds):
+            fields[324] = layout.offsets_tag(offsets[k])
+            fields[325] = layout.offsets_tag(sizes[k])
+        out.truncate(pos)  # (the preallocation's excess)
+        out.seek(positions[0])
+        for k, fields in enumerate(ifds):
+            nxt = positions[k + 1] if k + 1 < len(ifds) else 0
+            out.write(layout.ifd_bytes(fields, positions[k], nxt))
+        out.seek(0, os.SEEK_END)
+
+    def _size_bound(self, prefix: int, over: list[list[bytes]]) -> int:
+        """At least the file's size: the prefix (header, IFDs), the overview tiles, the
+        full-resolution tiles held and spilled, and the raw size of those still compressing
+        (ZSTD and DEFLATE add under 1 %)."""
+        tile = int(self.block ** 2 * self.dtype.itemsize * 1.01) + 8
+        pending = sum(len(band) for band in self.levels[0].tiles[self._drained:])
+        return (prefix + sum(len(t) + 8 for lev in over for t in lev)
+                + sum(self._sizes) + 8 * len(self._sizes) + pending * tile)
+
+    def _could_pass_4gib(self, count: int) -> bool:
+        """Whether the file could pass 4 GiB: its raw samples, with room for incompressible
+        tiles (ZSTD and DEFLATE add under 1 %) and the tiles' leaders."""
+        tile = self.block ** 2 * self.dtype.itemsize * 1.01 + 8
+        raw = sum(lev.tiles_across * lev.tiles_down * count * tile for lev in self.levels)
+        return raw + 16 + len(_GHOST) + 2 ** 20 >= _CLASSIC_LIMIT
 
     def _ifd_fields(self, k: int, count: int, layout: _Layout, tags: Mapping[int, Tag],
                     nodata_tags: Mapping[int, Tag]) -> dict[int, Tag]:
@@ -320,6 +351,22 @@ def _append(src: BinaryIO, dst: BinaryIO) -> None:
         src.seek(done)
         dst.seek(0, os.SEEK_END)
         shutil.copyfileobj(src, dst, 16 * 2 ** 20)
+
+
+def _preallocate(f: BinaryIO, size: int) -> None:
+    """Allocate the file's blocks up to ``size`` before writing (Linux ``fallocate``; the
+    caller truncates the excess): ext4 otherwise delays the allocation, then writes the whole
+    file back when it is closed after a truncation or renamed over an existing file
+    (``auto_da_alloc``: 0.08-0.1 s of a 231 MB map here). Nothing where the file system or
+    platform cannot (no emulation by writing zeros)."""
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        fallocate = libc.fallocate
+    except (OSError, AttributeError):  # pragma: no cover - not glibc/Linux
+        return
+    fallocate.argtypes = [ctypes.c_int, ctypes.c_int, ctypes.c_int64, ctypes.c_int64]
+    f.flush()
+    fallocate(f.fileno(), 0, 0, max(int(size), 1))  # failure: delayed allocation, as before
 
 
 def _write_tile(f: BinaryIO, data: bytes) -> None:

@@ -172,7 +172,10 @@ def write_cog(
                         progress(n, count + 1)
                 if n != count:
                     raise OutputError(f"{out}: {n} bands given, {count} expected")
-                with open(tmp, "wb") as f:
+                # the empty file atomic_path made, not truncated again ("wb"): ext4 writes back
+                # a truncated file's data when it is closed (auto_da_alloc; the writer also
+                # preallocates, against the same on a rename over an existing output)
+                with open(tmp, "r+b") as f:
                     writer.finish(f, main, every)
             finally:
                 writer.close()
