@@ -243,10 +243,14 @@ def _undulation(datum: str, lon: np.ndarray, lat: np.ndarray, todo: np.ndarray) 
         out[sel] = to_ellipsoid(np.zeros(sel.size), lon[sel], lat[sel], datum)
         return out
     lo, la = lon[sel], lat[sel]
-    if not (lo.min() >= -180.0 and lo.max() < 180.0):
+    ok = np.isfinite(lo) & np.isfinite(la) & (np.abs(la) <= 90.0)  # (others: NaN, as numpy's)
+    if not ok.any():
+        return out
+    if not (lo[ok].min() >= -180.0 and lo[ok].max() < 180.0):
         lon = (lon + 180.0) % 360.0 - 180.0
         lo = lon[sel]
-    i, j = node_indices(np.array([lo.min(), lo.max()]), np.array([la.min(), la.max()]))
+    i, j = node_indices(np.array([lo[ok].min(), lo[ok].max()]),
+                        np.array([la[ok].min(), la[ok].max()]))
     nodes = nodes_between(int(i[0]), int(i[1]) + 1, int(j[0]), int(j[1]) + 1)
     terrain.geoid_bilinear(nodes, int(i[0]), int(j[0]), GRID_STEP_DEG, lon, lat, todo, out)
     return out
@@ -667,7 +671,7 @@ class _Blocks:
         when the heights are not the DEMs')."""
         for whole, part in ((self.line, res["line"]), (self.col, res["col"]),
                             (self.iters, res["iterations"])):
-            if not np.shares_memory(whole[r0:r1], part):  # (solved in place: nothing to do)
+            if not np.may_share_memory(whole[r0:r1], part):  # (solved in place: nothing to do)
                 whole[r0:r1] = part
         for k, v in res["search"].items():
             self.search[k] = self.search.get(k, 0) + v

@@ -170,6 +170,11 @@ def test_geoid_bilinear_equals_the_numpy_undulation():
     geoid_bilinear(nodes, int(i[0]), int(j[0]), GRID_STEP_DEG, lon, lat, todo, out)
     np.testing.assert_array_equal(out[todo], geoid_undulation(lon[todo], lat[todo]))
     assert np.all(out[~todo] == -1.0) and np.ptp(out[todo]) > 5.0  # N varies over the Alps
+    lat[:3], lon[3:6] = (np.nan, 91.0, -95.0), np.nan  # no position: NaN, as numpy's
+    todo[:6] = True
+    out[:] = -1.0
+    geoid_bilinear(nodes, int(i[0]), int(j[0]), GRID_STEP_DEG, lon, lat, todo, out)
+    assert np.all(np.isnan(out[:6])) and np.all(np.isnan(geoid_undulation(lon[:6], lat[:6])))
     beyond = np.full(lon.size, np.nan)  # points past the nodes: NaN, not a wrong node
     geoid_bilinear(nodes, int(i[0]), int(j[0]), GRID_STEP_DEG, lon + 20.0, lat, todo, beyond)
     assert np.all(np.isnan(beyond[todo]))

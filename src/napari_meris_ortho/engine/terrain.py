@@ -85,6 +85,9 @@ def _geoid_range(lo, hi, nodes, i0, j0, step, lon, lat, todo, out):  # pragma: n
     for k in range(lo, hi):
         if not todo[k]:
             continue
+        if not (abs(lat[k]) <= 90.0 and abs(lon[k]) <= 360.0):  # NaN or no latitude
+            out[k] = math.nan
+            continue
         i = min(max(math.floor((lat[k] + 90.0) / step), 0), 719)
         j = math.floor((lon[k] + 180.0) / step)
         r = int(i) - i0
