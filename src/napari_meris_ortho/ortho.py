@@ -187,6 +187,7 @@ def _heights(stack: DemStack, lon: np.ndarray, lat: np.ndarray, mask: np.ndarray
     flon = np.ascontiguousarray(lon, dtype=np.float64).reshape(-1)
     flat = np.ascontiguousarray(lat, dtype=np.float64).reshape(-1)
     todo = np.array(mask, dtype=bool, copy=True).reshape(-1)
+    geoid: dict[str, np.ndarray] = {}  # N by datum, once: the points left only ever shrink
     for i, dem in enumerate(stack.sources):
         if not todo.any():
             break
@@ -201,7 +202,7 @@ def _heights(stack: DemStack, lon: np.ndarray, lat: np.ndarray, mask: np.ndarray
                 break
             miss = np.zeros(todo.size, bool)
             if _window_heights(replace(window, datum=datum), i, method, flon, flat, todo, fh,
-                               fsrc, miss):
+                               fsrc, miss, geoid):
                 deferred |= miss
                 todo &= ~miss
         if deferred.any():
@@ -212,9 +213,10 @@ def _heights(stack: DemStack, lon: np.ndarray, lat: np.ndarray, mask: np.ndarray
 
 def _window_heights(window: LatticeWindow, index: int, method: str, lon: np.ndarray,
                     lat: np.ndarray, todo: np.ndarray, h: np.ndarray, src: np.ndarray,
-                    miss: np.ndarray) -> int:
+                    miss: np.ndarray, geoid: dict[str, np.ndarray]) -> int:
     """``engine.terrain.window_heights`` at the ``todo`` points (flat arrays): DEM x/y by the
-    window's transformation (projected DEMs), geoid N for EGM96 heights (``io.geoid``)."""
+    window's transformation (projected DEMs), geoid N for EGM96 heights (``io.geoid``; kept
+    in ``geoid`` by datum for the DEMs and lattices after this one)."""
     x, y = lon, lat
     sel: np.ndarray | None = None
     if window.transform is not None:
@@ -223,7 +225,9 @@ def _window_heights(window: LatticeWindow, index: int, method: str, lon: np.ndar
         x[sel], y[sel] = window.transform(lon[sel], lat[sel])
     undulation = np.empty(0)
     if window.datum not in (None, "ellipsoid"):
-        undulation = _undulation(window.datum, lon, lat, todo)
+        if window.datum not in geoid:
+            geoid[window.datum] = _undulation(window.datum, lon, lat, todo)
+        undulation = geoid[window.datum]
     return int(terrain.window_heights(
         window.data, window.inv, window.lattice, window.wrap_centre,
         terrain.METHOD_CODES[method], x, y, todo, undulation, index, h, src, miss))
@@ -242,15 +246,17 @@ def _undulation(datum: str, lon: np.ndarray, lat: np.ndarray, todo: np.ndarray) 
     if datum != EGM96:  # (no other geoid: one message for an unknown datum)
         out[sel] = to_ellipsoid(np.zeros(sel.size), lon[sel], lat[sel], datum)
         return out
-    lo, la = lon[sel], lat[sel]
-    ok = np.isfinite(lo) & np.isfinite(la) & (np.abs(la) <= 90.0)  # (others: NaN, as numpy's)
-    if not ok.any():
+    # the nodes under every point with a position (a few more than under the todo ones: no
+    # copies of the points); points without one (NaN, |lat| > 90) get NaN from the kernel
+    la0 = np.fmax(np.fmin.reduce(lat), -90.0)  # fmin/fmax: NaN skipped (all NaN: NaN)
+    la1 = np.fmin(np.fmax.reduce(lat), 90.0)
+    lo0, lo1 = np.fmin.reduce(lon), np.fmax.reduce(lon)
+    if not (np.isfinite(lo0) and la0 <= la1):
         return out
-    if not (lo[ok].min() >= -180.0 and lo[ok].max() < 180.0):
+    if lo0 < -180.0 or lo1 >= 180.0:
         lon = (lon + 180.0) % 360.0 - 180.0
-        lo = lon[sel]
-    i, j = node_indices(np.array([lo[ok].min(), lo[ok].max()]),
-                        np.array([la[ok].min(), la[ok].max()]))
+        lo0, lo1 = np.fmin.reduce(lon), np.fmax.reduce(lon)
+    i, j = node_indices(np.array([lo0, lo1]), np.array([la0, la1]))
     nodes = nodes_between(int(i[0]), int(i[1]) + 1, int(j[0]), int(j[1]) + 1)
     terrain.geoid_bilinear(nodes, int(i[0]), int(j[0]), GRID_STEP_DEG, lon, lat, todo, out)
     return out
