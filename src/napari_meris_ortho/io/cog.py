@@ -32,7 +32,7 @@ import threading
 import zlib
 from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, BinaryIO
 
@@ -107,14 +107,13 @@ def predicted_tile(a: np.ndarray, i0: int, j0: int, block: int) -> np.ndarray:
     return t
 
 
-@dataclass
+@dataclass(frozen=True)
 class _Level:
-    """One resolution level: size, tiles per band and the futures of its compressed tiles."""
+    """One resolution level: its size and tiles."""
 
     width: int
     height: int
     block: int
-    tiles: list[list[Future[bytes]]] = field(default_factory=list)
 
     @property
     def tiles_across(self) -> int:
@@ -123,6 +122,11 @@ class _Level:
     @property
     def tiles_down(self) -> int:
         return -(-self.height // self.block)
+
+    def corners(self) -> list[tuple[int, int]]:
+        """(row, column) of each tile's first pixel, in row-major (file) order."""
+        b = self.block
+        return [(i * b, j * b) for i in range(self.tiles_down) for j in range(self.tiles_across)]
 
 
 class CogWriter:
@@ -151,6 +155,7 @@ class CogWriter:
         n = threads or usable_cores()
         self._pool = ThreadPoolExecutor(max_workers=max(n, 1), thread_name_prefix="cog")
         self._spill: BinaryIO = open(spill, "w+b")  # closed by close()
+        self._full: list[list[Future[bytes]]] = []  # per band, its full-resolution tiles
         self._sizes: list[int] = []  # full-resolution tiles done, in file order
         self._held: list[bytes] = []  # the first of them, held in memory
         self._held_bytes = 0
@@ -190,9 +195,7 @@ class CogWriter:
             raise ValueError(f"band of shape {band.shape}, expected {(full.height, full.width)}")
         a = np.ascontiguousarray(band, dtype=self.dtype)
         self._overview_jobs.append(self._pool.submit(self._overviews, a, halve))
-        b = self.block
-        full.tiles.append([self._pool.submit(self._encode, a, i * b, j * b)
-                           for i in range(full.tiles_down) for j in range(full.tiles_across)])
+        self._full.append([self._pool.submit(self._encode, a, i, j) for i, j in full.corners()])
         self._drain(keep=2)
 
     def _overviews(self, a: np.ndarray, halve: Callable[[np.ndarray], np.ndarray]
@@ -200,21 +203,19 @@ class CogWriter:
         """The compressed tiles of each overview level of a band (from its full resolution
         ``a``), in one worker job: small next to the full resolution, and known early."""
         out = []
-        b = self.block
         for lev in self.levels[1:]:
             a = np.ascontiguousarray(halve(a), dtype=self.dtype)
             if a.shape != (lev.height, lev.width):
                 raise ValueError(f"overview of shape {a.shape}, expected "
                                  f"{(lev.height, lev.width)}")
-            out.append([self._encode(a, i * b, j * b)
-                        for i in range(lev.tiles_down) for j in range(lev.tiles_across)])
+            out.append([self._encode(a, i, j) for i, j in lev.corners()])
         return out
 
     def _drain(self, keep: int) -> None:
         """Collect the finished full-resolution bands (all but the last ``keep``): held in
         memory while within the budget, then (and once spilling has begun, always: the file
         order) written to the spill."""
-        full = self.levels[0].tiles
+        full = self._full
         while self._drained < len(full) - keep:
             for fut in full[self._drained]:
                 data = fut.result()
@@ -237,7 +238,7 @@ class CogWriter:
         = when the file could pass 4 GiB."""
         over_by_band = [job.result() for job in self._overview_jobs]  # (or a job's error)
         over = [[t for band in over_by_band for t in band[k]] for k in range(len(self.levels) - 1)]
-        count = len(self.levels[0].tiles)
+        count = len(self._full)
         layout = _Layout(self._could_pass_4gib(count) if bigtiff is None else bigtiff)
         ifds = [self._ifd_fields(k, count, layout, tags if k == 0 else {}, nodata_tags)
                 for k in range(len(self.levels))]
@@ -265,8 +266,7 @@ class CogWriter:
         self._spill.flush()
         out.flush()
         _append(self._spill, out)
-        full = self.levels[0].tiles
-        for band in full[self._drained:]:  # the last bands: written as they are compressed
+        for band in self._full[self._drained:]:  # the last bands: written as they are done
             for fut in band:
                 data = fut.result()
                 self._sizes.append(len(data))
@@ -289,16 +289,20 @@ class CogWriter:
         """At least the file's size: the prefix (header, IFDs), the overview tiles, the
         full-resolution tiles held and spilled, and the raw size of those still compressing
         (ZSTD and DEFLATE add under 1 %)."""
-        tile = int(self.block ** 2 * self.dtype.itemsize * 1.01) + 8
-        pending = sum(len(band) for band in self.levels[0].tiles[self._drained:])
+        pending = sum(len(band) for band in self._full[self._drained:])
         return (prefix + sum(len(t) + 8 for lev in over for t in lev)
-                + sum(self._sizes) + 8 * len(self._sizes) + pending * tile)
+                + sum(self._sizes) + 8 * len(self._sizes) + pending * self._tile_bound)
+
+    @property
+    def _tile_bound(self) -> int:
+        """Bytes a tile takes at most in the file: its raw samples (ZSTD and DEFLATE add under
+        1 % to incompressible data) and its leader and trailer."""
+        return int(self.block ** 2 * self.dtype.itemsize * 1.01) + 8
 
     def _could_pass_4gib(self, count: int) -> bool:
-        """Whether the file could pass 4 GiB: its raw samples, with room for incompressible
-        tiles (ZSTD and DEFLATE add under 1 %) and the tiles' leaders."""
-        tile = self.block ** 2 * self.dtype.itemsize * 1.01 + 8
-        raw = sum(lev.tiles_across * lev.tiles_down * count * tile for lev in self.levels)
+        """Whether the file could pass 4 GiB: every tile at its ``_tile_bound``."""
+        raw = sum(lev.tiles_across * lev.tiles_down * count * self._tile_bound
+                  for lev in self.levels)
         return raw + 16 + len(_GHOST) + 2 ** 20 >= _CLASSIC_LIMIT
 
     def _ifd_fields(self, k: int, count: int, layout: _Layout, tags: Mapping[int, Tag],
