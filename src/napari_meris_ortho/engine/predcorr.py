@@ -132,6 +132,13 @@ def _primary_nodes(lon, lat, lat_tp, lon_tp, coef, df, dj, geo, line, col,
                 last_p = col[r, c]
 
 
+@njit(cache=True, inline="always")
+def _weighted(g, a, b, w):  # pragma: no cover
+    """Bilinear value of the 2-D grid ``g`` in cell (a, b), weights ``w`` of its corners
+    (a, b), (a, b + 1), (a + 1, b), (a + 1, b + 1)."""
+    return w[0] * g[a, b] + w[1] * g[a, b + 1] + w[2] * g[a + 1, b] + w[3] * g[a + 1, b + 1]
+
+
 @njit(cache=True)
 def _predict(cl, cp, rates, step, i, j, h):
     """Primary grid interpolated bilinearly at output pixel (i, j), moved by ``h`` times the
@@ -144,12 +151,9 @@ def _predict(cl, cp, rates, step, i, j, h):
     b = min(int(tj), nc - 2)
     u = ti - a
     v = tj - b
-    w00 = (1 - u) * (1 - v)
-    w01 = (1 - u) * v
-    w10 = u * (1 - v)
-    w11 = u * v
-    l = w00 * cl[a, b] + w01 * cl[a, b + 1] + w10 * cl[a + 1, b] + w11 * cl[a + 1, b + 1]
-    p = w00 * cp[a, b] + w01 * cp[a, b + 1] + w10 * cp[a + 1, b] + w11 * cp[a + 1, b + 1]
+    w = ((1 - u) * (1 - v), (1 - u) * v, u * (1 - v), u * v)
+    l = _weighted(cl, a, b, w)
+    p = _weighted(cp, a, b, w)
     if math.isnan(l):  # a missing node: take any valid one (then Newton does the rest)
         for da in range(2):
             for db in range(2):
@@ -158,12 +162,9 @@ def _predict(cl, cp, rates, step, i, j, h):
         return l, p
     if h != 0.0:
         if math.isnan(h):
-            h = (w00 * rates[2, a, b] + w01 * rates[2, a, b + 1] + w10 * rates[2, a + 1, b]
-                 + w11 * rates[2, a + 1, b + 1])
-        rl = (w00 * rates[0, a, b] + w01 * rates[0, a, b + 1] + w10 * rates[0, a + 1, b]
-              + w11 * rates[0, a + 1, b + 1])
-        rp = (w00 * rates[1, a, b] + w01 * rates[1, a, b + 1] + w10 * rates[1, a + 1, b]
-              + w11 * rates[1, a + 1, b + 1])
+            h = _weighted(rates[2], a, b, w)
+        rl = _weighted(rates[0], a, b, w)
+        rp = _weighted(rates[1], a, b, w)
         if not (math.isnan(rl) or math.isnan(rp) or math.isnan(h)):
             l += h * rl
             p += h * rp
