@@ -133,6 +133,17 @@ def _primary_nodes(lon, lat, lat_tp, lon_tp, coef, df, dj, geo, line, col,
 
 
 @njit(cache=True, inline="always")
+def _point_height(hmode, height, i, j):  # pragma: no cover
+    """The height the direct model takes at output point (i, j) (module docstring): 0 (none),
+    NaN (the tie points' dem_alt at the antecedent) or the given one."""
+    if hmode == HEIGHT_NONE:
+        return 0.0
+    if hmode == HEIGHT_TIEPOINTS:
+        return math.nan
+    return np.float64(height[i, j])
+
+
+@njit(cache=True, inline="always")
 def _weighted(g, a, b, w):  # pragma: no cover
     """Bilinear value of the 2-D grid ``g`` in cell (a, b), weights ``w`` of its corners
     (a, b), (a, b + 1), (a + 1, b), (a + 1, b + 1)."""
@@ -254,12 +265,7 @@ def _antecedent_rows(lo, hi, lon, lat, height, hmode, ptr, start, stop, cl, cp, 
                 tlat = lat[i, j]
                 if math.isnan(tlon) or math.isnan(tlat):
                     continue
-                if hmode == 0:
-                    h = 0.0
-                elif hmode == 1:
-                    h = math.nan
-                else:
-                    h = np.float64(height[i, j])
+                h = _point_height(hmode, height, i, j)
                 gl, gp = _predict(cl, cp, rates, step, i, j, h)
                 if math.isnan(gl):
                     continue
@@ -339,12 +345,7 @@ def _handbook_rows(lo, hi, lon, lat, height, hmode, ptr, start, stop, lat_tp, lo
                 ok = True
                 while (hmode != 0 or geo != 0) and it < max_iter:
                     it += 1
-                    if hmode == 0:
-                        h = 0.0
-                    elif hmode == 1:
-                        h = math.nan
-                    else:
-                        h = np.float64(height[i, j])
+                    h = _point_height(hmode, height, i, j)
                     r = direct_point(x, y, h, coef, df, dj, model, geo)
                     f3, g3, u3, v3, path3 = search_facet(r[0], r[1], f, g, lat_tp, lon_tp)
                     paths[i, path3 + 1] += 1
@@ -397,12 +398,7 @@ def _parallax_rows(lo, hi, line, col, height, hmode, coef, df, dj, model, geo, h
         for j in range(nc):
             if math.isnan(line[i, j]):
                 continue
-            if hmode == 0:
-                h = 0.0
-            elif hmode == 1:
-                h = math.nan
-            else:
-                h = np.float64(height[i, j])
+            h = _point_height(hmode, height, i, j)
             r = direct_point(np.float64(line[i, j]), np.float64(col[i, j]), h, coef, df, dj,
                              model, geo)
             h_used[i, j] = r[2]
