@@ -110,7 +110,7 @@ def default_grid_of(path: Path):
     from napari_meris_ortho.engine.boundary import segment_boundary
     from napari_meris_ortho.geometry.grid import default_grid
     from napari_meris_ortho.geometry.tiepoints import TiePointGrid
-    from napari_meris_ortho.io.n1 import read_product
+    from napari_meris_ortho.products.n1 import read_product
 
     prod = read_product(path)
     tp = TiePointGrid.from_product(prod)

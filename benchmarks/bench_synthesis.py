@@ -67,8 +67,8 @@ def throughput(paths: list[str], grid, bands: list[int], tile: int, workers: int
     """One new synthesis of every product; workers = 0: in this process."""
     from distributed import Client, LocalCluster
 
-    from napari_meris_ortho._synthesis_run import WORKER_ENV
-    from napari_meris_ortho.synthesis import synthesize
+    from napari_meris_ortho.synthesis.api import synthesize
+    from napari_meris_ortho.synthesis.run import WORKER_ENV
 
     kwargs = dict(grid=grid, bands=bands, algorithm="max-ndvi", tile=tile,
                   elevation="tiepoints")
@@ -113,8 +113,8 @@ def _reset_peak() -> None:
 def update_cost(paths: list[str], grid, bands: list[int], tile: int, tmp: Path,
                 name: str) -> dict:
     """Seconds and bytes of merging one product into a store holding another."""
-    from napari_meris_ortho.io.synthesis_store import overview_factors
-    from napari_meris_ortho.synthesis import synthesize
+    from napari_meris_ortho.synthesis.api import synthesize
+    from napari_meris_ortho.synthesis.store import overview_factors
 
     out = tmp / f"update-{name}"
     synthesize(paths[:1], out, grid=grid, bands=bands, algorithm="max-ndvi", tile=tile,
@@ -140,12 +140,12 @@ def main() -> None:
     args = parser.parse_args()
 
     from napari_meris_ortho.geometry.grid import OutputGrid
-    from napari_meris_ortho.io.n1 import read_product
-    from napari_meris_ortho.synthesis import _new_grid
+    from napari_meris_ortho.products.n1 import read_product
+    from napari_meris_ortho.synthesis.tiling import new_grid
 
     paths = products(args.products, args.scene)
     bands = sorted(set(range(1, min(args.bands, 15) + 1)) | {7, 13})
-    grid = _new_grid(read_product(paths[0]), "EPSG:4326", None)
+    grid = new_grid(read_product(paths[0]), "EPSG:4326", None)
     europe = OutputGrid("EPSG:4326", EUROPE[0], EUROPE[1], PIXEL_260M, PIXEL_260M,
                         round(EUROPE[2] / PIXEL_260M), round(EUROPE[3] / PIXEL_260M))
     print(f"{len(paths)} {args.scene} products, {len(bands)} bands, grid {grid.width} x "

@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from napari_meris_ortho.geometry.tiepoints import analytic_swath
-from napari_meris_ortho.io.n1 import write_product
+from napari_meris_ortho.products.n1 import write_product
 
 
 def terrain(lon, lat):

@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 
 from napari_meris_ortho.cli import main
-from napari_meris_ortho.io.n1 import write_product
+from napari_meris_ortho.products.n1 import write_product
 
-sys.path.insert(0, str(Path(__file__).parent / "io"))  # the N1 sample inputs of tests/io
+sys.path.insert(0, str(Path(__file__).parent / "products"))  # N1 sample inputs
 from n1_samples import sample_inputs
 
 

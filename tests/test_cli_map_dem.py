@@ -12,9 +12,9 @@ import rasterio
 from rasterio.transform import Affine
 
 from napari_meris_ortho.cli import main
-from napari_meris_ortho.io import geoid
-from napari_meris_ortho.io.copernicus import tile_name
-from napari_meris_ortho.io.n1 import read_product
+from napari_meris_ortho.dem import geoid
+from napari_meris_ortho.dem.copernicus import tile_name
+from napari_meris_ortho.products.n1 import read_product
 from ortho_samples import make_product, terrain
 
 

@@ -13,7 +13,7 @@ import sys
 import pytest
 
 from napari_meris_ortho.cli import main
-from napari_meris_ortho.io.n1 import read_product
+from napari_meris_ortho.products.n1 import read_product
 from ortho_samples import make_dem, make_product
 
 

@@ -8,7 +8,7 @@ import shutil
 import numpy as np
 
 from napari_meris_ortho.cli import main
-from napari_meris_ortho.io.geotiff import read_geotiff
+from napari_meris_ortho.output.geotiff import read_geotiff
 
 
 def _run(capsys, *argv):
@@ -52,7 +52,7 @@ def test_map_with_the_pixel_geolocation(geolocated, tmp_path, capsys):
 
 
 def test_synthesize_with_the_pixel_geolocation(geolocated, tmp_path, capsys):
-    from napari_meris_ortho.synthesis import open_synthesis
+    from napari_meris_ortho.synthesis.reading import open_synthesis
 
     out = tmp_path / "syn"
     code, _, _ = _run(capsys, "synthesize", geolocated["fsg"], geolocated["sen3"], "--out", out,

@@ -6,7 +6,7 @@ import json
 from pathlib import Path
 
 from napari_meris_ortho.cli import main
-from napari_meris_ortho.io.n1 import read_product
+from napari_meris_ortho.products.n1 import read_product
 
 SMALL = {"lines": 40, "columns": 65,
          "exports": {"getasse30": False, "getasse30_beam": True, "srtm30": False,

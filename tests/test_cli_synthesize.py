@@ -15,7 +15,7 @@ from pathlib import Path
 import pytest
 
 from napari_meris_ortho.cli import main
-from napari_meris_ortho.synthesis import open_synthesis
+from napari_meris_ortho.synthesis.reading import open_synthesis
 from test_synthesis import BANDS, layers, scene_product
 
 GRID_ARGS = ["--crs", "EPSG:4326", "--ul", "13.45", "46.70", "--lr", "14.26", "46.19",

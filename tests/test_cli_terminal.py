@@ -15,7 +15,7 @@ from n1_samples import sample_inputs
 
 from napari_meris_ortho._terminal import printable
 from napari_meris_ortho.cli import main
-from napari_meris_ortho.io.n1 import read_product, write_product
+from napari_meris_ortho.products.n1 import read_product, write_product
 from ortho_samples import make_product
 
 

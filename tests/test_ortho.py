@@ -10,7 +10,7 @@ from napari_meris_ortho.engine.location import direct_location
 from napari_meris_ortho.errors import DemError, N1FormatError, OptionsError
 from napari_meris_ortho.geometry.grid import OutputGrid
 from napari_meris_ortho.geometry.tiepoints import TiePointGrid
-from napari_meris_ortho.io.n1 import read_product
+from napari_meris_ortho.products.n1 import read_product
 from ortho_samples import COPERNICUS_SCENE, make_dem, make_product, terrain
 
 
@@ -373,7 +373,7 @@ def test_dem_heights_by_the_window_kernel_equal_the_dem_stack(tmp_path, method):
     points beyond the prepared window, a UTM DEM, EGM96 heights, a 0..360 deg global DEM."""
     from rasterio.transform import from_origin
 
-    from napari_meris_ortho.io.dem import DemStack
+    from napari_meris_ortho.dem.stack import DemStack
     from napari_meris_ortho.ortho import _heights
 
     rng = np.random.default_rng(12)
@@ -418,7 +418,7 @@ def test_tile_directory_heights_by_the_window_kernel_equal_the_dem_stack(method)
     of posts (per Copernicus zone, per SRTM tile; a tile the bounds miss: an empty window) and
     ``_heights`` gives ``DemStack.sample``'s heights and sources, also for points beyond the
     windows and where no tile is."""
-    from napari_meris_ortho.io.dem import DemStack, open_dem
+    from napari_meris_ortho.dem.stack import DemStack, open_dem
     from napari_meris_ortho.ortho import _heights
     from napari_meris_ortho.simulate.scene import generate_scene
 

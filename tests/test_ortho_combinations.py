@@ -18,7 +18,7 @@ import pytest
 from scipy.ndimage import map_coordinates
 
 from napari_meris_ortho import orthorectify
-from napari_meris_ortho.io.n1 import read_product
+from napari_meris_ortho.products.n1 import read_product
 
 ELEVATIONS = ("none", "tiepoints", "dem")
 PARALLAXES = ("handbook", "ellipsoid")

@@ -14,15 +14,13 @@ import rasterio
 from napari_meris_ortho.engine.synthesis import ndvi_encode, validated_pixels
 from napari_meris_ortho.errors import OptionsError
 from napari_meris_ortho.geometry.grid import OutputGrid
-from napari_meris_ortho.io import synthesis_store as st
 from napari_meris_ortho.ortho import orthorectify
 from napari_meris_ortho.simulate.radiometry import CLOUD_SPECTRUM
-from napari_meris_ortho.synthesis import (
-    export_cog,
-    open_synthesis,
-    synthesize,
-    tiles,
-)
+from napari_meris_ortho.synthesis import store as st
+from napari_meris_ortho.synthesis.api import synthesize
+from napari_meris_ortho.synthesis.export import export_cog
+from napari_meris_ortho.synthesis.reading import open_synthesis
+from napari_meris_ortho.synthesis.tiling import tiles
 
 NO_EXPORTS = {"getasse30": False, "getasse30_beam": False, "srtm30": False,
               "geotiff_utm": False, "reference": False}
@@ -346,7 +344,7 @@ def test_failed_product_is_skipped_and_reported(products, tmp_path, caplog) -> N
 def test_new_synthesis_takes_the_first_footprint(products, tmp_path) -> None:
     from napari_meris_ortho.engine.boundary import segment_boundary
     from napari_meris_ortho.geometry.grid import default_grid
-    from napari_meris_ortho.io.n1 import read_product
+    from napari_meris_ortho.products.n1 import read_product
 
     result = synthesize([products["clear"]], tmp_path / "s", bands=(7,), elevation="tiepoints")
     p = read_product(products["clear"])
@@ -395,7 +393,7 @@ def test_tile_beyond_the_zero_height_boundary_keeps_terrain_pixels(tmp_path) -> 
     boundary, the east tiles hold no boundary pixel, yet the synthesis keeps those pixels
     (ortho allow_empty)."""
     from napari_meris_ortho.simulate.scene import generate_scene
-    from napari_meris_ortho.synthesis import terrain_margin_px
+    from napari_meris_ortho.synthesis.tiling import terrain_margin_px
 
     scene = generate_scene({"base": "fr-small", "lines": 128, "columns": 193,
                             "first_column": 1150, "exports": NO_EXPORTS, "clouds": None})
@@ -414,7 +412,7 @@ def test_tile_beyond_the_zero_height_boundary_keeps_terrain_pixels(tmp_path) -> 
     assert 20 <= count[:, 256:].sum() == valid[:, 256:].sum()
     # the cheap tile skip leaves a margin for 9000 m seen at 45 deg: 9 km over pixels of
     # 0.0015 deg x cos(46.6 deg) = 115 m (the narrower pixel side), 79 pixels, plus 2
-    from napari_meris_ortho.io.n1 import read_product
+    from napari_meris_ortho.products.n1 import read_product
 
     product = read_product(scene.product_path)
     lat = float(np.max(np.abs(product.tie_points["latitude"])))
@@ -426,7 +424,7 @@ def test_tile_beyond_the_zero_height_boundary_keeps_terrain_pixels(tmp_path) -> 
 def test_product_table_and_cog_export_carry_band_and_scaling_metadata(products,
                                                                       tmp_path) -> None:
     """Issue 4 item 9: band description (number, wavelength) and radiance factors sf_rad."""
-    from napari_meris_ortho.io.n1 import read_product
+    from napari_meris_ortho.products.n1 import read_product
 
     clear, cloudy = read_product(products["clear"]), read_product(products["cloudy1"])
     synthesize([products["clear"]], tmp_path / "s", grid=GRID, bands=BANDS, tile=256,
@@ -492,8 +490,9 @@ def test_tie_points_and_boundary_built_once_per_product(tmp_path, monkeypatch) -
     on that tile (DEM heights from the product-wide window = the tile's own)."""
     from collections import Counter, OrderedDict
 
-    from napari_meris_ortho import _synthesis_run, ortho
+    from napari_meris_ortho import ortho
     from napari_meris_ortho.simulate.scene import generate_scene
+    from napari_meris_ortho.synthesis import run as _synthesis_run
 
     scene = generate_scene({"base": "fr-small", "lines": 128, "columns": 193,
                             "first_column": 1150, "exports": NO_EXPORTS, "clouds": None})

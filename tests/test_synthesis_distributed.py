@@ -1,4 +1,4 @@
-"""Synthesis on dask.distributed workers (synthesis.py, _synthesis_run.py): a real LocalCluster
+"""Synthesis on dask.distributed workers (synthesis/: api, run): a real LocalCluster
 gives the bytes of the in-process run in any product order; an unreachable scheduler, two
 concurrent runs on one store and a corrupt product among many end cleanly."""
 
@@ -13,7 +13,8 @@ import numpy as np
 import pytest
 
 from napari_meris_ortho.cli import main
-from napari_meris_ortho.synthesis import open_synthesis, synthesize
+from napari_meris_ortho.synthesis.api import synthesize
+from napari_meris_ortho.synthesis.reading import open_synthesis
 from test_synthesis import GRID, layers, scene_product
 
 COMMON = dict(grid=GRID, bands=(7, 13), tile=256, elevation="tiepoints")
@@ -34,7 +35,7 @@ def cluster():
     """A real LocalCluster: 2 worker processes, one thread each."""
     from distributed import LocalCluster
 
-    from napari_meris_ortho._synthesis_run import WORKER_ENV
+    from napari_meris_ortho.synthesis.run import WORKER_ENV
 
     with LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
                       dashboard_address=None, env=WORKER_ENV) as c:

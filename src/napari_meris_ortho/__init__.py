@@ -12,8 +12,8 @@ from typing import Any
 __version__ = "0.1.0"
 
 _LAZY = {
-    "read_product": "napari_meris_ortho.io.product",
-    "MerisL1bProduct": "napari_meris_ortho.io.n1",
+    "read_product": "napari_meris_ortho.products.open",
+    "MerisL1bProduct": "napari_meris_ortho.products.n1",
     "N1FormatError": "napari_meris_ortho.errors",
     "Sen3FormatError": "napari_meris_ortho.errors",
     "MerisOrthoError": "napari_meris_ortho.errors",
@@ -21,8 +21,8 @@ _LAZY = {
     "precompute": "napari_meris_ortho.ortho",
     "OrthoResult": "napari_meris_ortho.ortho",
     "geodetic_correction": "napari_meris_ortho.engine.location",
-    "synthesize": "napari_meris_ortho.synthesis",
-    "open_synthesis": "napari_meris_ortho.synthesis",
+    "synthesize": "napari_meris_ortho.synthesis.api",
+    "open_synthesis": "napari_meris_ortho.synthesis.reading",
     "disparity": "napari_meris_ortho.analysis.disparity",
     "demcheck": "napari_meris_ortho.analysis.demcheck",
 }

@@ -1,5 +1,5 @@
 """The cores this process may run on: one count for the engine's thread pool
-(``engine.threads``), the COG writer's compression threads (``io.cog``) and the default number
+(``engine.threads``), the COG writer's compression threads (``output.cog``) and the default number
 of synthesis workers (``meris-ortho synthesize``)."""
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """L1b flag bits of MERIS Flags MDS(16) (EPR's ``MER_RR__1P_flags``), one definition for the
-reader (``io.n1``), the synthesis rules (``engine.synthesis``) and the simulator. A bottom room:
-imports nothing."""
+reader (``products.n1``), the synthesis rules (``engine.synthesis``) and the simulator. A bottom
+room: imports nothing."""
 
 from __future__ import annotations
 

@@ -1,6 +1,6 @@
 """Orthorectified mapping of a MERIS L1b product (MERSYN use case 3, handbook sections 3.1-3.4).
 
-``orthorectify`` is the only glue between the readers (``io.n1``, ``io.dem``) and the engine:
+``orthorectify`` is the only glue between the readers (``products.n1``, ``dem``) and the engine:
 segment boundary and output grid, the heights of the output points (none / tie points / DEMs
 tried in order), the prediction/correction of every antecedent, then the resampling of the
 bands and flags. Everything is checked before any heavy work starts.
@@ -36,13 +36,14 @@ from .options import Elevation, Geolocation, OrthoOptions, Sampling, SearchMetho
 from .progress import ProgressCallback
 
 if TYPE_CHECKING:
-    from .io.dem import DemSource, DemStack, LatticeWindow
+    from .dem.base import DemSource, LatticeWindow
+    from .dem.stack import DemStack
 
 log = logging.getLogger(__name__)
 
 
 class MerisProduct(ProductGeometry, Protocol):
-    """What ``orthorectify`` reads of a product (``io.n1.MerisL1bProduct``): the geometry, the
+    """What ``orthorectify`` reads of a product (``products.n1.MerisL1bProduct``): the geometry, the
     counts of each band, the flags and the radiance scaling factors (Appendix A)."""
 
     def counts(self, band: int) -> np.ndarray: ...
@@ -106,7 +107,7 @@ def band_metadata(stats: dict[str, Any], bands: Sequence[int]) -> list[dict[str,
 
 
 def _open_product(product: str | os.PathLike[str] | MerisProduct) -> MerisProduct:
-    from .io.product import read_product
+    from .products.open import read_product
 
     if isinstance(product, (str, os.PathLike)):
         return read_product(product)
@@ -118,7 +119,7 @@ def _open_product(product: str | os.PathLike[str] | MerisProduct) -> MerisProduc
 def _open_dems(dems: Sequence[DemSource | str | os.PathLike[str]]) -> DemStack | None:
     if not dems:
         return None
-    from .io.dem import DemStack
+    from .dem.stack import DemStack
 
     try:
         return DemStack(list(dems))
@@ -215,7 +216,7 @@ def _window_heights(window: LatticeWindow, index: int, method: str, lon: np.ndar
                     lat: np.ndarray, todo: np.ndarray, h: np.ndarray, src: np.ndarray,
                     miss: np.ndarray, geoid: dict[str, np.ndarray]) -> int:
     """``engine.terrain.window_heights`` at the ``todo`` points (flat arrays): DEM x/y by the
-    window's transformation (projected DEMs), geoid N for EGM96 heights (``io.geoid``; kept
+    window's transformation (projected DEMs), geoid N for EGM96 heights (``dem.geoid``; kept
     in ``geoid`` by datum for the DEMs and lattices after this one)."""
     x, y = lon, lat
     sel: np.ndarray | None = None
@@ -235,9 +236,9 @@ def _window_heights(window: LatticeWindow, index: int, method: str, lon: np.ndar
 
 def _undulation(datum: str, lon: np.ndarray, lat: np.ndarray, todo: np.ndarray) -> np.ndarray:
     """Geoid undulation N of ``datum`` at the ``todo`` points (flat arrays): EGM96 by the
-    compiled bilinear between the grid nodes under them (``io.geoid.nodes_between``,
-    ``engine.terrain.geoid_bilinear``: ``io.geoid.geoid_undulation``'s numbers)."""
-    from .io.geoid import EGM96, GRID_STEP_DEG, node_indices, nodes_between, to_ellipsoid
+    compiled bilinear between the grid nodes under them (``dem.geoid.nodes_between``,
+    ``engine.terrain.geoid_bilinear``: ``dem.geoid.geoid_undulation``'s numbers)."""
+    from .dem.geoid import EGM96, GRID_STEP_DEG, node_indices, nodes_between, to_ellipsoid
 
     out = np.full(lon.shape, np.nan)
     sel = np.flatnonzero(todo)
@@ -624,7 +625,7 @@ def _pixel_grids(prod: MerisProduct) -> tuple[np.ndarray, np.ndarray, np.ndarray
         raise OptionsError(
             f"{getattr(prod, 'path', prod)}: geolocation 'pixel' needs a product with a "
             "per-pixel geolocation (MER_FRG_1P / MER_FSG_1P N1 or a .SEN3 directory)")
-    geolocated: Any = prod  # FRG/FSG N1 or SEN3 (io.product): the per-pixel accessors
+    geolocated: Any = prod  # FRG/FSG N1 or SEN3 (products.open): the per-pixel accessors
     return (geolocated.pixel_longitude(), geolocated.pixel_latitude(),
             geolocated.pixel_altitude())
 

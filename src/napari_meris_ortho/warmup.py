@@ -39,7 +39,7 @@ def _tiny_product(directory: Path) -> tuple[Path, Path]:
     from rasterio.transform import from_origin
 
     from .geometry.tiepoints import analytic_swath
-    from .io.n1 import write_product
+    from .products.n1 import write_product
 
     height, width = 70, 129
     g = analytic_swath(height=height, width=width)
@@ -71,8 +71,8 @@ def warm_up() -> float:
     overview kernel of the map outputs (``engine.resample.overview_level``); seconds."""
     from .engine.resample import overview_level
     from .geometry.grid import utm_crs_for
-    from .io.n1 import read_product
     from .ortho import orthorectify
+    from .products.n1 import read_product
 
     t0 = time.perf_counter()
     for dtype in OVERVIEW_DTYPES:

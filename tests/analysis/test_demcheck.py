@@ -17,8 +17,8 @@ from napari_meris_ortho.analysis.demcheck import (
     plot_histogram,
     read_points,
 )
+from napari_meris_ortho.dem.geoid import geoid_undulation
 from napari_meris_ortho.errors import MerisOrthoError, OptionsError
-from napari_meris_ortho.io.geoid import geoid_undulation
 
 FIXTURES = Path(__file__).parent / "fixtures"
 
@@ -136,7 +136,7 @@ def test_interpolation_methods_on_a_plane_and_geoid(tmp_path):
     assert s.arithmetic_mean == pytest.approx(-47.5, abs=1e-6)
     assert s.standard_deviation < 1e-6
     assert "geoid" in with_geoid.report(listing=False)
-    # --geoid without a file: EGM96 of io.geoid, the same as the entry PATH:egm96
+    # --geoid without a file: EGM96 of dem.geoid, the same as the entry PATH:egm96
     egm = demcheck(pts, [dem_path], methods=("bilinear",), geoid="egm96")
     entry = demcheck(pts, [f"{dem_path}:egm96"], methods=("bilinear",))
     n = geoid_undulation(plon, plat)

@@ -152,13 +152,13 @@ def test_ranges_on_threads_equal_one_whole_range_call(posts, method):
 
 
 def test_geoid_bilinear_equals_the_numpy_undulation():
-    from napari_meris_ortho.engine.terrain import geoid_bilinear
-    from napari_meris_ortho.io.geoid import (
+    from napari_meris_ortho.dem.geoid import (
         GRID_STEP_DEG,
         geoid_undulation,
         node_indices,
         nodes_between,
     )
+    from napari_meris_ortho.engine.terrain import geoid_bilinear
 
     rng = np.random.default_rng(9)
     lon = rng.uniform(5.0, 12.0, 20000)

@@ -1,4 +1,4 @@
-"""The Keys cubic kernel (geometry/interpolation.py) shared by io.dem and engine.resample."""
+"""The Keys cubic kernel (geometry/interpolation.py) shared by dem and engine.resample."""
 
 from __future__ import annotations
 

@@ -10,7 +10,7 @@ import pytest
 import rasterio
 from rasterio.transform import Affine
 
-from napari_meris_ortho.io.n1 import tie_columns, tie_lines, write_product
+from napari_meris_ortho.products.n1 import tie_columns, tie_lines, write_product
 
 # the Orthorectify widget would compile the numba kernels in a background thread
 os.environ.setdefault("MERIS_ORTHO_NO_WARMUP", "1")

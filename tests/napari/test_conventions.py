@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from pyproj import Transformer
 
-from napari_meris_ortho.io.n1 import read_product, write_product
+from napari_meris_ortho.products.n1 import read_product, write_product
 
 STAMP = "2003-09-21 09:23"  # sensing start of the tiny product
 

@@ -13,7 +13,7 @@ from napari_meris_ortho._napari.reader import get_reader, read_layers
 from napari_meris_ortho._napari.world import layer_scale, layer_translate
 from napari_meris_ortho.errors import MerisOrthoError, N1FormatError
 from napari_meris_ortho.geometry.grid import OutputGrid
-from napari_meris_ortho.io.n1 import tie_columns, tie_lines, write_product
+from napari_meris_ortho.products.n1 import tie_columns, tie_lines, write_product
 
 H, W = 70, 2241
 
@@ -48,7 +48,7 @@ def test_reader_accepts_n1_and_geotiff_only(n1_path, tmp_path):
 
 
 def test_n1_reader_layers(n1_path):
-    from napari_meris_ortho.io.n1 import read_product
+    from napari_meris_ortho.products.n1 import read_product
 
     layers = read_layers(str(n1_path))
     assert [t for _, _, t in layers] == ["image", "image", "labels"]
@@ -110,7 +110,7 @@ def test_geotiff_counts_with_scale_read_as_radiances(tmp_path):
     """``meris-ortho map`` writes uint16 counts with GDAL scale = sf_rad: layers hold radiances."""
     from napari_meris_ortho.engine.resample import overview_level
     from napari_meris_ortho.geometry.grid import OutputGrid
-    from napari_meris_ortho.io.geotiff import write_cog
+    from napari_meris_ortho.output.geotiff import write_cog
 
     g = OutputGrid("EPSG:32632", 400_000.0, 5_100_000.0, 300.0, 300.0, 30, 20)
     counts = np.arange(20 * 30, dtype=np.uint16).reshape(20, 30)  # 0 = background

@@ -8,7 +8,8 @@ import pytest
 
 from napari_meris_ortho._napari.reader import get_reader, read_store
 from napari_meris_ortho._napari.world import layer_scale
-from napari_meris_ortho.synthesis import open_synthesis, synthesize
+from napari_meris_ortho.synthesis.api import synthesize
+from napari_meris_ortho.synthesis.reading import open_synthesis
 from test_synthesis import GRID, scene_product
 
 

@@ -16,7 +16,7 @@ from napari_meris_ortho._napari.widget_ortho import (
 from napari_meris_ortho.engine.boundary import segment_boundary
 from napari_meris_ortho.errors import OptionsError
 from napari_meris_ortho.geometry.grid import OutputGrid, default_grid
-from napari_meris_ortho.io.n1 import read_product
+from napari_meris_ortho.products.n1 import read_product
 
 STAMP = " · 2003-09-21 09:23"  # first line time of the tiny product
 

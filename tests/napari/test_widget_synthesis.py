@@ -10,8 +10,8 @@ import tempfile
 import numpy as np
 import pytest
 
-from napari_meris_ortho.io.n1 import read_product, write_product
 from napari_meris_ortho.ortho import orthorectify
+from napari_meris_ortho.products.n1 import read_product, write_product
 
 BANDS = (7, 13)
 
@@ -153,6 +153,6 @@ def test_cancel_between_tiles(make_napari_viewer, qtbot, tiny_n1, second_n1, tmp
     assert widget.status.value == "cancelled by the user"
     assert seen and seen[0][0] < seen[0][1]
     assert len(viewer.layers) == 0
-    from napari_meris_ortho.synthesis import is_synthesis
+    from napari_meris_ortho.synthesis.reading import is_synthesis
 
     assert not is_synthesis(tmp_path / "synthesis")

@@ -10,7 +10,7 @@ import pytest
 
 import napari_meris_ortho
 from napari_meris_ortho.errors import OptionsError
-from napari_meris_ortho.io.n1 import read_product
+from napari_meris_ortho.products.n1 import read_product
 from napari_meris_ortho.simulate import (
     config_hash,
     default_out_dir,

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import rasterio
 
-from napari_meris_ortho.io.geoid import geoid_undulation
+from napari_meris_ortho.dem.geoid import geoid_undulation
 from napari_meris_ortho.simulate.exports import (
     getasse_tile_name,
     getasse_tiles,

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from napari_meris_ortho.geometry.earth import MEAN_EARTH_RADIUS
-from napari_meris_ortho.io.n1 import (
+from napari_meris_ortho.products.n1 import (
     FLAG_BRIGHT,
     FLAG_COASTLINE,
     FLAG_GLINT_RISK,

@@ -31,7 +31,7 @@ def add_bands_option(p: Any, help: str) -> None:
     p.add_argument("--bands", type=parse_bands, default=None, metavar="LIST", help=help)
 
 
-#: what a ``--dem`` entry may be (io.dem, io.copernicus, io.geoid)
+#: what a ``--dem`` entry may be (dem, dem.copernicus, dem.geoid)
 DEM_ENTRY_HELP = (
     "PATH: GeoTIFF/VRT, SRTM30 .DEM, a directory of GETASSE30, SRTM30 or Copernicus GLO-30/90 "
     "tiles; DATUM: egm96 (heights above the geoid) or ellipsoid; default: SRTM30 and "

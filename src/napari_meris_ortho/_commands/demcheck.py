@@ -46,7 +46,7 @@ def register(subparsers: Any) -> None:
 def run(args: argparse.Namespace) -> int:
     from .._atomic import atomic_path, check_distinct, check_writable_dir
     from ..analysis.demcheck import demcheck, plot_histogram, read_points
-    from ..io.geoid import split_datum
+    from ..dem.geoid import split_datum
 
     check_distinct({"--plot": args.plot, "--report": args.report},
                    {"GPS point file": [args.points],

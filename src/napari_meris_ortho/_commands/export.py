@@ -30,7 +30,8 @@ def register(subparsers: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from ..progress import tqdm_progress
-    from ..synthesis import export_cog, open_synthesis
+    from ..synthesis.export import export_cog
+    from ..synthesis.reading import open_synthesis
 
     store = open_synthesis(args.store, at=args.at)
     with tqdm_progress("tiles", enabled=not args.quiet, unit="tile") as progress:

@@ -14,9 +14,9 @@ from typing import Any
 import numpy as np
 
 from .._terminal import printable
-from ..io.n1 import FLAG_NAMES, MerisL1bProduct
-from ..io.n1_format import EPOCH_2000
-from ..io.product import read_product
+from ..products.n1 import FLAG_NAMES, MerisL1bProduct
+from ..products.n1.format import EPOCH_2000
+from ..products.open import read_product
 
 _RESOLUTION_NAMES = {"FR": "full resolution", "RR": "reduced resolution"}
 

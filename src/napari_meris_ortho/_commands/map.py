@@ -83,7 +83,7 @@ def _diagnostics_path(out: Path) -> Path:
 def _check(args: argparse.Namespace) -> Any:
     """Every check that needs no product read, before any work (Appendix C parameter checks)."""
     from .._atomic import check_distinct, check_writable_dir
-    from ..io.geoid import split_datum
+    from ..dem.geoid import split_datum
 
     outputs = {"-o": args.output, "--stats-json": args.stats_json,
                "the diagnostics output": (_diagnostics_path(Path(args.output))
@@ -168,8 +168,8 @@ def _write(args: argparse.Namespace, ante: Any, progress: Any) -> None:
     import numpy as np
 
     from ..engine.resample import overview_level
-    from ..io.geotiff import meris_band_description, write_cog
     from ..ortho import RADIANCE_UNITS, band_metadata
+    from ..output.geotiff import meris_band_description, write_cog
 
     bands, stats = ante.bands, ante.stats
     wl = stats.get("wavelengths", {})

@@ -19,7 +19,7 @@ def register(subparsers: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..synthesis import open_synthesis
+    from ..synthesis.reading import open_synthesis
 
     store = open_synthesis(args.store, at=args.at)
     grid = store.grid

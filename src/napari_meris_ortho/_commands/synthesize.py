@@ -73,7 +73,7 @@ def register(subparsers: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from ..progress import tqdm_progress
-    from ..synthesis import synthesize
+    from ..synthesis.api import synthesize
 
     if args.input is not None and (args.ul or args.lr or args.crs or args.pixel_size
                                    or args.bands):

@@ -176,8 +176,8 @@ def run_orthorectify(options: RunSettings, progress: ProgressCallback | None = N
 
 
 def _run_mapping(options: RunSettings, progress: ProgressCallback | None) -> OrthoRun:
-    from ..io.product import read_product
     from ..ortho import orthorectify
+    from ..products.open import read_product
 
     products = [read_product(p) for p in options.products]
     crs = output_crs(options, products[0].tie_points)
@@ -210,7 +210,7 @@ def _grid_for(product: Any, crs: Any, options: RunSettings) -> Any:
 
 
 def _write_mapping(result: Any, product: Any, output: Path, k: int, n: int) -> Path:
-    from ..io.geotiff import meris_band_description, write_geotiff
+    from ..output.geotiff import meris_band_description, write_geotiff
 
     path = Path(output)
     if n > 1:
@@ -223,7 +223,7 @@ def _write_mapping(result: Any, product: Any, output: Path, k: int, n: int) -> P
 
 def _readable(paths: list[Path]) -> tuple[list[Any], list[str]]:
     """The products that open, and "name: reason" of those that do not (skipped, like the CLI)."""
-    from ..io.product import read_product
+    from ..products.open import read_product
 
     products, skipped = [], []
     for p in paths:
@@ -237,7 +237,7 @@ def _readable(paths: list[Path]) -> tuple[list[Any], list[str]]:
 def _run_synthesis(options: RunSettings, progress: ProgressCallback | None) -> OrthoRun:
     """A synthesis of the readable products; read back into memory; a temporary store (no
     output chosen) is removed afterwards."""
-    from ..synthesis import synthesize
+    from ..synthesis.api import synthesize
 
     products, skipped = _readable(options.products)
     if not products:
@@ -266,7 +266,7 @@ def _run_synthesis(options: RunSettings, progress: ProgressCallback | None) -> O
 
 def _synthesis_item(path: Path, algorithm: str) -> dict[str, Any]:
     """The synthesis layers read into memory: bands, NDVI (maximum-NDVI rule), count."""
-    from ..synthesis import open_synthesis
+    from ..synthesis.reading import open_synthesis
 
     store = open_synthesis(path)
     grid, prefix = store.grid, f"synthesis {algorithm}"

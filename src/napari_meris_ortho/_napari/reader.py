@@ -24,7 +24,7 @@ from .product_layers import QUICKLOOK_BANDS, contrast_limits, stretch_rgb
 from .world import geo_image_kwargs, place_on_frame, viewer_frame
 
 if TYPE_CHECKING:
-    from ..io.n1 import MerisL1bProduct
+    from ..products.n1 import MerisL1bProduct
 
 LayerData = tuple[Any, dict[str, Any], str]
 N1_SUFFIXES = (".n1",)
@@ -33,7 +33,7 @@ TIFF_SUFFIXES = (".tif", ".tiff")
 
 def _is_product(path: str | Path) -> bool:
     """An N1 file, a ``.SEN3`` directory or its ``xfdumanifest.xml``."""
-    from ..io.sen3 import is_sen3
+    from ..products.sen3 import is_sen3
 
     p = Path(path)
     return p.suffix.lower() in N1_SUFFIXES or is_sen3(p)
@@ -62,7 +62,7 @@ def read_store(path: str | list[str]) -> list[LayerData]:
 
 def _readable(path: Path) -> bool:
     """True for an N1 header, a SEN3 product or a GeoTIFF with a CRS (a cheap look)."""
-    from ..io.sen3 import is_sen3
+    from ..products.sen3 import is_sen3
 
     suffix = path.suffix.lower()
     if suffix in N1_SUFFIXES:
@@ -202,7 +202,7 @@ def n1_layers(path: str | Path, frame: OutputGrid | None = None) -> list[LayerDa
     and flags (named bits in the features) of a MERIS L1b product (N1 or .SEN3; FRG/FSG and
     SEN3 products also carry their per-pixel altitude in the metadata), in product geometry;
     over a map (``frame``) placed by an affine fit of its tie points (``tie_point_affine``)."""
-    from ..io.product import read_product
+    from ..products.open import read_product
     from .ortho_run import product_stamp
 
     try:
@@ -234,7 +234,7 @@ def n1_layers(path: str | Path, frame: OutputGrid | None = None) -> list[LayerDa
 
 def flag_names(value: int) -> str:
     """The L1b flag bits set in ``value`` (Flags MDS(16)), e.g. 'LAND_OCEAN|INVALID'."""
-    from ..io.n1 import FLAG_NAMES
+    from ..products.n1 import FLAG_NAMES
 
     names = [name for k, name in enumerate(FLAG_NAMES) if int(value) & (1 << k)]
     return "|".join(names) if names else "none"

@@ -54,8 +54,8 @@ def build_sample(name: str, progress: ProgressCallback | None = None,
     """Generate (or load) scene ``name`` and its uncorrected and orthorectified mappings."""
     from ..engine.boundary import segment_boundary
     from ..geometry.grid import default_grid, utm_crs_for
-    from ..io.n1 import read_product
     from ..ortho import orthorectify
+    from ..products.n1 import read_product
     from ..simulate.scene import generate_scene
 
     scene = generate_scene(name, out_dir=out_dir, progress=_stage(progress, 0, 50))

@@ -9,8 +9,8 @@ from typing import Any
 
 import numpy as np
 
-from ..io import synthesis_store as st
-from ..synthesis import SynthesisStore, open_synthesis
+from ..synthesis import store as st
+from ..synthesis.reading import SynthesisStore, open_synthesis
 from .product_layers import contrast_limits
 from .world import geo_image_kwargs
 

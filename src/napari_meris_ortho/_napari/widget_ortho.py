@@ -72,10 +72,11 @@ def warm_up_in_background() -> None:
 
 def _import_engine() -> None:
     """Import the engine in the main thread (module-level pyproj objects made here)."""
-    from .. import ortho, synthesis  # noqa: F401
+    from .. import ortho  # noqa: F401
     from ..engine import boundary  # noqa: F401
     from ..geometry import grid  # noqa: F401
-    from ..io import dem, geotiff, n1  # noqa: F401
+    from ..products import n1  # noqa: F401
+    from ..synthesis import api  # noqa: F401
 
 
 class _Job:
@@ -228,7 +229,7 @@ class OrthorectifyWidget(Container):
 
     def add_dem(self, path: str | Path | tuple[Path, ...] | None) -> None:
         """Append a DEM (GeoTIFF, SRTM30 tile or GETASSE30 directory) after checking it opens."""
-        from ..io.dem import open_dem
+        from ..dem.stack import open_dem
 
         p = Path(path) if isinstance(path, str | Path) else Path()
         if str(p) in ("", ".") or not p.exists():

@@ -1,7 +1,7 @@
 """npe2 writer: a geocoded image layer saved as a GeoTIFF with its CRS and transform.
 
 The georeference is the layer's ``metadata["geo"]`` (``world`` module doc); the file is written
-through ``io.geotiff.write_geotiff`` (temporary name, then rename). A layer without one (a
+through ``output.geotiff.write_geotiff`` (temporary name, then rename). A layer without one (a
 product-geometry N1 layer, a plain image) is refused with a message naming it.
 """
 
@@ -24,7 +24,7 @@ class _Meta:
 
 def write_geotiff_layer(path: str, data: Any, meta: dict[str, Any]) -> list[str]:
     """npe2 single-layer writer: ``data`` of an image layer as a GeoTIFF at ``path``."""
-    from ..io.geotiff import meris_band_description, write_geotiff
+    from ..output.geotiff import meris_band_description, write_geotiff
 
     name = meta.get("name", "layer")
     grid = layer_frame(_Meta(meta))

@@ -9,12 +9,12 @@ interpolated (nearest neighbour, bilinear or bicubic) and the differences H_i - 
     STANDARD DEVIATION = sqrt(1/N sum (h_i - H_i)^2 - [1/N sum (h_i - H_i)]^2)
     MINIMUM, MAXIMUM   = min, max of (H_i - h_i)
 
-A point is "inside" where a DEM of the list gives a height (``io.dem.DemStack``: outside or a
+A point is "inside" where a DEM of the list gives a height (``dem.stack.DemStack``: outside or a
 no-data post used by the interpolation sends the point to the next DEM, then outside).
 DEM heights above the geoid are put on the ellipsoid, h = H_dem + N, by the same code as the
-orthorectification (``io.geoid``, EGM96 from proj-data): each DEM entry has its vertical datum
+orthorectification (``dem.geoid``, EGM96 from proj-data): each DEM entry has its vertical datum
 (``PATH:egm96``, SRTM30 and Copernicus by default); ``geoid="egm96"`` takes every entry without
-an explicit datum as EGM96 heights. A raster of undulations N (any raster ``io.dem.open_dem``
+an explicit datum as EGM96 heights. A raster of undulations N (any raster ``dem.stack.open_dem``
 reads) may be given instead; the DEM heights are then used as stored.
 """
 
@@ -32,9 +32,10 @@ from pathlib import Path
 import numpy as np
 
 from .._atomic import atomic_path
+from ..dem.base import METHODS, DemSource
+from ..dem.geoid import EGM96, ELLIPSOID, GEOID_GRID, split_datum
+from ..dem.stack import DemStack, open_dem
 from ..errors import OptionsError
-from ..io.dem import METHODS, DemSource, DemStack, open_dem
-from ..io.geoid import EGM96, ELLIPSOID, GEOID_GRID, split_datum
 
 __all__ = [
     "METHOD_TITLES", "DemCheckResult", "ElevationStatistics", "GroundControlPoints", "MethodCheck",
@@ -158,7 +159,7 @@ def demcheck(
 ) -> DemCheckResult:
     """Compare GPS points with a DEM list for each interpolation method (section 5.2, DEMCHK).
 
-    ``geoid``: "egm96" (DEM entries without a datum suffix are EGM96 heights, ``io.geoid``)
+    ``geoid``: "egm96" (DEM entries without a datum suffix are EGM96 heights, ``dem.geoid``)
     or a raster of geoid undulations N (m) added to the stored DEM heights (points where N is
     unknown are outside).
     """

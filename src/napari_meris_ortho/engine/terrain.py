@@ -2,10 +2,10 @@
 "Digital elevation data", Appendix C ``TimMersynGetAltitudeFromDem``): serial compiled loops
 over the output points, no temporaries.
 
-The window is plain data (``io.dem.LatticeWindow`` gives it; engine and io never import each
+The window is plain data (``dem.base.LatticeWindow`` gives it; engine and io never import each
 other): float32 posts, NaN = no data, and the inverse geotransform of the DEM, (a, b, c, d, e,
 f) with ``col + 0.5 = a x + b y + c`` and ``row + 0.5 = d x + e y + f`` (posts at pixel
-centres). Interpolation as ``io.dem.DemSource.sample``: "nearest", "bilinear" (2x2 posts),
+centres). Interpolation as ``dem.base.DemSource.sample``: "nearest", "bilinear" (2x2 posts),
 "bicubic" (4x4 posts, Keys a = -0.5, ``geometry.interpolation``); a post outside the lattice is
 clamped to its edge, a post that is no data or outside -500..9000 m makes the point no data (it
 goes to the next DEM). Nearest/bilinear and bicubic are two kernels: a run compiles only the
@@ -45,7 +45,7 @@ def window_heights(data: np.ndarray, inv: np.ndarray, lattice: np.ndarray, wrap_
     """Heights at the points ``todo`` (DEM coordinates ``x``, ``y``, flat float64) from the
     window ``data`` (float32 posts of the DEM lattice from row ``lattice[0]``, column
     ``lattice[1]``; lattice ``lattice[2]`` x ``lattice[3]`` posts) by the inverse geotransform
-    ``inv`` (module docstring) and ``method`` (``METHOD_CODES``); bilinear sums as ``io.dem``
+    ``inv`` (module docstring) and ``method`` (``METHOD_CODES``); bilinear sums as ``dem``
     (top and bottom rows, then between them: the same float64 numbers).
 
     ``wrap_centre``: geographic DEM, x is moved by whole turns of 360 deg next to it (NaN:
@@ -71,7 +71,7 @@ def geoid_bilinear(nodes: np.ndarray, i0: int, j0: int, step: float, lon: np.nda
                    lat: np.ndarray, todo: np.ndarray, out: np.ndarray) -> None:
     """Geoid undulation N at the ``todo`` points (flat WGS84 lon in [-180, 180), lat): the
     bilinear of ``nodes`` (N at grid nodes from row ``i0``, column ``j0``, every ``step``
-    degrees; ``io.geoid.nodes_between``), the float64 numbers of ``io.geoid``'s numpy
+    degrees; ``dem.geoid.nodes_between``), the float64 numbers of ``dem.geoid``'s numpy
     bilinear; NaN for a point beyond the nodes. Points split over threads."""
     split_range(lambda lo, hi: _geoid_range(lo, hi, nodes, np.int64(i0), np.int64(j0),
                                             float(step), lon, lat, todo, out), lon.size,

@@ -1,4 +1,4 @@
-"""Interpolation weights shared by the DEM sampling (``io.dem``) and the band resampling
+"""Interpolation weights shared by the DEM sampling (``dem``) and the band resampling
 (``engine.resample``): one definition of the Keys cubic convolution kernel (a = -0.5), the
 bicubic of the handbook's "Retrieve the antecedent" (section 3.1).
 

@@ -22,7 +22,7 @@ from .earth import MEAN_EARTH_RADIUS
 
 
 class ProductGeometry(Protocol):
-    """What a MERIS L1b product offers the location models (``io.n1.MerisL1bProduct``, the
+    """What a MERIS L1b product offers the location models (``products.n1.MerisL1bProduct``, the
     per-pixel geolocated products): tie points in physical units, DF, DJ and the size H x W."""
 
     @property
@@ -116,7 +116,7 @@ class TiePointGrid:
 
     @classmethod
     def from_product(cls, product: ProductGeometry) -> TiePointGrid:
-        """Build the grid from an ``io.n1.MerisL1bProduct`` (tie points in physical units)."""
+        """Build the grid from an ``products.n1.MerisL1bProduct`` (tie points in physical units)."""
         tp = product.tie_points
         missing = [name for name in _NEEDED if name not in tp]
         if missing:

@@ -1,9 +1,9 @@
 """Simulator of MERIS L1b products with exact ground truth (issue 3).
 
 ``generate_scene(name_or_config, out_dir=None, progress=None) -> SimulatedScene`` writes an N1
-product (via ``io.n1.write_product``), DEM exports and a reference image, and returns the truth:
-``true_antecedent(lon, lat, h)``, ``dem_height(lon, lat)``, ``truth_radiance(lon, lat, band)``,
-``pixel_geometry(lines, cols)``.
+product (via ``products.n1.write_product``), DEM exports and a reference image, and returns
+the truth: ``true_antecedent(lon, lat, h)``, ``dem_height(lon, lat)``,
+``truth_radiance(lon, lat, band)``, ``pixel_geometry(lines, cols)``.
 
 Configs
 -------

@@ -13,8 +13,8 @@ All exports are resampled from the truth DEM (bilinear between its posts, ellips
 - ``srtm30`` (SRTM30/GTOPO30): 40 x 50 deg tiles ``W020N90.DEM`` (int16 big-endian, rows North
   to South) + ``.HDR`` (ULXMAP/ULYMAP = centre of the upper-left post); -9999 over the sea and
   outside the scene like real SRTM30; heights above the EGM96 geoid like real SRTM30
-  (h - N, ``io.geoid``).
-- ``copernicus`` (Copernicus DEM GLO-90 COG tiles, ``io.copernicus``): 1 x 1 deg float32
+  (h - N, ``dem.geoid``).
+- ``copernicus`` (Copernicus DEM GLO-90 COG tiles, ``dem.copernicus``): 1 x 1 deg float32
   ``Copernicus_DSM_COG_30_N46_00_E010_00_DEM.tif``, posts every 3" on whole multiples of the
   spacing (origin half a post north-west of the corner), heights above the EGM96 geoid
   (h - N), -32767 outside the scene.
@@ -68,13 +68,13 @@ def write_geographic_geotiff(path: Path, grid: DemGrid, data: np.ndarray,
     return _write_tif(path, data, transform, "EPSG:4326", nodata, descriptions, tags)
 
 
-#: tag of our DEM GeoTIFFs naming the vertical datum of their heights (``io.dem``)
+#: tag of our DEM GeoTIFFs naming the vertical datum of their heights (``dem``)
 ELLIPSOIDAL = {"VERTICAL_DATUM": "ellipsoid"}
 
 
 def geoid_heights(sample: Sampler) -> Sampler:
     """A sampler of heights above the EGM96 geoid (H = h - N) from an ellipsoidal one."""
-    from ..io.geoid import geoid_undulation
+    from ..dem.geoid import geoid_undulation
 
     def above_geoid(lon: np.ndarray, lat: np.ndarray) -> np.ndarray:
         return sample(lon, lat) - geoid_undulation(lon, lat)
@@ -244,7 +244,7 @@ def write_copernicus(out_dir: Path, sample: Sampler, grid: DemGrid, code: str = 
                      nodata: float = -32767.0) -> list[Path]:
     """Copernicus DEM COG tiles under the scene (module docstring); ``sample`` gives the heights
     to store (the caller passes geoid heights)."""
-    from ..io.copernicus import ARCSEC, covering_tiles, lon_factor, tile_name
+    from ..dem.copernicus import ARCSEC, covering_tiles, lon_factor, tile_name
 
     out_dir.mkdir(parents=True, exist_ok=True)
     dy = ARCSEC[code] / 3600.0

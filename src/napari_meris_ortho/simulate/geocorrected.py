@@ -44,9 +44,9 @@ def write_geocorrected(scene, fsg: bool = True, sen3: bool = True,
     """Write the FRG N1 (``"fsg"``) and/or the ``.SEN3`` directory (``"sen3"``) of ``scene`` into
     ``out_dir`` (default: the scene's directory); existing outputs of the same product are
     reused. Returns their paths by kind."""
-    from ..io.n1 import read_product, write_product
-    from ..io.n1_writer import default_product_name
-    from ..io.sen3 import default_sen3_name, write_sen3
+    from ..products.n1 import read_product, write_product
+    from ..products.n1.writer import default_product_name
+    from ..products.sen3 import default_sen3_name, write_sen3
 
     target = Path(out_dir) if out_dir is not None else Path(scene.out_dir)
     target.mkdir(parents=True, exist_ok=True)

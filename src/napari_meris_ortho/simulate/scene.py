@@ -462,7 +462,7 @@ def render_product(cfg: dict, geom: SceneGeometry, grid: DemGrid, dem: np.ndarra
                    truth: GroundTruth, progress: ProgressCallback | None = None,
                    chunk: int = 64) -> tuple[np.ndarray, np.ndarray]:
     """Counts (15, H, W) uint16 and flags (H, W) uint8: the truth at every pixel's T."""
-    from ..io.n1 import ScalingFactors
+    from ..products.n1 import ScalingFactors
 
     sf = np.array(ScalingFactors.appendix_a().radiance, dtype=np.float64)
     model = terrain_model(dem, grid)
@@ -599,8 +599,8 @@ def generate_scene(name_or_config: str | dict, out_dir: str | os.PathLike[str] |
 def _write_product(target: Path, cfg: dict, geom: SceneGeometry, grid: DemGrid,
                    dem: np.ndarray, counts: np.ndarray, flags: np.ndarray,
                    progress: ProgressCallback | None) -> Path:
-    from ..io.n1 import write_product
-    from ..io.n1_writer import default_product_name
+    from ..products.n1 import write_product
+    from ..products.n1.writer import default_product_name
 
     tp = tie_point_values(geom, grid, dem)
     det = np.broadcast_to(detector_index(geom), flags.shape)

@@ -1,0 +1,216 @@
+"""Elevation sources for orthorectification (handbook section 3.1 "Digital elevation data",
+chapter 5 GETASSE30, Appendix C ``TimMersynGetAltitudeFromDem``).
+
+``open_dem(path)`` detects the format:
+
+- a directory (or one file) of GETASSE30 tiles: 15 x 15 deg, 1800 x 1800 posts of 30", named
+  from the lower-left corner (``45N015E.GETASSE30``). Handbook variant: float32 (12 960 000
+  bytes), rows South to North, byte order detected from the values; BEAM variant: int16
+  big-endian (6 480 000 bytes), rows North to South, -32768/32767 no data, also inside
+  ``45N015E.zip``. Post (r, c) of a tile with lower-left (lat0, lon0) is at
+  lon0 + (c + 0.5)/120 and lat0 + (r + 0.5)/120 (handbook) or lat0 + 15 - (r + 0.5)/120 (BEAM).
+  A missing tile is no data.
+- SRTM30/GTOPO30 ``.DEM`` + ``.HDR`` tiles (ULXMAP/ULYMAP = centre of the upper-left post,
+  BYTEORDER M/I, NODATA -9999), a file or a directory of them.
+- any raster GDAL reads (GeoTIFF...) in any CRS: posts at pixel centres, lookups reprojected with
+  pyproj, nodata honoured, only the window under the requested points read.
+
+- a directory (searched 3 levels deep) of Copernicus DEM GLO-30 / GLO-90 tiles
+  (``Copernicus_DSM_COG_10_N46_00_E010_00_DEM.tif``; ``dem.copernicus``), only the tiles under
+  the requested points read; a VRT is any GDAL raster.
+
+Vertical datum (issue 11): every source has a ``datum``, "ellipsoid" or "egm96"; ``sample``
+returns ellipsoidal heights (EGM96 heights + the geoid undulation N, ``dem.geoid``). A DEM entry
+``PATH:egm96`` or ``PATH:ellipsoid`` names it; by default SRTM30 and Copernicus are EGM96,
+GETASSE30 ellipsoidal, a GDAL raster takes its vertical CRS (compound EGM96/EGM2008 height,
+3-D geographic) or its ``VERTICAL_DATUM`` tag, else it is taken as ellipsoidal with a warning.
+
+``DemSource.sample(lon, lat, method="bilinear")`` -> float64 heights, NaN outside or where a post
+used by the interpolation is no data (as MERSYN: a background post sends the point to the next
+DEM). Methods "nearest", "bilinear" (2x2 posts), "bicubic" (4x4 posts, Keys a = -0.5).
+``DemStack(sources).sample(lon, lat)`` -> (heights, source index), trying each DEM in order;
+index -1 (and NaN) where none has data (the caller then falls back to the tie points).
+``prepare(lon_min, lat_min, lon_max, lat_max)`` (sources and stacks) reads once the window of
+a GDAL raster that covers a footprint, decoding its blocks on all cores; later lookups inside it
+read nothing more (bilinear: four flat gathers). ``lattice_window()`` then gives that window as
+plain data (``LatticeWindow``) for the compiled lookup of ``engine.terrain`` (called by
+``ortho``; None for the other sources, which keep ``sample``).
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..errors import DemError
+from .base import DemSource, check_regular
+from .geoid import EGM96, ELLIPSOID, geoid_grid_path, split_datum
+from .getasse import _TILE_RE, _ZIP_RE, GetasseSource
+from .raster import RasterSource
+from .srtm import SrtmTile
+
+log = logging.getLogger(__name__)
+# ---------------------------------------------------------------------- several sources
+class CompositeSource(DemSource):
+    """Several sources of one DEM series (tiles): the first with data wins at each point."""
+
+    def __init__(self, name: str, sources: Sequence[DemSource]) -> None:
+        self.name = name
+        self.sources = list(sources)
+        datums = {s.datum for s in self.sources}
+        self.datum = datums.pop() if len(datums) == 1 else None
+
+    def set_datum(self, datum: str) -> None:
+        self.datum = datum
+        for s in self.sources:
+            s.set_datum(datum)
+
+    @property
+    def bounds(self) -> tuple[float, float, float, float]:
+        b = np.array([s.bounds for s in self.sources])
+        return (b[:, 0].min(), b[:, 1].min(), b[:, 2].max(), b[:, 3].max())
+
+    def sample(self, lon: Any, lat: Any, method: str = "bilinear") -> np.ndarray:
+        return DemStack(self.sources).sample(lon, lat, method)[0]
+
+    def prepare(self, lon_min: float, lat_min: float, lon_max: float, lat_max: float) -> None:
+        for s in self.sources:
+            s.prepare(lon_min, lat_min, lon_max, lat_max)
+
+    def parts(self) -> list[tuple[DemSource, str | None]]:
+        return [part for s in self.sources for part in s.parts()]
+
+    def close(self) -> None:
+        for s in self.sources:
+            s.close()
+
+
+class DemStack:
+    """DEMs tried in order at each point (section 3.1: outside or background -> next DEM)."""
+
+    def __init__(self, sources: Sequence[DemSource | str | os.PathLike[str]]) -> None:
+        self.sources = [s if isinstance(s, DemSource) else open_dem(s) for s in sources]
+
+    def sample(self, lon: Any, lat: Any, method: str = "bilinear"
+               ) -> tuple[np.ndarray, np.ndarray]:
+        """(heights float64, index int16 of the DEM used; -1 and NaN where none has data)."""
+        lon, lat = np.broadcast_arrays(np.asarray(lon, dtype=np.float64),
+                                       np.asarray(lat, dtype=np.float64))
+        h = np.full(lon.shape, np.nan)
+        index = np.full(lon.shape, -1, dtype=np.int16)
+        todo = np.ones(lon.shape, dtype=bool)
+        for i, src in enumerate(self.sources):
+            if not todo.any():
+                break
+            v = src.sample(lon[todo], lat[todo], method)
+            got = np.isfinite(v)
+            sel = np.flatnonzero(todo.ravel())[got]
+            h.ravel()[sel] = v[got]
+            index.ravel()[sel] = i
+            todo.ravel()[sel] = False
+        return h, index
+
+    def prepare(self, lon_min: float, lat_min: float, lon_max: float, lat_max: float) -> None:
+        """Read once what lookups inside these WGS84 bounds need, from every DEM."""
+        for s in self.sources:
+            s.prepare(lon_min, lat_min, lon_max, lat_max)
+
+    def close(self) -> None:
+        for s in self.sources:
+            s.close()
+
+
+_WARNED: set[str] = set()
+
+
+def open_dem(path: str | os.PathLike[str]) -> DemSource:
+    """Open a DEM entry ``PATH[:egm96|:ellipsoid]``, detecting its format and vertical datum
+    (module docstring). Raises DemError."""
+    text, datum = split_datum(path)
+    src = _open_path(Path(text))
+    if datum is not None:
+        src.set_datum(datum)
+    elif _datums(src) & {None}:
+        if text not in _WARNED:  # once per path (synthesis opens the DEMs per tile)
+            _WARNED.add(text)
+            log.warning("%s: the DEM does not say its vertical datum: its heights are taken as "
+                        "ellipsoidal (write %s:egm96 for heights above the geoid, %s:ellipsoid "
+                        "to silence this)", text, text, text)
+        _assume_ellipsoid(src)
+    if EGM96 in _datums(src):
+        geoid_grid_path()  # a missing geoid grid fails now, before any work
+    return src
+
+
+def _datums(src: DemSource) -> set[str | None]:
+    """Vertical datums of a source and of its parts (a CompositeSource of tiles)."""
+    parts = getattr(src, "sources", None)
+    if parts is None:
+        return {src.datum}
+    return set().union(*(_datums(p) for p in parts)) if parts else {src.datum}
+
+
+def _assume_ellipsoid(src: DemSource) -> None:
+    """Ellipsoidal heights where a source (or a part of it) does not say its datum."""
+    parts = getattr(src, "sources", None)
+    if parts is None:
+        if src.datum is None:
+            src.set_datum(ELLIPSOID)
+        return
+    for p in parts:
+        _assume_ellipsoid(p)
+    datums = _datums(src)
+    src.datum = datums.pop() if len(datums) == 1 else None
+
+
+def _open_path(p: Path) -> DemSource:
+    if not p.exists():
+        raise DemError(f"{p}: DEM not found")
+    if p.is_dir():
+        return _open_directory(p)
+    check_regular(p)
+    if _TILE_RE.match(p.name) or _ZIP_RE.match(p.name):
+        return GetasseSource(p.parent, files=[p])
+    if p.suffix.upper() in (".DEM", ".HDR"):
+        return SrtmTile(p)
+    return RasterSource(p)
+
+
+
+
+def _open_directory(p: Path) -> DemSource:
+    try:
+        files = sorted(f for f in p.iterdir() if f.is_file())
+    except OSError as exc:
+        raise DemError(f"{p}: cannot list DEM directory ({exc})") from exc
+    if any(_TILE_RE.match(f.name) or _ZIP_RE.match(f.name) for f in files):
+        return GetasseSource(p, files)
+    from .copernicus import CopernicusSource, find_tiles
+
+    tiles = find_tiles(p)
+    if tiles:
+        return CopernicusSource(p, tiles)
+    dems = [f for f in files if f.suffix.upper() == ".DEM"]
+    if dems:
+        return CompositeSource(str(p), [SrtmTile(f) for f in dems])
+    rasters = [f for f in files if f.suffix.lower() in (".tif", ".tiff", ".vrt", ".img")]
+    if rasters:
+        return CompositeSource(str(p), [RasterSource(f) for f in rasters])
+    raise DemError(f"{p}: no GETASSE30, SRTM30/GTOPO30 or GeoTIFF DEM found in the directory")
+
+
+def heights_or_fallback(stack: DemStack | None, lon: np.ndarray, lat: np.ndarray,
+                        fallback: np.ndarray, method: str = "bilinear"
+                        ) -> tuple[np.ndarray, np.ndarray]:
+    """DEM heights with ``fallback`` (e.g. tie-point heights) where no DEM has data
+    (section 3.1); index -1 marks the fallback."""
+    fallback = np.broadcast_to(np.asarray(fallback, dtype=np.float64), np.shape(lon))
+    if stack is None:
+        return fallback.copy(), np.full(np.shape(lon), -1, np.int16)
+    h, idx = stack.sample(lon, lat, method)
+    return np.where(idx >= 0, h, fallback), idx

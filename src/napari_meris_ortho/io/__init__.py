@@ -1,1 +1,0 @@
-"""File formats: ENVISAT N1 products, DEM sources, GeoTIFF outputs."""

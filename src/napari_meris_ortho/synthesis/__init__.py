@@ -1,0 +1,44 @@
+"""Synthesis of many MERIS products (MERSYN use cases 1 and 2, handbook section 3.1, Appendix C).
+
+A synthesis is an Icechunk repository holding Zarr v3 arrays chunked by the output tile
+(:mod:`.store`). The work is split into tasks: one per (product,
+output tile) pair -- orthorectify the product on the tile and make its contribution
+(:func:`engine.synthesis.segment_state`) -- and one per tile -- merge the contributions into
+the stored tile with the associative, commutative rule of :func:`engine.synthesis.combine`
+(ties: sensing time, then name) and write it. Tasks run in this process (``workers=0``), on an
+embedded ``distributed.LocalCluster`` or on an existing dask cluster (``scheduler``); each tile
+task writes into its own fork of the Icechunk session, the forks are merged and the run ends in
+one commit listing the products. Only the tiles the products touch are read and written.
+
+A run killed or failed before its commit leaves the store at its previous commit. A product
+already in the synthesis (same product name and sensing time) is reported and skipped.
+
+Rooms: ``store`` (the Icechunk/Zarr layout, tile read/write, lock, history), ``tiling`` (grid
+and tile arithmetic), ``reports`` (Appendix B statistics), ``reading`` (``open_synthesis``),
+``run`` (one run: tasks in process or on dask.distributed), ``api`` (``synthesize``),
+``export`` (``export_cog``).
+"""
+
+from __future__ import annotations
+
+from importlib import import_module
+from typing import Any
+
+#: the room's public names and the module of each, imported on first use (``import
+#: napari_meris_ortho.synthesis.store`` stays cheap)
+_LAZY = {
+    "synthesize": "api", "ALGORITHMS": "api",
+    "open_synthesis": "reading", "is_synthesis": "reading", "SynthesisStore": "reading",
+    "export_cog": "export",
+    "ProductReport": "reports", "SynthesisResult": "reports",
+    "tiles": "tiling", "terrain_margin_px": "tiling", "footprint_window": "tiling",
+}
+
+
+def __getattr__(name: str) -> Any:
+    if name in _LAZY:
+        return getattr(import_module(f"{__name__}.{_LAZY[name]}"), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+__all__ = sorted(_LAZY)

@@ -1,0 +1,207 @@
+"""synthesize: MERSYN use cases 1 and 2 into a synthesis store (the run is ``run.Synthesis``)."""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import os
+import shutil
+from collections.abc import Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from .._atomic import check_writable_dir
+from ..errors import OptionsError, OutputError
+from ..options import Elevation, MergeRule, OrthoOptions, Sampling, choices, parse
+from ..progress import ProgressCallback
+from . import store as st
+
+if TYPE_CHECKING:
+    from ..dem.base import DemSource
+    from ..geometry.grid import OutputGrid
+from .reading import is_synthesis, open_synthesis
+from .reports import SynthesisResult
+from .tiling import ALL_BANDS, BLOCK, DEFAULT_TILE, check_new_grid_size
+
+log = logging.getLogger("napari_meris_ortho.synthesis")
+
+ALGORITHMS = tuple(choices(MergeRule))
+
+
+# --------------------------------------------------------------------------- synthesize
+
+
+def synthesize(products: Sequence[str | os.PathLike[str]], out: str | os.PathLike[str], *,
+               algorithm: str | None = None, input: str | os.PathLike[str] | None = None,
+               grid: OutputGrid | None = None, crs: Any = None,
+               pixel_size: float | None = None,
+               dems: Sequence[DemSource | str | os.PathLike[str]] = (), elevation: str = "dem",
+               sampling: str = "nearest",
+               bands: Sequence[int] | None = None, reject_bright: bool = False,
+               tile: int = DEFAULT_TILE, progress: ProgressCallback | None = None,
+               workers: int = 0, scheduler: str | None = None,
+               geolocation: str | None = None,
+               max_pixels: int | None = None) -> SynthesisResult:
+    """Orthorectify ``products`` onto the synthesis grid and merge them (section 3.1 use cases
+    1-2, Appendix C) into the synthesis store ``out``: one Icechunk commit.
+
+    A new synthesis (no ``input``) takes ``grid``, or the footprint of the earliest readable
+    product (sensing time, then name; with ``crs``/``pixel_size``), and ``bands`` (default all
+    15). With ``input`` (may equal ``out``: update in place; else ``input`` is copied to ``out``
+    first), grid and bands come from the input synthesis; giving grid options or bands too is
+    refused as MERSYN refuses them. A product that cannot be read or orthorectified is reported
+    in ``result.failed`` and skipped; one already in the synthesis in ``result.skipped``.
+
+    ``workers``: 0 runs the tasks in this process, N > 0 on an embedded LocalCluster of N
+    worker processes; ``scheduler``: address of an existing dask scheduler (the store path and
+    the products must then be on storage every worker sees: absolute paths). ``progress(done,
+    total)`` is called after each task; an exception raised by it cancels the run (nothing is
+    committed). ``geolocation``: the location model of ``orthorectify`` (None: the tie points;
+    "pixel": the products' per-pixel geolocation, a product without one fails).
+    ``max_pixels``: largest grid of a new synthesis (default: what the free space of the
+    output's file system holds, uncompressed); a larger one is an OptionsError.
+    """
+    from . import run
+
+    out_dir = Path(out)
+    if geolocation is not None:
+        OrthoOptions.parse(geolocation=geolocation, elevation=elevation, n_dems=len(dems))
+    source_path = _check_options(products, out_dir, algorithm, input, grid, crs, pixel_size,
+                                 bands, tile, dems, elevation, sampling, workers, scheduler)
+    if grid is not None and source_path is None:
+        check_new_grid_size(grid, len(bands or ALL_BANDS), out_dir, max_pixels)
+    paths = [str(Path(p).absolute()) if scheduler else str(p) for p in products]
+    with run.engine(workers, scheduler) as runner:
+        created = _make_dir(out_dir)
+        owner = False  # this run holds the lock of out_dir
+        try:
+            with contextlib.ExitStack() as locks:
+                locks.enter_context(st.locked(out_dir))
+                owner = True
+                if source_path is not None and source_path.resolve() != out_dir.resolve():
+                    locks.enter_context(st.locked(source_path))
+                target = _target(out_dir, source_path, algorithm)
+                result = run.Synthesis(
+                    target, paths, algorithm=algorithm, grid=grid, crs=crs,
+                    pixel_size=pixel_size, dems=[str(d) for d in dems], elevation=elevation,
+                    sampling=sampling, bands=bands, reject_bright=reject_bright, tile=tile,
+                    progress=progress, geolocation=geolocation,
+                    max_pixels=max_pixels).run(runner)
+                if created and result.snapshot is None:  # nothing merged: no store
+                    shutil.rmtree(out_dir, ignore_errors=True)
+        except BaseException:
+            if created and owner and not is_synthesis(out_dir):
+                shutil.rmtree(out_dir, ignore_errors=True)
+            raise
+    return result
+
+
+def _make_dir(out_dir: Path) -> bool:
+    """Create the store directory if missing; True when this run created it."""
+    if out_dir.exists():
+        if not out_dir.is_dir():
+            raise OutputError(f"{out_dir}: exists and is not a directory")
+        return False
+    check_writable_dir(out_dir)
+    try:
+        out_dir.mkdir()
+    except FileExistsError:  # another run created it meanwhile: the lock decides
+        return False
+    except OSError as exc:
+        raise OutputError(f"{out_dir}: cannot create the synthesis store ({exc})") from exc
+    return True
+
+
+def _target(out_dir: Path, source_path: Path | None, algorithm: str | None) -> Any:
+    """Under the lock: the repository to write and its synthesis (None: a new one). The "is
+    there already a synthesis" check of a new synthesis is made here, under the lock."""
+    from .run import Target
+
+    if source_path is None:
+        if st.is_repository(out_dir):
+            if is_synthesis(out_dir):
+                raise OptionsError(f"{out_dir}: already holds a synthesis; pass it as the input "
+                                   "synthesis to update it, or choose another output store")
+            return Target(out_dir, st.open_repository(out_dir), None)  # left by a killed run
+        if (out_dir / st.OLD_MANIFEST).is_file():
+            st.open_repository(out_dir)  # raises: old format
+        if any(out_dir.iterdir()):
+            raise OptionsError(f"{out_dir}: not empty and not a synthesis store")
+        return Target(out_dir, st.create_repository(out_dir), None)
+    source = open_synthesis(source_path)
+    if algorithm is not None and algorithm != source.algorithm:
+        raise OptionsError(f"{source_path}: is a {source.algorithm} synthesis, cannot update "
+                           f"it with {algorithm}")
+    if source_path.resolve() == out_dir.resolve():
+        return Target(out_dir, source.repo, source)
+    if any(out_dir.iterdir()):
+        raise OptionsError(f"{out_dir}: already holds another synthesis or files")
+    _copy_store(source_path, out_dir)
+    return Target(out_dir, st.open_repository(out_dir), open_synthesis(out_dir))
+
+
+def _copy_store(source: Path, out_dir: Path) -> None:
+    """Copy the repository ``source`` into the empty ``out_dir`` (all its history)."""
+    try:
+        for entry in source.iterdir():
+            if entry.is_dir():
+                shutil.copytree(entry, out_dir / entry.name)
+            else:
+                shutil.copy2(entry, out_dir / entry.name)
+    except OSError as exc:
+        for entry in out_dir.iterdir():
+            shutil.rmtree(entry, ignore_errors=True)
+        raise OutputError(f"{out_dir}: cannot copy the input synthesis ({exc})") from exc
+
+
+def _check_ortho_options(dems: Sequence[Any], elevation: str, sampling: str) -> None:
+    """Refuse bad orthorectification options before any product is read (exit code 2, not a
+    failure of every product)."""
+    parse(Elevation, elevation)
+    parse(Sampling, sampling)
+    if dems and elevation != "dem":
+        raise OptionsError(f"DEMs given with elevation {elevation!r}: DEMs need elevation 'dem'")
+    if dems:
+        from ..dem.stack import DemStack
+
+        DemStack([d for d in dems if not hasattr(d, "sample")]).close()
+
+
+def _check_options(products: Sequence[Any], out_dir: Path, algorithm: str | None,
+                   input: Any, grid: OutputGrid | None, crs: Any, pixel_size: float | None,
+                   bands: Sequence[int] | None, tile: int, dems: Sequence[Any],
+                   elevation: str, sampling: str, workers: int, scheduler: str | None
+                   ) -> Path | None:
+    """MERSYN's parameter consistency checks (Appendix C), before any work."""
+    if algorithm is not None:
+        parse(MergeRule, algorithm)
+    if not products:
+        raise OptionsError("no MERIS product given")
+    if tile < BLOCK or tile % BLOCK:
+        raise OptionsError(f"tile size {tile}: must be a positive multiple of {BLOCK}")
+    if workers < 0:
+        raise OptionsError(f"workers {workers}: must be >= 0 (0: in this process)")
+    if scheduler is not None and not out_dir.is_absolute():
+        raise OptionsError(f"{out_dir}: with a dask scheduler the store must be on storage "
+                           "every worker sees: give an absolute path")
+    if bands is not None:
+        bad = [b for b in bands if not 1 <= int(b) <= 15]
+        if bad or len(bands) == 0:
+            raise OptionsError(f"bands {list(bands)}: MERIS bands are 1..15")
+    if pixel_size is not None and not pixel_size > 0:
+        raise OptionsError(f"pixel size {pixel_size}: must be positive")
+    if crs is not None:
+        from ..geometry.grid import parse_crs
+
+        parse_crs(crs)
+    _check_ortho_options(dems, elevation, sampling)
+    if input is None:
+        return None
+    if grid is not None or crs is not None or pixel_size is not None or bands is not None:
+        raise OptionsError("when an input synthesis is given, the grid (CRS, extent, pixel "
+                           "size) and the bands come from it and shall not be given")
+    source = open_synthesis(input)  # refuse a non-synthesis early (again under the lock)
+    if algorithm is not None and algorithm != source.algorithm:
+        raise OptionsError(f"{input}: is a {source.algorithm} synthesis, cannot update it "
+                           f"with {algorithm}")
+    return Path(input)

@@ -1,0 +1,123 @@
+"""Reading a synthesis: ``open_synthesis(path, at)`` -> ``SynthesisStore`` at one snapshot."""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from ..errors import OptionsError
+from . import store as st
+
+if TYPE_CHECKING:
+    pass
+from .tiling import grid_from_dict
+
+# --------------------------------------------------------------------------- reading a store
+
+
+@dataclass
+class SynthesisStore:
+    """A synthesis store opened at one snapshot (the branch head unless ``--at``)."""
+
+    path: Path
+    repo: Any
+    snapshot: str
+    attrs: dict[str, Any]
+
+    @property
+    def session(self) -> Any:
+        return self.repo.readonly_session(snapshot_id=self.snapshot)
+
+    @property
+    def algorithm(self) -> str:
+        return str(self.attrs["algorithm"])
+
+    @property
+    def bands(self) -> tuple[int, ...]:
+        return tuple(int(b) for b in self.attrs["bands"])
+
+    @property
+    def grid(self) -> Any:
+        return grid_from_dict(self.attrs["grid"])
+
+    @property
+    def tile(self) -> int:
+        return int(self.attrs["tile"])
+
+    @property
+    def overviews(self) -> list[int]:
+        return [int(f) for f in self.attrs.get("overviews", [])]
+
+    @property
+    def products(self) -> list[dict[str, Any]]:
+        """The product table: entry k - 1 is the product of index k in the ``product`` layer."""
+        return list(self.attrs.get("products", []))
+
+    def layers(self) -> list[str]:
+        """Layer names (``band_07``, ..., ``ndvi``, ``count``, ``product``)."""
+        return st.layer_names(self.bands, self.algorithm)
+
+    def read(self, name: str, window: tuple[int, int, int, int] | None = None,
+             level: int = 1) -> np.ndarray:
+        """Read one layer, optionally a window ``(row0, row1, col0, col1)``, at overview
+        ``level`` (1 = full resolution, else a factor of :attr:`overviews`)."""
+        if name not in self.layers():
+            raise OptionsError(f"{self.path}: synthesis has no layer {name!r}")
+        if level != 1 and level not in self.overviews:
+            raise OptionsError(f"{self.path}: no overview level {level} (has {self.overviews})")
+        if window is None:
+            grid = self.grid
+            window = (0, -(-grid.height // level), 0, -(-grid.width // level))
+        return st.read_window(self.session.store, [name], window, level)[name]
+
+    def band(self, band: int, window: tuple[int, int, int, int] | None = None) -> np.ndarray:
+        """Radiance of MERIS band ``band`` (float32, 0 = background)."""
+        return self.read(st.band_layer(band), window)
+
+    def ndvi(self, window: tuple[int, int, int, int] | None = None) -> np.ndarray:
+        """The maximum-NDVI layer decoded to float32 (Appendix C coding), NaN = background."""
+        from ..engine.synthesis import ndvi_decode
+
+        return ndvi_decode(self.read("ndvi", window))
+
+    def product_names(self) -> dict[int, str]:
+        """Index in the ``product`` layer -> product name."""
+        return {int(p["index"]): str(p["product_name"]) for p in self.products}
+
+    def history(self) -> list[st.Commit]:
+        """The synthesis commits up to this snapshot, newest first."""
+        return st.history(self.repo, snapshot=self.snapshot)
+
+
+def open_synthesis(path: str | os.PathLike[str], at: str | None = None) -> SynthesisStore:
+    """Open the synthesis store ``path`` at its latest commit, or at snapshot ``at``."""
+    root = Path(path)
+    repo = st.open_repository(root)
+    try:
+        session = (repo.readonly_session(snapshot_id=at) if at
+                   else repo.readonly_session(branch=st.BRANCH))
+    except Exception as exc:  # icechunk's own error types
+        what = f"snapshot {at!r}" if at else f"branch {st.BRANCH!r}"
+        raise OptionsError(f"{root}: no {what} in the synthesis store ({exc})") from None
+    attrs = st.read_attributes(session.store)
+    if attrs is None:
+        raise OptionsError(f"{root}: not a synthesis store (no synthesis committed there)")
+    store = SynthesisStore(root, repo, session.snapshot_id, attrs)
+    try:
+        _ = store.grid, store.bands, store.algorithm, store.tile
+    except (ValueError, KeyError, TypeError) as exc:
+        raise OptionsError(f"{root}: damaged synthesis attributes ({exc})") from None
+    return store
+
+
+def is_synthesis(path: str | os.PathLike[str]) -> bool:
+    """True when ``path`` is a store holding a committed synthesis."""
+    try:
+        open_synthesis(path)
+    except OptionsError:
+        return False
+    return True

@@ -1,0 +1,621 @@
+"""One ``synthesize`` run: plan the (product, tile) tasks, run them in this process or on dask
+workers, merge the Icechunk forks and commit (see :mod:`napari_meris_ortho.synthesis`).
+
+Task functions are module-level (dask ships them by reference); the products they open and the
+grids they build are cached per worker process, so a product is opened once per worker, not once
+per tile.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import os
+import uuid
+import warnings
+from collections import OrderedDict
+from collections.abc import Callable, Iterator, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from ..engine.synthesis import NDVI_NIR_BAND, NDVI_RED_BAND, TileState
+from ..errors import DemError, MerisOrthoError, OptionsError, OutputError
+from ..progress import ProgressCallback
+from . import store as st
+from .reading import SynthesisStore
+from .reports import (
+    RADIANCE_NOTE,
+    STATUS_ALREADY,
+    STATUS_FAILED,
+    ProductReport,
+    SynthesisResult,
+    message_of,
+)
+from .tiling import (
+    ALL_BANDS,
+    check_new_grid_size,
+    footprint_window,
+    grid_from_dict,
+    grid_to_dict,
+    new_grid,
+    terrain_margin_px,
+    tile_of,
+    tiles,
+)
+
+log = logging.getLogger("napari_meris_ortho.synthesis")
+
+#: seconds to wait for a dask scheduler before giving up (bad address: exit 2 quickly)
+CONNECT_TIMEOUT_S = 8
+#: products / grids kept open per process
+CACHE_SIZE = 16
+#: environment of embedded worker processes: one thread each (the workers are the parallelism)
+WORKER_ENV = {"NUMBA_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1",
+              "MKL_NUM_THREADS": "1"}
+
+Window = tuple[int, int, int, int]
+#: a segment task: product index, path, its piece of the grid, the product's whole window
+Job = tuple[int, str, Window, Window]
+
+
+# --------------------------------------------------------------------------- runners
+
+
+class _Lazy:
+    """A task of the in-process runner: computed when its turn comes (submission order)."""
+
+    def __init__(self, fn: Callable[..., Any], args: tuple[Any, ...]) -> None:
+        self.fn, self.args = fn, args
+        self.value: Any = None
+        self.done = False
+
+    def compute(self) -> Any:
+        if not self.done:
+            self.value = self.fn(*(_resolve(a) for a in self.args))
+            self.done = True
+            for a in self.args:  # the inputs are consumed: free them
+                for lazy in a if isinstance(a, list) else [a]:
+                    if isinstance(lazy, _Lazy):
+                        lazy.value = None
+            self.args = ()
+        return self.value
+
+
+def _resolve(arg: Any) -> Any:
+    if isinstance(arg, _Lazy):
+        return arg.compute()
+    if isinstance(arg, list):
+        return [_resolve(a) for a in arg]
+    return arg
+
+
+class InProcess:
+    """Runs the tasks one after the other in this process, in submission order."""
+
+    def submit(self, fn: Callable[..., Any], *args: Any, **_: Any) -> _Lazy:
+        return _Lazy(fn, args)
+
+    def completed(self, futures: Sequence[_Lazy]) -> Iterator[_Lazy]:
+        for f in futures:
+            f.compute()
+            yield f
+
+    def result(self, future: _Lazy) -> Any:
+        return future.value
+
+    def release(self, futures: Sequence[Any]) -> None:
+        pass
+
+    def cancel(self, futures: Sequence[Any]) -> None:
+        pass
+
+
+class Dask:
+    """Runs tasks on a dask.distributed cluster."""
+
+    def __init__(self, client: Any) -> None:
+        self.client = client
+
+    def submit(self, fn: Callable[..., Any], *args: Any, key: str, priority: int = 0) -> Any:
+        return self.client.submit(fn, *args, key=key, priority=priority, pure=False)
+
+    def completed(self, futures: Sequence[Any]) -> Iterator[Any]:
+        from distributed import as_completed
+
+        yield from as_completed(futures, loop=self.client.loop)
+
+    def result(self, future: Any) -> Any:
+        return future.result()
+
+    def release(self, futures: Sequence[Any]) -> None:
+        for f in futures:
+            f.release()
+
+    def cancel(self, futures: Sequence[Any]) -> None:
+        with contextlib.suppress(Exception):
+            self.client.cancel(list(futures))
+
+
+@contextlib.contextmanager
+def engine(workers: int, scheduler: str | None) -> Iterator[InProcess | Dask]:
+    """The runner: this process, an embedded LocalCluster or an existing scheduler."""
+    if scheduler is None and workers == 0:
+        yield InProcess()
+        return
+    import distributed
+
+    with contextlib.ExitStack() as stack:
+        quiet = logging.getLogger("distributed")  # its INFO lines are not ours to print
+        stack.callback(quiet.setLevel, quiet.level)
+        quiet.setLevel(logging.ERROR)
+        if scheduler is not None:
+            try:
+                client = distributed.Client(scheduler, timeout=CONNECT_TIMEOUT_S,
+                                            set_as_default=False)
+            except (OSError, TimeoutError, ValueError, TypeError) as exc:
+                raise OptionsError(f"cannot reach the dask scheduler at {scheduler} "
+                                   f"({message_of(exc).splitlines()[0]})") from None
+        else:
+            with warnings.catch_warnings():  # "port 8787 in use": no dashboard is served
+                warnings.simplefilter("ignore", UserWarning)
+                cluster = stack.enter_context(distributed.LocalCluster(
+                    n_workers=workers, threads_per_worker=1, processes=True,
+                    dashboard_address=None, env=WORKER_ENV, silence_logs=logging.ERROR))
+            client = distributed.Client(cluster, set_as_default=False)
+        stack.callback(client.close)
+        yield Dask(client)
+
+
+# --------------------------------------------------------------------------- worker side
+
+
+@dataclass(frozen=True)
+class Spec:
+    """What every task needs to know of the run (small, picklable)."""
+
+    grid: tuple[tuple[str, Any], ...]
+    bands: tuple[int, ...]
+    algorithm: str
+    dems: tuple[str, ...]
+    elevation: str
+    sampling: str
+    reject_bright: bool
+    tile: int
+    names: tuple[str, ...]
+    overviews: tuple[int, ...]
+    #: location model of orthorectify: None (tie points) or "pixel" (per-pixel geolocation)
+    geolocation: str | None = None
+
+    @property
+    def needed(self) -> tuple[int, ...]:
+        ndvi = {NDVI_RED_BAND, NDVI_NIR_BAND} if self.algorithm == "max-ndvi" else set()
+        return tuple(sorted(set(self.bands) | ndvi))
+
+
+@dataclass
+class Piece:
+    """One product's contribution to one tile (``state`` covers ``window``; None: nothing)."""
+
+    index: int
+    window: Window
+    state: TileState | None
+    processed: int = 0
+    validated: int = 0
+    error: str | None = None
+    dem_error: str | None = None
+
+
+@dataclass
+class TileDone:
+    """A written tile: its fork of the session and the pixels each product holds there."""
+
+    fork: Any
+    window: Window
+    winners: dict[int, int] = field(default_factory=dict)
+    pieces: list[Piece] = field(default_factory=list)  # without their states
+
+
+_PRODUCTS: OrderedDict[str, Any] = OrderedDict()
+_GRIDS: OrderedDict[tuple[Any, ...], Any] = OrderedDict()
+_SEGMENTS: OrderedDict[tuple[Any, ...], Any] = OrderedDict()
+
+
+def _cached(cache: OrderedDict[Any, Any], key: Any, make: Callable[[], Any]) -> Any:
+    if key in cache:
+        cache.move_to_end(key)
+        return cache[key]
+    value = cache[key] = make()
+    while len(cache) > CACHE_SIZE:
+        cache.popitem(last=False)
+    return value
+
+
+def _product(path: str) -> Any:
+    from ..products.open import read_product
+
+    return _cached(_PRODUCTS, path, lambda: read_product(path))
+
+
+def _grid(spec: Spec) -> Any:
+    return _cached(_GRIDS, spec.grid, lambda: grid_from_dict(dict(spec.grid)))
+
+
+def _segment(spec: Spec, path: str, extent: Window) -> Any:
+    """The product's ``ortho.Segment`` (tie points, segment boundary, DEMs read under its
+    whole ``extent`` of the grid), built once per worker process and product."""
+    from ..options import OrthoOptions
+    from ..ortho import open_segment
+
+    def make() -> Any:
+        opts = OrthoOptions.parse(elevation=spec.elevation, sampling=spec.sampling,
+                                  geolocation=spec.geolocation, bands=spec.needed,
+                                  n_dems=len(spec.dems))
+        segment = open_segment(_product(path), list(spec.dems), opts)
+        segment.prepare_dems(_grid(spec).window(*extent))
+        return segment
+
+    key = (path, extent, spec.grid, spec.dems, spec.elevation, spec.sampling, spec.needed,
+           spec.geolocation)
+    return _cached(_SEGMENTS, key, make)
+
+
+def segment_task(spec: Spec, index: int, path: str, window: Window,
+                 extent: Window | None = None) -> Piece:
+    """Orthorectify product ``path`` on ``window`` of the grid: its contribution (cropped to
+    its validated pixels); ``extent``: the product's whole window of the grid (default
+    ``window``). Errors come back as text (exceptions may not survive pickling)."""
+    from ..engine.synthesis import segment_state, validated_pixels
+
+    try:
+        segment = _segment(spec, path, window if extent is None else extent)
+        result = segment.precompute(_grid(spec).window(*window), allow_empty=True).result()
+    except DemError as exc:
+        return Piece(index, window, None, dem_error=message_of(exc))
+    except (MerisOrthoError, OSError, ValueError) as exc:
+        return Piece(index, window, None, error=message_of(exc))
+    inside = np.ascontiguousarray(result.valid, dtype=np.bool_)
+    valid = validated_pixels(inside, np.ascontiguousarray(result.flags, dtype=np.uint8),
+                             spec.reject_bright)
+    piece = Piece(index, window, None, int(inside.sum()), int(valid.sum()))
+    rows, cols = np.flatnonzero(valid.any(axis=1)), np.flatnonzero(valid.any(axis=0))
+    if rows.size == 0:
+        return piece
+    r0, r1, c0, c1 = int(rows[0]), int(rows[-1]) + 1, int(cols[0]), int(cols[-1]) + 1
+    segment = np.stack([result.bands[b][r0:r1, c0:c1] for b in spec.bands])
+    red = nir = None
+    if spec.algorithm == "max-ndvi":
+        red = result.bands[NDVI_RED_BAND][r0:r1, c0:c1]
+        nir = result.bands[NDVI_NIR_BAND][r0:r1, c0:c1]
+    piece.state = segment_state(segment, valid[r0:r1, c0:c1], index, red, nir)
+    piece.window = (window[0] + r0, window[0] + r1, window[2] + c0, window[2] + c1)
+    return piece
+
+
+def tile_task(fork: Any, spec: Spec, window: Window, pieces: list[Piece], rank: np.ndarray,
+              exclude: frozenset[int]) -> TileDone:
+    """Merge the pieces into the stored tile ``window`` (a whole chunk) and write it into
+    ``fork``. Pieces of products in ``exclude`` or that failed are left out."""
+    from ..engine.synthesis import combine
+
+    st.quiet_icechunk()
+    usable = [p for p in pieces if p.state is not None and p.error is None
+              and p.dem_error is None and p.index not in exclude]
+    done = TileDone(None, window, pieces=[Piece(p.index, p.window, None, p.processed,
+                                                p.validated, p.error, p.dem_error)
+                                          for p in pieces])
+    if not usable:
+        return done
+    stored = st.read_window(fork.store, spec.names, window)
+    state = _state_of(stored, spec)
+    for p in sorted(usable, key=lambda p: int(rank[p.index])):  # any order gives the same
+        if p.state is None:
+            continue
+        r0, r1, c0, c1 = (p.window[0] - window[0], p.window[1] - window[0],
+                          p.window[2] - window[2], p.window[3] - window[2])
+        combine(state.window(r0, r1, c0, c1), p.state, rank)
+    st.write_tile(fork.store, window, _arrays_of(state, spec), spec.overviews)
+    ids, counts = np.unique(state.winner, return_counts=True)
+    new = {p.index for p in usable}
+    done.winners = {int(i): int(n) for i, n in zip(ids, counts, strict=True) if int(i) in new}
+    done.fork = fork
+    return done
+
+
+def _state_of(arrays: dict[str, np.ndarray], spec: Spec) -> TileState:
+    bands = np.stack([arrays[st.band_layer(b)] for b in spec.bands]).astype(np.float32)
+    return TileState(bands, arrays["count"].astype(np.uint16),
+                     arrays["product"].astype(np.int32),
+                     arrays["ndvi"].astype(np.uint16) if "ndvi" in arrays else None)
+
+
+def _arrays_of(state: TileState, spec: Spec) -> dict[str, np.ndarray]:
+    out = {st.band_layer(b): state.bands[k] for k, b in enumerate(spec.bands)}
+    if state.ndvi is not None:
+        out["ndvi"] = state.ndvi
+    out["count"] = state.count
+    out["product"] = state.winner
+    return out
+
+
+# --------------------------------------------------------------------------- client side
+
+
+@dataclass
+class Target:
+    """The store a run writes: its repository and current synthesis (None: a new one)."""
+
+    path: Any
+    repo: Any
+    synthesis: SynthesisStore | None
+
+
+@dataclass
+class _Product:
+    report: ProductReport
+    product: Any = None
+    margin: int = 0
+    window: Window | None = None
+
+    @property
+    def key(self) -> tuple[str, str]:
+        return (self.report.sensing_start, self.report.product_name)
+
+
+class Synthesis:
+    """Plan, run and commit one ``synthesize`` call."""
+
+    def __init__(self, target: Target, paths: list[str], *, algorithm: str | None, grid: Any,
+                 crs: Any, pixel_size: float | None, dems: list[str], elevation: str,
+                 sampling: str, bands: Sequence[int] | None, reject_bright: bool, tile: int,
+                 progress: ProgressCallback | None, geolocation: str | None = None,
+                 max_pixels: int | None = None) -> None:
+        self.target = target
+        self.paths = paths
+        old = target.synthesis
+        self.algorithm = old.algorithm if old else (algorithm or "min-radiance")
+        self.bands = old.bands if old else tuple(sorted({int(b) for b in bands or ALL_BANDS}))
+        self.tile = old.tile if old else int(tile)
+        self.grid = old.grid if old else grid
+        self.crs, self.pixel_size = crs, pixel_size
+        self.dems, self.elevation, self.sampling = dems, elevation, sampling
+        self.reject_bright = reject_bright
+        self.geolocation = geolocation
+        self.max_pixels = max_pixels
+        self.progress = progress
+        self.table: list[dict[str, Any]] = old.products if old else []
+        self._branch: str | None = None  # run branch of a new synthesis
+
+    # ---------------------------------------------------------------- products
+    def _open(self) -> list[_Product]:
+        """Read every product's header; report failures and products already merged."""
+        from ..products.open import read_product
+
+        seen = {(str(p.get("sensing_start", "")), str(p["product_name"])) for p in self.table}
+        out = []
+        for path in self.paths:
+            item = _Product(ProductReport(path))
+            out.append(item)
+            try:
+                item.product = read_product(path)
+            except (MerisOrthoError, OSError, ValueError) as exc:
+                item.report.status, item.report.error = STATUS_FAILED, message_of(exc)
+                continue
+            when = item.product.first_line_time
+            item.report.product_name = item.product.product_name or os.path.basename(path)
+            item.report.sensing_start = "" if when is None else str(when)
+            item.report.sf_rad = {b: float(item.product.scaling.radiance[b - 1])
+                                  for b in self.bands}
+            if item.key in seen:
+                item.report.status = STATUS_ALREADY
+                item.product = None
+                continue
+            seen.add(item.key)
+        return out
+
+    def _plan(self, items: list[_Product]) -> list[_Product]:
+        """Indices (canonical order: sensing time, then name) and footprints of the products
+        to merge."""
+        todo = sorted((i for i in items if i.product is not None), key=lambda i: i.key)
+        if self.grid is None and todo:
+            self.grid = new_grid(todo[0].product, self.crs, self.pixel_size)
+            check_new_grid_size(self.grid, len(self.bands), self.target.path, self.max_pixels)
+        for k, item in enumerate(todo):
+            item.report.index = len(self.table) + k + 1
+            item.margin = terrain_margin_px(item.product, self.grid)
+            item.window = footprint_window(item.product, self.grid, item.margin)
+        return todo
+
+    def _rank(self, todo: list[_Product]) -> np.ndarray:
+        """Tie-break rank of every product index (stored and new): sensing time, then name."""
+        keys = {int(p["index"]): (str(p.get("sensing_start", "")), str(p["product_name"]))
+                for p in self.table}
+        keys.update({i.report.index: i.key for i in todo})
+        rank = np.zeros(max(keys, default=0) + 1, np.int64)
+        for r, index in enumerate(sorted(keys, key=lambda k: (keys[k], k))):
+            rank[index] = r + 1
+        return rank
+
+    def _jobs(self, todo: list[_Product]) -> dict[Window, list[Job]]:
+        """Output tile -> the (product index, path, piece, product window) tasks it needs."""
+        from ..engine.boundary import row_spans, segment_boundary
+
+        shape = (self.grid.height, self.grid.width)
+        jobs: dict[Window, list[Job]] = {}
+        for item in todo:
+            if item.window is None:
+                continue
+            tp = item.product.tie_points
+            boundary = segment_boundary(tp["latitude"], tp["longitude"])
+            for piece in tiles(item.window, self.tile):
+                if row_spans(boundary, self.grid.window(*piece), margin=item.margin).count == 0:
+                    continue  # beyond any terrain point of the product
+                jobs.setdefault(tile_of(piece, self.tile, shape), []).append(
+                    (item.report.index, item.report.path, piece, item.window))
+            item.product = None  # the workers open it themselves
+        return dict(sorted(jobs.items()))
+
+    # ---------------------------------------------------------------- run
+    def run(self, runner: InProcess | Dask) -> SynthesisResult:
+        items = self._open()
+        todo = self._plan(items)
+        reports = [i.report for i in items]
+        result = SynthesisResult(self.target.path, None, self.grid, self.algorithm, self.bands,
+                                 reports)
+        if not todo:
+            return _log(result)
+        spec = self._spec()
+        session, finish = self._session(spec)
+        try:
+            rank, jobs = self._rank(todo), self._jobs(todo)
+            failed: set[int] = set()
+            while True:
+                done = self._execute(runner, session, spec, jobs, rank, frozenset(failed))
+                newly = self._collect(done, todo, failed)
+                if not newly:
+                    break
+                log.warning("%d product(s) failed part-way; merging again without them",
+                            len(newly))
+            merged = [i for i in todo if i.report.index not in failed]
+            if merged:
+                session.merge(*[d.fork for d in done if d.fork is not None])
+                result.snapshot = finish(session, merged, reports)
+        except BaseException:
+            self._abandon()
+            raise
+        return _log(result)
+
+    def _spec(self) -> Spec:
+        shape = (self.grid.height, self.grid.width)
+        return Spec(tuple(grid_to_dict(self.grid).items()), self.bands, self.algorithm,
+                    tuple(self.dems), self.elevation, self.sampling, self.reject_bright,
+                    self.tile, tuple(st.layer_names(self.bands, self.algorithm)),
+                    tuple(st.overview_factors(shape[1], shape[0], self.tile)), self.geolocation)
+
+    def _session(self, spec: Spec) -> tuple[Any, Callable[..., str]]:
+        """A writable session without uncommitted changes (forks need one) and the function
+        that commits it. A new synthesis lays its arrays out in a snapshot of a run branch;
+        ``main`` moves to the run's commit only at the end."""
+        repo = self.target.repo
+        if self.target.synthesis is not None:
+            base = self.target.synthesis.snapshot
+            session = repo.writable_session(st.BRANCH)
+            if session.snapshot_id != base:
+                raise OutputError(f"{self.target.path}: the synthesis changed while this run "
+                                  "started (another writer without the lock?); run it again")
+            return session, lambda s, m, r: self._commit(s, m, r, base)
+        for branch in repo.list_branches():  # left by a killed run
+            if branch.startswith(st.RUN_BRANCH_PREFIX):
+                repo.delete_branch(branch)
+        base = repo.lookup_branch(st.BRANCH)
+        layout = repo.writable_session(st.BRANCH)
+        st.create_layout(layout.store, self._attributes([]), (self.grid.height, self.grid.width),
+                         self.tile, spec.names, spec.overviews)
+        snapshot = layout.flush("synthesis layout: grid, bands, empty arrays")
+        self._branch = f"{st.RUN_BRANCH_PREFIX}{uuid.uuid4().hex[:12]}"
+        repo.create_branch(self._branch, snapshot)
+        return (repo.writable_session(self._branch),
+                lambda s, m, r: self._commit(s, m, r, base, move_main=True))
+
+    def _abandon(self) -> None:
+        if self._branch is not None:
+            with contextlib.suppress(Exception):
+                self.target.repo.delete_branch(self._branch)
+
+    def _attributes(self, table: list[dict[str, Any]]) -> dict[str, Any]:
+        shape = (self.grid.height, self.grid.width)
+        return {"format": st.FORMAT, "version": st.VERSION, "algorithm": self.algorithm,
+                "bands": list(self.bands), "grid": grid_to_dict(self.grid), "tile": self.tile,
+                "overviews": st.overview_factors(shape[1], shape[0], self.tile),
+                "radiance": RADIANCE_NOTE, "products": table}
+
+    def _execute(self, runner: InProcess | Dask, session: Any, spec: Spec,
+                 jobs: dict[Window, list[Job]], rank: np.ndarray,
+                 exclude: frozenset[int]) -> list[TileDone]:
+        """Submit every task (tile by tile), report progress, return the written tiles."""
+        futures: list[Any] = []
+        inputs: dict[int, list[Any]] = {}  # tile future -> its pieces
+        total = sum(len(v) + 1 for v in jobs.values())
+        run = uuid.uuid4().hex[:8]
+        for t, (window, tasks) in enumerate(jobs.items()):
+            pieces = [runner.submit(segment_task, spec, index, path, piece, extent,
+                                    priority=-t,
+                                    key=f"segment-{run}-{index}-{piece[0]}-{piece[2]}")
+                      for index, path, piece, extent in tasks if index not in exclude]
+            tile = runner.submit(tile_task, session.fork(), spec, window, pieces, rank, exclude,
+                                 key=f"tile-{run}-{window[0]}-{window[2]}", priority=-t)
+            inputs[id(tile)] = pieces
+            futures += [*pieces, tile]
+        done = 0
+        written: list[TileDone] = []
+        try:
+            for future in runner.completed(futures):
+                done += 1
+                if id(future) in inputs:
+                    runner.release(inputs.pop(id(future)))  # merged: free the workers' memory
+                    tile = runner.result(future)
+                    written.append(tile)
+                    errors = [p.dem_error for p in tile.pieces if p.dem_error is not None]
+                    if errors:  # not the product's fault: stop the run (exit 2)
+                        raise DemError(errors[0])
+                if self.progress is not None:
+                    self.progress(done, total)
+        except BaseException:
+            runner.cancel(futures)
+            raise
+        return written
+
+    def _collect(self, done: list[TileDone], todo: list[_Product], failed: set[int]
+                 ) -> set[int]:
+        """Statistics of the run; products that failed on some tile (newly)."""
+        by_index = {i.report.index: i.report for i in todo}
+        for report in by_index.values():
+            report.processed = report.validated = report.added = 0
+        newly: set[int] = set()
+        for tile in done:
+            for p in tile.pieces:
+                report = by_index[p.index]
+                if p.error is not None and p.index not in failed:
+                    newly.add(p.index)
+                    report.status, report.error = STATUS_FAILED, p.error
+                report.processed += p.processed
+                report.validated += p.validated
+            for index, n in tile.winners.items():
+                by_index[index].added += n
+        failed |= newly
+        return newly
+
+    def _commit(self, session: Any, merged: list[_Product], reports: list[ProductReport],
+                base: str, move_main: bool = False) -> str:
+        """One commit: the product table grows by the merged products; the commit metadata
+        lists every product of the run with its status."""
+        import icechunk
+
+        table = self.table + [i.report.table_entry() for i in merged]
+        st.set_attributes(session.store, self._attributes(table))
+        names = ", ".join(i.report.product_name for i in merged)
+        others = len(reports) - len(merged)
+        message = f"synthesize: {len(merged)} product(s) merged ({names})" + (
+            f"; {others} skipped or failed" if others else "")
+        metadata = {st.COMMIT_KEY: {"products": [r.commit_entry() for r in reports],
+                                    "algorithm": self.algorithm}}
+        try:
+            snapshot = session.commit(message, metadata=metadata)
+            if move_main:
+                self.target.repo.reset_branch(st.BRANCH, snapshot, from_snapshot_id=base)
+                self.target.repo.delete_branch(self._branch)
+                self._branch = None
+        except icechunk.ConflictError as exc:
+            raise OutputError(f"{self.target.path}: another run committed to the synthesis "
+                              f"meanwhile; nothing was written by this one ({exc})") from None
+        return str(snapshot)
+
+
+def _log(result: SynthesisResult) -> SynthesisResult:
+    """The Appendix B log of every product."""
+    pixels = 0 if result.grid is None else result.grid.width * result.grid.height
+    for r in result.reports:
+        for line in r.lines(pixels):
+            (log.warning if r.status == STATUS_FAILED else log.info)(line)
+    return result

@@ -1,0 +1,119 @@
+"""Grid and tile arithmetic of a synthesis (section 3.1): the grid of a new synthesis and its size
+check, the footprint window a product may reach (terrain margin), tiles aligned on the store's
+chunks."""
+
+from __future__ import annotations
+
+import shutil
+from collections.abc import Iterator
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+if TYPE_CHECKING:
+    from ..geometry.grid import OutputGrid
+    from ..geometry.tiepoints import ProductGeometry
+BLOCK = 256  # tiles are multiples of it
+DEFAULT_TILE = 1024
+ALL_BANDS = tuple(range(1, 16))
+#: terrain parallax a tile must be within to be orthorectified: ``geometry.earth.MAX_TERRAIN_M``
+#: seen at 45 deg view zenith or the product's largest one if larger (section 3.1)
+SKIP_VIEW_ZENITH_DEG = 45.0
+
+
+# --------------------------------------------------------------------------- grid helpers
+
+
+def grid_to_dict(grid: OutputGrid) -> dict[str, Any]:
+    """The output grid as JSON-able values (CRS as WKT)."""
+    from ..geometry.grid import parse_crs
+
+    return {"crs": parse_crs(grid.crs).to_wkt(), "x0": float(grid.x0),
+            "y0": float(grid.y0), "dx": float(grid.dx), "dy": float(grid.dy),
+            "width": int(grid.width), "height": int(grid.height)}
+
+
+def grid_from_dict(values: dict[str, Any]) -> OutputGrid:
+    """Rebuild an ``geometry.grid.OutputGrid`` from :func:`grid_to_dict` values."""
+    from ..geometry.grid import OutputGrid
+
+    return OutputGrid(values["crs"], values["x0"], values["y0"], values["dx"], values["dy"],
+                      int(values["width"]), int(values["height"]))
+
+
+def terrain_margin_px(product: ProductGeometry, grid: OutputGrid) -> int:
+    """Output pixels beyond the zero-height segment boundary that a terrain point of the
+    product may reach: ``geometry.earth.MAX_TERRAIN_M`` x tan(max(45 deg, largest view
+    zenith)), + 2."""
+    from ..geometry.grid import terrain_margin_px as margin_px
+
+    tp = product.tie_points
+    zenith = max(SKIP_VIEW_ZENITH_DEG, float(np.nanmax(tp["view_zenith"])))
+    return margin_px(grid, zenith, float(np.nanmax(np.abs(tp["latitude"]))))
+
+
+def footprint_window(product: ProductGeometry, grid: OutputGrid, margin: int | None = None
+                     ) -> tuple[int, int, int, int] | None:
+    """Rows/columns ``(row0, row1, col0, col1)`` of ``grid`` that the product may reach: its
+    tie points widened by ``margin`` pixels (default ``terrain_margin_px``); None when
+    disjoint."""
+    tp = product.tie_points
+    lat = np.asarray(tp["latitude"], dtype=np.float64).ravel()
+    lon = np.asarray(tp["longitude"], dtype=np.float64).ravel()
+    rows, cols = grid.xy_of_lonlat(lon, lat)
+    ok = np.isfinite(rows) & np.isfinite(cols)
+    if not ok.any():
+        return None
+    rows, cols = rows[ok], cols[ok]
+    margin = terrain_margin_px(product, grid) if margin is None else int(margin)
+    row0 = max(0, int(np.floor(rows.min() - margin)))
+    row1 = min(grid.height, int(np.ceil(rows.max() + margin)) + 1)
+    col0 = max(0, int(np.floor(cols.min() - margin)))
+    col1 = min(grid.width, int(np.ceil(cols.max() + margin)) + 1)
+    if row0 >= row1 or col0 >= col1:
+        return None
+    return row0, row1, col0, col1
+
+
+def tiles(window: tuple[int, int, int, int], tile: int) -> Iterator[tuple[int, int, int, int]]:
+    """Tiles of ``tile`` x ``tile`` pixels aligned on multiples of ``tile`` covering ``window``
+    (each clipped to ``window``)."""
+    row0, row1, col0, col1 = window
+    for r in range((row0 // tile) * tile, row1, tile):
+        for c in range((col0 // tile) * tile, col1, tile):
+            yield max(r, row0), min(r + tile, row1), max(c, col0), min(c + tile, col1)
+
+
+def tile_of(piece: tuple[int, int, int, int], tile: int, shape: tuple[int, int]
+            ) -> tuple[int, int, int, int]:
+    """The whole output tile (one chunk of the store) holding ``piece``."""
+    r, c = (piece[0] // tile) * tile, (piece[2] // tile) * tile
+    return r, min(r + tile, shape[0]), c, min(c + tile, shape[1])
+
+
+def new_grid(product: ProductGeometry, crs: Any, pixel_size: float | None) -> OutputGrid:
+    """Grid of a new synthesis: the smallest rectangle holding the product's segment
+    boundary (section 3.1, fig. 19), nominal FR/RR pixel size unless ``pixel_size``."""
+    from ..engine.boundary import segment_boundary
+    from ..geometry.grid import FR_PIXEL_SIZE_M, RR_PIXEL_SIZE_M, default_grid
+
+    boundary = segment_boundary(product.tie_points["latitude"], product.tie_points["longitude"])
+    resolution = FR_PIXEL_SIZE_M if product.samples_per_tie_point >= 64 else RR_PIXEL_SIZE_M
+    return default_grid(boundary, resolution, crs if crs is not None else "EPSG:4326",
+                        pixel_size=pixel_size)
+
+
+def check_new_grid_size(grid: OutputGrid, n_bands: int, out_dir: Path,
+                     max_pixels: int | None) -> None:
+    """A new synthesis grid must fit the free space of the output's file system (its layers
+    uncompressed: the bands and the bookkeeping layers) or ``max_pixels``."""
+    from ..geometry.grid import check_grid_size
+
+    parent = out_dir if out_dir.exists() else out_dir.absolute().parent
+    try:
+        free: int | None = shutil.disk_usage(parent).free
+    except OSError:
+        free = None
+    check_grid_size(grid.width, grid.height, (grid.dx, grid.dy), 4 * (n_bands + 2),
+                    max_pixels, free, f"the free space in {parent}")

@@ -1,0 +1,97 @@
+"""Hostile DEMs (issue 15 reproducers): special files refused without hanging, invalid
+georeferencing refused, implausible heights are no data, a half float32 GETASSE30 tile is not
+read as the int16 variant, and a DEM that gives no height is reported by ``map``."""
+
+from __future__ import annotations
+
+import logging
+import os
+
+import numpy as np
+import pytest
+import rasterio
+from affine import Affine
+from rasterio.transform import from_origin
+
+from napari_meris_ortho.cli import main
+from napari_meris_ortho.dem.getasse import GETASSE_FLOAT_SIZE, getasse_tile_name
+from napari_meris_ortho.dem.stack import open_dem
+from napari_meris_ortho.errors import DemError
+from napari_meris_ortho.products.n1 import read_product
+from ortho_samples import make_dem, make_product
+
+
+def write_tif(path, z, transform, crs="EPSG:4326", nodata=None):
+    with rasterio.open(path, "w", driver="GTiff", width=z.shape[1], height=z.shape[0], count=1,
+                       dtype=z.dtype, crs=crs, transform=transform, nodata=nodata) as ds:
+        ds.write(z, 1)
+    return path
+
+
+@pytest.mark.timeout(60)
+@pytest.mark.parametrize("name", ["dem.tif", "45N015E.GETASSE30", "tile.DEM"])
+def test_fifo_dem_is_refused_without_hanging(tmp_path, name):
+    fifo = tmp_path / name
+    os.mkfifo(fifo)
+    with pytest.raises(DemError, match="not a regular file"):
+        open_dem(fifo)
+
+
+@pytest.mark.timeout(60)
+def test_fifo_header_of_an_srtm_tile_is_refused(tmp_path):
+    (tmp_path / "tile.DEM").write_bytes(bytes(8))
+    os.mkfifo(tmp_path / "tile.HDR")
+    with pytest.raises(DemError, match="tile.HDR: not a regular file"):
+        open_dem(tmp_path / "tile.DEM")
+
+
+def test_zero_pixel_size_is_refused(tmp_path):
+    transform = Affine(0.01, 0, 10, 0, 0.0, 50)  # GDAL keeps a zero row height and the CRS
+    path = write_tif(tmp_path / "flat.tif", np.ones((4, 4), np.float32), transform)
+    with pytest.raises(DemError, match="invalid georeferencing: pixel size"):
+        open_dem(path)
+
+
+def test_implausible_heights_are_no_data(tmp_path):
+    z = np.array([[3e38, -600.0, 9500.0, 8848.0], [-430.0, 0.0, 100.0, 1e4]], np.float32)
+    path = write_tif(tmp_path / "dem.tif", z, from_origin(10.0, 50.0, 1.0, 1.0))
+    dem = open_dem(path)
+    lon = 10.5 + np.arange(4.0)
+    h = dem.sample(np.r_[lon, lon], np.r_[[49.5] * 4, [48.5] * 4], method="nearest")
+    np.testing.assert_array_equal(h, [np.nan, np.nan, np.nan, 8848.0,
+                                      -430.0, 0.0, 100.0, np.nan])  # fmt: skip
+    # bilinear: a post out of range makes the point no data (the next DEM is tried)
+    assert np.isnan(dem.sample(11.0, 49.0))
+    assert dem.sample(12.0, 48.2, method="bilinear") == pytest.approx(50.0)
+
+
+def test_half_of_a_float_getasse_tile_is_not_read_as_int16(tmp_path):
+    lat0, lon0 = 45, 15
+    r, c = np.mgrid[0:1800, 0:1800].astype(np.float32)
+    heights = 200.0 + 3.0 * r + 0.5 * c  # plausible alpine float heights
+    raw = heights.astype("<f4").tobytes()
+    assert len(raw) == GETASSE_FLOAT_SIZE
+    (tmp_path / getasse_tile_name(lat0, lon0)).write_bytes(raw[: len(raw) // 2])
+    dem = open_dem(tmp_path)
+    with pytest.raises(DemError, match="not a BEAM int16 GETASSE30 tile"):
+        dem.sample(17.0, 50.0)
+
+
+def test_map_warns_about_a_dem_that_gives_no_height(tmp_path, caplog):
+    prod = make_product(tmp_path / "p.N1", height=130, width=321, lon0=15.0, nadir_col=-800.0)
+    tp = read_product(prod).tie_points
+    box = (tp["longitude"].min() - 0.3, tp["latitude"].min() - 0.3,
+           tp["longitude"].max() + 0.3, tp["latitude"].max() + 0.3)  # fmt: skip
+    good = make_dem(tmp_path / "good.tif", *box)
+    wrong_crs = make_dem(tmp_path / "wrong.tif", *box)
+    with rasterio.open(wrong_crs, "r+") as ds:
+        ds.crs = "EPSG:3857"  # degrees tagged as metres: lies off the coast of Africa
+    caplog.set_level(logging.INFO, logger="napari_meris_ortho")
+    out = tmp_path / "out.tif"
+    wrong_entry = f"{wrong_crs}:ellipsoid"  # (the datum named: no datum warning)
+    code = main(["map", str(prod), "-o", str(out), "--bands", "1", "--dem", wrong_entry,
+                 "--dem", f"{good}:ellipsoid"])  # fmt: skip
+    assert code == 0 and out.exists()
+    warnings = [r.getMessage() for r in caplog.records if r.levelno == logging.WARNING]
+    assert warnings == [f"warning: DEM {wrong_entry} contributed no height (outside the product, "
+                        "wrong CRS, or only no data / heights outside -500..9000 m)"]

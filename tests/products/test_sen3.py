@@ -1,0 +1,152 @@
+"""Fourth-reprocessing ``.SEN3`` MERIS Level 1 products: the simulator's directory read back like
+its N1 sibling, opened by xarray with CF attributes, broken copies refused with one error."""
+
+from __future__ import annotations
+
+import shutil
+
+import numpy as np
+import pytest
+
+from napari_meris_ortho.errors import Sen3FormatError
+from napari_meris_ortho.products.n1 import FLAG_INVALID, read_product
+from napari_meris_ortho.products.sen3 import (
+    GEO_FILE,
+    QUALITY_FILE,
+    is_sen3,
+    l1b_to_quality,
+    manifest_summary,
+    quality_to_l1b,
+    read_sen3,
+    required_files,
+)
+
+
+@pytest.fixture(scope="module")
+def scene():
+    from napari_meris_ortho.simulate.scene import generate_scene
+
+    return generate_scene("fr-small")
+
+
+@pytest.fixture(scope="module")
+def products(scene, tmp_path_factory):
+    from napari_meris_ortho.simulate.geocorrected import pixel_truth, write_geocorrected
+
+    out = tmp_path_factory.mktemp("geocorrected")
+    paths = write_geocorrected(scene, out_dir=out)
+    return paths, pixel_truth(scene)
+
+
+def test_quality_flag_mapping_round_trips():
+    flags = np.arange(256, dtype=np.uint8)
+    assert np.array_equal(quality_to_l1b(l1b_to_quality(flags)), flags)
+    assert l1b_to_quality(np.array([FLAG_INVALID]))[0] == 1 << 25
+
+
+def test_sen3_reads_like_the_n1_product(scene, products):
+    paths, truth = products
+    n1 = read_product(scene.product_path)
+    s3 = read_sen3(paths["sen3"])
+    assert is_sen3(paths["sen3"]) and s3.product_type == "ME_1_FRG___"
+    assert (s3.width, s3.height) == (n1.width, n1.height) == (513, 320)
+    assert (s3.lines_per_tie_point, s3.samples_per_tie_point) == (64, 64)
+    for b in (1, 7, 15):
+        np.testing.assert_array_equal(s3.counts(b), n1.counts(b))
+        np.testing.assert_allclose(s3.radiance(b), n1.radiance(b), rtol=1e-6)
+    np.testing.assert_array_equal(s3.flags, n1.flags)
+    np.testing.assert_array_equal(s3.detector_index, n1.detector_index)
+    np.testing.assert_allclose(s3.line_times, n1.line_times, atol=1e-6)
+    for key in ("latitude", "longitude", "view_zenith", "sun_zenith", "dem_alt"):
+        np.testing.assert_allclose(s3.tie_points[key], n1.tie_points[key], atol=1e-6)
+    for key in ("view_azimuth", "sun_azimuth"):
+        d = (s3.tie_points[key] - n1.tie_points[key] + 180) % 360 - 180
+        assert np.max(np.abs(d)) < 1e-6
+    np.testing.assert_allclose(s3.tie_points["lat_corr"], n1.tie_points["lat_corr"], atol=2e-6)
+    np.testing.assert_allclose(s3.tie_points["ozone"], n1.tie_points["ozone"], rtol=1e-5)
+    np.testing.assert_allclose(s3.pixel_longitude(), truth["longitude"], atol=5.1e-7)
+    np.testing.assert_allclose(s3.pixel_latitude(), truth["latitude"], atol=5.1e-7)
+    np.testing.assert_allclose(s3.pixel_altitude(), truth["altitude"], atol=0.51)
+    np.testing.assert_allclose(s3.wavelengths, n1.wavelengths, atol=1e-3)
+
+
+def test_fsg_n1_reads_the_same_pixel_geolocation(scene, products):
+    paths, truth = products
+    frg = read_product(paths["fsg"])
+    s3 = read_sen3(paths["sen3"])
+    assert frg.product_type == "MER_FRG_1P"
+    np.testing.assert_array_equal(frg.pixel_latitude(), s3.pixel_latitude())
+    np.testing.assert_array_equal(frg.pixel_longitude(), s3.pixel_longitude())
+    np.testing.assert_array_equal(frg.pixel_altitude(), s3.pixel_altitude())
+    np.testing.assert_array_equal(frg.counts(9), read_product(scene.product_path).counts(9))
+    # the truth terrain points really differ from the ellipsoid points (there is relief)
+    assert np.ptp(truth["altitude"]) > 1000.0
+
+
+def test_xarray_opens_the_members_with_cf_attributes(products):
+    import xarray as xr
+    d = products[0]["sen3"]
+    with xr.open_dataset(d / GEO_FILE) as geo:
+        lat = geo["latitude"]
+        assert lat.dtype == np.float64 and lat.attrs["units"] == "degrees_north"
+        assert lat.attrs["standard_name"] == "latitude"
+        assert lat.encoding["scale_factor"] == 1e-6 and lat.encoding["dtype"] == np.int32
+        np.testing.assert_allclose(lat.values, read_sen3(d).pixel_latitude())
+    with xr.open_dataset(d / "M07_radiance.nc") as rad:
+        v = rad["M07_radiance"]
+        assert v.attrs["units"] == "mW.m-2.sr-1.nm-1"
+        assert v.attrs["standard_name"] == "toa_upwelling_spectral_radiance"
+        np.testing.assert_allclose(v.values, read_sen3(d).radiance(7), rtol=1e-6)
+    with xr.open_dataset(d / "time_coordinates.nc") as t:
+        assert np.issubdtype(t["time_stamp"].dtype, np.datetime64)
+    with xr.open_dataset(d / QUALITY_FILE, decode_cf=True) as q:
+        meanings = q["quality_flags"].attrs["flag_meanings"].split()
+        assert meanings[:4] == ["land", "coastline", "bright", "invalid"]
+        assert len(q["quality_flags"].attrs["flag_masks"]) == len(meanings)
+
+
+def test_manifest_lists_every_member(products):
+    d = products[0]["sen3"]
+    info = manifest_summary(d)
+    assert info["productType"] == "ME_1_FRG___"
+    assert (info["rows"], info["columns"], info["rowsPerTiePoint"]) == ("320", "513", "64")
+    listed = set(info["files"].split())
+    assert set(required_files()[1:]) <= listed
+    assert all((d / f).is_file() for f in listed)
+
+
+@pytest.fixture
+def copy(products, tmp_path):
+    dst = tmp_path / products[0]["sen3"].name
+    shutil.copytree(products[0]["sen3"], dst)
+    return dst
+
+
+def test_missing_member_file(copy):
+    (copy / GEO_FILE).unlink()
+    with pytest.raises(Sen3FormatError, match=r"missing member file\(s\): geo_coordinates.nc"):
+        read_sen3(copy)
+
+
+def test_wrong_variable_shape(copy):
+    import netCDF4
+
+    with netCDF4.Dataset(copy / GEO_FILE, "a") as ds:
+        ds.createDimension("short_rows", 10)
+        ds.renameVariable("altitude", "old_altitude")
+        ds.createVariable("altitude", "i2", ("short_rows", "columns"))
+    with pytest.raises(Sen3FormatError, match=r"'altitude' has shape \(10, 513\)"):
+        read_sen3(copy)
+
+
+def test_member_that_is_not_netcdf(copy):
+    (copy / "M03_radiance.nc").write_bytes(b"not a netCDF file")
+    with pytest.raises(Sen3FormatError, match="M03_radiance.nc: not a netCDF file"):
+        read_sen3(copy)
+
+
+def test_foreign_directory(tmp_path):
+    with pytest.raises(Sen3FormatError, match="missing member file"):
+        read_sen3(tmp_path)
+    with pytest.raises(Sen3FormatError, match="not a directory"):
+        read_sen3(tmp_path / "nothing.SEN3")
