@@ -81,14 +81,14 @@ def run_engine(scene, label: str, kwargs: dict, with_accuracy: bool) -> dict:
         t0 = time.perf_counter()
         res = orthorectify(scene.product_path, diagnostics=with_accuracy, **kwargs)
         wall = time.perf_counter() - t0
-    sec = res.stats["seconds"]
+    sec = res.stats.seconds
     row = {"run": label, "wall_s": wall, "engine_s": sec["engine"],
            "prediction_correction_s": sec["prediction_correction"],
            "resample_s": sec["resample"], "lonlat_s": sec["lonlat"], "dem_s": sec["dem"],
            "read_bands_s": sec["read_bands"], "peak_rss_mb": mem.peak / 2 ** 20,
            "grid": [res.grid.height, res.grid.width],
-           "processed_points": res.stats["processed_points"],
-           "iterations_histogram": res.stats["iterations_histogram"]}
+           "processed_points": res.stats.processed_points,
+           "iterations_histogram": res.stats.iterations_histogram}
     if with_accuracy:
         row.update(accuracy(scene, res))
     return row

@@ -1,5 +1,5 @@
-"""The ``meris-ortho`` process tuning (``cli.console_main``): freed memory kept for reuse, no
-collection on the way out; a library user's process is left as it is."""
+"""The ``meris-ortho`` process tuning (``cli.console_main`` -> ``_process``): freed memory kept
+for reuse, no collection on the way out; a library user's process is left as it is."""
 
 from __future__ import annotations
 
@@ -13,7 +13,7 @@ import pytest
 _PROBE = """
 import ctypes, gc, json, sys
 import numpy as np
-from napari_meris_ortho import cli
+from napari_meris_ortho import _process, cli
 
 class MallInfo2(ctypes.Structure):
     _fields_ = [(n, ctypes.c_size_t) for n in ("arena", "ordblks", "smblks", "hblks", "hblkhd",
@@ -22,7 +22,7 @@ class MallInfo2(ctypes.Structure):
 libc = ctypes.CDLL(None)
 libc.mallinfo2.restype = MallInfo2
 if sys.argv[1] == "tuned":
-    cli._keep_freed_memory()
+    _process._keep_freed_memory()
 start = libc.mallinfo2()
 a = np.ones(64 * 2 ** 20, np.uint8)
 live = libc.mallinfo2()
@@ -85,7 +85,7 @@ def test_a_map_process_does_not_import_scipy_linalg(tmp_path):
 
 _HUGEPAGES = """
 import sys
-from napari_meris_ortho import cli
+from napari_meris_ortho import _process, cli
 
 def probe(argv=None, *, last=False):
     import numpy._core.multiarray as m  # numpy first imported here, as in a real run
@@ -97,11 +97,17 @@ cli.console_main()
 """
 
 
-@pytest.mark.parametrize(("setting", "expected"), [(None, "False True"), ("1", "True True")])
-def test_the_process_keeps_numpy_arrays_off_huge_pages_unless_asked(setting, expected):
-    env = {k: v for k, v in os.environ.items() if k != "NUMPY_MADVISE_HUGEPAGE"}
+@pytest.mark.parametrize(("setting", "switch", "expected"),
+                         [(None, None, "False True"), ("1", None, "True True"),
+                          (None, "1", "True True")])
+def test_the_process_keeps_numpy_arrays_off_huge_pages_unless_asked(setting, switch, expected):
+    """Off huge pages unless the user sets NUMPY_MADVISE_HUGEPAGE or turns the tuning off."""
+    env = {k: v for k, v in os.environ.items()
+           if k not in ("NUMPY_MADVISE_HUGEPAGE", "MERIS_ORTHO_NO_TUNING")}
     if setting is not None:
         env["NUMPY_MADVISE_HUGEPAGE"] = setting
+    if switch is not None:
+        env["MERIS_ORTHO_NO_TUNING"] = switch
     done = subprocess.run([sys.executable, "-c", _HUGEPAGES], capture_output=True, text=True,
                           env=env, check=True)
     assert done.stdout.strip() == expected

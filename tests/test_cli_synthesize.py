@@ -188,7 +188,8 @@ def test_shared_grid_and_height_options_refused_alike(products, tmp_path, capsys
         (["--ul", "13", "47", "--lr", "14", "46"], "--ul/--lr need --pixel-size"),
         (["--pixel-size", "-0.5"], "--pixel-size must be > 0, got -0.5"),
         (["--crs", "EPSG:999999"], "unknown CRS"),
-        (["--dem", str(tmp_path / "d.tif"), "--elevation", "none"], "DEMs need --elevation dem"),
+        (["--dem", str(tmp_path / "d.tif"), "--elevation", "none"],
+         "DEMs are only used with elevation 'dem'"),
         (["--ul", "14", "46", "--lr", "13", "47", "--pixel-size", "0.01"], "upper-left"),
     ]
     for extra, message in cases:

@@ -65,8 +65,8 @@ def test_dem_mode_finds_consistent_antecedents(files, dem_run):
     lon, lat = r.grid.lonlat()
     assert np.max(np.abs(d["elevation"][ok] - terrain(lon[ok], lat[ok]))) < 5.0
     assert np.all(d["elevation_source"][ok] == 0)
-    assert r.stats["elevation_sources"]["tiepoints"] == 0
-    hist = r.stats["iterations_histogram"]
+    assert r.stats.elevation_sources["tiepoints"] == 0
+    hist = r.stats.iterations_histogram
     assert len(hist) == 11 and sum(hist) == ok.sum() and sum(hist[4:]) == 0
 
 
@@ -99,8 +99,8 @@ def test_precompute_once_apply_to_any_band(files, dem_run):
     sf = product.scaling.radiance[0]
     assert np.max(np.abs(c[ok] * sf - rad[ok])) <= 0.5 * sf + 1e-6  # float32 radiances
     assert np.any(np.abs(rad[ok] / sf - np.round(rad[ok] / sf)) > 0.1)  # really interpolated
-    assert bil.stats["seconds"]["resample"] > 0 and bil.window == tuple(
-        bil.stats["product_lines_read"])
+    assert bil.stats.seconds["resample"] > 0 and bil.window == tuple(
+        bil.stats.product_lines_read)
 
 
 def test_parallax_shift_matches_the_antecedent_move(files, dem_run):
@@ -114,7 +114,7 @@ def test_parallax_shift_matches_the_antecedent_move(files, dem_run):
     assert np.all(east > 0)  # seen from the west, towards the satellite
     assert np.all(none.diagnostics["elevation"][none.valid] == 0)
     assert np.all(none.diagnostics["elevation_source"][none.valid] == -2)
-    assert none.stats["orthorectification"] is False
+    assert none.stats.orthorectification is False
 
 
 def test_handbook_search_gives_the_same_antecedents(files):
@@ -129,7 +129,7 @@ def test_handbook_search_gives_the_same_antecedents(files):
     assert b.valid.sum() < a.valid.sum() < 1.05 * b.valid.sum()
     assert np.max(np.abs(a.diagnostics["line"][both] - b.diagnostics["line"][both])) < 1e-3
     assert np.max(np.abs(a.diagnostics["col"][both] - b.diagnostics["col"][both])) < 1e-3
-    fs = b.stats["facet_search"]
+    fs = b.stats.facet_search
     assert fs["same"] > 0.8 * (fs["same"] + fs["4-connex"] + fs["8-connex"] + fs["all"])
 
 
@@ -139,7 +139,7 @@ def test_dem_list_falls_back_to_tie_points(files):
     src = r.diagnostics["elevation_source"][r.valid]
     assert 0.1 < np.mean(src == 0) < 0.9
     assert set(np.unique(src)) == {-1, 0}
-    n = r.stats["elevation_sources"]
+    n = r.stats.elevation_sources
     assert n["tiepoints"] == np.sum(src == -1) and n["0:part.tif"] == np.sum(src == 0)
     tp = TiePointGrid.from_product(read_product(prod))
     d = r.diagnostics
@@ -229,7 +229,7 @@ def test_tile_reads_only_the_antecedent_lines(files, wide_run, sampling):
     ok = r.valid
     line, col = r.diagnostics["line"][ok], r.diagnostics["col"][ok]
     pad = 1 if sampling == "bicubic" else 0
-    first, stop = r.stats["product_lines_read"]
+    first, stop = r.stats.product_lines_read
     assert first == max(int(np.floor(line.min())) - pad, 0) > 0
     assert stop == int(np.floor(line.max())) + 2 + pad < 200
     assert stop - first <= 100  # at most half of the 200 product lines
@@ -253,7 +253,7 @@ def test_allow_empty_keeps_terrain_points_beyond_the_boundary(files, wide_run):
         orthorectify(prod, grid=east, dems=[dem], bands=[1])
     r = orthorectify(prod, grid=east, dems=[dem], bands=[1, 2], allow_empty=True,
                      diagnostics=True)
-    assert r.stats["points_in_boundary"] == 0
+    assert r.stats.points_in_boundary == 0
     assert r.valid.sum() == wide_run.valid[:, 885:].sum() > 100
     np.testing.assert_array_equal(r.valid, wide_run.valid[:, 885:])
     np.testing.assert_array_equal(r.bands[1], wide_run.bands[1][:, 885:])
@@ -262,8 +262,8 @@ def test_allow_empty_keeps_terrain_points_beyond_the_boundary(files, wide_run):
     e = orthorectify(prod, grid=far, dems=[dem], bands=[1, 2], allow_empty=True,
                      diagnostics=True)
     assert e.valid.sum() == 0 and e.bands[1].max() == 0.0 and e.bands[2].shape == (20, 20)
-    assert e.stats["processed_points"] == 0 and e.stats["product_lines_read"] == [0, 0]
-    assert e.stats["elevation_sources"] == {"tiepoints": 0, "0:dem.tif": 0}
+    assert e.stats.processed_points == 0 and e.stats.product_lines_read == [0, 0]
+    assert e.stats.elevation_sources == {"tiepoints": 0, "0:dem.tif": 0}
     assert (e.diagnostics["iterations"] == -1).all()
 
 
@@ -374,7 +374,7 @@ def test_dem_heights_by_the_window_kernel_equal_the_dem_stack(tmp_path, method):
     from rasterio.transform import from_origin
 
     from napari_meris_ortho.dem.stack import DemStack
-    from napari_meris_ortho.ortho import _heights
+    from napari_meris_ortho.ortho.heights import dem_heights as _heights
 
     rng = np.random.default_rng(12)
     geo = rng.uniform(0.0, 3000.0, (200, 300)).astype(np.float32)
@@ -419,7 +419,7 @@ def test_tile_directory_heights_by_the_window_kernel_equal_the_dem_stack(method)
     ``_heights`` gives ``DemStack.sample``'s heights and sources, also for points beyond the
     windows and where no tile is."""
     from napari_meris_ortho.dem.stack import DemStack, open_dem
-    from napari_meris_ortho.ortho import _heights
+    from napari_meris_ortho.ortho.heights import dem_heights as _heights
     from napari_meris_ortho.simulate.scene import generate_scene
 
     scene = generate_scene({"base": "fr-small", "lines": 128, "columns": 193,

@@ -47,7 +47,7 @@ def test_geoid_tiles_are_as_accurate_as_the_ellipsoidal_dem(scene):
     assert abs(_rms(e_geo) - _rms(e_ell)) < 0.01
     assert r_geo.valid.sum() > 0.99 * r_ell.valid.sum()
     # the DEM is all Copernicus (no fall back to the tie points) and the heights are ellipsoidal
-    assert r_geo.stats["elevation_sources"]["tiepoints"] == 0
+    assert r_geo.stats.elevation_sources["tiepoints"] == 0
     both = r_geo.valid & r_ell.valid & r_raw.valid
     dh = r_geo.diagnostics["elevation"][both] - r_ell.diagnostics["elevation"][both]
     assert np.abs(np.median(dh)) < 0.5

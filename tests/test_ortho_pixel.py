@@ -45,7 +45,7 @@ def test_pixel_geolocation_accuracy_against_the_truth(fr_small, geolocated, tiep
     # the product altitude at the antecedent is the diagnostics' elevation
     h = fr_small.dem_height(*[a[both] for a in r.grid.lonlat()])
     assert np.median(np.abs(r.diagnostics["elevation"][both] - h)) < 5.0
-    assert r.stats["geolocation"] == "pixel"
+    assert r.stats.geolocation == "pixel"
     # nearest neighbour: the same product pixel almost everywhere (flicker: nothing moves)
     assert np.mean(r.bands[7][both] == tiepoint_result.bands[7][both]) > 0.95
 

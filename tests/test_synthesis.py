@@ -174,7 +174,7 @@ def test_options_refused_like_mersyn(products, tmp_path) -> None:
         synthesize([product], tmp_path / "new", sampling="sinc")
     with pytest.raises(OptionsError, match="elevation"):
         synthesize([product], tmp_path / "new", elevation="sea")
-    with pytest.raises(OptionsError, match="DEMs need elevation"):
+    with pytest.raises(OptionsError, match="DEMs are only used with elevation"):
         synthesize([product], tmp_path / "new", elevation="none", dems=["x.tif"])
     with pytest.raises(OptionsError, match="CRS"):
         synthesize([product], tmp_path / "new", crs="EPSG:99999999")
@@ -440,7 +440,7 @@ def test_product_table_and_cog_export_carry_band_and_scaling_metadata(products,
     with rasterio.open(out) as ds:
         assert ds.count == 1 and ds.descriptions[0] == "MERIS band 13"
         assert ds.tags()["products"].split() == [clear.product_name, cloudy.product_name]
-        assert ds.overviews(1) and ds.profile["blockxsize"] == 256
+        assert ds.overviews(1) and ds.profile["blockxsize"] == 512  # the COG block of write_map
         assert (ds.width, ds.height) == (GRID.width, GRID.height)
         assert ds.transform.c == GRID.x0 and ds.transform.f == GRID.y0
         assert ds.read(1).tobytes() == store.band(13).tobytes()
@@ -490,7 +490,7 @@ def test_tie_points_and_boundary_built_once_per_product(tmp_path, monkeypatch) -
     on that tile (DEM heights from the product-wide window = the tile's own)."""
     from collections import Counter, OrderedDict
 
-    from napari_meris_ortho import ortho
+    from napari_meris_ortho.ortho import core as ortho
     from napari_meris_ortho.simulate.scene import generate_scene
     from napari_meris_ortho.synthesis import run as _synthesis_run
 

@@ -15,7 +15,7 @@ def test_warm_up_runs_every_configuration(monkeypatch):
 
     def spy(product, **kw):
         res = real(product, **kw)
-        calls.append((kw["elevation"], kw["sampling"], kw["method"], res.stats["crs"],
+        calls.append((kw["elevation"], kw["sampling"], kw["method"], res.stats.crs,
                       int(res.valid.sum()), float(np.max(res.bands[2]))))
         return res
 
@@ -87,7 +87,7 @@ _NO_BLAS = """
 import json, sys
 import numpy as np
 from numba import njit
-from napari_meris_ortho.warmup import start_numba_without_blas
+from napari_meris_ortho._process import start_numba_without_blas
 from napari_meris_ortho.engine.resample import overview_level
 
 start_numba_without_blas()

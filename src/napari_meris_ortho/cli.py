@@ -12,8 +12,6 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import ctypes
-import gc
 import logging
 import os
 import signal
@@ -24,6 +22,7 @@ from typing import NoReturn
 
 from . import __version__
 from ._atomic import abort_run, output_run
+from ._process import few_collections, start_numba_without_blas, tune_process
 from ._terminal import printable, stderr_is_terminal
 from .errors import MerisOrthoError
 
@@ -86,63 +85,17 @@ def _signals_handled() -> Iterator[None]:
             signal.signal(sig, handler)
 
 
-@contextlib.contextmanager
-def _few_collections(last: bool) -> Iterator[None]:
-    """Python's cyclic garbage collector run rarely (imports and numba's cache loading make
-    hundreds of thousands of objects: 0.3 s of collections in a 3.5 s map); restored after,
-    or, when the process ends with this run (``last``), turned off: the collections that
-    restoring and leaving would start walk every object the run made (0.15-0.3 s) for
-    nothing."""
-    previous = gc.get_threshold()
-    gc.set_threshold(200_000, 50, 100)
-    try:
-        yield
-    finally:
-        if last:  # Python collects at exit even when disabled: frozen objects it skips
-            gc.disable()
-            gc.freeze()
-        else:
-            gc.set_threshold(*previous)
-
-
-#: glibc ``mallopt`` parameters
-_M_TRIM_THRESHOLD, _M_MMAP_THRESHOLD = -1, -3
-
-
-def _keep_freed_memory() -> None:
-    """Let glibc's malloc keep the memory the run frees and hand it out again: arrays up to
-    1 GiB from the heap instead of fresh ``mmap`` pages, and no trimming. Every fresh page
-    is zeroed by the kernel on first touch, and a map frees and allocates its band-sized
-    arrays over and over (measured: 3.9 -> 3.6 s median of a fr-alps map). For the
-    ``meris-ortho`` process only (``console_main``), never for a library user's process;
-    no-op off glibc."""
-    with contextlib.suppress(OSError, AttributeError, ValueError):
-        if not (os.confstr("CS_GNU_LIBC_VERSION") or "").startswith("glibc"):
-            return
-        libc = ctypes.CDLL(None)
-        libc.mallopt(_M_MMAP_THRESHOLD, 2 ** 30)
-        libc.mallopt(_M_TRIM_THRESHOLD, 2 ** 31 - 1)
-
-
 def console_main() -> NoReturn:
     """The ``meris-ortho`` process (console script and ``python -m``): ``main`` in a process
-    tuned for one run: ``_keep_freed_memory``; numpy arrays on ordinary pages (numpy asks
-    for transparent huge pages for arrays of 4 MiB and more: the kernel then compacts and
-    zeroes 2 MiB at each first touch, 0.4-0.6 s of a 3.4-3.9 s map here; a user's own
-    ``NUMPY_MADVISE_HUGEPAGE`` wins, numpy reads it when first imported, below); no garbage
-    collection on the way out."""
-    os.environ.setdefault("NUMPY_MADVISE_HUGEPAGE", "0")
-    _keep_freed_memory()
+    tuned for one run (``_process``; ``MERIS_ORTHO_NO_TUNING=1`` turns that off)."""
+    tune_process()
     sys.exit(main(last=True))
 
 
 def main(argv: Sequence[str] | None = None, *, last: bool = False) -> int:
     """Run one ``meris-ortho`` command line (``argv``: without the program name; None: the
     process's). ``last``: the process ends after this run (``console_main``)."""
-    # no linear algebra here: no OpenBLAS server threads (numpy's and scipy's each spin about
-    # 0.1 s of a core at start-up); numpy is first imported below, a user's own setting wins
-    os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
-    with _signals_handled(), _few_collections(last):
+    with _signals_handled(), few_collections(last):
         try:
             parser = build_parser()
             args = parser.parse_args(argv)
@@ -150,8 +103,6 @@ def main(argv: Sequence[str] | None = None, *, last: bool = False) -> int:
             level = logging.DEBUG if args.verbose else quiet
             logging.basicConfig(level=level, format="%(message)s", stream=sys.stderr)
             if last and args.command in NUMBA_COMMANDS:
-                from .warmup import start_numba_without_blas
-
                 start_numba_without_blas()
             with output_run():
                 return int(args.func(args) or 0)

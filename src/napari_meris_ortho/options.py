@@ -156,6 +156,39 @@ class OrthoOptions:
         return cls(elev, parse(Sampling, sampling), par, geo, parse(SearchMethod, method),
                    float(tolerance), check_bands(bands), bool(diagnostics))
 
+    @classmethod
+    def of(cls, options: OrthoOptions | None = None, *, n_dems: int = 0,
+           **values: object) -> OrthoOptions:
+        """``options`` (default: the defaults) with ``values`` (the keywords of ``parse``)
+        replacing its fields, all checked again with the number of DEMs: the one check of the
+        options of ``orthorectify``, ``precompute``, ``synthesize``, the CLI and the widget."""
+        base = options.values() if options is not None else {}
+        return cls.parse(**{**base, **values}, n_dems=n_dems)  # type: ignore[arg-type]
+
+    def values(self) -> dict[str, object]:
+        """The options as ``parse`` keywords."""
+        return {"elevation": self.elevation, "sampling": self.sampling,
+                "parallax": self.parallax, "geolocation": self.geolocation,
+                "method": self.method, "tolerance": self.tolerance, "bands": self.bands,
+                "diagnostics": self.diagnostics}
+
+
+def parse_band_list(text: str) -> tuple[int, ...] | None:
+    """A band list as users type it: "7,5,2" or "7 5 2" -> (7, 5, 2) in that order; "all" or
+    "" -> None (all 15 bands). OptionsError naming the text otherwise (the CLI's ``--bands``
+    and the widget's field)."""
+    words = text.replace(",", " ").split()
+    if not words or (len(words) == 1 and words[0].lower() == "all"):
+        return None
+    try:
+        values = tuple(int(w) for w in words)
+    except ValueError:
+        raise OptionsError(f"bands {text!r}: expected MERIS band numbers 1..15 separated by "
+                           "commas, e.g. 7,5,2") from None
+    if any(not 1 <= v <= 15 for v in values):
+        raise OptionsError(f"bands {text!r}: MERIS bands are 1..15")
+    return values
+
 
 def check_bands(bands: Sequence[int] | None) -> tuple[int, ...]:
     """Sorted distinct MERIS bands 1..15 (None: all 15); OptionsError otherwise."""

@@ -24,6 +24,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ._process import numba_cache_index, start_numba_without_blas, tune_process
+
 _STARTED: threading.Thread | None = None
 #: (elevation, sampling, method, crs) combinations compiled by ``warm_up``
 RUNS = (("none", "nearest", "primary", "EPSG:4326"),
@@ -123,33 +125,12 @@ def compile_late() -> float:
     return time.perf_counter() - t0
 
 
-def start_numba_without_blas() -> None:
-    """Start numba's CPU target without importing scipy.linalg (0.13-0.2 s of every run).
-    numba's first compilation or cache load imports its array implementations, and one of
-    them imports scipy.linalg only to learn whether BLAS is there (without it, compiled
-    ``np.correlate`` / ``np.convolve`` use a plain loop instead of BLAS). No kernel of this
-    package calls BLAS, and a kernel with ``np.dot`` still gets it: numba imports
-    scipy.linalg again when it compiles one. For a process this package owns
-    (``cli.console_main``), before its first kernel and before it starts other threads;
-    no-op once scipy.linalg or numba's array implementations are imported."""
-    if "scipy.linalg" in sys.modules or "numba.np.arraymath" in sys.modules:
-        return
-    sys.modules["scipy.linalg"] = None  # type: ignore[assignment]  # import raises ImportError
-    try:
-        from numba.core.registry import cpu_target
-
-        cpu_target.target_context.refresh()
-    finally:
-        del sys.modules["scipy.linalg"]
-
-
 def cache_is_cold() -> bool:
     """True when numba's cache holds no machine code of the prediction/correction kernel for
     this installation (a first run): its index file is missing."""
     from .engine import predcorr
 
-    cache_file = getattr(getattr(predcorr._antecedent_rows, "_cache", None), "_cache_file", None)
-    index = getattr(cache_file, "_index_path", None)  # numba's IndexDataCacheFile
+    index = numba_cache_index(predcorr._antecedent_rows)
     return index is not None and not os.path.exists(index)
 
 
@@ -197,6 +178,7 @@ def warm_up_in_background() -> threading.Thread | None:
 
 if __name__ == "__main__":
     if sys.argv[1:] == ["--late"]:  # a child of `meris-ortho map`: a process of ours
+        tune_process()
         start_numba_without_blas()
         compile_late()
     else:

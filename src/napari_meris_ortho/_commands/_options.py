@@ -13,18 +13,17 @@ import math
 from typing import Any
 
 from ..errors import OptionsError
-from ..options import Elevation, Sampling, choices
+from ..options import Elevation, OrthoOptions, Sampling, choices, parse_band_list
 
 
-def parse_bands(text: str) -> list[int]:
-    """argparse type of ``--bands``: "3,5,7" or "3 5 7" -> [3, 5, 7] (MERIS bands 1..15)."""
+def parse_bands(text: str) -> list[int] | None:
+    """argparse type of ``--bands``: "3,5,7" or "3 5 7" -> [3, 5, 7], "all" -> None (all 15
+    MERIS bands); ``options.parse_band_list``."""
     try:
-        values = [int(v) for v in text.replace(",", " ").split()]
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"bands {text!r}: expected e.g. 3,5,7") from None
-    if not values or any(not 1 <= v <= 15 for v in values):
-        raise argparse.ArgumentTypeError(f"bands {text!r}: MERIS bands are 1..15")
-    return values
+        values = parse_band_list(text)
+    except OptionsError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+    return None if values is None else list(values)
 
 
 def add_bands_option(p: Any, help: str) -> None:
@@ -75,11 +74,12 @@ def _pixel_count(text: str) -> int:
     return int(value)
 
 
-def check_heights(args: argparse.Namespace) -> None:
-    """DEMs are only used with ``--elevation dem`` (MERSYN refuses -dem with -ort NO)."""
-    if args.dem and args.elevation != "dem":
-        raise OptionsError(f"--dem given with --elevation {args.elevation}: DEMs need "
-                           "--elevation dem (MERSYN refuses -dem with -ort NO)")
+def ortho_options(args: argparse.Namespace, **values: Any) -> OrthoOptions:
+    """The checked ``OrthoOptions`` of ``--elevation``, ``--sampling``, ``--bands``, the
+    ``--dem`` list and ``values`` (``OrthoOptions.of``: DEMs only with elevation dem, as MERSYN
+    refuses -dem with -ort NO)."""
+    return OrthoOptions.of(n_dems=len(args.dem), elevation=args.elevation,
+                           sampling=args.sampling, bands=args.bands, **values)
 
 
 def grid_from_args(args: argparse.Namespace, default_crs: str = "EPSG:4326") -> Any:

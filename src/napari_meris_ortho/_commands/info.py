@@ -17,6 +17,7 @@ from .._terminal import printable
 from ..products.n1 import FLAG_NAMES, MerisL1bProduct
 from ..products.n1.format import EPOCH_2000
 from ..products.open import read_product
+from ..products.protocol import MerisProduct
 
 _RESOLUTION_NAMES = {"FR": "full resolution", "RR": "reduced resolution"}
 
@@ -71,7 +72,7 @@ def _utc(seconds: float) -> str:
     return str(t).replace("T", " ") + " UTC"
 
 
-def describe(product: MerisL1bProduct, every: int = 8) -> list[str]:
+def describe(product: MerisProduct, every: int = 8) -> list[str]:
     """The lines ``meris-ortho info`` prints."""
     mph, sph = product.mph, product.sph
     res = _RESOLUTION_NAMES.get(product.resolution.name, product.resolution.name)
@@ -132,6 +133,7 @@ def describe(product: MerisL1bProduct, every: int = 8) -> list[str]:
                         *tie_point_table(product, every)]
     lines += ["", f"Flags (Flags MDS(16))  {bits}", "", "Data sets"]
     lines.append("  #  DS_NAME                       T  DS_OFFSET   DS_SIZE  NUM_DSR  DSR_SIZE")
+    assert isinstance(product, MerisL1bProduct)  # an N1 file (not a .SEN3 directory)
     for i, d in enumerate(product.dsds, start=1):
         if d.is_spare:
             lines.append(f"{i:>3}  (spare)")
@@ -147,7 +149,7 @@ def describe(product: MerisL1bProduct, every: int = 8) -> list[str]:
     return lines
 
 
-def _headers_line(product: MerisL1bProduct) -> str:
+def _headers_line(product: MerisProduct) -> str:
     mph = product.mph
     if product.path.is_dir():
         return f"Format         SAFE .SEN3 directory, {len(list(product.path.iterdir()))} files"
@@ -155,7 +157,7 @@ def _headers_line(product: MerisL1bProduct) -> str:
             f"{mph.get('NUM_DATA_SETS', '?')} data sets, total {mph['TOT_SIZE']} bytes")
 
 
-def _geolocation_lines(product: MerisL1bProduct) -> list[str]:
+def _geolocation_lines(product: MerisProduct) -> list[str]:
     """Extent of the per-pixel terrain-corrected geolocation (FRG/FSG, SEN3), else nothing."""
     if not getattr(product, "has_pixel_geolocation", False):
         return []
@@ -167,7 +169,7 @@ def _geolocation_lines(product: MerisL1bProduct) -> list[str]:
             "(map with --geolocation pixel)"]
 
 
-def _member_lines(product: MerisL1bProduct) -> list[str]:
+def _member_lines(product: MerisProduct) -> list[str]:
     """The member files of a .SEN3 directory with their sizes."""
     out = ["Member files"]
     for f in sorted(product.path.iterdir()):
@@ -176,7 +178,7 @@ def _member_lines(product: MerisL1bProduct) -> list[str]:
     return out
 
 
-def tie_point_table(product: MerisL1bProduct, every: int = 8) -> list[str]:
+def tie_point_table(product: MerisProduct, every: int = 8) -> list[str]:
     """Appendix A/E tie-point table: for tie-point lines 1, 1+every, ... and the last one, the
     date (s since 2000-01-01), then for the FIRST and LAST tie point: (lat, lon), altitude,
     roughness, latitude and longitude corrections (1e-6 deg), sun and view (zenith, azimuth)."""

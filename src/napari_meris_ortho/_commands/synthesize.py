@@ -21,8 +21,8 @@ from ._options import (
     add_grid_options,
     add_height_options,
     add_sampling_option,
-    check_heights,
     grid_from_args,
+    ortho_options,
 )
 
 log = logging.getLogger("napari_meris_ortho")
@@ -79,7 +79,7 @@ def run(args: argparse.Namespace) -> int:
                                    or args.bands):
         raise OptionsError("when --input is given, --crs, --pixel-size, --ul, --lr and --bands "
                            "come from the input synthesis and shall not be given")
-    check_heights(args)
+    options = ortho_options(args, geolocation=args.geolocation)
     grid = grid_from_args(args)
     if args.scheduler and args.workers is not None:
         raise OptionsError("--workers and --scheduler exclude each other (the cluster of the "
@@ -90,10 +90,9 @@ def run(args: argparse.Namespace) -> int:
             args.products, args.out, algorithm=args.algorithm, input=args.input, grid=grid,
             crs=None if grid is not None else args.crs,
             pixel_size=None if grid is not None else args.pixel_size, dems=args.dem,
-            elevation=args.elevation, sampling=args.sampling, bands=args.bands,
-            reject_bright=args.reject_bright, tile=args.tile, progress=progress,
-            workers=0 if args.scheduler else workers, scheduler=args.scheduler or None,
-            geolocation=args.geolocation, max_pixels=args.max_pixels)
+            options=options, bands=args.bands, reject_bright=args.reject_bright,
+            tile=args.tile, progress=progress, workers=0 if args.scheduler else workers,
+            scheduler=args.scheduler or None, max_pixels=args.max_pixels)
     if result.snapshot is not None:
         log.info("synthesis %s (%s) committed to %s: %d product(s) merged", result.snapshot,
                  result.algorithm, result.path, len(result.merged))

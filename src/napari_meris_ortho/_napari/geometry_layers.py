@@ -5,6 +5,7 @@ coordinates (no scale/translate, see ``world``) from lon/lat projected into the 
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
@@ -136,7 +137,7 @@ def parallax_layer_data(frame: OutputGrid, shift_east: np.ndarray, shift_north: 
     return vectors, kwargs, "vectors"
 
 
-def geometry_layers(tie_points: dict[str, np.ndarray], frame: OutputGrid, suffix: str = "",
+def geometry_layers(tie_points: Mapping[str, np.ndarray], frame: OutputGrid, suffix: str = "",
                     diagnostics: dict[str, np.ndarray] | None = None, *,
                     valid: np.ndarray | None = None, exaggeration: float = 10.0,
                     step: int = 16) -> list[tuple[Any, dict, str]]:

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import shutil
 import tempfile
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -19,7 +20,7 @@ import numpy as np
 
 from ..errors import MerisOrthoError, OptionsError
 from ..geometry.grid import OutputGrid
-from ..options import Elevation, MergeRule, choices
+from ..options import Elevation, MergeRule, OrthoOptions, choices, parse_band_list
 from ..progress import ProgressCallback
 from .geometry_layers import geometry_layers
 from .product_layers import band_layers, diagnostic_layers
@@ -67,44 +68,42 @@ class RunSettings:
         """True with the product's per-pixel geolocation (FRG/FSG/SEN3)."""
         return self.geolocation == "pixel"
 
-    def ortho_kwargs(self) -> dict[str, Any]:
-        """The DEM and location-model arguments of orthorectify/synthesize."""
-        return {"dems": [] if self.pixel else list(self.dems), "elevation": self.elevation,
-                "sampling": self.sampling, "bands": self.bands,
-                "geolocation": "pixel" if self.pixel else None}
+    @property
+    def dem_list(self) -> list[str]:
+        """The DEMs used (none with the per-pixel geolocation)."""
+        return [] if self.pixel else [str(d) for d in self.dems]
+
+    def options(self) -> OrthoOptions:
+        """The checked ``OrthoOptions`` of the run (``OrthoOptions.of``, as the CLI)."""
+        return OrthoOptions.of(n_dems=len(self.dem_list), elevation=self.elevation,
+                               sampling=self.sampling, bands=self.bands,
+                               geolocation="pixel" if self.pixel else None,
+                               diagnostics=self.geometry)
 
     def check(self) -> None:
-        """OptionsError naming the first missing or inconsistent input."""
+        """OptionsError/OutputError naming the first missing or inconsistent input."""
         if not self.products:
             raise OptionsError("choose at least one N1 product")
-        missing = [str(p) for p in self.products if not Path(p).is_file()]
+        missing = [str(p) for p in self.products if not Path(p).exists()]
         if missing:
             raise OptionsError(f"N1 product not found: {', '.join(missing)}")
-        if self.pixel:
-            return  # the product's own terrain-corrected geolocation: no DEM
-        if self.elevation != Elevation.DEM and self.dems:
-            raise OptionsError(f"DEMs are only used with elevation 'dem', not {self.elevation!r}")
-        if self.elevation == Elevation.DEM and not self.dems:
+        self.options()
+        if not self.pixel and self.elevation == Elevation.DEM and not self.dems:
             raise OptionsError("elevation 'dem' needs a DEM: add one, or choose elevation "
                                "'tiepoints' (the product's tie-point heights) or 'none'")
+        if self.output is not None and self.algorithm == MAPPING:
+            from ..ortho.writing import check_outputs
+
+            n = len(self.products)
+            check_outputs({f"output {k + 1}": _output_path(self.output, k, n)
+                           for k in range(n)}, self.products, self.dem_list)
 
 
-def parse_bands(text: str) -> tuple[int, ...] | None:
-    """"7,5,2" -> (7, 5, 2); "all" or "" -> None (all 15 bands). Raises OptionsError."""
-    text = text.strip().lower()
-    if text in ("", "all"):
-        return None
-    try:
-        bands = tuple(int(t) for t in text.replace(" ", ",").split(",") if t)
-    except ValueError:
-        raise OptionsError(f"bands must be numbers 1..15 separated by commas, got {text!r}"
-                           ) from None
-    if not bands or any(not 1 <= b <= 15 for b in bands):
-        raise OptionsError(f"bands must be 1..15, got {text!r}")
-    return bands
+#: "7,5,2" -> (7, 5, 2); "all" or "" -> None (all 15 bands); OptionsError otherwise
+parse_bands = parse_band_list
 
 
-def output_crs(options: RunSettings, tie_points: dict[str, np.ndarray]) -> Any:
+def output_crs(options: RunSettings, tie_points: Mapping[str, np.ndarray]) -> Any:
     """The output CRS: the UTM zone of the footprint centre, EPSG:4326 or the given EPSG code."""
     from ..geometry.grid import parse_crs, utm_crs_for
 
@@ -143,6 +142,8 @@ class OrthoRun:
     options: RunSettings
     written: list[Path] = field(default_factory=list)
     skipped: list[str] = field(default_factory=list)  # "name: reason" of skipped products
+    #: what the user should know (a DEM that gave no height), as the CLI warns
+    warnings: list[str] = field(default_factory=list)
 
     def summary(self) -> str:
         """The status line of a finished run."""
@@ -153,6 +154,8 @@ class OrthoRun:
             n = sum(1 for item in self.items if item["tie_points"] is not None)
             text = (f"done: synthesis ({self.options.algorithm}) of {n} "
                     f"product{'s' if n != 1 else ''}")
+        if self.warnings:
+            text += f"; warning: {'; '.join(self.warnings)}"
         if self.skipped:
             text += f"; skipped {'; '.join(self.skipped)}"
         if self.written:
@@ -176,49 +179,41 @@ def run_orthorectify(options: RunSettings, progress: ProgressCallback | None = N
 
 
 def _run_mapping(options: RunSettings, progress: ProgressCallback | None) -> OrthoRun:
-    from ..ortho import orthorectify
+    from ..ortho import precompute, product_grid
+    from ..ortho.writing import write_map
     from ..products.open import read_product
 
     products = [read_product(p) for p in options.products]
     crs = output_crs(options, products[0].tie_points)
-    items, written = [], []
+    opts = options.options()
+    items, written, warnings = [], [], []
     n = len(products)
     for k, product in enumerate(products):
         def part(done: int, total: int, k: int = k) -> None:
             if progress is not None:
                 progress(k * 1000 + int(1000 * done / max(total, 1)), n * 1000)
 
-        result = orthorectify(
-            product, diagnostics=options.geometry, progress=part, crs=crs,
-            grid=_grid_for(product, crs, options), **options.ortho_kwargs())
+        grid = product_grid(product, crs, _pixel_size(options, product, crs))
+        ante = precompute(product, grid, options.dem_list, options=opts, progress=part)
+        warnings += [f"DEM {Path(d).name} gave no height for {Path(product.path).name} (outside "
+                     "the scene, wrong CRS or only no data)" for d in ante.stats.unused_dems()]
+        if options.output is not None:
+            written.append(write_map(_output_path(options.output, k, n), ante,
+                                     software="napari-meris-ortho widget"))
+        result = ante.result()
         prefix = "ortho pixel-geolocation" if options.pixel else "ortho"
         items.append(_item(product, prefix, bands=result.bands, grid=result.grid,
                            valid=result.valid, diagnostics=result.diagnostics,
                            stats=result.stats))
-        if options.output is not None:
-            written.append(_write_mapping(result, product, options.output, k, n))
-    return OrthoRun(items, options, written)
+    return OrthoRun(items, options, written, warnings=warnings)
 
 
-def _grid_for(product: Any, crs: Any, options: RunSettings) -> Any:
-    """The default grid (smallest rectangle holding the segment boundary, section 3.1)."""
-    from ..engine.boundary import segment_boundary
-    from ..geometry.grid import default_grid
-
-    boundary = segment_boundary(product.tie_points["latitude"], product.tie_points["longitude"])
-    return default_grid(boundary, crs=crs, pixel_size=_pixel_size(options, product, crs))
-
-
-def _write_mapping(result: Any, product: Any, output: Path, k: int, n: int) -> Path:
-    from ..output.geotiff import meris_band_description, write_geotiff
-
+def _output_path(output: Path, k: int, n: int) -> Path:
+    """The output file of product ``k`` of ``n``: ``output`` itself, or ``OUT_<k+1>.tif``."""
     path = Path(output)
     if n > 1:
         path = path.with_name(f"{path.stem}_{k + 1}{path.suffix or '.tif'}")
-    bands = sorted(result.bands)
-    return write_geotiff(path, [result.bands[b] for b in bands], result.grid,
-                         descriptions=[meris_band_description(b, product.wavelengths[b - 1])
-                                       for b in bands])
+    return path
 
 
 def _readable(paths: list[Path]) -> tuple[list[Any], list[str]]:
@@ -250,7 +245,7 @@ def _run_synthesis(options: RunSettings, progress: ProgressCallback | None) -> O
         result = synthesize(
             [p.path for p in products], out, algorithm=options.algorithm, crs=crs,
             pixel_size=_pixel_size(options, products[0], crs), progress=progress,
-            **options.ortho_kwargs())
+            dems=options.dem_list, options=options.options())
         skipped += [f"{Path(r.path).name}: {r.error}" for r in result.failed]
         if not result.merged:
             raise OptionsError(f"no product could be merged into the synthesis "

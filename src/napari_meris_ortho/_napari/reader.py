@@ -24,7 +24,7 @@ from .product_layers import QUICKLOOK_BANDS, contrast_limits, stretch_rgb
 from .world import geo_image_kwargs, place_on_frame, viewer_frame
 
 if TYPE_CHECKING:
-    from ..products.n1 import MerisL1bProduct
+    from ..products.protocol import MerisProduct
 
 LayerData = tuple[Any, dict[str, Any], str]
 N1_SUFFIXES = (".n1",)
@@ -275,7 +275,7 @@ def _with_band_axis(affine: np.ndarray) -> np.ndarray:
     return out
 
 
-def n1_metadata(product: MerisL1bProduct) -> dict[str, Any]:
+def n1_metadata(product: MerisProduct) -> dict[str, Any]:
     """Tie points and headers of a product, for the layer metadata."""
     return {
         "path": str(product.path), "product_type": product.product_type,
@@ -290,7 +290,7 @@ def n1_metadata(product: MerisL1bProduct) -> dict[str, Any]:
     }
 
 
-def radiance_stack(product: MerisL1bProduct) -> Any:
+def radiance_stack(product: MerisProduct) -> Any:
     """The 15 radiance bands as a lazy (15, H, W) float32 dask array."""
     import dask
     import dask.array as da
@@ -301,7 +301,7 @@ def radiance_stack(product: MerisL1bProduct) -> Any:
     return da.stack(bands)
 
 
-def quicklook_rgb(product: MerisL1bProduct,
+def quicklook_rgb(product: MerisProduct,
                   bands: tuple[int, int, int] = QUICKLOOK_BANDS) -> np.ndarray:
     """An RGB quick-look (H, W, 3) uint8 from three radiance bands, 1-99 % stretch each."""
     return stretch_rgb([product.radiance(b) for b in bands])

@@ -11,6 +11,7 @@ them pixel to pixel.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -39,7 +40,7 @@ class SampleScene:
     orthorectified: dict[int, np.ndarray]
     valid: np.ndarray
     diagnostics: dict[str, np.ndarray]
-    tie_points: dict[str, np.ndarray]
+    tie_points: Mapping[str, np.ndarray]
 
 
 def _stage(progress: ProgressCallback | None, start: int, span: int) -> ProgressCallback | None:

@@ -21,7 +21,7 @@ The georeference of a layer lives in ``layer.metadata["geo"]``: ``{"crs": WKT, "
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from typing import Any
 
 import numpy as np
@@ -150,7 +150,7 @@ def place_on_frame(data: np.ndarray, source: OutputGrid, frame: OutputGrid | Non
     return reproject_onto(data, source, frame, nearest=nearest), frame
 
 
-def tie_point_affine(tie_points: dict[str, np.ndarray], lines_per_tie_point: int,
+def tie_point_affine(tie_points: Mapping[str, np.ndarray], lines_per_tie_point: int,
                      samples_per_tie_point: int, crs: Any) -> tuple[np.ndarray, float]:
     """The affine map (3 x 3, napari ``affine``) from product (line, column) to the world frame
     of ``crs`` fitted by least squares to the tie points (pixel (i DF, k DJ), section 2.3),

@@ -41,20 +41,25 @@ from __future__ import annotations
 
 import logging
 import os
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from ..errors import DemError
-from .base import DemSource, check_regular
+from .base import DemSource, LatticeWindow, check_regular
 from .geoid import EGM96, ELLIPSOID, geoid_grid_path, split_datum
 from .getasse import _TILE_RE, _ZIP_RE, GetasseSource
 from .raster import RasterSource
 from .srtm import SrtmTile
 
 log = logging.getLogger(__name__)
+#: a compiled lookup in a lattice window (``DemStack.walk``): (window, DEM index, lon, lat,
+#: todo, h, index, miss) -> points filled
+WindowLookup = Callable[[LatticeWindow, int, np.ndarray, np.ndarray, np.ndarray, np.ndarray,
+                         np.ndarray, np.ndarray], int]
 # ---------------------------------------------------------------------- several sources
 class CompositeSource(DemSource):
     """Several sources of one DEM series (tiles): the first with data wins at each point."""
@@ -101,19 +106,45 @@ class DemStack:
         """(heights float64, index int16 of the DEM used; -1 and NaN where none has data)."""
         lon, lat = np.broadcast_arrays(np.asarray(lon, dtype=np.float64),
                                        np.asarray(lat, dtype=np.float64))
-        h = np.full(lon.shape, np.nan)
-        index = np.full(lon.shape, -1, dtype=np.int16)
-        todo = np.ones(lon.shape, dtype=bool)
-        for i, src in enumerate(self.sources):
+        h = np.full(lon.size, np.nan)
+        index = np.full(lon.size, -1, dtype=np.int16)
+        self.walk(np.ascontiguousarray(lon).reshape(-1), np.ascontiguousarray(lat).reshape(-1),
+                  np.ones(lon.size, dtype=bool), h, index, method)
+        return h.reshape(lon.shape), index.reshape(lon.shape)
+
+    def walk(self, lon: np.ndarray, lat: np.ndarray, todo: np.ndarray, h: np.ndarray,
+             index: np.ndarray, method: str = "bilinear",
+             window_lookup: WindowLookup | None = None) -> None:
+        """The DEMs tried in order at the ``todo`` points (flat arrays; section 3.1: outside
+        or background -> next DEM): where DEM k has data, its height goes to ``h``, k to
+        ``index`` and the point leaves ``todo``. The one walk of the package.
+
+        ``window_lookup(window, k, lon, lat, todo, h, index, miss)``: a faster lookup of a
+        lattice read into memory (``LatticeWindow``; ``ortho.heights`` passes the compiled
+        one); it fills what it can and marks in ``miss`` the points whose posts lie beyond
+        the window. Those points, and all points of a lattice without a window, are read by
+        the DEM's own ``sample`` (which tries its lattices in the same order)."""
+        for k, dem in enumerate(self.sources):
             if not todo.any():
                 break
-            v = src.sample(lon[todo], lat[todo], method)
-            got = np.isfinite(v)
-            sel = np.flatnonzero(todo.ravel())[got]
-            h.ravel()[sel] = v[got]
-            index.ravel()[sel] = i
-            todo.ravel()[sel] = False
-        return h, index
+            deferred = np.zeros(todo.size, bool)
+            if window_lookup is None:
+                deferred |= todo
+            else:
+                for part, datum in dem.parts():
+                    window = part.lattice_window()
+                    if window is None:
+                        deferred |= todo
+                        break
+                    miss = np.zeros(todo.size, bool)
+                    if window_lookup(replace(window, datum=datum), k, lon, lat, todo, h, index,
+                                     miss):
+                        deferred |= miss
+                        todo &= ~miss
+            if deferred.any():
+                todo |= deferred
+                _sample_into(dem, k, method, np.flatnonzero(deferred), lon, lat, todo, h,
+                             index)
 
     def prepare(self, lon_min: float, lat_min: float, lon_max: float, lat_max: float) -> None:
         """Read once what lookups inside these WGS84 bounds need, from every DEM."""
@@ -123,6 +154,20 @@ class DemStack:
     def close(self) -> None:
         for s in self.sources:
             s.close()
+
+
+def _sample_into(dem: DemSource, k: int, method: str, sel: np.ndarray, lon: np.ndarray,
+                 lat: np.ndarray, todo: np.ndarray, h: np.ndarray, index: np.ndarray) -> None:
+    """Heights of DEM ``k`` at the flat points ``sel`` by its ``sample``: where it has data,
+    written to ``h``/``index`` and cleared from ``todo``."""
+    if sel.size == 0:
+        return
+    v = dem.sample(lon[sel], lat[sel], method)
+    got = np.isfinite(v)
+    sel = sel[got]
+    h[sel] = v[got]
+    index[sel] = k
+    todo[sel] = False
 
 
 _WARNED: set[str] = set()

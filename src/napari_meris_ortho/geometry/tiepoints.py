@@ -12,13 +12,90 @@ Away from nadir the two agree to far below a metre of parallax.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-from typing import Protocol
+from collections.abc import Iterator, Mapping
+from dataclasses import dataclass, field, fields
+from typing import Any, Protocol
 
 import numpy as np
 
 from ..errors import GeometryError
 from .earth import MEAN_EARTH_RADIUS
+
+#: the tie-point quantities the location models need (section 2.2)
+_NEEDED = ("latitude", "longitude", "view_zenith", "view_azimuth", "dem_alt")
+
+
+@dataclass(frozen=True, eq=False, kw_only=True)
+class TiePoints(Mapping[str, np.ndarray]):
+    """The tie-point annotations of a product in physical units (Tie points ADS, Appendix A;
+    the same quantities for a ``.SEN3``'s ``tie_*.nc``), float64 arrays (n_tie_lines,
+    n_tie_cols) in the stored column order. The five the location models need are required;
+    the others are None where a product does not carry them. Also a read-only mapping
+    ``name -> array`` over the arrays present (``tp["latitude"]``, ``dict(tp)``)."""
+
+    latitude: np.ndarray
+    longitude: np.ndarray
+    #: terrain height of the tie point above the ellipsoid (m; bathymetry below 0 over sea)
+    dem_alt: np.ndarray
+    dem_rough: np.ndarray | None = None
+    #: AMORGOS/ground-segment altitude correction of the position (deg), eq. 6a'-6b'
+    lat_corr: np.ndarray | None = None
+    lon_corr: np.ndarray | None = None
+    sun_zenith: np.ndarray | None = None
+    sun_azimuth: np.ndarray | None = None
+    view_zenith: np.ndarray
+    view_azimuth: np.ndarray
+    zonal_wind: np.ndarray | None = None
+    merid_wind: np.ndarray | None = None
+    atm_pressure: np.ndarray | None = None
+    ozone: np.ndarray | None = None
+    rel_humidity: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        shape = None
+        for f in fields(self):
+            v = getattr(self, f.name)
+            if v is None:
+                continue
+            a = np.asarray(v, dtype=np.float64)
+            if shape is None:
+                shape = a.shape
+            elif a.shape != shape:
+                raise GeometryError(f"tie points: {f.name} of shape {a.shape}, "
+                                    f"latitude of shape {shape}")
+            object.__setattr__(self, f.name, a)
+
+    @classmethod
+    def from_mapping(cls, arrays: Mapping[str, Any]) -> TiePoints:
+        """From ``{name: array}`` (names as the fields); GeometryError naming what is missing
+        or unknown."""
+        if isinstance(arrays, TiePoints):
+            return arrays
+        known = {f.name for f in fields(cls)}
+        unknown = sorted(set(arrays) - known)
+        if unknown:
+            raise GeometryError(f"tie points: unknown quantities {', '.join(unknown)}")
+        missing = [name for name in _NEEDED if name not in arrays]
+        if missing:
+            raise GeometryError(f"tie points lack {', '.join(missing)}")
+        return cls(**arrays)
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """(n_tie_lines, n_tie_cols)."""
+        return (int(self.latitude.shape[0]), int(self.latitude.shape[1]))
+
+    def __getitem__(self, name: str) -> np.ndarray:
+        value = getattr(self, name, None) if name in _FIELD_NAMES else None
+        if value is None:
+            raise KeyError(name)
+        return value
+
+    def __iter__(self) -> Iterator[str]:
+        return (name for name in _FIELD_NAMES if getattr(self, name) is not None)
+
+    def __len__(self) -> int:
+        return sum(1 for _ in self)
 
 
 class ProductGeometry(Protocol):
@@ -28,7 +105,7 @@ class ProductGeometry(Protocol):
     @property
     def path(self) -> object: ...
     @property
-    def tie_points(self) -> dict[str, np.ndarray]: ...
+    def tie_points(self) -> TiePoints: ...
     @property
     def lines_per_tie_point(self) -> int: ...
     @property
@@ -39,7 +116,6 @@ class ProductGeometry(Protocol):
     def width(self) -> int: ...
 
 
-_NEEDED = ("latitude", "longitude", "view_zenith", "view_azimuth", "dem_alt")
 
 
 def unwrap_longitudes(lon: np.ndarray) -> np.ndarray:
@@ -171,3 +247,6 @@ def analytic_swath(height: int = 600, width: int = 2241, df: int = 64, dj: int =
     va = np.degrees(np.arctan2(-side * np.cos(t), side * np.sin(t))) % 360.0 + 0.0 * line
     dem = dem_amplitude_m * (0.5 + 0.5 * np.sin(line / 300.0) * np.cos(col / 400.0))
     return TiePointGrid(lat, lon, vz, va, dem, df, dj, height, width)
+
+
+_FIELD_NAMES = tuple(f.name for f in fields(TiePoints))

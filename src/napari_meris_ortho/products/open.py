@@ -15,9 +15,10 @@ from pathlib import Path
 from typing import Any
 
 from . import n1, sen3
+from .protocol import MerisProduct
 
 
-def read_product(path: str | os.PathLike[str]) -> Any:
+def read_product(path: str | os.PathLike[str]) -> MerisProduct:
     """Open a MERIS Level 1 product: N1 file or ``.SEN3`` directory (see module docstring)."""
     p = Path(path)
     if sen3.is_sen3(p) or p.suffix.upper() == ".SEN3":
@@ -32,5 +33,6 @@ def is_product_path(path: str | os.PathLike[str]) -> bool:
 
 
 def has_pixel_geolocation(product: Any) -> bool:
-    """True for products with a per-pixel geolocation (FRG/FSG N1, SEN3)."""
+    """True for products with a per-pixel geolocation (FRG/FSG N1, SEN3); False for anything
+    else (a foreign object)."""
     return bool(getattr(product, "has_pixel_geolocation", False))

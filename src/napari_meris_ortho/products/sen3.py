@@ -38,6 +38,7 @@ import os
 import re
 import threading
 import xml.etree.ElementTree as ET
+from collections.abc import Mapping
 from dataclasses import replace
 from functools import cached_property
 from pathlib import Path
@@ -48,6 +49,7 @@ import numpy as np
 from .. import flags as fl
 from .._atomic import atomic_dir
 from ..errors import OptionsError, Sen3FormatError
+from ..geometry.tiepoints import TiePoints
 from ..progress import ProgressCallback
 from .n1.format import (
     APPENDIX_A_BANDWIDTHS,
@@ -155,7 +157,7 @@ class MerisSen3Product:
     dsds: list = []
 
     def __init__(self, path: Path, product_type: str, width: int, height: int, df: int, dj: int,
-                 tie_points: dict[str, np.ndarray], line_times: np.ndarray,
+                 tie_points: Mapping[str, np.ndarray], line_times: np.ndarray,
                  scaling: ScalingFactors, wavelengths: tuple[float, ...],
                  bandwidths: tuple[float, ...], attrs: dict[str, Any]) -> None:
         self.path = path
@@ -165,7 +167,7 @@ class MerisSen3Product:
         self.height = height
         self.lines_per_tie_point = df
         self.samples_per_tie_point = dj
-        self.tie_points = tie_points
+        self.tie_points = TiePoints.from_mapping(tie_points)
         self.line_times = line_times
         self.scaling = scaling
         self.wavelengths = wavelengths
@@ -503,7 +505,7 @@ def default_sen3_name(resolution: str, start: np.datetime64, duration_s: float) 
 
 
 def write_sen3(path: str | os.PathLike[str], *, resolution: str,
-               tie_points: dict[str, np.ndarray], counts: Any, flags: np.ndarray,
+               tie_points: Mapping[str, np.ndarray], counts: Any, flags: np.ndarray,
                detector_index: np.ndarray, pixel_geolocation: dict[str, np.ndarray],
                first_line_time: np.datetime64, line_interval_s: float,
                scaling: ScalingFactors | None = None,
@@ -626,7 +628,7 @@ def _write_instrument(nc: _NcWriter, detector_index: np.ndarray, flags: np.ndarr
                flag_meanings=" ".join(n for n, _, _ in QUALITY_BITS))
 
 
-def _write_tie_points(nc: _NcWriter, tie_points: dict[str, np.ndarray]) -> None:
+def _write_tie_points(nc: _NcWriter, tie_points: Mapping[str, np.ndarray]) -> None:
     """``tie_geo_coordinates.nc``, ``tie_geometries.nc`` (azimuths on (-180, 180]) and
     ``tie_meteo.nc`` (ozone in kg m-2) from N1-named physical tie points."""
     tshape = np.shape(tie_points["latitude"])

@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING, Any
 
 from .._atomic import check_writable_dir
 from ..errors import OptionsError, OutputError
-from ..options import Elevation, MergeRule, OrthoOptions, Sampling, choices, parse
+from ..options import MergeRule, OrthoOptions, check_bands, choices, parse
 from ..progress import ProgressCallback
 from . import store as st
 
@@ -35,13 +35,12 @@ def synthesize(products: Sequence[str | os.PathLike[str]], out: str | os.PathLik
                algorithm: str | None = None, input: str | os.PathLike[str] | None = None,
                grid: OutputGrid | None = None, crs: Any = None,
                pixel_size: float | None = None,
-               dems: Sequence[DemSource | str | os.PathLike[str]] = (), elevation: str = "dem",
-               sampling: str = "nearest",
+               dems: Sequence[DemSource | str | os.PathLike[str]] = (),
+               options: OrthoOptions | None = None,
                bands: Sequence[int] | None = None, reject_bright: bool = False,
                tile: int = DEFAULT_TILE, progress: ProgressCallback | None = None,
                workers: int = 0, scheduler: str | None = None,
-               geolocation: str | None = None,
-               max_pixels: int | None = None) -> SynthesisResult:
+               max_pixels: int | None = None, **modes: Any) -> SynthesisResult:
     """Orthorectify ``products`` onto the synthesis grid and merge them (section 3.1 use cases
     1-2, Appendix C) into the synthesis store ``out``: one Icechunk commit.
 
@@ -56,18 +55,22 @@ def synthesize(products: Sequence[str | os.PathLike[str]], out: str | os.PathLik
     worker processes; ``scheduler``: address of an existing dask scheduler (the store path and
     the products must then be on storage every worker sees: absolute paths). ``progress(done,
     total)`` is called after each task; an exception raised by it cancels the run (nothing is
-    committed). ``geolocation``: the location model of ``orthorectify`` (None: the tie points;
-    "pixel": the products' per-pixel geolocation, a product without one fails).
+    committed). ``options`` (``OrthoOptions``) and/or its fields as keywords (``modes``:
+    ``elevation``, ``sampling``, ``geolocation``, ``parallax``, ``tolerance``, ``method``; as
+    ``orthorectify``, checked by ``OrthoOptions.of``): how each product is orthorectified
+    (geolocation "pixel": the products' per-pixel geolocation, a product without one fails);
+    the bands are the synthesis's (``bands``), not the options'.
     ``max_pixels``: largest grid of a new synthesis (default: what the free space of the
     output's file system holds, uncompressed); a larger one is an OptionsError.
     """
     from . import run
 
     out_dir = Path(out)
-    if geolocation is not None:
-        OrthoOptions.parse(geolocation=geolocation, elevation=elevation, n_dems=len(dems))
+    if "bands" in modes:
+        raise OptionsError("give the bands of the synthesis as bands=, not in the options")
+    opts = OrthoOptions.of(options, n_dems=len(dems), **modes)
     source_path = _check_options(products, out_dir, algorithm, input, grid, crs, pixel_size,
-                                 bands, tile, dems, elevation, sampling, workers, scheduler)
+                                 bands, tile, dems, workers, scheduler)
     if grid is not None and source_path is None:
         check_new_grid_size(grid, len(bands or ALL_BANDS), out_dir, max_pixels)
     paths = [str(Path(p).absolute()) if scheduler else str(p) for p in products]
@@ -83,9 +86,8 @@ def synthesize(products: Sequence[str | os.PathLike[str]], out: str | os.PathLik
                 target = _target(out_dir, source_path, algorithm)
                 result = run.Synthesis(
                     target, paths, algorithm=algorithm, grid=grid, crs=crs,
-                    pixel_size=pixel_size, dems=[str(d) for d in dems], elevation=elevation,
-                    sampling=sampling, bands=bands, reject_bright=reject_bright, tile=tile,
-                    progress=progress, geolocation=geolocation,
+                    pixel_size=pixel_size, dems=[str(d) for d in dems], options=opts,
+                    bands=bands, reject_bright=reject_bright, tile=tile, progress=progress,
                     max_pixels=max_pixels).run(runner)
                 if created and result.snapshot is None:  # nothing merged: no store
                     shutil.rmtree(out_dir, ignore_errors=True)
@@ -154,13 +156,9 @@ def _copy_store(source: Path, out_dir: Path) -> None:
         raise OutputError(f"{out_dir}: cannot copy the input synthesis ({exc})") from exc
 
 
-def _check_ortho_options(dems: Sequence[Any], elevation: str, sampling: str) -> None:
-    """Refuse bad orthorectification options before any product is read (exit code 2, not a
+def _check_dems(dems: Sequence[Any]) -> None:
+    """Open the DEM entries once before any product is read (a bad one is exit code 2, not a
     failure of every product)."""
-    parse(Elevation, elevation)
-    parse(Sampling, sampling)
-    if dems and elevation != "dem":
-        raise OptionsError(f"DEMs given with elevation {elevation!r}: DEMs need elevation 'dem'")
     if dems:
         from ..dem.stack import DemStack
 
@@ -170,8 +168,7 @@ def _check_ortho_options(dems: Sequence[Any], elevation: str, sampling: str) -> 
 def _check_options(products: Sequence[Any], out_dir: Path, algorithm: str | None,
                    input: Any, grid: OutputGrid | None, crs: Any, pixel_size: float | None,
                    bands: Sequence[int] | None, tile: int, dems: Sequence[Any],
-                   elevation: str, sampling: str, workers: int, scheduler: str | None
-                   ) -> Path | None:
+                   workers: int, scheduler: str | None) -> Path | None:
     """MERSYN's parameter consistency checks (Appendix C), before any work."""
     if algorithm is not None:
         parse(MergeRule, algorithm)
@@ -185,16 +182,14 @@ def _check_options(products: Sequence[Any], out_dir: Path, algorithm: str | None
         raise OptionsError(f"{out_dir}: with a dask scheduler the store must be on storage "
                            "every worker sees: give an absolute path")
     if bands is not None:
-        bad = [b for b in bands if not 1 <= int(b) <= 15]
-        if bad or len(bands) == 0:
-            raise OptionsError(f"bands {list(bands)}: MERIS bands are 1..15")
+        check_bands(bands)
     if pixel_size is not None and not pixel_size > 0:
         raise OptionsError(f"pixel size {pixel_size}: must be positive")
     if crs is not None:
         from ..geometry.grid import parse_crs
 
         parse_crs(crs)
-    _check_ortho_options(dems, elevation, sampling)
+    _check_dems(dems)
     if input is None:
         return None
     if grid is not None or crs is not None or pixel_size is not None or bands is not None:

@@ -15,13 +15,14 @@ import uuid
 import warnings
 from collections import OrderedDict
 from collections.abc import Callable, Iterator, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
 
 from ..engine.synthesis import NDVI_NIR_BAND, NDVI_RED_BAND, TileState
 from ..errors import DemError, MerisOrthoError, OptionsError, OutputError
+from ..options import OrthoOptions
 from ..progress import ProgressCallback
 from . import store as st
 from .reading import SynthesisStore
@@ -39,7 +40,6 @@ from .tiling import (
     footprint_window,
     grid_from_dict,
     grid_to_dict,
-    new_grid,
     terrain_margin_px,
     tile_of,
     tiles,
@@ -179,19 +179,22 @@ class Spec:
     bands: tuple[int, ...]
     algorithm: str
     dems: tuple[str, ...]
-    elevation: str
-    sampling: str
+    #: the options of ``orthorectify`` (its bands: those the merge rule needs)
+    options: OrthoOptions
     reject_bright: bool
     tile: int
     names: tuple[str, ...]
     overviews: tuple[int, ...]
-    #: location model of orthorectify: None (tie points) or "pixel" (per-pixel geolocation)
-    geolocation: str | None = None
 
     @property
     def needed(self) -> tuple[int, ...]:
-        ndvi = {NDVI_RED_BAND, NDVI_NIR_BAND} if self.algorithm == "max-ndvi" else set()
-        return tuple(sorted(set(self.bands) | ndvi))
+        return _needed(self.bands, self.algorithm)
+
+
+def _needed(bands: Sequence[int], algorithm: str) -> tuple[int, ...]:
+    """The bands a product is sampled in: the synthesis's and the NDVI's (max-NDVI rule)."""
+    ndvi = {NDVI_RED_BAND, NDVI_NIR_BAND} if algorithm == "max-ndvi" else set()
+    return tuple(sorted(set(bands) | ndvi))
 
 
 @dataclass
@@ -245,19 +248,14 @@ def _grid(spec: Spec) -> Any:
 def _segment(spec: Spec, path: str, extent: Window) -> Any:
     """The product's ``ortho.Segment`` (tie points, segment boundary, DEMs read under its
     whole ``extent`` of the grid), built once per worker process and product."""
-    from ..options import OrthoOptions
     from ..ortho import open_segment
 
     def make() -> Any:
-        opts = OrthoOptions.parse(elevation=spec.elevation, sampling=spec.sampling,
-                                  geolocation=spec.geolocation, bands=spec.needed,
-                                  n_dems=len(spec.dems))
-        segment = open_segment(_product(path), list(spec.dems), opts)
+        segment = open_segment(_product(path), list(spec.dems), spec.options)
         segment.prepare_dems(_grid(spec).window(*extent))
         return segment
 
-    key = (path, extent, spec.grid, spec.dems, spec.elevation, spec.sampling, spec.needed,
-           spec.geolocation)
+    key = (path, extent, spec.grid, spec.dems, spec.options)
     return _cached(_SEGMENTS, key, make)
 
 
@@ -367,10 +365,9 @@ class Synthesis:
     """Plan, run and commit one ``synthesize`` call."""
 
     def __init__(self, target: Target, paths: list[str], *, algorithm: str | None, grid: Any,
-                 crs: Any, pixel_size: float | None, dems: list[str], elevation: str,
-                 sampling: str, bands: Sequence[int] | None, reject_bright: bool, tile: int,
-                 progress: ProgressCallback | None, geolocation: str | None = None,
-                 max_pixels: int | None = None) -> None:
+                 crs: Any, pixel_size: float | None, dems: list[str], options: OrthoOptions,
+                 bands: Sequence[int] | None, reject_bright: bool, tile: int,
+                 progress: ProgressCallback | None, max_pixels: int | None = None) -> None:
         self.target = target
         self.paths = paths
         old = target.synthesis
@@ -379,9 +376,9 @@ class Synthesis:
         self.tile = old.tile if old else int(tile)
         self.grid = old.grid if old else grid
         self.crs, self.pixel_size = crs, pixel_size
-        self.dems, self.elevation, self.sampling = dems, elevation, sampling
+        self.dems = dems
+        self.options = options
         self.reject_bright = reject_bright
-        self.geolocation = geolocation
         self.max_pixels = max_pixels
         self.progress = progress
         self.table: list[dict[str, Any]] = old.products if old else []
@@ -419,7 +416,9 @@ class Synthesis:
         to merge."""
         todo = sorted((i for i in items if i.product is not None), key=lambda i: i.key)
         if self.grid is None and todo:
-            self.grid = new_grid(todo[0].product, self.crs, self.pixel_size)
+            from ..ortho import product_grid
+
+            self.grid = product_grid(todo[0].product, self.crs or "EPSG:4326", self.pixel_size)
             check_new_grid_size(self.grid, len(self.bands), self.target.path, self.max_pixels)
         for k, item in enumerate(todo):
             item.report.index = len(self.table) + k + 1
@@ -488,10 +487,12 @@ class Synthesis:
 
     def _spec(self) -> Spec:
         shape = (self.grid.height, self.grid.width)
+        needed = _needed(self.bands, self.algorithm)
         return Spec(tuple(grid_to_dict(self.grid).items()), self.bands, self.algorithm,
-                    tuple(self.dems), self.elevation, self.sampling, self.reject_bright,
+                    tuple(self.dems), replace(self.options, bands=needed, diagnostics=False),
+                    self.reject_bright,
                     self.tile, tuple(st.layer_names(self.bands, self.algorithm)),
-                    tuple(st.overview_factors(shape[1], shape[0], self.tile)), self.geolocation)
+                    tuple(st.overview_factors(shape[1], shape[0], self.tile)))
 
     def _session(self, spec: Spec) -> tuple[Any, Callable[..., str]]:
         """A writable session without uncommitted changes (forks need one) and the function

@@ -92,18 +92,6 @@ def tile_of(piece: tuple[int, int, int, int], tile: int, shape: tuple[int, int]
     return r, min(r + tile, shape[0]), c, min(c + tile, shape[1])
 
 
-def new_grid(product: ProductGeometry, crs: Any, pixel_size: float | None) -> OutputGrid:
-    """Grid of a new synthesis: the smallest rectangle holding the product's segment
-    boundary (section 3.1, fig. 19), nominal FR/RR pixel size unless ``pixel_size``."""
-    from ..engine.boundary import segment_boundary
-    from ..geometry.grid import FR_PIXEL_SIZE_M, RR_PIXEL_SIZE_M, default_grid
-
-    boundary = segment_boundary(product.tie_points["latitude"], product.tie_points["longitude"])
-    resolution = FR_PIXEL_SIZE_M if product.samples_per_tie_point >= 64 else RR_PIXEL_SIZE_M
-    return default_grid(boundary, resolution, crs if crs is not None else "EPSG:4326",
-                        pixel_size=pixel_size)
-
-
 def check_new_grid_size(grid: OutputGrid, n_bands: int, out_dir: Path,
                      max_pixels: int | None) -> None:
     """A new synthesis grid must fit the free space of the output's file system (its layers

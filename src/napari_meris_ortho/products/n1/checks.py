@@ -12,6 +12,7 @@ Every error names the field and the value.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from pathlib import Path
 
 import numpy as np
@@ -113,7 +114,7 @@ def check_scaling(path: Path, scaling: ScalingFactors) -> None:
             raise N1FormatError(path, f"Scaling Factor GADS {name}={value:g} is not positive")
 
 
-def check_tie_points(path: Path, tie_points: dict[str, np.ndarray], days: np.ndarray) -> None:
+def check_tie_points(path: Path, tie_points: Mapping[str, np.ndarray], days: np.ndarray) -> None:
     """Tie points within their physical ranges; record times within 1990..2100."""
     for name, (low, high, closed) in TIE_POINT_RANGES.items():
         values = tie_points[name]

@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 
 from ...errors import N1FormatError
+from ...geometry.tiepoints import TiePoints
 from .checks import (
     check_counts,
     check_dimensions,
@@ -201,10 +202,10 @@ class MerisL1bProduct:
         self.samples_per_tie_point = samples_per_tie_point
         self.scaling = scaling
         self._tie_records = tie_records
-        self.tie_points: dict[str, np.ndarray] = {
+        self.tie_points = TiePoints(**{
             f.name: tie_records[f.name].astype(np.float64) * scaling.factor(f)
             for f in TIE_POINT_FIELDS
-        }
+        })
         self.tie_point_times = mjd2000_to_seconds(
             tie_records["days"], tie_records["seconds"], tie_records["microseconds"]
         )

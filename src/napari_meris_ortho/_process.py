@@ -1,0 +1,134 @@
+"""Process tuning for a process this package owns (the ``meris-ortho`` command and the
+background compiler of ``warmup``), in one place, with one switch.
+
+Set ``MERIS_ORTHO_NO_TUNING=1`` to turn all of it off (the process then runs as any Python
+process; only speed changes). A library user's process is never tuned: only ``cli.console_main``
+and ``python -m napari_meris_ortho.warmup --late`` call ``tune_process``.
+
+What it does, each measured on a fr-alps map (README, "Speed"):
+
+- glibc's malloc keeps the memory the run frees (``mallopt``): band-sized arrays come back from
+  the heap instead of fresh, kernel-zeroed ``mmap`` pages (3.9 -> 3.6 s);
+- numpy arrays on ordinary pages (``NUMPY_MADVISE_HUGEPAGE=0``, read by numpy when first
+  imported: transparent huge pages cost 0.4-0.6 s of compaction and zeroing);
+- one OpenBLAS thread (no linear algebra here: its server threads spin at start-up);
+- Python's cyclic garbage collector run rarely, and not at all on the way out;
+- numba's CPU target started without importing scipy.linalg (0.13-0.2 s).
+
+numba offers no public interface for two things this package needs; both private hooks are
+here and only here (``numba_cache_index``, ``_refresh_cpu_target``), and ``check_numba_hooks``
+(run by the tests) fails loudly when a numba release changes them.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import ctypes
+import gc
+import os
+import sys
+from collections.abc import Iterator
+from typing import Any
+
+#: the one switch: any non-empty value turns the tuning off
+SWITCH = "MERIS_ORTHO_NO_TUNING"
+#: glibc ``mallopt`` parameters
+_M_TRIM_THRESHOLD, _M_MMAP_THRESHOLD = -1, -3
+
+
+def enabled() -> bool:
+    """False when ``MERIS_ORTHO_NO_TUNING`` is set."""
+    return not os.environ.get(SWITCH)
+
+
+def tune_process() -> None:
+    """Before numpy is imported: ordinary pages for numpy arrays, one OpenBLAS thread (a
+    user's own settings win), glibc keeping freed memory (module docstring)."""
+    if not enabled():
+        return
+    os.environ.setdefault("NUMPY_MADVISE_HUGEPAGE", "0")
+    os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+    _keep_freed_memory()
+
+
+def _keep_freed_memory() -> None:
+    """glibc's malloc: arrays up to 1 GiB from the heap, no trimming; no-op off glibc."""
+    with contextlib.suppress(OSError, AttributeError, ValueError):
+        if not (os.confstr("CS_GNU_LIBC_VERSION") or "").startswith("glibc"):
+            return
+        libc = ctypes.CDLL(None)
+        libc.mallopt(_M_MMAP_THRESHOLD, 2 ** 30)
+        libc.mallopt(_M_TRIM_THRESHOLD, 2 ** 31 - 1)
+
+
+@contextlib.contextmanager
+def few_collections(last: bool) -> Iterator[None]:
+    """Python's cyclic garbage collector run rarely (imports and numba's cache loading make
+    hundreds of thousands of objects: 0.3 s of collections in a 3.5 s map); restored after,
+    or, when the process ends with this run (``last``), turned off: the collections that
+    restoring and leaving would start walk every object the run made for nothing."""
+    if not enabled():
+        yield
+        return
+    previous = gc.get_threshold()
+    gc.set_threshold(200_000, 50, 100)
+    try:
+        yield
+    finally:
+        if last:  # Python collects at exit even when disabled: frozen objects it skips
+            gc.disable()
+            gc.freeze()
+        else:
+            gc.set_threshold(*previous)
+
+
+def start_numba_without_blas() -> None:
+    """Start numba's CPU target without importing scipy.linalg. numba's first compilation or
+    cache load imports its array implementations, and one of them imports scipy.linalg only to
+    learn whether BLAS is there (without it, compiled ``np.correlate`` / ``np.convolve`` use a
+    plain loop). No kernel of this package calls BLAS, and a kernel with ``np.dot`` still gets
+    it: numba imports scipy.linalg again when it compiles one. Before the process's first
+    kernel and before it starts other threads; no-op once scipy.linalg or numba's array
+    implementations are imported, or with the tuning off."""
+    if not enabled() or "scipy.linalg" in sys.modules or "numba.np.arraymath" in sys.modules:
+        return
+    sys.modules["scipy.linalg"] = None  # type: ignore[assignment]  # import raises ImportError
+    try:
+        _refresh_cpu_target()
+    finally:
+        del sys.modules["scipy.linalg"]
+
+
+# --------------------------------------------------------------------------- numba's privates
+
+
+def _refresh_cpu_target() -> None:
+    """numba private: load the CPU target's implementations now (``refresh``)."""
+    from numba.core.registry import cpu_target
+
+    cpu_target.target_context.refresh()
+
+
+def numba_cache_index(dispatcher: Any) -> str | None:
+    """numba private: the path of a ``cache=True`` kernel's cache index file (``.nbi``; it
+    exists once the kernel was compiled for this installation), None when numba does not say."""
+    cache_file = getattr(getattr(dispatcher, "_cache", None), "_cache_file", None)
+    index = getattr(cache_file, "_index_path", None)  # numba's IndexDataCacheFile
+    return None if index is None else str(index)
+
+
+def check_numba_hooks(dispatcher: Any) -> None:
+    """RuntimeError naming what changed when numba's private interfaces used here are gone
+    (``dispatcher``: a ``cache=True`` kernel)."""
+    import numba
+    from numba.core.registry import cpu_target
+
+    missing = []
+    if not callable(getattr(getattr(cpu_target, "target_context", None), "refresh", None)):
+        missing.append("numba.core.registry.cpu_target.target_context.refresh()")
+    index = numba_cache_index(dispatcher)
+    if index is None or not index.endswith(".nbi"):
+        missing.append("Dispatcher._cache._cache_file._index_path (the .nbi cache index)")
+    if missing:
+        raise RuntimeError(f"numba {numba.__version__} changed private interfaces that "
+                           f"napari_meris_ortho._process uses: {', '.join(missing)}")

@@ -1,0 +1,241 @@
+"""The result of the antecedent search and the bands sampled there.
+
+``Antecedents`` (what ``precompute`` returns) holds the antecedent (line, col) of every output
+point; ``counts``, ``radiance`` and ``flags`` sample the product there (section 3.1 "Retrieve
+the antecedent"; nearest: one fused gather of all bands), ``result`` gives the ``OrthoResult``
+that ``orthorectify`` returns.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import pyproj
+from affine import Affine
+
+from ..geometry.grid import OutputGrid
+from ..options import Sampling
+from ..products.protocol import MerisProduct
+from ..progress import ProgressCallback
+from .stats import RunStats
+
+#: unit of the radiances of the output bands (counts x sf_rad, Scaling Factor GADS)
+RADIANCE_UNITS = "W m-2 sr-1 um-1"
+
+
+@dataclass
+class OrthoResult:
+    """Output of ``orthorectify``: bands (radiance float32, 0 = background) on ``grid``.
+
+    ``valid``: points whose antecedent is inside the product; ``flags``: L1b flags (nearest);
+    ``diagnostics`` (on request): line, col, elevation, elevation_source, iterations,
+    shift_east_m, shift_north_m; ``stats``: what the Appendix B log prints.
+    """
+
+    bands: dict[int, np.ndarray]
+    grid: OutputGrid
+    valid: np.ndarray
+    flags: np.ndarray
+    stats: RunStats
+    diagnostics: dict[str, np.ndarray] = field(default_factory=dict)
+
+    @property
+    def crs(self) -> pyproj.CRS:
+        return self.grid.crs
+
+    @property
+    def transform(self) -> Affine:
+        return self.grid.transform
+
+    def band_metadata(self) -> list[dict[str, Any]]:
+        """Per output band (sorted band numbers), ``band_metadata``; the band values are
+        already radiances."""
+        return band_metadata(self.stats, list(self.bands))
+
+
+def band_metadata(stats: RunStats, bands: Sequence[int]) -> list[dict[str, Any]]:
+    """Per band (sorted band numbers): MERIS band number, central wavelength and bandwidth
+    (nm), radiance unit and ``sf_rad``, the source product's counts-to-radiance factor
+    (Scaling Factor GADS, Appendix A)."""
+    out = []
+    for b in sorted(bands):
+        meta: dict[str, Any] = {"meris_band": b, "units": RADIANCE_UNITS}
+        for key, name in (("wavelengths", "wavelength_nm"), ("bandwidths", "bandwidth_nm"),
+                          ("scale_factors", "sf_rad")):
+            value = getattr(stats, key).get(b)
+            if value is not None:
+                meta[name] = value
+        out.append(meta)
+    return out
+
+
+
+def antecedent_line_window(line: np.ndarray, col: np.ndarray, n_lines: int, n_cols: int,
+                           sampling: str = "nearest") -> tuple[int, int]:
+    """Product lines ``[first, stop)`` holding every pixel the resampling of the antecedents
+    inside the product reads (section 3.1 "Retrieve the antecedent"): min..max antecedent line
+    plus the kernel margin (nearest/bilinear: 0 and +1 line, bicubic: -1 and +2); (0, 0) when
+    no antecedent is inside."""
+    from ..engine.resample import inside_line_range
+
+    span = inside_line_range(line, col, n_lines, n_cols)
+    if span is None:
+        return 0, 0
+    before, after = Sampling(sampling).margin
+    first = int(math.floor(span[0])) - before
+    stop = int(math.floor(span[1])) + 1 + after
+    return max(first, 0), min(stop, n_lines)
+
+
+
+@dataclass
+class Antecedents:
+    """Antecedent (line, col) of every output point of ``grid`` (float32, NaN: background)
+    and the product lines ``window`` = [first, stop) they read; ``counts``, ``radiance`` and
+    ``flags`` sample the product there (nearest: one fused gather of all bands)."""
+
+    prod: MerisProduct
+    grid: OutputGrid
+    line: np.ndarray
+    col: np.ndarray
+    iterations: np.ndarray
+    sampling: Sampling
+    bands: list[int]
+    stats: RunStats
+    diagnostics: dict[str, np.ndarray]
+    progress: ProgressCallback | None = None
+    t_start: float = field(default_factory=time.perf_counter)
+    _index: np.ndarray | None = field(default=None, repr=False)
+
+    @property
+    def valid(self) -> np.ndarray:
+        """Points whose antecedent is inside the product."""
+        return self.iterations >= 0
+
+    @property
+    def window(self) -> tuple[int, int]:
+        first, stop = self.stats.product_lines_read
+        return int(first), int(stop)
+
+    def _rows(self) -> slice:
+        first, stop = self.window
+        return slice(first, stop)
+
+    def _nearest_index(self) -> np.ndarray:
+        """Flat pixel index (relative to the window) of each point's nearest pixel, once."""
+        from ..engine.resample import nearest_pixel
+
+        if self._index is None:
+            first, stop = self.window
+            self._index = nearest_pixel(self.line, self.col, stop - first,
+                                        int(self.prod.width), line_offset=first)
+        return self._index
+
+    def _timed(self, key: str, t0: float) -> None:
+        sec = self.stats.seconds
+        sec[key] += time.perf_counter() - t0
+
+    def _gather(self, images: Sequence[Any], dtype: Any, out: np.ndarray,
+                scales: np.ndarray | None = None) -> None:
+        """The nearest pixel of every point from ``images`` (their window, as ``dtype``) into
+        ``out`` (images, points): as they are (``gather``), or times ``scales`` as float32
+        (``gather_scaled``)."""
+        from ..engine.resample import gather, gather_scaled
+
+        stack = self._stack(images, dtype)
+        index = self._nearest_index()
+        t0 = time.perf_counter()
+        if scales is None:
+            gather(stack, index, out)
+        else:
+            gather_scaled(stack, index, scales, out)
+        self._timed("resample", t0)
+
+    def _stack(self, images: Sequence[Any], dtype: Any) -> np.ndarray:
+        """(n, window lines, W) native copy of the window of each image (memmaps read here)."""
+        t0 = time.perf_counter()
+        rows = self._rows()
+        out = np.empty((len(images), rows.stop - rows.start, int(self.prod.width)), dtype)
+        for k, im in enumerate(images):
+            out[k] = im[rows]
+        self._timed("read_bands", t0)
+        return out
+
+    def _interpolated(self, bands: Sequence[int]) -> list[np.ndarray]:
+        """Bilinear/bicubic counts (float32) of ``bands`` at the antecedents."""
+        from ..engine.resample import resample_bands
+
+        stack = self._stack([self.prod.counts(b) for b in bands], np.uint16)
+        t0 = time.perf_counter()
+        out = resample_bands(list(stack), self.line.astype(np.float64) - self.window[0],
+                             self.col, self.sampling.value)
+        self._timed("resample", t0)
+        return out
+
+    def counts(self, bands: Sequence[int] | None = None) -> np.ndarray:
+        """uint16 counts (len(bands), rows, cols) at the antecedents, 0 = background; nearest:
+        the product's counts; bilinear/bicubic: interpolated counts rounded half up."""
+        bands = self.bands if bands is None else [int(b) for b in bands]
+        nr, nc = self.grid.shape
+        first, stop = self.window
+        if stop <= first or not bands:
+            return np.zeros((len(bands), nr, nc), np.uint16)
+        out = np.empty((len(bands), nr * nc), np.uint16)  # every point is written below
+        if self.sampling is Sampling.NEAREST:
+            self._gather([self.prod.counts(b) for b in bands], np.uint16, out)
+            return out.reshape(len(bands), nr, nc)
+        for k, v in enumerate(self._interpolated(bands)):
+            out[k] = np.clip(np.floor(v.reshape(-1) + np.float32(0.5)), 0, 65535)
+        return out.reshape(len(bands), nr, nc)
+
+    def radiance(self, bands: Sequence[int] | None = None) -> dict[int, np.ndarray]:
+        """float32 radiances (counts x sf_rad, Scaling Factor GADS) of ``bands``, 0 = background;
+        bilinear/bicubic: the interpolated counts, not rounded."""
+        bands = self.bands if bands is None else [int(b) for b in bands]
+        sf = self.prod.scaling.radiance
+        nr, nc = self.grid.shape
+        if self.window[1] <= self.window[0]:
+            return {b: np.zeros((nr, nc), np.float32) for b in bands}
+        if self.sampling is Sampling.NEAREST:  # counts x sf_rad in one pass, no uint16 copy
+            values = np.empty((len(bands), nr * nc), np.float32)
+            self._gather([self.prod.counts(b) for b in bands], np.uint16, values,
+                         scales=np.array([sf[b - 1] for b in bands]))
+            return {b: values[k].reshape(nr, nc) for k, b in enumerate(bands)}
+        out = {}
+        for b, v in zip(bands, self._interpolated(bands), strict=True):
+            v *= np.float32(sf[b - 1])
+            out[b] = v.reshape(nr, nc)
+        return out
+
+    def flags(self) -> np.ndarray:
+        """L1b flags (uint8) of the nearest pixel, 0 = background (any sampling)."""
+        nr, nc = self.grid.shape
+        out = np.zeros((1, nr * nc), np.uint8)
+        first, stop = self.window
+        if stop > first:
+            self._gather([self.prod.flags], np.uint8, out)
+        return out.reshape(nr, nc)
+
+    def finish(self) -> RunStats:
+        """Statistics with the engine and total times up to now (Appendix B log)."""
+        sec = self.stats.seconds
+        sec["engine"] = sec["prediction_correction"] + sec["resample"]
+        sec["total"] = time.perf_counter() - self.t_start
+        return self.stats
+
+    def result(self) -> OrthoResult:
+        """All bands and flags as an ``OrthoResult`` (what ``orthorectify`` returns)."""
+        radiance = self.radiance()
+        flags = self.flags()
+        if self.progress is not None:
+            total = self.grid.height + len(self.bands)
+            self.progress(total, total)
+        return OrthoResult(radiance, self.grid, self.valid, flags, self.finish(),
+                           self.diagnostics)
+
+

@@ -1,0 +1,529 @@
+"""Orthorectified mapping of a MERIS L1b product (MERSYN use case 3, handbook sections 3.1-3.4).
+
+``orthorectify`` is the only glue between the readers (``products.n1``, ``dem``) and the engine:
+segment boundary and output grid, the heights of the output points (none / tie points / DEMs
+tried in order), the prediction/correction of every antecedent, then the resampling of the
+bands and flags. Everything is checked before any heavy work starts.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import os
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from ..engine import pixelgeo, predcorr
+from ..engine.boundary import RowSpans, row_spans, segment_boundary
+from ..errors import DemError, OptionsError
+from ..geometry.grid import (
+    OutputGrid,
+    check_grid_size,
+    default_grid,
+    parse_crs,
+    terrain_margin_px,
+)
+from ..geometry.tiepoints import TiePointGrid
+from ..options import Elevation, Geolocation, OrthoOptions, SearchMethod
+from ..products.protocol import MerisProduct
+from ..progress import ProgressCallback
+from .antecedents import Antecedents, OrthoResult, antecedent_line_window
+from .heights import dem_heights
+from .stats import SOURCE_NONE, SOURCE_TIEPOINTS, TIMINGS, RunStats, per_band, source_counts
+
+if TYPE_CHECKING:
+    from ..dem.base import DemSource
+    from ..dem.stack import DemStack
+
+log = logging.getLogger(__name__)
+_BLOCK_ROWS = 256
+#: the product argument of ``orthorectify``/``precompute``: a path or an opened product
+ProductLike = str | os.PathLike[str] | MerisProduct
+
+
+def _open_product(product: str | os.PathLike[str] | MerisProduct) -> MerisProduct:
+    from ..products.open import read_product
+
+    if isinstance(product, (str, os.PathLike)):
+        return read_product(product)
+    if not hasattr(product, "tie_points"):
+        raise OptionsError(f"not a MERIS L1b product: {product!r}")
+    return product
+
+
+def _open_dems(dems: Sequence[DemSource | str | os.PathLike[str]]) -> DemStack | None:
+    if not dems:
+        return None
+    from ..dem.stack import DemStack
+
+    try:
+        return DemStack(list(dems))
+    except DemError:
+        raise
+    except (OSError, ValueError) as exc:
+        raise DemError(f"cannot open DEM: {exc}") from exc
+
+
+def _check_dem_coverage(stack: Any, boundary: Any) -> None:
+    """A tile directory none of whose tiles meets the footprint is a DemError (a wrong
+    directory, not a DEM gap): DEM entries with ``check_covers`` are asked."""
+    pad = 0.2  # degrees: terrain seen beyond the zero-height boundary
+    bounds = (float(np.nanmin(boundary.lon)) - pad, float(np.nanmin(boundary.lat)) - pad,
+              float(np.nanmax(boundary.lon)) + pad, float(np.nanmax(boundary.lat)) + pad)
+    for src in stack.sources:
+        check = getattr(src, "check_covers", None)
+        if check is not None:
+            check(bounds)
+
+
+def _margin_px(tp: TiePointGrid, grid: OutputGrid, terrain: bool = True,
+               pixel_m: float = 260.0) -> int:
+    """Output pixels beyond the zero-height boundary that an antecedent inside the product
+    may reach: the outer half product pixel (the boundary joins the border tie points, which
+    sit on pixel centres; ``pixel_m``: the product's column spacing, taken twice for the
+    oblique pixels) plus, with ``terrain``, the parallax of the highest terrain."""
+    lat = float(np.nanmax(np.abs(tp.latitude)))
+    half_pixel = terrain_margin_px(grid, 45.0, lat, max_terrain_m=pixel_m)  # tan 45 deg = 1
+    if not terrain:
+        return half_pixel
+    return half_pixel + terrain_margin_px(grid, float(np.nanmax(tp.view_zenith)), lat)
+
+
+def lonlat_bounds(grid: OutputGrid, n: int = 65) -> tuple[float, float, float, float] | None:
+    """WGS84 (lon_min, lat_min, lon_max, lat_max) of the grid's outline (``n`` points a side,
+    longitudes unwrapped around the first corner); None when the outline circles a pole."""
+    import pyproj
+
+    h, w = grid.shape
+    t = np.linspace(0.0, 1.0, n)
+    rows = np.concatenate([t * h, np.full(n, h), (1 - t) * h, np.zeros(n)]) - 0.5
+    cols = np.concatenate([np.zeros(n), t * w, np.full(n, w), (1 - t) * w]) - 0.5
+    x, y = grid.xy(rows, cols)
+    tr = pyproj.Transformer.from_crs(grid.crs, "EPSG:4326", always_xy=True)
+    lon, lat = (np.asarray(v, np.float64) for v in tr.transform(x, y, errcheck=False))
+    ok = np.isfinite(lon) & np.isfinite(lat)
+    if not ok.any():
+        return None
+    lon, lat = lon[ok], lat[ok]
+    lon = lon[0] + (lon - lon[0] + 180.0) % 360.0 - 180.0
+    if np.ptp(lon) > 300.0:
+        return None
+    return float(lon.min()), float(lat.min()), float(lon.max()), float(lat.max())
+
+
+def orthorectify(product: ProductLike, grid: OutputGrid | None = None,
+                 dems: Sequence[DemSource | str | os.PathLike[str]] = (), *,
+                 options: OrthoOptions | None = None,
+                 progress: ProgressCallback | None = None, crs: Any = "EPSG:4326",
+                 pixel_size: float | None = None, allow_empty: bool = False,
+                 max_pixels: int | None = None, **modes: Any) -> OrthoResult:
+    """Map a MERIS L1b product onto ``grid`` with terrain correction (sections 3.1-3.4).
+
+    ``product``: path or opened product (``read_product``); ``grid``: ``OutputGrid`` (default:
+    :func:`product_grid`, the smallest rectangle holding the segment boundary in ``crs``,
+    ``pixel_size`` in CRS units or FR 260 m / RR 1040 m pixels); ``dems``: DEM entries or
+    sources, tried in order. The options: ``options`` (an ``OrthoOptions``) and/or its fields
+    as keywords (``modes``, which replace those of ``options``; all checked by
+    ``OrthoOptions.of``):
+    ``elevation``: "none" (MERSYN ``-ort NO``), "tiepoints" (dem_alt at the antecedent) or "dem"
+    (the DEMs at the output point, tried in order, then the tie points; without DEMs: the tie
+    points); ``sampling``: "nearest", "bilinear", "bicubic"; ``bands`` (default all 15);
+    ``tolerance``: prediction/correction tolerance in product pixels; ``parallax``:
+    "handbook" (sphere) or "ellipsoid" (WGS84 radii); ``geolocation``: "bilinear" lon/lat
+    (eq. 4a-4b) or "ecef" (default: bilinear with the handbook parallax, ecef with the
+    ellipsoid one) tie points, or "pixel": the per-pixel terrain-corrected geolocation of
+    MER_FRG_1P/MER_FSG_1P and .SEN3 products (``engine.pixelgeo``; no parallax, no DEM, the
+    elevation is ignored); ``method``: "primary" (primary grid + Newton) or "handbook" (MERSYN's
+    facet search in the loop); ``diagnostics``: the per-point layers of ``OrthoResult``.
+    ``allow_empty``: a ``grid`` holding no pixel centre inside the
+    zero-height segment boundary gives an all-background result instead of an OptionsError
+    (synthesis tiles: terrain points may still lie there, section 3.1); ``max_pixels``: largest
+    output grid (default: what fits in 80 % of the available memory at
+    :func:`bytes_per_output_pixel`; a larger grid is an OptionsError before any allocation).
+    Equals ``precompute(...).result()``.
+    """
+    return precompute(product, grid, dems, options=options, progress=progress, crs=crs,
+                      pixel_size=pixel_size, allow_empty=allow_empty, max_pixels=max_pixels,
+                      **modes).result()
+
+
+def precompute(product: ProductLike, grid: OutputGrid | None = None,
+               dems: Sequence[DemSource | str | os.PathLike[str]] = (), *,
+               options: OrthoOptions | None = None,
+               progress: ProgressCallback | None = None, crs: Any = "EPSG:4326",
+               pixel_size: float | None = None, allow_empty: bool = False,
+               max_pixels: int | None = None, **modes: Any) -> Antecedents:
+    """The antecedent of every output point, once (arguments as ``orthorectify``); then
+    ``Antecedents.counts/radiance/flags`` sample any band at them (as pyresample's
+    ``get_neighbour_info`` / ``get_sample_from_neighbour_info``)."""
+    t_start = time.perf_counter()
+    opts = OrthoOptions.of(options, n_dems=len(dems), **modes)
+    if grid is None:
+        crs = parse_crs(crs)
+        check_pixel_size(pixel_size)
+    segment = open_segment(product, dems, opts)
+    try:
+        return segment.precompute(grid, progress, crs=crs, pixel_size=pixel_size,
+                                  allow_empty=allow_empty, max_pixels=max_pixels,
+                                  t_start=t_start)
+    finally:
+        segment.close()
+
+
+def check_pixel_size(pixel_size: float | None) -> None:
+    """OptionsError unless ``pixel_size`` is None or a finite size > 0."""
+    if pixel_size is not None and not (math.isfinite(pixel_size) and pixel_size > 0):
+        raise OptionsError(f"pixel size must be > 0, got {pixel_size}")
+
+
+def product_grid(product: ProductLike, crs: Any = "EPSG:4326",
+                 pixel_size: float | None = None) -> OutputGrid:
+    """The default output grid of a product: the smallest rectangle of ``crs`` holding its
+    segment boundary (section 3.1), ``pixel_size`` in CRS units (default: the product's column
+    spacing, FR 260 m / RR 1040 m, in CRS units). The one default grid of the package
+    (``orthorectify``, a new synthesis, the widget)."""
+    prod = _open_product(product)
+    tp = prod.tie_points
+    boundary = segment_boundary(tp["latitude"], tp["longitude"])
+    check_pixel_size(pixel_size)
+    return default_grid(boundary, _column_spacing_m(prod), parse_crs(crs),
+                        pixel_size=pixel_size)
+
+
+def _column_spacing_m(prod: MerisProduct) -> float:
+    """On-ground column spacing at nadir (m) of a product (FR 260 m when it does not say)."""
+    return float(getattr(getattr(prod, "resolution", None), "column_spacing_m", 260.0))
+
+
+@dataclass
+class Segment:
+    """What a product needs before any output grid, built once and shared by every grid
+    (synthesis tiles): tie-point grid, zero-height segment boundary (section 3.1), the opened
+    DEM stack and the per-pixel geolocation grids. ``precompute`` then maps one grid."""
+
+    prod: MerisProduct
+    tp: TiePointGrid
+    boundary: Any
+    stack: DemStack | None
+    options: OrthoOptions
+    dems: list[str]
+    pixel: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+    #: the DEM stack was read under a grid holding every later one (``prepare_dems``)
+    dems_prepared: bool = False
+
+    def prepare_dems(self, extent: OutputGrid) -> None:
+        """Read the DEM window under ``extent`` once; the grids of later ``precompute`` calls
+        must lie inside it (points beyond are read lazily, same heights)."""
+        if self.stack is not None:
+            bounds = lonlat_bounds(extent)
+            if bounds is not None:
+                self.stack.prepare(*bounds)
+        self.dems_prepared = True
+
+    def precompute(self, grid: OutputGrid | None = None,
+                   progress: ProgressCallback | None = None, *, crs: Any = "EPSG:4326",
+                   pixel_size: float | None = None, allow_empty: bool = False,
+                   max_pixels: int | None = None, t_start: float | None = None
+                   ) -> Antecedents:
+        """The antecedents of ``grid`` (arguments as ``precompute``)."""
+        t0 = time.perf_counter() if t_start is None else t_start
+        job = _prepare(self, grid, crs, pixel_size, t0, max_pixels)
+        if job.points_in_boundary == 0 and not allow_empty:
+            raise OptionsError(
+                f"the output extent {job.grid.bounds} misses the product footprint")
+        if job.spans.count == 0:  # nothing to search: every point is background
+            return _empty_antecedents(job)
+        return _run(job, progress)
+
+    def close(self) -> None:
+        if self.stack is not None:
+            self.stack.close()
+
+
+def open_segment(product: str | os.PathLike[str] | MerisProduct,
+                 dems: Sequence[DemSource | str | os.PathLike[str]],
+                 opts: OrthoOptions) -> Segment:
+    """The ``Segment`` of a product (tie points, boundary, DEMs checked against it)."""
+    prod = _open_product(product)
+    stack = _open_dems(dems) if opts.elevation is Elevation.DEM else None
+    try:
+        tp = TiePointGrid.from_product(prod)
+        boundary = segment_boundary(tp.latitude, tp.longitude)
+        if stack is not None:
+            _check_dem_coverage(stack, boundary)
+        pixel = _pixel_grids(prod) if opts.geolocation is Geolocation.PIXEL else None
+    except BaseException:
+        if stack is not None:
+            stack.close()
+        raise
+    return Segment(prod, tp, boundary, stack, opts, [str(d) for d in dems], pixel)
+
+
+@dataclass
+class _Job:
+    """One orthorectification, everything checked: product, tie points, grid, the CSR spans of
+    the output points to search, the DEM stack, the kernel height mode and the options."""
+
+    prod: MerisProduct
+    tp: TiePointGrid
+    grid: OutputGrid
+    spans: RowSpans
+    stack: DemStack | None
+    hmode: int
+    options: OrthoOptions
+    #: output pixels searched beyond the zero-height boundary; output pixel centres inside it
+    margin_px: int
+    points_in_boundary: int
+    dems: list[str]
+    t_start: float
+    #: per-pixel (lon, lat, altitude) grids of the pixel geolocation model, else None
+    pixel: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+
+
+def _height_mode(elevation: Elevation, has_dems: bool) -> int:
+    """Kernel height mode (``engine.predcorr``) of an elevation source."""
+    if elevation is Elevation.NONE:
+        return predcorr.HEIGHT_NONE
+    if elevation is Elevation.DEM and has_dems:
+        return predcorr.HEIGHT_GIVEN
+    return predcorr.HEIGHT_TIEPOINTS
+
+
+def bytes_per_output_pixel(opts: OrthoOptions) -> int:
+    """Memory an output pixel costs in :func:`_run`: antecedent line/column (float32) and
+    iterations, each band and its resampling buffer (float32), the diagnostics layers and
+    their float32 copies for writing."""
+    return 16 + 8 * len(opts.bands) + (48 if opts.diagnostics else 0)
+
+
+def _prepare(seg: Segment, grid: OutputGrid | None, crs: Any, pixel_size: float | None,
+             t_start: float, max_pixels: int | None = None) -> _Job:
+    """Default grid (its size checked) and the spans of ``grid`` to search (3.1)."""
+    prod, tp, boundary, stack, opts, pixel = (seg.prod, seg.tp, seg.boundary, seg.stack,
+                                              seg.options, seg.pixel)
+    res_m = _column_spacing_m(prod)
+    if grid is None:
+        grid = default_grid(boundary, res_m, crs, pixel_size=pixel_size)
+    check_grid_size(grid.width, grid.height, (grid.dx, grid.dy), bytes_per_output_pixel(opts),
+                    max_pixels)
+    if stack is not None and not seg.dems_prepared:  # the DEM window under the grid, once
+        bounds = lonlat_bounds(grid)
+        if bounds is not None:
+            stack.prepare(*bounds)
+    # MERSYN processes the points inside the segment boundary; the primary-grid path also tries
+    # a margin: the outer half pixel of the product and terrain seen obliquely beyond it (the
+    # pixel geolocation always: its terrain points may lie outside the zero-height boundary)
+    margin = (_margin_px(tp, grid, pixel is not None or opts.elevation is not Elevation.NONE,
+                         res_m)
+              if pixel is not None or opts.method is SearchMethod.PRIMARY else 0)
+    inner = row_spans(boundary, grid)
+    spans = row_spans(boundary, grid, margin=margin) if margin else inner
+    hmode = (predcorr.HEIGHT_NONE if pixel is not None
+             else _height_mode(opts.elevation, stack is not None))
+    return _Job(prod, tp, grid, spans, stack, hmode, opts, margin, inner.count, list(seg.dems),
+                t_start, pixel)
+
+
+def _pixel_grids(prod: MerisProduct) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The product's per-pixel (lon, lat, altitude), or OptionsError when it has none."""
+    if not getattr(prod, "has_pixel_geolocation", False):
+        raise OptionsError(
+            f"{getattr(prod, 'path', prod)}: geolocation 'pixel' needs a product with a "
+            "per-pixel geolocation (MER_FRG_1P / MER_FSG_1P N1 or a .SEN3 directory)")
+    geolocated: Any = prod  # FRG/FSG N1 or SEN3 (products.open): the per-pixel accessors
+    return (geolocated.pixel_longitude(), geolocated.pixel_latitude(),
+            geolocated.pixel_altitude())
+
+
+def _solve(job: _Job, lon: np.ndarray, lat: np.ndarray, h: np.ndarray | None,
+           spans: tuple[np.ndarray, np.ndarray, np.ndarray], r0: int,
+           out: tuple[np.ndarray, np.ndarray, np.ndarray]) -> dict:
+    """Antecedents of one block of output rows: tie-point model (``predcorr``; primary search
+    straight into ``out``, the block's rows of the whole grid) or the product's pixel
+    geolocation (``pixelgeo``)."""
+    opts = job.options
+    if job.pixel is not None:
+        return pixelgeo.solve_pixel(job.pixel[0], job.pixel[1], job.grid, lon, lat, spans,
+                                    row_start=r0, tolerance=opts.tolerance,
+                                    altitude=job.pixel[2], diagnostics=opts.diagnostics)
+    return predcorr.solve(job.tp, job.grid, lon, lat, h, job.hmode, spans, row_start=r0,
+                          tolerance=opts.tolerance, model=opts.parallax.code,
+                          geo=opts.geolocation.code, method=opts.method.value,
+                          diagnostics=opts.diagnostics,
+                          out=out if opts.method is SearchMethod.PRIMARY else None)
+
+
+@dataclass
+class _Blocks:
+    """What the blocks of output rows accumulate: antecedents, iterations, diagnostics, the
+    facet-search counts and the points per elevation source."""
+
+    line: np.ndarray
+    col: np.ndarray
+    iters: np.ndarray
+    diag: dict[str, np.ndarray]
+    sources: np.ndarray
+    search: dict[str, int] = field(default_factory=dict)
+
+    @classmethod
+    def empty(cls, shape: tuple[int, int], diagnostics: bool, n_dems: int) -> _Blocks:
+        diag: dict[str, np.ndarray] = {}
+        if diagnostics:
+            diag = {"elevation": np.full(shape, np.nan, np.float32),
+                    "elevation_source": np.full(shape, SOURCE_NONE, np.int8),
+                    "shift_east_m": np.full(shape, np.nan, np.float32),
+                    "shift_north_m": np.full(shape, np.nan, np.float32)}
+        # line, col, iterations: every row is written by ``add`` (blocks cover the grid)
+        return cls(np.empty(shape, np.float32), np.empty(shape, np.float32),
+                   np.empty(shape, np.int8), diag, np.zeros(n_dems + 1, np.int64))
+
+    def add(self, r0: int, r1: int, res: dict[str, Any], src: np.ndarray | None,
+            hmode: int) -> None:
+        """Store the solution of rows [r0, r1) (``src``: elevation source per point, None
+        when the heights are not the DEMs')."""
+        for whole, part in ((self.line, res["line"]), (self.col, res["col"]),
+                            (self.iters, res["iterations"])):
+            if not np.may_share_memory(whole[r0:r1], part):  # (solved in place: nothing to do)
+                whole[r0:r1] = part
+        for k, v in res["search"].items():
+            self.search[k] = self.search.get(k, 0) + v
+        if src is not None:  # DEM k counted at k + 1; tie points (-1) at 0
+            self.sources += predcorr.solved_counts(src, res["iterations"], -1,
+                                                   self.sources.size)
+        else:
+            self.sources[0] += int(np.count_nonzero(res["iterations"] >= 0))
+        if not self.diag:
+            return
+        ok = res["iterations"] >= 0
+        if "elevation" in res:
+            for name in ("elevation", "shift_east_m", "shift_north_m"):
+                self.diag[name][r0:r1] = np.where(ok, res[name], np.nan)
+        code = (src if src is not None else np.full(ok.shape, SOURCE_TIEPOINTS
+                if hmode == predcorr.HEIGHT_TIEPOINTS else SOURCE_NONE, np.int8))
+        self.diag["elevation_source"][r0:r1] = np.where(ok, code, SOURCE_NONE)
+
+
+def _run(job: _Job, progress: ProgressCallback | None) -> Antecedents:
+    """Prediction/correction by blocks of output rows (section 3.2); the bands are sampled
+    later by the returned ``Antecedents``."""
+    grid, spans, stack, hmode, opts = job.grid, job.spans, job.stack, job.hmode, job.options
+    nr = grid.shape[0]
+    blocks = _Blocks.empty(grid.shape, opts.diagnostics,
+                           len(stack.sources) if stack is not None else 0)
+    t_dem = t_lonlat = t_engine = 0.0
+    total = nr + len(opts.bands)
+    for r0 in range(0, nr, _BLOCK_ROWS):
+        r1 = min(r0 + _BLOCK_ROWS, nr)
+        t0 = time.perf_counter()
+        lon, lat = grid.lonlat(r0, r1)
+        t_lonlat += time.perf_counter() - t0
+        p0, p1 = spans.ptr[r0 - spans.row_start], spans.ptr[r1 - spans.row_start]
+        ptr = spans.ptr[r0 - spans.row_start: r1 - spans.row_start + 1] - p0
+        start, stop = spans.start[p0:p1], spans.stop[p0:p1]
+        h = src = None
+        if hmode == predcorr.HEIGHT_GIVEN:
+            t0 = time.perf_counter()
+            mask = np.zeros(lon.shape, bool)
+            _mark(mask, ptr, start, stop)
+            assert stack is not None
+            h, src = dem_heights(stack, lon, lat, mask)
+            t_dem += time.perf_counter() - t0
+        t0 = time.perf_counter()
+        res = _solve(job, lon, lat, h, (ptr, start, stop), r0,
+                     (blocks.line[r0:r1], blocks.col[r0:r1], blocks.iters[r0:r1]))
+        t_engine += time.perf_counter() - t0
+        blocks.add(r0, r1, res, src, hmode)
+        if progress is not None:
+            progress(r1, total)
+    seconds = {"lonlat": t_lonlat, "dem": t_dem, "prediction_correction": t_engine,
+               "read_bands": 0.0, "resample": 0.0, "engine": t_engine}
+    return _antecedents(job, blocks, seconds, progress)
+
+
+def _antecedents(job: _Job, blocks: _Blocks, seconds: dict[str, float],
+                 progress: ProgressCallback | None) -> Antecedents:
+    """The ``Antecedents`` of a run: diagnostics completed, the Appendix B statistics."""
+    prod, opts, hmode = job.prod, job.options, job.hmode
+    line, col, iters, diag = blocks.line, blocks.col, blocks.iters, blocks.diag
+    window = antecedent_line_window(line, col, int(prod.height), int(prod.width),
+                                    opts.sampling)
+    valid = iters >= 0
+    hist = predcorr.iteration_histogram(
+        iters, pixelgeo.MAX_PIXEL_ITERATIONS if job.pixel is not None else predcorr.MAX_ITERATIONS)
+    if opts.diagnostics:
+        diag.update(line=line, col=col, iterations=iters)
+        if hmode == predcorr.HEIGHT_NONE and job.pixel is None:
+            diag["elevation"] = np.where(valid, np.float32(0), np.float32(np.nan))
+            diag["shift_east_m"] = diag["elevation"].copy()
+            diag["shift_north_m"] = diag["elevation"].copy()
+    seconds = {**seconds, "total": time.perf_counter() - job.t_start}
+    stats = _stats(job, search=blocks.search, hist=hist, processed=int(valid.sum()),
+                   window=window, sources=blocks.sources, seconds=seconds)
+    return Antecedents(prod, job.grid, line, col, iters, opts.sampling, list(opts.bands), stats,
+                       diag, progress, job.t_start)
+
+
+def _empty_antecedents(job: _Job) -> Antecedents:
+    """No antecedent search can reach the grid (``allow_empty``): all background."""
+    grid, stack = job.grid, job.stack
+    nr, nc = grid.shape
+    nan = np.full((nr, nc), np.nan, np.float32)
+    iters = np.full((nr, nc), -1, np.int8)
+    diag: dict[str, np.ndarray] = {}
+    if job.options.diagnostics:
+        diag = {"line": nan, "col": nan.copy(), "elevation": nan.copy(),
+                "elevation_source": np.full((nr, nc), SOURCE_NONE, np.int8),
+                "iterations": iters, "shift_east_m": nan.copy(), "shift_north_m": nan.copy()}
+    hist = np.zeros(predcorr.MAX_ITERATIONS + 1, np.int64)
+    sources = np.zeros(len(stack.sources) + 1 if stack is not None else 1, np.int64)
+    seconds = {**dict.fromkeys(TIMINGS, 0.0), "total": time.perf_counter() - job.t_start}
+    stats = _stats(job, search={}, hist=hist, processed=0, window=(0, 0), sources=sources,
+                   seconds=seconds)
+    return Antecedents(job.prod, grid, nan, nan, iters, job.options.sampling,
+                       list(job.options.bands), stats, diag, None, job.t_start)
+
+
+def _stats(job: _Job, *, search: dict[str, int], hist: np.ndarray, processed: int,
+           window: tuple[int, int], sources: np.ndarray, seconds: dict[str, float]
+           ) -> RunStats:
+    """The ``RunStats`` of a run (``sources``: points per elevation source, tie points at 0,
+    DEM k at k + 1)."""
+    prod, grid, opts, band_list = job.prod, job.grid, job.options, list(job.options.bands)
+    nr, nc = grid.shape
+    names = None if job.stack is None else [
+        str(getattr(s, "name", None) or getattr(s, "path", f"dem{i}"))
+        for i, s in enumerate(job.stack.sources)]
+    return RunStats(
+        product=str(getattr(prod, "path", "")),
+        product_name=str(getattr(prod, "product_name", "")),
+        output_lines=nr, output_columns=nc,
+        crs=grid.crs.to_string(), ul_x=grid.x0, ul_y=grid.y0,
+        lr_x=grid.x0 + nc * grid.dx, lr_y=grid.y0 - nr * grid.dy,
+        pixel_width=grid.dx, pixel_height=grid.dy,
+        orthorectification=job.hmode != predcorr.HEIGHT_NONE or job.pixel is not None,
+        facet_search=search,
+        iterations_histogram=[int(v) for v in hist],
+        processed_points=processed,
+        product_lines_read=list(window),
+        output_points=nr * nc,
+        elevation_sources=source_counts(sources, names, job.hmode != predcorr.HEIGHT_NONE),
+        seconds=seconds,
+        bands=band_list, wavelengths=per_band(prod, "wavelengths", band_list),
+        bandwidths=per_band(prod, "bandwidths", band_list),
+        scale_factors=per_band(getattr(prod, "scaling", None), "radiance", band_list),
+        elevation=opts.elevation.value, parallax=opts.parallax.value,
+        sampling=opts.sampling.value, geolocation=opts.geolocation.value,
+        tolerance=opts.tolerance, method=opts.method.value, margin_px=job.margin_px,
+        points_in_boundary=job.points_in_boundary, dems=list(job.dems))
+
+
+def _mark(mask: np.ndarray, ptr: np.ndarray, start: np.ndarray, stop: np.ndarray) -> None:
+    """True in ``mask`` on the CSR spans of the output points to search (one block of rows)."""
+    for i in range(mask.shape[0]):
+        for k in range(ptr[i], ptr[i + 1]):
+            mask[i, start[k]:stop[k]] = True

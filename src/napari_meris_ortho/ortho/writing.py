@@ -1,0 +1,142 @@
+"""A mapped product as a file: ``write_map``, the one writer of mapped bands.
+
+``meris-ortho map``, the napari widget and the synthesis export all write through it: a
+Cloud-Optimized GeoTIFF (``output.geotiff.write_cog``) with one band per MERIS band, streamed
+one band at a time; uint16 counts with GDAL scale = sf_rad (GDAL, QGIS and rasterio read
+radiances) or float32 radiances; band descriptions, wavelengths and units; the run's options as
+dataset tags; overviews averaged with nodata 0 ignored (``engine.resample.overview_level``);
+optionally the diagnostics as ``OUT_diagnostics.tif``.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Iterator, Mapping, Sequence
+from pathlib import Path
+from typing import Any, Protocol
+
+import numpy as np
+
+from ..engine.resample import overview_level
+from ..errors import OptionsError
+from ..geometry.grid import OutputGrid
+from ..output.geotiff import COMPRESSIONS, meris_band_description, write_cog
+from ..progress import ProgressCallback
+from .antecedents import RADIANCE_UNITS, band_metadata
+from .stats import RunStats
+
+#: dataset tag explaining the band values and the per-band ``sf_rad`` tags
+RADIANCE_NOTE = {
+    "uint16": "TOA radiance = counts x scale (GDAL scale = sf_rad of the source product, "
+              "Scaling Factor GADS); counts 0 = background (nodata)",
+    "float32": "TOA radiance (float32, 0 = background) = counts x sf_rad of the source "
+               "product (Scaling Factor GADS); no further scaling applies",
+}
+DTYPES = tuple(RADIANCE_NOTE)
+#: bands gathered together (one pass over the antecedent index for several bands)
+GATHER_GROUP = 4
+#: the diagnostics layers of ``OUT_diagnostics.tif``, in band order
+DIAGNOSTICS = ("line", "col", "elevation", "elevation_source", "iterations", "shift_east_m",
+               "shift_north_m")
+
+
+class Mapped(Protocol):
+    """What ``write_map`` writes: bands on a grid (``Antecedents``: sampled while writing;
+    ``OrthoResult``; a synthesis's bands). ``stats``: the run's, or None (then ``metadata``
+    describes the bands)."""
+
+    @property
+    def grid(self) -> OutputGrid: ...
+    @property
+    def bands(self) -> Any: ...
+    @property
+    def stats(self) -> RunStats | None: ...
+    @property
+    def diagnostics(self) -> dict[str, np.ndarray]: ...
+    def radiance(self, bands: Sequence[int] | None = None) -> dict[int, np.ndarray]: ...
+
+
+def diagnostics_path(out: str | os.PathLike[str]) -> Path:
+    """``OUT_diagnostics.tif`` beside ``OUT.tif``."""
+    p = Path(out)
+    return p.with_name(p.stem + "_diagnostics" + (p.suffix or ".tif"))
+
+
+def check_outputs(outputs: Mapping[str, str | os.PathLike[str] | None],
+                  products: Sequence[str | os.PathLike[str]],
+                  dems: Sequence[str | os.PathLike[str]] = ()) -> None:
+    """Before any work: every output (name -> path, None: not requested) distinct from the
+    others, never an input product or a DEM of the list (``PATH[:DATUM]``), never a special
+    file, in a writable directory; OutputError naming the output otherwise. The one output
+    check of the CLI and the widget."""
+    from .._atomic import check_distinct, check_writable_dir
+    from ..dem.geoid import split_datum
+
+    check_distinct(dict(outputs), {"input product": list(products),
+                                   "DEM": [split_datum(d)[0] for d in dems]})
+    for out in outputs.values():
+        if out is not None:
+            check_writable_dir(out)
+
+
+def write_map(path: str | os.PathLike[str], mapped: Mapped, *, dtype: str = "uint16",
+              compress: str = "zstd", diagnostics: bool = False,
+              metadata: Mapping[str, Any] | None = None, software: str = "napari-meris-ortho",
+              progress: ProgressCallback | None = None) -> Path:
+    """Write the bands of ``mapped`` as a Cloud-Optimized GeoTIFF (module docstring); with
+    ``diagnostics`` also its diagnostics layers. ``dtype``: "uint16" (counts + GDAL scale;
+    needs ``mapped.counts``, which ``Antecedents`` have) or "float32" (radiances);
+    ``metadata``: more dataset tags. Atomic (tmp file + rename); OutputError/OptionsError."""
+    if dtype not in DTYPES:
+        raise OptionsError(f"unknown output type {dtype!r}: choose {', '.join(DTYPES)}")
+    if compress not in COMPRESSIONS:
+        raise OptionsError(f"unknown compression {compress!r}: choose "
+                           f"{', '.join(COMPRESSIONS)}")
+    bands = sorted(int(b) for b in mapped.bands)
+    stats = mapped.stats
+    counts = dtype == "uint16"
+    if counts and not hasattr(mapped, "counts"):
+        raise OptionsError("uint16 output needs the product counts: write float32 radiances")
+    wl = stats.wavelengths if stats is not None else {}
+    tags: dict[str, Any] = {}
+    if stats is not None:
+        tags = {"product": stats.product, "product_name": stats.product_name,
+                "radiance": RADIANCE_NOTE[dtype], "elevation": stats.elevation,
+                "parallax": stats.parallax, "geolocation": stats.geolocation,
+                "tolerance_px": stats.tolerance, "sampling": stats.sampling}
+    else:
+        tags = {"radiance": RADIANCE_NOTE[dtype]}
+    tags = {**tags, **(metadata or {}), "software": software}
+    write_cog(
+        Path(path), _streamed(mapped, bands, counts, progress), mapped.grid, count=len(bands),
+        dtype=dtype, scales=[stats.scale_factors[b] for b in bands] if counts and stats else None,
+        offsets=[0.0] * len(bands) if counts else None, units=[RADIANCE_UNITS] * len(bands),
+        descriptions=[meris_band_description(b, wl.get(b)) for b in bands],
+        band_metadata=band_metadata(stats, bands) if stats is not None else None,
+        compress=compress, halve=overview_level, metadata=tags)
+    if diagnostics:
+        arrays = (np.nan_to_num(mapped.diagnostics[n].astype(np.float32), nan=0.0)
+                  for n in DIAGNOSTICS)
+        write_cog(diagnostics_path(path), arrays, mapped.grid, count=len(DIAGNOSTICS),
+                  nodata=None, descriptions=list(DIAGNOSTICS), dtype="float32",
+                  compress=compress, overview_resampling="nearest", halve=overview_level,
+                  metadata={"elevation_source": "k >= 0: DEM k; -1: tie points; -2: none"})
+    return Path(path)
+
+
+def _streamed(mapped: Mapped, bands: list[int], counts: bool,
+              progress: ProgressCallback | None) -> Iterator[np.ndarray]:
+    """One band at a time (uint16 counts or float32 radiances), sampled ``GATHER_GROUP`` at a
+    time; progress after the antecedent rows (``orthorectify``'s own steps) and each band."""
+    nr = mapped.grid.height
+    for g in range(0, len(bands), GATHER_GROUP):
+        group = bands[g:g + GATHER_GROUP]
+        if counts:
+            values = list(mapped.counts(group))  # type: ignore[attr-defined]
+        else:
+            radiance = mapped.radiance(group)
+            values = [radiance[b] for b in group]
+        for k, v in enumerate(values):
+            yield v
+            if progress is not None:
+                progress(nr + g + k + 1, nr + len(bands))
