@@ -105,7 +105,7 @@ def test_demcheck_cli(tmp_path, capsys):
     out = capsys.readouterr().out
     mean = float(out.split("ARITHMETIC MEAN")[1].split(":")[1].split()[0])
     assert code == 0 and "EGM96 (egm96_15.gtx)" in out and -45.0 < mean < -25.0
-    assert main(["demcheck", str(pts), "--dem", f"{dem}:egm2008"]) == 2
+    assert main(["demcheck", str(pts), "--dem", f"{dem}:egm08"]) == 2
     assert "unknown vertical datum" in capsys.readouterr().err
 
 

@@ -84,8 +84,8 @@ def _bad(args, tmp_path, capsys, match):
 def test_bad_dem_entries_exit_2(files, tmp_path, capsys, monkeypatch):
     _, prod, tiles, far = files
     out = str(tmp_path / "o.tif")
-    _bad(["map", str(prod), "-o", out, "--dem", f"{tiles}:egm2008"], tmp_path, capsys,
-         "unknown vertical datum 'egm2008'")
+    _bad(["map", str(prod), "-o", out, "--dem", f"{tiles}:egm08"], tmp_path, capsys,
+         "unknown vertical datum 'egm08'")
     _bad(["map", str(prod), "-o", out, "--dem", str(far)], tmp_path, capsys,
          "no Copernicus tile covers the product footprint")
     monkeypatch.setattr(geoid, "_SEARCH", ())

@@ -9,6 +9,7 @@ import pytest
 from napari_meris_ortho.dem import geoid
 from napari_meris_ortho.dem.geoid import (
     EGM96,
+    EGM2008,
     ELLIPSOID,
     crs_datum,
     geoid_undulation,
@@ -53,7 +54,7 @@ def test_dem_entries_name_their_datum(tmp_path):
 
 def test_vertical_crs_gives_the_datum():
     assert crs_datum("EPSG:4326+5773") == EGM96
-    assert crs_datum("EPSG:4326+3855") == EGM96  # EGM2008 height: EGM96 stands in
+    assert crs_datum("EPSG:4326+3855") == EGM2008  # resolved to EGM96 only when its grid is missing
     assert crs_datum("EPSG:4979") == ELLIPSOID
     assert crs_datum("EPSG:4326") is None and crs_datum("EPSG:32632") is None
 

@@ -10,7 +10,8 @@ the neighbour). The longitude spacing grows with latitude (Copernicus DEM produc
 x1 below 50 deg, x1.5 to 60, x2 to 70, x3 to 80, x5 to 85, x10 beyond), so the tiles form one
 global lattice per latitude zone, and bilinear interpolation crosses tile seams exactly.
 Only the tiles under the requested points are opened, and only the window they need is read.
-Heights are above EGM2008; they are turned into ellipsoidal heights with EGM96 (``dem.geoid``).
+Heights are above EGM2008; they are turned into ellipsoidal heights with EGM2008 (``dem.geoid``;
+EGM96 with a warning when PROJ's EGM2008 grid is not there).
 """
 
 from __future__ import annotations
@@ -25,7 +26,7 @@ import numpy as np
 
 from ..errors import DemError
 from .base import DemSource
-from .geoid import EGM96, to_ellipsoid
+from .geoid import EGM2008, to_ellipsoid
 
 NAME_RE = re.compile(r"^Copernicus_DSM(?:_COG)?_(10|30)_([NS])(\d{2})_00_([EW])(\d{3})_00_DEM"
                      r"\.(tif|tiff|dt1|dt2)$", re.IGNORECASE)
@@ -197,10 +198,11 @@ class _Zone(DemSource):
 
 
 class CopernicusSource(DemSource):
-    """A directory of Copernicus DEM tiles as one DEM (module docstring); heights above EGM96
-    unless the entry says otherwise."""
+    """A directory of Copernicus DEM tiles as one DEM (module docstring); heights above EGM2008
+    (EGM96 with a warning when only its grid is there, ``geoid.resolve_datum``) unless the
+    entry says otherwise."""
 
-    datum = EGM96
+    datum = EGM2008
 
     def __init__(self, path: str | Path, tiles: dict[tuple[int, int], Path] | None = None
                  ) -> None:

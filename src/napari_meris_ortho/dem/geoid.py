@@ -1,22 +1,29 @@
-"""Vertical datums of DEM heights: the EGM96 geoid (issue 11).
+"""Vertical datums of DEM heights: the EGM96 and EGM2008 geoids (issues 11, 26).
 
 The engine needs heights above the WGS84 ellipsoid (the parallax of eq. 6a is computed from the
-ellipsoid point). GETASSE30 gives them already (handbook chapter 5); SRTM30 and the Copernicus
-DEM give orthometric heights H above the EGM96 / EGM2008 geoid, so h = H + N with the geoid
+ellipsoid point). GETASSE30 gives them already (handbook chapter 5); SRTM30 gives orthometric
+heights H above EGM96, the Copernicus DEM above EGM2008, so h = H + N with the geoid
 undulation N (up to +-100 m: 0.3 FR pixel at 40 deg view zenith).
 
-N comes from the EGM96 15' grid ``egm96_15.gtx`` of Debian's ``proj-data`` package (PROJ's
-``vgridshift``, bilinear): N = 48.95 m at 10 E, 46 N. The grid is looked up in
-``$MERIS_ORTHO_GEOID`` (a file), ``$PROJ_DATA``/``$PROJ_LIB``, pyproj's data directory,
-``/usr/share/proj`` and ``/usr/local/share/proj``; a missing grid is a ``DemError`` naming them.
-The Copernicus DEM is referred to EGM2008; EGM96 stands in for it (the proj-data package has no
-EGM2008 grid), which differs by about a metre in most places.
+N comes from the grids PROJ ships (PROJ's ``vgridshift``, bilinear between the nodes), under
+either of their names: EGM96 15' as ``egm96_15.gtx`` (Debian's proj-data) or
+``us_nga_egm96_15.tif`` (PROJ-data, conda-forge's proj-data, ``projsync``); EGM2008 2.5' as
+``us_nga_egm08_25.tif``. N = 48.95 m (EGM96) at 10 E, 46 N. A grid is looked up in
+``$MERIS_ORTHO_GEOID`` (an EGM96 file), ``$PROJ_DATA``/``$PROJ_LIB``, pyproj's data
+directory, pyproj's user-writable directory (where ``projsync`` puts grids),
+``/usr/share/proj`` and ``/usr/local/share/proj``. Not found there and PROJ's network enabled
+by the user (``PROJ_NETWORK=ON``): PROJ fetches the grid from its CDN (``cdn.proj.org``) and
+caches it in the user-writable directory. Else a ``DemError`` saying all the ways to get it.
+EGM2008 heights (Copernicus, a raster in EGM2008) use EGM96 with a warning when only EGM96 is
+there (about a metre apart in most places).
 """
 
 from __future__ import annotations
 
+import logging
 import os
 import threading
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -24,18 +31,38 @@ import numpy as np
 
 from ..errors import DemError
 
+log = logging.getLogger(__name__)
 EGM96 = "egm96"
+EGM2008 = "egm2008"
 ELLIPSOID = "ellipsoid"
 #: vertical datums a DEM entry may name (``--dem PATH:egm96``)
-DATUMS = (EGM96, ELLIPSOID)
+DATUMS = (EGM96, EGM2008, ELLIPSOID)
+
+
+@dataclass(frozen=True)
+class GeoidModel:
+    """A geoid grid as PROJ ships it: its names (first: the one PROJ's CDN serves)."""
+
+    datum: str
+    names: tuple[str, ...]
+    label: str
+
+
+GEOIDS = {
+    EGM96: GeoidModel(EGM96, ("us_nga_egm96_15.tif", "egm96_15.gtx"), "EGM96 15'"),
+    EGM2008: GeoidModel(EGM2008, ("us_nga_egm08_25.tif",), "EGM2008 2.5'"),
+}
 GEOID_GRID = "egm96_15.gtx"
-#: node spacing of the EGM96 grid (15')
+#: node spacing of the EGM96 grid (15'); each grid's own spacing is read from its file
 GRID_STEP_DEG = 0.25
 _SEARCH = (Path("/usr/share/proj"), Path("/usr/local/share/proj"))
 _local = threading.local()
+_WARNED: set[str] = set()
+_STEPS: dict[str, float] = {}
 
 
-def _candidates() -> list[Path]:
+def _directories() -> list[Path]:
+    """PROJ's search path as pyproj sees it (module docstring), in order, without repeats."""
     dirs: list[Path] = []
     for var in ("PROJ_DATA", "PROJ_LIB"):
         dirs += [Path(p) for p in os.environ.get(var, "").split(os.pathsep) if p]
@@ -43,30 +70,111 @@ def _candidates() -> list[Path]:
         import pyproj.datadir
 
         dirs += [Path(p) for p in pyproj.datadir.get_data_dir().split(os.pathsep) if p]
+        dirs.append(Path(pyproj.datadir.get_user_data_dir()))
     except (ImportError, RuntimeError):  # pragma: no cover
         pass
-    return [d / GEOID_GRID for d in [*dirs, *_SEARCH]]
+    out: list[Path] = []
+    for d in [*dirs, *_SEARCH]:
+        if d not in out:
+            out.append(d)
+    return out
 
 
-def geoid_grid_path() -> Path:
-    """The EGM96 grid file (module docstring), or DemError saying where it was looked for."""
-    env = os.environ.get("MERIS_ORTHO_GEOID")
-    if env:
-        if Path(env).is_file():
-            return Path(env)
-        raise DemError(f"MERIS_ORTHO_GEOID={env}: geoid grid file not found")
-    tried = _candidates()
-    for p in tried:
+def _candidates(datum: str = EGM96) -> list[Path]:
+    return [d / name for d in _directories() for name in GEOIDS[datum].names]
+
+
+def network_enabled() -> bool:
+    """True when the user enabled PROJ's network (``PROJ_NETWORK=ON`` or pyproj's setting)."""
+    if os.environ.get("PROJ_NETWORK", "").upper() == "ON":
+        return True
+    try:
+        import pyproj.network
+
+        return bool(pyproj.network.is_network_enabled())
+    except (ImportError, AttributeError):  # pragma: no cover
+        return False
+
+
+def find_geoid_grid(datum: str = EGM96) -> Path | str | None:
+    """The grid file of ``datum`` (EGM96 or EGM2008), its PROJ name when only PROJ's network
+    can give it, or None."""
+    if datum == EGM96:
+        env = os.environ.get("MERIS_ORTHO_GEOID")
+        if env:
+            if Path(env).is_file():
+                return Path(env)
+            raise DemError(f"MERIS_ORTHO_GEOID={env}: geoid grid file not found")
+    for p in _candidates(datum):
         if p.is_file():
             return p
+    if network_enabled():
+        return GEOIDS[datum].names[0]
+    return None
+
+
+def geoid_grid_path(datum: str = EGM96) -> Path | str:
+    """The grid of ``datum`` (``find_geoid_grid``), or a DemError saying where it was looked for
+    and the three ways to get it."""
+    found = find_geoid_grid(datum)
+    if found is not None:
+        return found
+    model = GEOIDS[datum]
+    names = " or ".join(model.names)
     raise DemError(
-        f"EGM96 geoid grid {GEOID_GRID} not found (looked in "
-        f"{', '.join(sorted({str(p.parent) for p in tried}))}): install Debian's proj-data "
-        "package (scripts/setup.sh does) or set MERIS_ORTHO_GEOID to the file; needed for "
-        "heights above the geoid (SRTM30, Copernicus, ':egm96' DEM entries)")
+        f"{model.label} geoid grid {names} not found (looked in "
+        f"{', '.join(str(d) for d in _directories())}); needed for heights above the geoid "
+        "(SRTM30, Copernicus, ':egm96'/':egm2008' DEM entries). Get it one of three ways: "
+        f"install PROJ's grids (Debian: apt install proj-data; conda: conda install -c "
+        f"conda-forge proj-data), or download it once with `projsync --file "
+        f"{model.names[0]}` (into {_user_dir()}), or let PROJ fetch it: PROJ_NETWORK=ON"
+        + (" (or set MERIS_ORTHO_GEOID to the file)" if datum == EGM96 else ""))
 
 
-def _transformer(path: Path) -> Any:
+def _user_dir() -> str:
+    try:
+        import pyproj.datadir
+
+        return str(pyproj.datadir.get_user_data_dir())
+    except (ImportError, RuntimeError):  # pragma: no cover
+        return "PROJ's user data directory"
+
+
+def resolve_datum(datum: str | None) -> str | None:
+    """The datum whose grid will be used: EGM2008 when its grid can be had, else EGM96 with a
+    warning (once); others as they are."""
+    if datum != EGM2008 or find_geoid_grid(EGM2008) is not None:
+        return datum
+    if EGM2008 not in _WARNED:
+        _WARNED.add(EGM2008)
+        log.warning("warning: EGM2008 geoid grid us_nga_egm08_25.tif not found: EGM2008 heights "
+                    "(Copernicus DEM) are taken as EGM96 heights, about a metre apart in most "
+                    "places (get it with `projsync --file us_nga_egm08_25.tif` or "
+                    "PROJ_NETWORK=ON)")
+    return EGM96
+
+
+def grid_step(datum: str = EGM96) -> float:
+    """Node spacing (degrees) of the grid of ``datum``: from the file (EGM96 15', EGM2008 2.5'
+    for PROJ's grids); a grid fetched through PROJ's network: the model's nominal spacing."""
+    path = geoid_grid_path(datum)
+    key = str(path)
+    if key not in _STEPS:
+        nominal = 0.25 if datum == EGM96 else 2.5 / 60.0
+        step = nominal
+        if isinstance(path, Path):
+            try:
+                import rasterio
+
+                with rasterio.open(path) as ds:
+                    step = abs(float(ds.transform.a))
+            except Exception:  # an unreadable header: PROJ reads it below or says why
+                step = nominal
+        _STEPS[key] = step
+    return _STEPS[key]
+
+
+def _transformer(path: Path | str) -> Any:
     """A vgridshift transformer of ``path``, one per thread (pyproj objects are not shared)."""
     import pyproj
 
@@ -83,55 +191,62 @@ def _transformer(path: Path) -> Any:
     return cache[key]
 
 
-def geoid_undulation(lon: Any, lat: Any) -> np.ndarray:
-    """EGM96 geoid undulation N (m) at WGS84 (lon, lat) degrees: ellipsoidal height = H + N.
-
-    NaN where a coordinate is NaN. Raises DemError when the grid is missing.
-    """
+def geoid_undulation(lon: Any, lat: Any, datum: str = EGM96) -> np.ndarray:
+    """Geoid undulation N (m) of ``datum`` at WGS84 (lon, lat) degrees: ellipsoidal height =
+    H + N. NaN where a coordinate is NaN. Raises DemError when the grid is missing."""
     lon_a, lat_a = np.broadcast_arrays(np.asarray(lon, dtype=np.float64),
                                        np.asarray(lat, dtype=np.float64))
     out = np.full(lon_a.shape, np.nan)
     ok = np.isfinite(lon_a) & np.isfinite(lat_a) & (np.abs(lat_a) <= 90.0)
     if ok.any():
-        out[ok] = _bilinear_on_nodes((lon_a[ok] + 180.0) % 360.0 - 180.0, lat_a[ok])
+        out[ok] = _bilinear_on_nodes((lon_a[ok] + 180.0) % 360.0 - 180.0, lat_a[ok], datum)
     return out
 
 
-def _nodes(lon: np.ndarray, lat: np.ndarray) -> np.ndarray:
+def _nodes(lon: np.ndarray, lat: np.ndarray, datum: str = EGM96) -> np.ndarray:
     """N at grid nodes, through PROJ (exact there)."""
-    tr = _transformer(geoid_grid_path())
+    tr = _transformer(geoid_grid_path(datum))
     _, _, z = tr.transform(lon, lat, np.zeros(lon.shape), errcheck=False)
     z = np.asarray(z, dtype=np.float64)
     z[~np.isfinite(z) | (np.abs(z) > 1e3)] = np.nan
     return z
 
 
-def node_indices(lon: np.ndarray, lat: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def last_row(datum: str = EGM96) -> int:
+    """Index of the last node row south of the north pole (rows from -90 deg)."""
+    return int(round(180.0 / grid_step(datum))) - 1
+
+
+def node_indices(lon: np.ndarray, lat: np.ndarray, datum: str = EGM96
+                 ) -> tuple[np.ndarray, np.ndarray]:
     """(row i, column j) of the grid node south-west of each point (lon in [-180, 180)):
-    i = floor((lat + 90) / step) within 0..719, j = floor((lon + 180) / step)."""
-    i = np.clip(np.floor((lat + 90.0) / GRID_STEP_DEG).astype(np.int64), 0, 719)
-    j = np.floor((lon + 180.0) / GRID_STEP_DEG).astype(np.int64)
+    i = floor((lat + 90) / step) within 0..last_row, j = floor((lon + 180) / step)."""
+    step = grid_step(datum)
+    i = np.clip(np.floor((lat + 90.0) / step).astype(np.int64), 0, last_row(datum))
+    j = np.floor((lon + 180.0) / step).astype(np.int64)
     return i, j
 
 
-def nodes_between(i0: int, i1: int, j0: int, j1: int) -> np.ndarray:
+def nodes_between(i0: int, i1: int, j0: int, j1: int, datum: str = EGM96) -> np.ndarray:
     """N (m) at the grid nodes rows i0..i1, columns j0..j1 (inclusive), float64, through PROJ
     (exact there); for a compiled bilinear lookup (``engine.terrain.geoid_bilinear``) that
     gives ``geoid_undulation``'s numbers."""
+    step = grid_step(datum)
     rows = np.arange(i0, i1 + 1)
     cols = np.arange(j0, j1 + 1)
-    node_lon, node_lat = np.meshgrid(-180.0 + cols * GRID_STEP_DEG, -90.0 + rows * GRID_STEP_DEG)
-    return _nodes(node_lon.ravel(), node_lat.ravel()).reshape(node_lon.shape)
+    node_lon, node_lat = np.meshgrid(-180.0 + cols * step, -90.0 + rows * step)
+    return _nodes(node_lon.ravel(), node_lat.ravel(), datum).reshape(node_lon.shape)
 
 
-def _bilinear_on_nodes(lon: np.ndarray, lat: np.ndarray) -> np.ndarray:
-    """PROJ's bilinear interpolation of the 15' grid, done here between the nodes under the
+def _bilinear_on_nodes(lon: np.ndarray, lat: np.ndarray, datum: str = EGM96) -> np.ndarray:
+    """PROJ's bilinear interpolation of the grid, done here between the nodes under the
     points (PROJ is asked only for those few nodes; same values to 1e-11 m)."""
-    i, j = node_indices(lon, lat)
+    step = grid_step(datum)
+    i, j = node_indices(lon, lat, datum)
     i0, j0 = int(i.min()), int(j.min())
-    grid = nodes_between(i0, int(i.max()) + 1, j0, int(j.max()) + 1)
-    u = (lat + 90.0) / GRID_STEP_DEG - i
-    v = (lon + 180.0) / GRID_STEP_DEG - j
+    grid = nodes_between(i0, int(i.max()) + 1, j0, int(j.max()) + 1, datum)
+    u = (lat + 90.0) / step - i
+    v = (lon + 180.0) / step - j
     r, c = i - i0, j - j0
     return ((1.0 - u) * ((1.0 - v) * grid[r, c] + v * grid[r, c + 1])
             + u * ((1.0 - v) * grid[r + 1, c] + v * grid[r + 1, c + 1]))
@@ -142,8 +257,8 @@ def to_ellipsoid(height: np.ndarray, lon: Any, lat: Any, datum: str) -> np.ndarr
     they are)."""
     if datum == ELLIPSOID:
         return height
-    if datum == EGM96:
-        return height + geoid_undulation(lon, lat)
+    if datum in GEOIDS:
+        return height + geoid_undulation(lon, lat, datum)
     raise DemError(f"unknown vertical datum {datum!r}: choose {' or '.join(DATUMS)}")
 
 
@@ -163,7 +278,8 @@ def split_datum(entry: str | os.PathLike[str]) -> tuple[str, str | None]:
 
 
 def crs_datum(crs: Any) -> str | None:
-    """Vertical datum of a raster's CRS: a compound CRS with EGM96 / EGM2008 height -> egm96,
+    """Vertical datum of a raster's CRS: a compound CRS with EGM96 / EGM2008 height -> egm96 /
+    egm2008,
     a 3-D geographic CRS (EPSG:4979) -> ellipsoid; None when the CRS says nothing."""
     import pyproj
 
@@ -174,7 +290,9 @@ def crs_datum(crs: Any) -> str | None:
     for sub in c.sub_crs_list:
         if sub.is_vertical:
             name = sub.name.upper()
-            if "EGM96" in name or "EGM2008" in name or "EGM08" in name:
+            if "EGM2008" in name or "EGM08" in name:
+                return EGM2008
+            if "EGM96" in name:
                 return EGM96
             return None
     if c.is_geographic and len(c.axis_info) == 3:
@@ -182,5 +300,6 @@ def crs_datum(crs: Any) -> str | None:
     return None
 
 
-__all__ = ["DATUMS", "EGM96", "ELLIPSOID", "GEOID_GRID", "crs_datum", "geoid_grid_path",
-           "geoid_undulation", "split_datum", "to_ellipsoid"]
+__all__ = ["DATUMS", "EGM96", "EGM2008", "ELLIPSOID", "GEOIDS", "GEOID_GRID", "crs_datum",
+           "find_geoid_grid", "geoid_grid_path", "geoid_undulation", "resolve_datum",
+           "split_datum", "to_ellipsoid"]

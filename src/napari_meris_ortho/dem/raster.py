@@ -13,7 +13,7 @@ import pyproj
 from ..errors import DemError
 from ..geometry.grid import pixel_limit
 from .base import DemSource, LatticeWindow, _plausible
-from .geoid import EGM96, ELLIPSOID, crs_datum
+from .geoid import EGM96, EGM2008, ELLIPSOID, crs_datum
 
 _WGS84 = pyproj.CRS.from_epsg(4326)
 
@@ -206,15 +206,15 @@ class RasterSource(DemSource):
 
 def _raster_datum(ds: Any, crs: pyproj.CRS) -> str | None:
     """Vertical datum of a GDAL raster: its ``VERTICAL_DATUM`` tag, its vertical CRS, or a
-    Copernicus VRT (EGM96 for EGM2008); None when unknown."""
+    Copernicus VRT (EGM2008); None when unknown."""
     tag = str(ds.tags().get("VERTICAL_DATUM", "")).lower()
-    if tag in (EGM96, ELLIPSOID):
+    if tag in (EGM96, EGM2008, ELLIPSOID):
         return tag
     datum = crs_datum(crs)
     if datum is None and str(ds.name).lower().endswith(".vrt"):
         try:
             if "Copernicus_DSM" in Path(ds.name).read_text(errors="replace"):
-                return EGM96
+                return EGM2008
         except OSError:
             pass
     return datum

@@ -50,7 +50,7 @@ import numpy as np
 
 from ..errors import DemError
 from .base import DemSource, LatticeWindow, check_regular
-from .geoid import EGM96, ELLIPSOID, geoid_grid_path, split_datum
+from .geoid import ELLIPSOID, GEOIDS, geoid_grid_path, resolve_datum, split_datum
 from .getasse import _TILE_RE, _ZIP_RE, GetasseSource
 from .raster import RasterSource
 from .srtm import SrtmTile
@@ -187,8 +187,9 @@ def open_dem(path: str | os.PathLike[str]) -> DemSource:
                         "ellipsoidal (write %s:egm96 for heights above the geoid, %s:ellipsoid "
                         "to silence this)", text, text, text)
         _assume_ellipsoid(src)
-    if EGM96 in _datums(src):
-        geoid_grid_path()  # a missing geoid grid fails now, before any work
+    _resolve_geoids(src)
+    for datum in sorted(d for d in _datums(src) if d in GEOIDS):
+        geoid_grid_path(datum)  # a missing geoid grid fails now, before any work
     return src
 
 
@@ -198,6 +199,20 @@ def _datums(src: DemSource) -> set[str | None]:
     if parts is None:
         return {src.datum}
     return set().union(*(_datums(p) for p in parts)) if parts else {src.datum}
+
+
+def _resolve_geoids(src: DemSource) -> None:
+    """EGM2008 heights with EGM96 when only its grid is there (``geoid.resolve_datum``)."""
+    parts = getattr(src, "sources", None)
+    if parts is None:
+        resolved = resolve_datum(src.datum)
+        if resolved != src.datum and resolved is not None:
+            src.set_datum(resolved)
+        return
+    for p in parts:
+        _resolve_geoids(p)
+    datums = _datums(src)
+    src.datum = datums.pop() if len(datums) == 1 else None
 
 
 def _assume_ellipsoid(src: DemSource) -> None:

@@ -68,18 +68,21 @@ def window_heights(data: np.ndarray, inv: np.ndarray, lattice: np.ndarray, wrap_
 
 
 def geoid_bilinear(nodes: np.ndarray, i0: int, j0: int, step: float, lon: np.ndarray,
-                   lat: np.ndarray, todo: np.ndarray, out: np.ndarray) -> None:
+                   lat: np.ndarray, todo: np.ndarray, out: np.ndarray,
+                   last_row: int = 719) -> None:
     """Geoid undulation N at the ``todo`` points (flat WGS84 lon in [-180, 180), lat): the
     bilinear of ``nodes`` (N at grid nodes from row ``i0``, column ``j0``, every ``step``
-    degrees; ``dem.geoid.nodes_between``), the float64 numbers of ``dem.geoid``'s numpy
-    bilinear; NaN for a point beyond the nodes. Points split over threads."""
+    degrees, rows 0..``last_row`` from -90 deg; ``dem.geoid.nodes_between``), the float64
+    numbers of ``dem.geoid``'s numpy bilinear; NaN for a point beyond the nodes. Points split
+    over threads."""
     split_range(lambda lo, hi: _geoid_range(lo, hi, nodes, np.int64(i0), np.int64(j0),
-                                            float(step), lon, lat, todo, out), lon.size,
-                min_size=1 << 16)
+                                            float(step), np.int64(last_row), lon, lat, todo,
+                                            out), lon.size, min_size=1 << 16)
 
 
 @njit(cache=True, nogil=True)
-def _geoid_range(lo, hi, nodes, i0, j0, step, lon, lat, todo, out):  # pragma: no cover
+def _geoid_range(lo, hi, nodes, i0, j0, step, last_row, lon, lat, todo,
+                 out):  # pragma: no cover
     """Points [lo, hi) of ``geoid_bilinear``."""
     n_r, n_c = nodes.shape
     for k in range(lo, hi):
@@ -88,7 +91,7 @@ def _geoid_range(lo, hi, nodes, i0, j0, step, lon, lat, todo, out):  # pragma: n
         if not (abs(lat[k]) <= 90.0 and abs(lon[k]) <= 360.0):  # NaN or no latitude
             out[k] = math.nan
             continue
-        i = min(max(math.floor((lat[k] + 90.0) / step), 0), 719)
+        i = min(max(math.floor((lat[k] + 90.0) / step), 0), last_row)
         j = math.floor((lon[k] + 180.0) / step)
         r = int(i) - i0
         c = int(j) - j0

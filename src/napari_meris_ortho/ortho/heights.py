@@ -64,16 +64,16 @@ class _CompiledLookup:
 
 
 def _undulation(datum: str, lon: np.ndarray, lat: np.ndarray, todo: np.ndarray) -> np.ndarray:
-    """Geoid undulation N of ``datum`` at the ``todo`` points (flat arrays): EGM96 by the
-    compiled bilinear between the grid nodes under them (``dem.geoid.nodes_between``,
+    """Geoid undulation N of ``datum`` at the ``todo`` points (flat arrays): EGM96 or EGM2008
+    by the compiled bilinear between the grid nodes under them (``dem.geoid.nodes_between``,
     ``engine.terrain.geoid_bilinear``: ``dem.geoid.geoid_undulation``'s numbers)."""
-    from ..dem.geoid import EGM96, GRID_STEP_DEG, node_indices, nodes_between, to_ellipsoid
+    from ..dem.geoid import GEOIDS, grid_step, last_row, node_indices, nodes_between, to_ellipsoid
 
     out = np.full(lon.shape, np.nan)
     sel = np.flatnonzero(todo)
     if sel.size == 0:
         return out
-    if datum != EGM96:  # (no other geoid: one message for an unknown datum)
+    if datum not in GEOIDS:  # (no such geoid: one message for an unknown datum)
         out[sel] = to_ellipsoid(np.zeros(sel.size), lon[sel], lat[sel], datum)
         return out
     # the nodes under every point with a position (a few more than under the todo ones: no
@@ -86,9 +86,8 @@ def _undulation(datum: str, lon: np.ndarray, lat: np.ndarray, todo: np.ndarray) 
     if lo0 < -180.0 or lo1 >= 180.0:
         lon = (lon + 180.0) % 360.0 - 180.0
         lo0, lo1 = np.fmin.reduce(lon), np.fmax.reduce(lon)
-    i, j = node_indices(np.array([lo0, lo1]), np.array([la0, la1]))
-    nodes = nodes_between(int(i[0]), int(i[1]) + 1, int(j[0]), int(j[1]) + 1)
-    terrain.geoid_bilinear(nodes, int(i[0]), int(j[0]), GRID_STEP_DEG, lon, lat, todo, out)
+    i, j = node_indices(np.array([lo0, lo1]), np.array([la0, la1]), datum)
+    nodes = nodes_between(int(i[0]), int(i[1]) + 1, int(j[0]), int(j[1]) + 1, datum)
+    terrain.geoid_bilinear(nodes, int(i[0]), int(j[0]), grid_step(datum), lon, lat, todo, out,
+                           last_row(datum))
     return out
-
-

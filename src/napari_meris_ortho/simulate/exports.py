@@ -72,12 +72,16 @@ def write_geographic_geotiff(path: Path, grid: DemGrid, data: np.ndarray,
 ELLIPSOIDAL = {"VERTICAL_DATUM": "ellipsoid"}
 
 
-def geoid_heights(sample: Sampler) -> Sampler:
-    """A sampler of heights above the EGM96 geoid (H = h - N) from an ellipsoidal one."""
-    from ..dem.geoid import geoid_undulation
+def geoid_heights(sample: Sampler, datum: str = "egm96") -> Sampler:
+    """A sampler of heights above the geoid of ``datum`` (H = h - N) from an ellipsoidal one;
+    "egm2008" is the geoid the readers will use for it (``dem.geoid.resolve_datum``: EGM96
+    when PROJ's EGM2008 grid is not there), so that they give h back."""
+    from ..dem.geoid import geoid_undulation, resolve_datum
+
+    geoid = resolve_datum(datum) or datum
 
     def above_geoid(lon: np.ndarray, lat: np.ndarray) -> np.ndarray:
-        return sample(lon, lat) - geoid_undulation(lon, lat)
+        return sample(lon, lat) - geoid_undulation(lon, lat, geoid)
 
     return above_geoid
 

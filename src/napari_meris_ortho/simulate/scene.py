@@ -652,7 +652,8 @@ def _write_exports(target: Path, cfg: dict, scene: SimulatedScene, terrain: Terr
             tiles = exports.write_srtm30(target / "srtm30", sample, sea, grid)
             paths[key] = tiles[0] if len(tiles) == 1 else target / "srtm30"
         elif key == "copernicus":
-            exports.write_copernicus(target / "copernicus", exports.geoid_heights(sample), grid)
+            exports.write_copernicus(target / "copernicus",
+                                     exports.geoid_heights(sample, "egm2008"), grid)
             paths[key] = target / "copernicus"
         elif key == "geotiff_utm":
             paths[key] = exports.write_utm_geotiff(target / "dem_utm.tif", sample, grid,
