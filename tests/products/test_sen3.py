@@ -91,17 +91,22 @@ def test_xarray_opens_the_members_with_cf_attributes(products):
         assert lat.dtype == np.float64 and lat.attrs["units"] == "degrees_north"
         assert lat.attrs["standard_name"] == "latitude"
         assert lat.encoding["scale_factor"] == 1e-6 and lat.encoding["dtype"] == np.int32
-        np.testing.assert_allclose(lat.values, read_sen3(d).pixel_latitude())
+        # stored west to east (a descending pass), as ESA's products: the reader mirrors
+        np.testing.assert_allclose(lat.values[:, ::-1], read_sen3(d).pixel_latitude())
+        lon = geo["longitude"].values
+        assert (np.diff(lon, axis=1) > 0).all()
     with xr.open_dataset(d / "M07_radiance.nc") as rad:
         v = rad["M07_radiance"]
         assert v.attrs["units"] == "mW.m-2.sr-1.nm-1"
         assert v.attrs["standard_name"] == "toa_upwelling_spectral_radiance"
-        np.testing.assert_allclose(v.values, read_sen3(d).radiance(7), rtol=1e-6)
+        np.testing.assert_allclose(v.values[:, ::-1], read_sen3(d).radiance(7), rtol=1e-6)
     with xr.open_dataset(d / "time_coordinates.nc") as t:
         assert np.issubdtype(t["time_stamp"].dtype, np.datetime64)
     with xr.open_dataset(d / QUALITY_FILE, decode_cf=True) as q:
         meanings = q["quality_flags"].attrs["flag_meanings"].split()
-        assert meanings[:4] == ["land", "coastline", "bright", "invalid"]
+        assert meanings[:6] == ["land", "coastline", "fresh_inland_water", "tidal_region",
+                                "bright", "invalid"]
+        assert meanings[10:12] == ["saturated_M01", "saturated_M02"] and len(meanings) == 31
         assert len(q["quality_flags"].attrs["flag_masks"]) == len(meanings)
 
 

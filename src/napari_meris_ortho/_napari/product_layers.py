@@ -28,12 +28,14 @@ def contrast_limits(values: np.ndarray, background: float | None = 0.0) -> tuple
 
 
 def stretch_rgb(channels: Sequence[np.ndarray], valid: np.ndarray | None = None) -> np.ndarray:
-    """An RGB (H, W, 3) uint8 quick-look, 1-99 % stretch per channel, background black."""
+    """An RGB (H, W, 3) uint8 quick-look, 1-99 % stretch per channel, background and no data
+    (NaN: a product's fill values) black."""
     out = []
     for c in channels:
         c = np.asarray(c, np.float32)
         lo, hi = contrast_limits(c)
-        out.append(np.clip((c - lo) / (hi - lo) * 255.0, 0, 255).astype(np.uint8))
+        scaled = np.clip((c - lo) / (hi - lo) * 255.0, 0, 255)
+        out.append(np.where(np.isfinite(scaled), scaled, 0).astype(np.uint8))
     rgb = np.stack(out, axis=-1)
     if valid is not None:
         rgb[~np.asarray(valid, bool)] = 0

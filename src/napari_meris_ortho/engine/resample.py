@@ -252,6 +252,50 @@ def _weights_range(lo, hi, lines, cols, h, wd, k, il, wl, ip, wp, valid):  # pra
             _axis(p_, wd, k, ip, wp, i)
 
 
+def touches(mask: np.ndarray, lines: np.ndarray, cols: np.ndarray, method: str = "bilinear"
+            ) -> np.ndarray:
+    """True where the resampling of a point reads a pixel of ``mask`` (bool/uint8 image) with a
+    non-zero weight: a sample touching a no-data pixel is itself no data, never a value mixed
+    with a fill (nearest: the pixel itself). Any shape of points in, bool of that shape out."""
+    k = _check_method(method)
+    m = np.ascontiguousarray(_native(mask), dtype=np.uint8)
+    lines = np.asarray(lines)
+    fl = np.ascontiguousarray(lines, dtype=np.float64).reshape(-1)
+    fc = np.ascontiguousarray(cols, dtype=np.float64).reshape(-1)
+    out = np.zeros(fl.size, np.bool_)
+    if k == 1:
+        index = nearest_pixel(fl, fc, m.shape[0], m.shape[1])
+        flat = m.reshape(-1)
+        hit = index >= 0
+        out[hit] = flat[index[hit]] != 0
+        return out.reshape(lines.shape)
+    for a in range(0, fl.size, _CHUNK):
+        b = min(a + _CHUNK, fl.size)
+        il, wl, ip, wp, valid = _weights(fl[a:b], fc[a:b], m.shape[0], m.shape[1], k)
+        _touches(m, il, wl, ip, wp, valid, out[a:b])
+    return out.reshape(lines.shape)
+
+
+def _touches(mask: np.ndarray, il: np.ndarray, wl: np.ndarray, ip: np.ndarray,
+             wp: np.ndarray, valid: np.ndarray, out: np.ndarray) -> None:
+    split_range(lambda lo, hi: _touches_range(lo, hi, mask, il, wl, ip, wp, valid, out),
+                out.size, min_size=1 << 14)
+
+
+@njit(cache=True, nogil=True)
+def _touches_range(lo, hi, mask, il, wl, ip, wp, valid, out):  # pragma: no cover
+    k = il.shape[1]
+    for i in range(lo, hi):
+        if not valid[i]:
+            continue
+        for a in range(k):
+            if wl[i, a] == 0.0:
+                continue
+            for b in range(k):
+                if wp[i, b] != 0.0 and mask[il[i, a], ip[i, b]] != 0:
+                    out[i] = True
+
+
 def _apply(image: np.ndarray, il: np.ndarray, wl: np.ndarray, ip: np.ndarray, wp: np.ndarray,
            valid: np.ndarray, out: np.ndarray) -> None:
     """Separable weighted sum of the neighbours of every point of ``out`` (0 where invalid)."""

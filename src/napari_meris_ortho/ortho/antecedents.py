@@ -34,7 +34,9 @@ class OrthoResult:
 
     ``valid``: points whose antecedent is inside the product; ``flags``: L1b flags (nearest);
     ``diagnostics`` (on request): line, col, elevation, elevation_source, iterations,
-    shift_east_m, shift_north_m; ``stats``: what the Appendix B log prints.
+    shift_east_m, shift_north_m; ``stats``: what the Appendix B log prints; ``saturated``:
+    per-band saturation bits (nearest; bit b-1: band b) of products that carry them (.SEN3).
+    A band's no-data pixels (a fill value in the product) are 0 like the background.
     """
 
     bands: dict[int, np.ndarray]
@@ -43,6 +45,7 @@ class OrthoResult:
     flags: np.ndarray
     stats: RunStats
     diagnostics: dict[str, np.ndarray] = field(default_factory=dict)
+    saturated: np.ndarray | None = None
 
     @property
     def crs(self) -> pyproj.CRS:
@@ -166,16 +169,37 @@ class Antecedents:
         self._timed("read_bands", t0)
         return out
 
+    def _no_data(self, bands: Sequence[int]) -> list[int | None]:
+        """The stored value of each band's no-data pixels (``MerisProduct.no_data_count``)."""
+        return [self.prod.no_data_count(b) for b in bands]
+
     def _interpolated(self, bands: Sequence[int]) -> list[np.ndarray]:
-        """Bilinear/bicubic counts (float32) of ``bands`` at the antecedents."""
-        from ..engine.resample import resample_bands
+        """Bilinear/bicubic counts (float32) of ``bands`` at the antecedents; a sample that
+        touches a no-data pixel is no data (0), never a value mixed with a fill."""
+        from ..engine.resample import resample_bands, touches
 
         stack = self._stack([self.prod.counts(b) for b in bands], np.uint16)
         t0 = time.perf_counter()
-        out = resample_bands(list(stack), self.line.astype(np.float64) - self.window[0],
-                             self.col, self.sampling.value)
+        lines = self.line.astype(np.float64) - self.window[0]
+        out = resample_bands(list(stack), lines, self.col, self.sampling.value)
+        for k, fill in enumerate(self._no_data(bands)):
+            if fill is not None:
+                mask = stack[k] == fill
+                if mask.any():
+                    out[k][touches(mask, lines, self.col, self.sampling.value)] = 0.0
         self._timed("resample", t0)
         return out
+
+    @staticmethod
+    def _clear(values: np.ndarray, fills: Sequence[int | None],
+               scales: np.ndarray | None = None) -> None:
+        """No-data pixels gathered into ``values`` (bands, points) -> 0 (background): the
+        count equal to the band's fill (``scales``: the values are fill x scale, float32)."""
+        for k, fill in enumerate(fills):
+            if fill is None:
+                continue
+            stored = fill if scales is None else np.float32(fill) * np.float32(scales[k])
+            values[k][values[k] == stored] = 0
 
     def counts(self, bands: Sequence[int] | None = None) -> np.ndarray:
         """uint16 counts (len(bands), rows, cols) at the antecedents, 0 = background; nearest:
@@ -188,6 +212,7 @@ class Antecedents:
         out = np.empty((len(bands), nr * nc), np.uint16)  # every point is written below
         if self.sampling is Sampling.NEAREST:
             self._gather([self.prod.counts(b) for b in bands], np.uint16, out)
+            self._clear(out, self._no_data(bands))
             return out.reshape(len(bands), nr, nc)
         for k, v in enumerate(self._interpolated(bands)):
             out[k] = np.clip(np.floor(v.reshape(-1) + np.float32(0.5)), 0, 65535)
@@ -203,8 +228,9 @@ class Antecedents:
             return {b: np.zeros((nr, nc), np.float32) for b in bands}
         if self.sampling is Sampling.NEAREST:  # counts x sf_rad in one pass, no uint16 copy
             values = np.empty((len(bands), nr * nc), np.float32)
-            self._gather([self.prod.counts(b) for b in bands], np.uint16, values,
-                         scales=np.array([sf[b - 1] for b in bands]))
+            scales = np.array([sf[b - 1] for b in bands])
+            self._gather([self.prod.counts(b) for b in bands], np.uint16, values, scales=scales)
+            self._clear(values, self._no_data(bands), scales)
             return {b: values[k].reshape(nr, nc) for k, b in enumerate(bands)}
         out = {}
         for b, v in zip(bands, self._interpolated(bands), strict=True):
@@ -219,6 +245,19 @@ class Antecedents:
         first, stop = self.window
         if stop > first:
             self._gather([self.prod.flags], np.uint8, out)
+        return out.reshape(nr, nc)
+
+    def saturated(self) -> np.ndarray | None:
+        """Per-band saturation bits (uint16, bit b-1: band b) of the nearest pixel, 0 =
+        background; None for a product without them (``MerisProduct.saturated``)."""
+        sat = self.prod.saturated
+        if sat is None:
+            return None
+        nr, nc = self.grid.shape
+        out = np.zeros((1, nr * nc), np.uint16)
+        first, stop = self.window
+        if stop > first:
+            self._gather([sat], np.uint16, out)
         return out.reshape(nr, nc)
 
     def finish(self) -> RunStats:
@@ -236,6 +275,6 @@ class Antecedents:
             total = self.grid.height + len(self.bands)
             self.progress(total, total)
         return OrthoResult(radiance, self.grid, self.valid, flags, self.finish(),
-                           self.diagnostics)
+                           self.diagnostics, self.saturated())
 
 

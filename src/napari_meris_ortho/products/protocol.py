@@ -4,7 +4,8 @@
 
 Arrays are in the stored column order (ARCHITECTURE.md "Conventions"); tie points in physical
 units (``geometry.tiepoints.TiePoints``); ``counts(b)`` are the stored uint16 values of band b
-(1..15), radiance = counts x ``scaling.radiance[b - 1]`` (Scaling Factor GADS, Appendix A);
+(1..15), radiance = counts x ``scaling.radiance[b - 1]`` (Scaling Factor GADS, Appendix A),
+except where they equal ``no_data_count(b)`` (no data, kept out of every resampling);
 ``mph``/``sph``: the N1 header records (Appendix A), or their fields a ``.SEN3`` carries.
 """
 
@@ -60,6 +61,12 @@ class MerisProduct(ProductGeometry, Protocol):
     def flags(self) -> np.ndarray: ...
     @property
     def has_pixel_geolocation(self) -> bool: ...
+    @property
+    def saturated(self) -> np.ndarray | None:
+        """Per-band saturation bits (uint16 (H, W), bit b-1: band b), or None."""
+
+    def no_data_count(self, band: int) -> int | None:
+        """The value ``counts(band)`` holds at no-data pixels (a ``_FillValue``), or None."""
 
     def counts(self, band: int) -> np.ndarray: ...
     def radiance(self, band: int, lines: slice | None = None) -> np.ndarray: ...

@@ -276,6 +276,7 @@ def segment_task(spec: Spec, index: int, path: str, window: Window,
     inside = np.ascontiguousarray(result.valid, dtype=np.bool_)
     valid = validated_pixels(inside, np.ascontiguousarray(result.flags, dtype=np.uint8),
                              spec.reject_bright)
+    _no_data_out(result, spec, valid)
     piece = Piece(index, window, None, int(inside.sum()), int(valid.sum()))
     rows, cols = np.flatnonzero(valid.any(axis=1)), np.flatnonzero(valid.any(axis=0))
     if rows.size == 0:
@@ -289,6 +290,18 @@ def segment_task(spec: Spec, index: int, path: str, window: Window,
     piece.state = segment_state(segment, valid[r0:r1, c0:c1], index, red, nir)
     piece.window = (window[0] + r0, window[0] + r1, window[2] + c0, window[2] + c1)
     return piece
+
+
+def _no_data_out(result: Any, spec: Spec, valid: np.ndarray) -> None:
+    """Saturated pixels of a band (``saturated_Mnn``, .SEN3) are no data (0) for that band;
+    the maximum-NDVI rule takes only pixels with both NDVI bands (a fill there is no data)."""
+    if result.saturated is not None:
+        for b in {*spec.bands, NDVI_RED_BAND, NDVI_NIR_BAND} & set(result.bands):
+            hit = (result.saturated & np.uint16(1 << (b - 1))) != 0
+            if hit.any():
+                result.bands[b][hit] = 0.0
+    if spec.algorithm == "max-ndvi":
+        valid &= (result.bands[NDVI_RED_BAND] > 0) & (result.bands[NDVI_NIR_BAND] > 0)
 
 
 def tile_task(fork: Any, spec: Spec, window: Window, pieces: list[Piece], rank: np.ndarray,

@@ -281,6 +281,14 @@ class MerisL1bProduct:
         self._check_band(band)
         return self._records(radiance_mds(band), radiance_dtype(self.width))["counts"]
 
+    #: N1 products carry no per-band saturation flags
+    saturated = None
+
+    def no_data_count(self, band: int) -> int | None:
+        """None: N1 counts have no fill value (invalid pixels are flagged, ``FLAG_INVALID``)."""
+        self._check_band(band)
+        return None
+
     def radiance(self, band: int, lines: slice | None = None) -> np.ndarray:
         """TOA radiance of ``band`` in W m-2 sr-1 um-1: counts x ``scaling.radiance[band-1]``
         (float32 (H, W), or the given slice of lines)."""

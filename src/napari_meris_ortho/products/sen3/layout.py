@@ -1,0 +1,189 @@
+"""What a MERIS fourth-reprocessing ``.SEN3`` product holds: member files, variables, the
+quality-flag coding, the column order and the CF decoding of packed values.
+
+Facts of ESA's products (``ENV_ME_1_RRG____20120406T085654``, 1121 x 1617 pixels, tie points every
+16 x 16; SNAP's and ocssw's readers; NOTES.md "real 4th-reprocessing products"):
+
+- **Columns run west to east on a descending pass** (longitude grows with the column), the mirror
+  of the N1 "chronological" order. Every product this package returns exposes the N1 order
+  (ARCHITECTURE.md "Conventions"), so a ``.SEN3`` and the N1 of one acquisition give the engine
+  the same arrays: :func:`mirror_columns` on read and on write (it is its own inverse).
+- Values are CF-packed: each variable has its own ``scale_factor``, ``add_offset``,
+  ``_FillValue`` and ``valid_min``/``valid_max`` (:func:`cf_decode`); radiances are uint16 with
+  ``_FillValue`` 65535 (SNAP's no-data of M01 is 65535 x its scale, 620.94).
+- ``quality_flags`` (uint32) carries its coding in ``flag_masks``/``flag_meanings``: land 2^31,
+  coastline 2^30, fresh_inland_water 2^29, tidal_region 2^28, bright 2^27, invalid 2^25,
+  cosmetic 2^24, duplicated 2^23, sun_glint_risk 2^22, dubious 2^21, saturated_M01..M21
+  2^20..2^0 (:data:`QUALITY_FLAGS`, used where a file does not carry its own coding).
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+
+from ... import flags as fl
+from ..n1.format import FULL_RESOLUTION, NUM_BANDS, REDUCED_RESOLUTION, Resolution
+
+#: product types (``ME_1_FRG___`` FR full swath, ``ME_1_RRG___`` RR) and their resolution
+SEN3_TYPES: dict[str, Resolution] = {"ME_1_FRG___": FULL_RESOLUTION,
+                                     "ME_1_RRG___": REDUCED_RESOLUTION}
+MANIFEST = "xfdumanifest.xml"
+GEO_FILE = "geo_coordinates.nc"
+INSTRUMENT_FILE = "instrument_data.nc"
+QUALITY_FILE = "qualityFlags.nc"
+TIE_GEO_FILE = "tie_geo_coordinates.nc"
+TIE_GEOMETRY_FILE = "tie_geometries.nc"
+TIE_METEO_FILE = "tie_meteo.nc"
+TIME_FILE = "time_coordinates.nc"
+#: kg m-2 of one Dobson unit (total_ozone is stored in kg m-2)
+DOBSON_KG_M2 = 2.1415e-5
+#: nominal number of detectors (instrument_data ``detectors`` dimension)
+DETECTORS = {"FR": 3700, "RR": 925}
+#: saturation bits of quality_flags: saturated_M01 is bit 20 ... saturated_M21 bit 0
+SATURATION_BANDS = 21
+RADIANCE_FILL = 65535
+INT32_FILL = -2147483648
+INT16_FILL = -32768
+
+#: the full quality_flags coding of ESA's products: (meaning, bit)
+QUALITY_FLAGS: tuple[tuple[str, int], ...] = (
+    ("land", 31), ("coastline", 30), ("fresh_inland_water", 29), ("tidal_region", 28),
+    ("bright", 27), ("invalid", 25), ("cosmetic", 24), ("duplicated", 23),
+    ("sun_glint_risk", 22), ("dubious", 21),
+    *((f"saturated_M{b:02d}", SATURATION_BANDS - b) for b in range(1, SATURATION_BANDS + 1)),
+)
+#: quality meanings and the third-reprocessing L1b flag each sets (SNAP's adapter)
+L1B_OF_QUALITY: dict[str, int] = {
+    "land": fl.FLAG_LAND_OCEAN, "coastline": fl.FLAG_COASTLINE, "bright": fl.FLAG_BRIGHT,
+    "invalid": fl.FLAG_INVALID, "cosmetic": fl.FLAG_COSMETIC, "duplicated": fl.FLAG_DUPLICATED,
+    "sun_glint_risk": fl.FLAG_GLINT_RISK, "dubious": fl.FLAG_SUSPECT,
+}
+
+#: product names: ESA's ``ENV_ME_1_FRG____``/``ENV_ME_1_RRG____`` and the
+#: ``EN1_MDSI_MER_FRS_1P_``/``EN1_MDSI_MER_RR__1P_`` names (NOTES.md)
+_NAMES = (re.compile(r"ME_1_(FR|RR)G_"), re.compile(r"MER_(FR|RR)[S_]_1P"))
+
+
+def product_type_of(text: str) -> str | None:
+    """``ME_1_FRG___``/``ME_1_RRG___`` named by a product type or file name, or None."""
+    for pattern in _NAMES:
+        m = pattern.search(text)
+        if m is not None:
+            return f"ME_1_{m.group(1)}G___"
+    return None
+
+
+def radiance_file(band: int) -> str:
+    return f"M{band:02d}_radiance.nc"
+
+
+def radiance_variable(band: int) -> str:
+    return f"M{band:02d}_radiance"
+
+
+def required_files() -> list[str]:
+    """Member files the reader needs (``tie_meteo.nc`` is optional)."""
+    return [MANIFEST, *(radiance_file(b) for b in range(1, NUM_BANDS + 1)), GEO_FILE,
+            INSTRUMENT_FILE, QUALITY_FILE, TIE_GEO_FILE, TIE_GEOMETRY_FILE, TIME_FILE]
+
+
+def mirror_columns(a: np.ndarray) -> np.ndarray:
+    """The columns of an image or tie-point grid (rows, columns[, ...]) in the other order:
+    ``.SEN3`` order (west to east on a descending pass) <-> N1 order; a C-contiguous copy."""
+    return np.ascontiguousarray(np.asarray(a)[:, ::-1])
+
+
+# ------------------------------------------------------------------------------------------
+# CF decoding
+# ------------------------------------------------------------------------------------------
+
+
+def no_data(raw: np.ndarray, attrs: Mapping[str, Any]) -> np.ndarray:
+    """Packed values that are no data (CF 1.8 section 2.5.1): equal to ``_FillValue``, or
+    outside ``valid_min``/``valid_max``/``valid_range`` (in packed units, as stored)."""
+    bad = np.zeros(np.shape(raw), bool)
+    fill = attrs.get("_FillValue")
+    if fill is not None:
+        bad |= raw == np.asarray(fill).astype(raw.dtype)
+    low, high = attrs.get("valid_min"), attrs.get("valid_max")
+    if "valid_range" in attrs:
+        low, high = np.asarray(attrs["valid_range"]).tolist()
+    if low is not None:
+        bad |= raw < low
+    if high is not None:
+        bad |= raw > high
+    return bad
+
+
+def cf_decode(raw: np.ndarray, attrs: Mapping[str, Any], dtype: Any = np.float64
+              ) -> tuple[np.ndarray, int]:
+    """Physical values of a CF-packed variable: ``raw x scale_factor + add_offset`` (CF 1.8
+    section 8.1) with no-data (:func:`no_data`) as NaN; (values, number of no-data values)."""
+    scale = float(np.asarray(attrs.get("scale_factor", 1.0)))
+    offset = float(np.asarray(attrs.get("add_offset", 0.0)))
+    out = np.asarray(raw).astype(dtype)
+    if scale != 1.0:
+        out *= dtype(scale)
+    if offset != 0.0:
+        out += dtype(offset)
+    bad = no_data(np.asarray(raw), attrs)
+    n_bad = int(bad.sum())
+    if n_bad:
+        out[bad] = np.nan
+    return out, n_bad
+
+
+# ------------------------------------------------------------------------------------------
+# quality flags
+# ------------------------------------------------------------------------------------------
+
+
+def flag_coding(attrs: Mapping[str, Any]) -> dict[str, int]:
+    """meaning -> mask of a flag variable from its own ``flag_masks``/``flag_meanings`` (CF 1.8
+    section 3.5), or ESA's coding (:data:`QUALITY_FLAGS`) when it carries none."""
+    masks, meanings = attrs.get("flag_masks"), attrs.get("flag_meanings")
+    if masks is not None and meanings is not None:
+        names = str(meanings).split()
+        values = np.atleast_1d(np.asarray(masks)).astype(np.int64).tolist()
+        if len(names) == len(values):
+            return {n: int(v) for n, v in zip(names, values, strict=True)}
+    return {name: 1 << bit for name, bit in QUALITY_FLAGS}
+
+
+def quality_to_l1b(quality: np.ndarray, coding: Mapping[str, int] | None = None) -> np.ndarray:
+    """L1b flags (uint8, ``flags.FLAG_*``) of ``quality_flags`` with ``coding``
+    (:func:`flag_coding`; default ESA's)."""
+    coding = dict(coding) if coding is not None else flag_coding({})
+    q = np.asarray(quality).astype(np.uint32)
+    out = np.zeros(q.shape, np.uint8)
+    for name, l1b in L1B_OF_QUALITY.items():
+        if name in coding:
+            out |= np.where(q & np.uint32(coding[name]), np.uint8(l1b), np.uint8(0))
+    return out
+
+
+def l1b_to_quality(flags: np.ndarray) -> np.ndarray:
+    """``quality_flags`` (uint32, ESA's coding) holding the given L1b flags (the inverse of
+    :func:`quality_to_l1b`)."""
+    f = np.asarray(flags).astype(np.uint8)
+    coding = flag_coding({})
+    out = np.zeros(f.shape, np.uint32)
+    for name, l1b in L1B_OF_QUALITY.items():
+        out |= np.where(f & np.uint8(l1b), np.uint32(coding[name]), np.uint32(0))
+    return out
+
+
+def saturated_bands(quality: np.ndarray, coding: Mapping[str, int]) -> np.ndarray:
+    """uint16 (rows, columns): bit b-1 set where band b (1..15) is saturated
+    (``saturated_Mnn`` of ``coding``)."""
+    q = np.asarray(quality).astype(np.uint32)
+    out = np.zeros(q.shape, np.uint16)
+    for b in range(1, NUM_BANDS + 1):
+        mask = coding.get(f"saturated_M{b:02d}")
+        if mask:
+            out |= np.where(q & np.uint32(mask), np.uint16(1 << (b - 1)), np.uint16(0))
+    return out

@@ -1,0 +1,491 @@
+"""Read a MERIS fourth-reprocessing ``.SEN3`` product (directory or zip archive).
+
+:func:`read_sen3` gives the interface of ``products.n1.MerisL1bProduct`` (N1 column order, tie
+points in physical units, ``counts``/``scaling``, L1b ``flags``) plus the per-pixel geolocation,
+the full ``quality_flags`` and the per-band saturation. Every variable is decoded from its own
+CF attributes (``layout.cf_decode``); no-data is NaN (radiances, geolocation, meteo), or the
+band's ``no_data_count`` in ``counts``, which the mapping keeps out of every resampling.
+
+The tie-point ``lat_corr``/``lon_corr`` (absent from the format) are derived from ``dem_alt``
+and the view angles with the N1 convention (NOTES.md).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import os
+from collections.abc import Mapping
+from dataclasses import replace
+from functools import cached_property
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ...errors import Sen3FormatError
+from ...geometry.tiepoints import TiePoints
+from ..n1.format import (
+    APPENDIX_A_BANDWIDTHS,
+    APPENDIX_A_WAVELENGTHS,
+    NUM_BANDS,
+    ScalingFactors,
+    format_utc,
+    tie_columns,
+    tie_lines,
+)
+from .layout import (
+    DOBSON_KG_M2,
+    GEO_FILE,
+    INSTRUMENT_FILE,
+    MANIFEST,
+    QUALITY_FILE,
+    RADIANCE_FILL,
+    SEN3_TYPES,
+    TIE_GEO_FILE,
+    TIE_GEOMETRY_FILE,
+    TIE_METEO_FILE,
+    TIME_FILE,
+    cf_decode,
+    flag_coding,
+    mirror_columns,
+    no_data,
+    product_type_of,
+    quality_to_l1b,
+    radiance_file,
+    radiance_variable,
+    required_files,
+    saturated_bands,
+)
+from .members import Members, product_name_of
+
+log = logging.getLogger(__name__)
+
+#: physical range of each geolocation and angle variable (degrees, metres)
+PHYSICAL_RANGE: dict[str, tuple[float, float]] = {
+    "latitude": (-90.0, 90.0), "longitude": (-180.0, 360.0), "altitude": (-11_000.0, 9_000.0),
+    "SZA": (0.0, 180.0), "OZA": (0.0, 90.0), "SAA": (-180.0, 360.0), "OAA": (-180.0, 360.0),
+}
+#: optional tie-point meteo variables, each on its own (none is used by the geometry)
+METEO = ("horizontal_wind", "sea_level_pressure", "total_ozone", "humidity")
+
+
+class MerisSen3Product:
+    """An opened ``.SEN3`` MERIS Level 1 product; build with :func:`read_sen3`.
+
+    Same attributes and methods as ``products.n1.MerisL1bProduct`` (``mph``/``sph`` hold a summary
+    in N1 keys, ``dsds`` is empty) plus ``quality_flags``, ``saturated`` and the per-pixel
+    geolocation (``pixel_longitude()``, ``pixel_latitude()``, ``pixel_altitude()``). Arrays in
+    the N1 column order (``layout.mirror_columns``); bands read on demand.
+    """
+
+    has_pixel_geolocation = True
+    dsds: list = []
+
+    def __init__(self, members: Members, product_type: str, width: int, height: int, df: int,
+                 dj: int, tie_points: Mapping[str, np.ndarray], line_times: np.ndarray,
+                 scaling: ScalingFactors, wavelengths: tuple[float, ...],
+                 bandwidths: tuple[float, ...], attrs: dict[str, Any],
+                 variables: dict[str, dict[str, Any]]) -> None:
+        self.members = members
+        self.path = members.path
+        self.product_type = product_type
+        self.resolution = SEN3_TYPES[product_type]
+        self.width = width
+        self.height = height
+        self.lines_per_tie_point = df
+        self.samples_per_tie_point = dj
+        self.tie_points = TiePoints.from_mapping(tie_points)
+        self.line_times = line_times
+        self.scaling = scaling
+        self.wavelengths = wavelengths
+        self.bandwidths = bandwidths
+        self.attrs = attrs
+        #: CF attributes of the image variables, by variable name
+        self.variables = variables
+        self._warned: set[str] = set()
+        n = self.n_tie_lines
+        self.tie_point_times = line_times[0] + self.line_interval_s * df * np.arange(n)
+        self.mph = {"PRODUCT": self.product_name, "PROC_CENTER": str(attrs.get("institution", "")),
+                    "SENSING_START": format_utc(self._utc(line_times[0])),
+                    "SENSING_STOP": format_utc(self._utc(line_times[-1])),
+                    "SPH_SIZE": 0, "NUM_DSD": 0}
+        self.sph = {"FIRST_LINE_TIME": self.mph["SENSING_START"],
+                    "LAST_LINE_TIME": self.mph["SENSING_STOP"], "LINE_LENGTH": width,
+                    "LINES_PER_TIE_PT": df, "SAMPLES_PER_TIE_PT": dj, "NUM_BANDS": NUM_BANDS,
+                    "LINE_TIME_INTERVAL": int(round(self.line_interval_s * 1e6)),
+                    "BAND_WAVELEN": tuple(int(round(w * 1000)) for w in wavelengths),
+                    "BANDWIDTH": tuple(int(round(w * 1000)) for w in bandwidths)}
+
+    def __repr__(self) -> str:
+        return f"<MerisSen3Product {self.product_type} {self.width}x{self.height} ({self.path})>"
+
+    @staticmethod
+    def _utc(seconds: float) -> np.datetime64:
+        return np.datetime64("2000-01-01T00:00:00", "us") + np.timedelta64(
+            int(round(float(seconds) * 1e6)), "us")
+
+    @property
+    def product_name(self) -> str:
+        return product_name_of(self.path)
+
+    @property
+    def n_tie_lines(self) -> int:
+        return int(self.tie_points["latitude"].shape[0])
+
+    @property
+    def n_tie_columns(self) -> int:
+        return int(self.tie_points["latitude"].shape[1])
+
+    @property
+    def first_line_time(self) -> np.datetime64:
+        return self._utc(self.line_times[0])
+
+    @property
+    def line_interval_s(self) -> float:
+        if self.line_times.size < 2:
+            return self.resolution.line_interval_s
+        return float(np.median(np.diff(self.line_times)))
+
+    def _raw(self, name: str, variable: str, lines: slice | None = None) -> np.ndarray:
+        """Stored values of an image variable (or the given lines), in the N1 column order."""
+        with self.members.dataset(name) as ds:
+            try:
+                var = ds.variables[variable]
+                var.set_auto_maskandscale(False)
+                raw = np.asarray(var[lines] if lines is not None else var[...])
+            except (KeyError, IndexError, RuntimeError) as exc:
+                raise Sen3FormatError(self.members.where(name),
+                                      f"cannot read {variable}: {exc}") from None
+        return mirror_columns(raw)
+
+    def _warn(self, what: str, n: int, total: int) -> None:
+        if n and what not in self._warned:
+            self._warned.add(what)
+            log.warning("%s: %d of %d %s masked as no data", self.product_name, n, total, what)
+
+    # -- bands ----------------------------------------------------------------------------
+
+    def no_data_count(self, band: int) -> int:
+        """The stored value of a band's no-data pixels in :meth:`counts` (its ``_FillValue``)."""
+        fill = self.variables[radiance_variable(band)].get("_FillValue", RADIANCE_FILL)
+        return int(np.asarray(fill))
+
+    def counts(self, band: int) -> np.ndarray:
+        """Stored uint16 values of ``band`` (1..15), radiance = counts x scaling.radiance[b-1];
+        no-data pixels (fill, outside valid_min/valid_max) hold ``no_data_count(band)``."""
+        if isinstance(band, bool) or not isinstance(band, int | np.integer):
+            raise TypeError(f"band must be an integer 1..15, got {band!r}")
+        if not 1 <= band <= NUM_BANDS:
+            raise ValueError(f"band must be 1..15, got {band}")
+        raw = self._raw(radiance_file(band), radiance_variable(band))
+        attrs = self.variables[radiance_variable(band)]
+        if any(k in attrs for k in ("valid_min", "valid_max", "valid_range")):
+            bad = no_data(raw, attrs)
+            if bad.any():
+                raw[bad] = self.no_data_count(band)
+        return raw.astype(np.uint16, copy=False)
+
+    def radiance(self, band: int, lines: slice | None = None) -> np.ndarray:
+        """TOA radiance (mW m-2 sr-1 nm-1) of ``band``, float32 (H, W) or the given lines;
+        no data is NaN."""
+        counts = self.counts(band)
+        if lines is not None:
+            counts = counts[lines]
+        out = counts.astype(np.float32) * np.float32(self.scaling.radiance[band - 1])
+        out[counts == self.no_data_count(band)] = np.nan
+        return out
+
+    # -- flags ----------------------------------------------------------------------------
+
+    @cached_property
+    def quality_flags(self) -> np.ndarray:
+        """``quality_flags`` (uint32 (H, W))."""
+        return self._raw(QUALITY_FILE, "quality_flags")
+
+    @cached_property
+    def quality_coding(self) -> dict[str, int]:
+        """meaning -> mask of ``quality_flags``, from the file's own ``flag_masks`` and
+        ``flag_meanings`` (ESA's coding when it has none)."""
+        return flag_coding(self.variables["quality_flags"])
+
+    @cached_property
+    def flags(self) -> np.ndarray:
+        """L1b flags (uint8 (H, W)) mapped from ``quality_flags`` (``layout``)."""
+        return quality_to_l1b(self.quality_flags, self.quality_coding)
+
+    @cached_property
+    def saturated(self) -> np.ndarray:
+        """uint16 (H, W): bit b-1 set where band b is saturated (``saturated_Mnn``)."""
+        return saturated_bands(self.quality_flags, self.quality_coding)
+
+    @cached_property
+    def detector_index(self) -> np.ndarray:
+        return self._raw(INSTRUMENT_FILE, "detector_index")
+
+    # -- per-pixel geolocation ------------------------------------------------------------
+
+    def _geo(self, variable: str, lines: slice | None, dtype: Any) -> np.ndarray:
+        raw = self._raw(GEO_FILE, variable, lines)
+        values, n_fill = cf_decode(raw, self.variables[f"geo.{variable}"], dtype)
+        low, high = PHYSICAL_RANGE[variable]
+        with np.errstate(invalid="ignore"):
+            outside = (values < low) | (values > high)
+        values[outside] = np.nan
+        self._warn(f"{variable}s of {GEO_FILE} (fill or outside [{low:g}, {high:g}])",
+                   n_fill + int(outside.sum()), raw.size)
+        return values
+
+    def pixel_longitude(self, lines: slice | None = None) -> np.ndarray:
+        """Longitude of every pixel (geo_coordinates.nc), float64 deg on (-180, 180]; NaN: none."""
+        lon = self._geo("longitude", lines, np.float64)
+        return np.where(lon > 180.0, lon - 360.0, lon)
+
+    def pixel_latitude(self, lines: slice | None = None) -> np.ndarray:
+        """Latitude of every pixel (geo_coordinates.nc), float64 deg; NaN: none."""
+        return self._geo("latitude", lines, np.float64)
+
+    def pixel_altitude(self, lines: slice | None = None) -> np.ndarray:
+        """Altitude of every pixel's terrain point (geo_coordinates.nc), float32 m; NaN: none."""
+        return self._geo("altitude", lines, np.float32)
+
+
+# ------------------------------------------------------------------------------------------
+# read_sen3
+# ------------------------------------------------------------------------------------------
+
+
+def read_sen3(path: str | os.PathLike[str]) -> MerisSen3Product:
+    """Open a MERIS Level 1 ``.SEN3`` directory (or its ``xfdumanifest.xml``), or a zip archive
+    of one.
+
+    Parses the manifest (the product type comes from its ``productType``, the name as a
+    fallback), checks that every member file is there and that every variable has the shape
+    of the radiances (tie-point variables: of the tie-point grid), decodes the tie points,
+    times and scale factors; bands and per-pixel geolocation are read on demand. Raises
+    :class:`Sen3FormatError` naming the product (or member) and the problem.
+    """
+    members = Members(path)
+    missing = [f for f in required_files() if not members.exists(f)]
+    if missing:
+        raise Sen3FormatError(members.path, f"missing member file(s): {', '.join(missing)}")
+    try:
+        return _read(members)
+    except OSError as exc:
+        raise Sen3FormatError(members.path, f"cannot read: {exc.strerror or exc}") from None
+
+
+def _variables(members: Members, name: str, variables: list[str], shape: tuple[int, ...] | None,
+               *, optional: bool = False) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+    """Raw values of ``variables`` (each checked against ``shape``, None: any; with
+    ``optional`` a missing one is left out), their attributes and the file's global
+    attributes (key ``""``)."""
+    out: dict[str, np.ndarray] = {}
+    attrs: dict[str, Any] = {}
+    with members.dataset(name) as ds:
+        attrs[""] = {k: ds.getncattr(k) for k in ds.ncattrs()}
+        for v in variables:
+            if v not in ds.variables:
+                if optional:
+                    continue
+                raise Sen3FormatError(members.where(name), f"has no variable {v!r}")
+            var = ds.variables[v]
+            if shape is not None and tuple(var.shape[: len(shape)]) != shape:
+                raise Sen3FormatError(members.where(name), f"variable {v!r} has shape "
+                                      f"{tuple(var.shape)}, expected {shape}")
+            var.set_auto_maskandscale(False)
+            out[v] = np.asarray(var[...])
+            attrs[v] = {k: var.getncattr(k) for k in var.ncattrs()}
+    return out, attrs
+
+
+def _variable_info(members: Members, name: str, variable: str
+                   ) -> tuple[tuple[int, ...], dict[str, Any]]:
+    """Shape and attributes of one variable (no data read)."""
+    with members.dataset(name) as ds:
+        if variable not in ds.variables:
+            raise Sen3FormatError(members.where(name), f"has no variable {variable!r}")
+        var = ds.variables[variable]
+        return tuple(var.shape), {k: var.getncattr(k) for k in var.ncattrs()}
+
+
+def _product_type(members: Members) -> str:
+    """From the manifest's ``productType``; else the product name; else instrument_data.nc's
+    ``product_name`` attribute."""
+    root = members.manifest()
+    for el in root.iter():
+        if el.tag.rsplit("}", 1)[-1] == "productType" and el.text:
+            found = product_type_of(el.text.strip())
+            if found is not None:
+                return found
+    found = product_type_of(members.path.name)
+    if found is None:
+        _, attrs = _variables(members, INSTRUMENT_FILE, [], None)
+        found = product_type_of(str(attrs[""].get("product_name", "")))
+    if found is None:
+        raise Sen3FormatError(members.path, "not a MERIS Level 1 product (ME_1_FRG___ or "
+                              "ME_1_RRG___ in the manifest's productType, the product name or "
+                              "instrument_data.nc product_name)")
+    return found
+
+
+def _read(members: Members) -> MerisSen3Product:
+    product_type = _product_type(members)
+    shape, _ = _variable_info(members, radiance_file(1), radiance_variable(1))
+    if len(shape) != 2 or min(shape) < 2:
+        raise Sen3FormatError(members.where(radiance_file(1)), f"M01_radiance has shape "
+                              f"{shape}, a 2-D (rows, columns) image expected")
+    height, width = shape
+    variables: dict[str, dict[str, Any]] = {}
+    for b in range(1, NUM_BANDS + 1):
+        got, a = _variable_info(members, radiance_file(b), radiance_variable(b))
+        if got != shape:
+            raise Sen3FormatError(members.where(radiance_file(b)), f"variable "
+                                  f"{radiance_variable(b)!r} has shape {got}, M01_radiance has "
+                                  f"{shape}")
+        if float(np.asarray(a.get("add_offset", 0.0))) != 0.0:
+            raise Sen3FormatError(members.where(radiance_file(b)), "radiances with a non-zero "
+                                  "add_offset are not supported")
+        scale = float(np.asarray(a.get("scale_factor", 1.0)))
+        if not (math.isfinite(scale) and scale > 0):
+            raise Sen3FormatError(members.where(radiance_file(b)), f"scale_factor {scale!r} of "
+                                  f"{radiance_variable(b)} is not a positive number")
+        variables[radiance_variable(b)] = a
+    for v in ("latitude", "longitude", "altitude"):
+        got, a = _variable_info(members, GEO_FILE, v)
+        if got != shape:
+            raise Sen3FormatError(members.where(GEO_FILE), f"variable {v!r} has shape {got}, "
+                                  f"the radiances have {shape}")
+        variables[f"geo.{v}"] = a
+    for name, v in ((INSTRUMENT_FILE, "detector_index"), (QUALITY_FILE, "quality_flags")):
+        got, a = _variable_info(members, name, v)
+        if got != shape:
+            raise Sen3FormatError(members.where(name), f"variable {v!r} has shape {got}, the "
+                                  f"radiances have {shape}")
+        variables[v] = a
+    times, _ = _variables(members, TIME_FILE, ["time_stamp"], (height,))
+    tie_points, df, dj = _tie_points(members, height, width)
+    spectral, _ = _variables(members, INSTRUMENT_FILE, ["solar_flux", "lambda0", "FWHM"], None,
+                             optional=True)
+    wavelengths = _band_means(spectral.get("lambda0"), APPENDIX_A_WAVELENGTHS)
+    bandwidths = _band_means(spectral.get("FWHM"), APPENDIX_A_BANDWIDTHS)
+    sun_flux = _band_means(spectral.get("solar_flux"), ScalingFactors().sun_flux)
+    scaling = replace(ScalingFactors(), radiance=tuple(
+        float(np.asarray(variables[radiance_variable(b)].get("scale_factor", 1.0)))
+        for b in range(1, NUM_BANDS + 1)), sun_flux=sun_flux)
+    _, gattrs = _variables(members, INSTRUMENT_FILE, [], None)
+    return MerisSen3Product(
+        members, product_type, width, height, df, dj, tie_points,
+        times["time_stamp"].astype(np.float64) * 1e-6, scaling, wavelengths, bandwidths,
+        gattrs[""], variables)
+
+
+def _band_means(values: np.ndarray | None, default: tuple[float, ...]) -> tuple[float, ...]:
+    """Per-band mean over the detectors (bands, detectors), or the default."""
+    if values is None or values.ndim != 2 or values.shape[0] != NUM_BANDS:
+        return tuple(default)
+    v = np.where(np.isfinite(values) & (values > 0), values, np.nan)
+    means = np.nanmean(v, axis=1) if np.isfinite(v).any() else np.full(NUM_BANDS, np.nan)
+    return tuple(float(m) if math.isfinite(m) else float(d)
+                 for m, d in zip(means, default, strict=True))
+
+
+def _tie_points(members: Members, height: int, width: int
+                ) -> tuple[dict[str, np.ndarray], int, int]:
+    """Tie points in physical units with the N1 names, N1 column order; (tie points, DF, DJ)."""
+    shape, _ = _variable_info(members, TIE_GEOMETRY_FILE, "SZA")
+    geom, attrs = _variables(members, TIE_GEOMETRY_FILE, ["SZA", "SAA", "OZA", "OAA"], shape)
+    where = members.where(TIE_GEOMETRY_FILE)
+    try:
+        df = int(attrs[""]["al_subsampling_factor"])
+        dj = int(attrs[""]["ac_subsampling_factor"])
+    except (KeyError, TypeError, ValueError):
+        raise Sen3FormatError(where, "global attributes al_subsampling_factor and "
+                              "ac_subsampling_factor are required") from None
+    if len(shape) != 2 or df < 1 or dj < 1:
+        raise Sen3FormatError(where, f"tie-point grid {shape} every {df} x {dj} is not valid")
+    n_cols = tie_columns(width, dj)
+    if shape[1] != n_cols or (width - 1) % dj or shape[0] < tie_lines(height, df):
+        raise Sen3FormatError(
+            where, f"tie-point grid of {shape[0]} x {shape[1]} every {df} lines x {dj} columns "
+            f"does not cover {height} x {width} pixels (needs {tie_lines(height, df)} x "
+            f"{n_cols})")
+    geo, geo_attrs = _variables(members, TIE_GEO_FILE, ["latitude", "longitude", "altitude"],
+                                shape)
+    meteo, meteo_attrs = _variables(members, TIE_METEO_FILE, list(METEO), shape, optional=True
+                                    ) if members.exists(TIE_METEO_FILE) else ({}, {})
+
+    def decoded(raw: dict[str, np.ndarray], all_attrs: dict[str, Any], name: str, file: str,
+                key: str | None = None) -> np.ndarray:
+        values, n_fill = cf_decode(raw[name], all_attrs[name])
+        key = key or name
+        low, high = PHYSICAL_RANGE[key]
+        with np.errstate(invalid="ignore"):
+            bad = ~((values >= low) & (values <= high))
+        if n_fill or bad.any():
+            if name == "altitude":  # usable: sea level where the tie-point height is missing
+                log.warning("%s: %d tie-point altitudes of %s are fill or outside [%g, %g] m: "
+                            "taken as 0 m", members.path.name, int(bad.sum()), file, low, high)
+                return mirror_columns(np.where(bad, 0.0, values))
+            raise Sen3FormatError(members.where(file), f"{int(bad.sum())} tie points of {name} "
+                                  f"are fill values or outside their physical range "
+                                  f"[{low:g}, {high:g}]")
+        return mirror_columns(values)
+
+    lat = decoded(geo, geo_attrs, "latitude", TIE_GEO_FILE)
+    lon = decoded(geo, geo_attrs, "longitude", TIE_GEO_FILE)
+    tp = {"latitude": lat, "longitude": np.where(lon > 180.0, lon - 360.0, lon),
+          "dem_alt": decoded(geo, geo_attrs, "altitude", TIE_GEO_FILE),
+          "dem_rough": np.zeros(shape),
+          "sun_zenith": decoded(geom, attrs, "SZA", TIE_GEOMETRY_FILE),
+          "sun_azimuth": decoded(geom, attrs, "SAA", TIE_GEOMETRY_FILE) % 360.0,
+          "view_zenith": decoded(geom, attrs, "OZA", TIE_GEOMETRY_FILE),
+          "view_azimuth": decoded(geom, attrs, "OAA", TIE_GEOMETRY_FILE) % 360.0}
+    # the N1 convention of the stored DEM corrections (NOTES.md), derived
+    t = tp["dem_alt"] * np.tan(np.radians(tp["view_zenith"])) / 6370997.0
+    va = np.radians(tp["view_azimuth"])
+    tp["lat_corr"] = np.degrees(t * np.cos(va))
+    tp["lon_corr"] = -np.degrees(t * np.sin(va) / np.cos(np.radians(lat)))
+    tp.update(_meteo(meteo, meteo_attrs, shape))
+    return tp, df, dj
+
+
+def _meteo(raw: dict[str, np.ndarray], attrs: dict[str, Any], shape: tuple[int, ...]
+           ) -> dict[str, np.ndarray]:
+    """The N1 meteo annotations from whichever tie_meteo variables there are (each optional;
+    fill -> NaN)."""
+    def value(name: str) -> np.ndarray | None:
+        if name not in raw:
+            return None
+        return cf_decode(raw[name], attrs[name])[0]
+
+    nan = np.full(shape, np.nan)
+    out = {k: nan for k in ("zonal_wind", "merid_wind", "atm_pressure", "ozone",
+                            "rel_humidity")}
+    wind = value("horizontal_wind")
+    if wind is not None and wind.ndim == 3 and wind.shape[-1] == 2:
+        out["zonal_wind"], out["merid_wind"] = wind[..., 0], wind[..., 1]
+    for name, key, factor in (("sea_level_pressure", "atm_pressure", 1.0),
+                              ("total_ozone", "ozone", 1.0 / DOBSON_KG_M2),
+                              ("humidity", "rel_humidity", 1.0)):
+        v = value(name)
+        if v is not None:
+            out[key] = v * factor
+    return {k: mirror_columns(v) for k, v in out.items()}
+
+
+def manifest_summary(path: str | os.PathLike[str]) -> dict[str, str]:
+    """Product name, type, times, image size and data-object files of an ``xfdumanifest.xml``
+    (by local element names; absent entries are left out)."""
+    root = Members(Path(path).parent if Path(path).name == MANIFEST else path).manifest()
+    out: dict[str, str] = {}
+    files = []
+    for el in root.iter():
+        local = el.tag.rsplit("}", 1)[-1]
+        if local in ("productName", "productType", "startTime", "stopTime", "rows", "columns",
+                     "rowsPerTiePoint", "columnsPerTiePoint") and el.text:
+            out.setdefault(local, el.text.strip())
+        if local == "fileLocation" and el.get("href"):
+            files.append(el.get("href", "").removeprefix("./"))
+    out["files"] = " ".join(files)
+    return out

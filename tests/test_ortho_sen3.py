@@ -1,0 +1,128 @@
+"""A ``.SEN3`` as ESA writes it, mapped (issue 22): the SEN3 and the N1 of one simulated
+acquisition orthorectify to the same map; a fill pixel never yields a radiance in any sampling
+(a sample touching it is no data); a zipped SEN3 maps end to end; saturated pixels of a band are
+no data for that band in a synthesis."""
+
+from __future__ import annotations
+
+import shutil
+import zipfile
+
+import netCDF4
+import numpy as np
+import pytest
+import rasterio
+
+from napari_meris_ortho.cli import main
+from napari_meris_ortho.engine.resample import touches
+from napari_meris_ortho.ortho import orthorectify, precompute
+from napari_meris_ortho.products.open import read_product
+from napari_meris_ortho.products.sen3 import mirror_columns
+
+
+@pytest.fixture(scope="module")
+def pair(tmp_path_factory):
+    from napari_meris_ortho.simulate.geocorrected import write_geocorrected
+    from napari_meris_ortho.simulate.scene import generate_scene
+
+    scene = generate_scene("fr-small")
+    out = tmp_path_factory.mktemp("sen3map")
+    paths = write_geocorrected(scene, fsg=False, out_dir=out)
+    return scene.product_path, paths["sen3"]
+
+
+@pytest.fixture
+def sen3_copy(pair, tmp_path):
+    dst = tmp_path / pair[1].name
+    shutil.copytree(pair[1], dst)
+    return dst
+
+
+def test_sen3_and_n1_of_one_acquisition_give_the_same_map(pair):
+    n1, s3 = read_product(pair[0]), read_product(pair[1])
+    for sampling in ("nearest", "bicubic"):
+        a = orthorectify(n1, bands=(2, 7, 13), elevation="tiepoints", sampling=sampling)
+        b = orthorectify(s3, bands=(2, 7, 13), elevation="tiepoints", sampling=sampling,
+                         grid=a.grid)
+        for band in (2, 7, 13):
+            np.testing.assert_array_equal(a.bands[band], b.bands[band])
+        np.testing.assert_array_equal(a.flags, b.flags)
+        assert a.valid.sum() > 100_000
+
+
+def _set_fill(directory, band: int, cells: list[tuple[int, int]]) -> None:
+    """Fill value 65535 at N1-order (line, column) cells of a band of a .SEN3 directory."""
+    with netCDF4.Dataset(directory / f"M{band:02d}_radiance.nc", "a") as ds:
+        v = ds.variables[f"M{band:02d}_radiance"]
+        v.set_auto_maskandscale(False)
+        stored = mirror_columns(v[...])
+        for line, col in cells:
+            stored[line, col] = 65535
+        v[...] = mirror_columns(stored)
+
+
+@pytest.mark.parametrize("sampling", ["nearest", "bilinear", "bicubic"])
+def test_a_fill_pixel_never_yields_a_radiance(pair, sen3_copy, sampling):
+    cells = [(100 + 7 * k, 60 + 31 * k) for k in range(12)]
+    _set_fill(sen3_copy, 7, cells)
+    clean = precompute(read_product(pair[1]), bands=(6, 7), elevation="tiepoints",
+                       sampling=sampling)
+    filled = precompute(read_product(sen3_copy), clean.grid, bands=(6, 7),
+                        elevation="tiepoints", sampling=sampling)
+    a, b = clean.radiance(), filled.radiance()
+    np.testing.assert_array_equal(a[6], b[6])  # other bands untouched
+    mask = np.zeros((320, 513), bool)
+    for cell in mask_cells(cells):
+        mask[cell] = True
+    hit = touches(mask, filled.line.astype(np.float64), filled.col, sampling)
+    assert hit.sum() >= len(cells)
+    assert (b[7][hit] == 0).all()  # no data, never a fill x scale (~450) nor a mixed value
+    np.testing.assert_array_equal(a[7][~hit], b[7][~hit])
+    assert b[7].max() <= a[7].max()
+    counts = filled.counts([7])[0]
+    assert (counts[hit] == 0).all() and counts.max() < 65535
+
+
+def mask_cells(cells):
+    return [(int(r), int(c)) for r, c in cells]
+
+
+def test_a_zipped_sen3_maps_end_to_end(pair, tmp_path, capsys):
+    archive = tmp_path / (pair[1].name + ".zip")
+    with zipfile.ZipFile(archive, "w", zipfile.ZIP_DEFLATED) as z:
+        for f in sorted(pair[1].iterdir()):
+            z.write(f, f"{pair[1].name}/{f.name}")
+    outs = []
+    for src, name in ((archive, "zip.tif"), (pair[1], "dir.tif")):
+        out = tmp_path / name
+        assert main(["-q", "map", str(src), "-o", str(out), "--bands", "7,13",
+                     "--geolocation", "pixel"]) == 0, capsys.readouterr().err
+        with rasterio.open(out) as ds:
+            outs.append((ds.read(), ds.transform, ds.crs))
+    np.testing.assert_array_equal(outs[0][0], outs[1][0])
+    assert outs[0][1:] == outs[1][1:] and (outs[0][0] > 0).sum() > 100_000
+
+
+def test_saturated_pixels_are_no_data_for_their_band_in_a_synthesis(pair, sen3_copy, tmp_path):
+    from napari_meris_ortho.synthesis.api import synthesize
+    from napari_meris_ortho.synthesis.reading import open_synthesis
+
+    with netCDF4.Dataset(sen3_copy / "qualityFlags.nc", "a") as ds:
+        v = ds.variables["quality_flags"]
+        v.set_auto_maskandscale(False)
+        q = v[...]
+        q[:, 200:260] |= np.uint32(1 << (21 - 7))  # saturated_M07, stored columns 200-259
+        v[...] = q
+    out = tmp_path / "syn"
+    synthesize([sen3_copy], out, bands=(6, 7), elevation="tiepoints", sampling="nearest",
+               tile=256)
+    store = open_synthesis(out)
+    b6, b7 = store.read("band_06"), store.read("band_07")
+    ref = tmp_path / "ref"
+    synthesize([pair[1]], ref, bands=(6, 7), elevation="tiepoints", sampling="nearest",
+               tile=256)
+    r7 = open_synthesis(ref).read("band_07")
+    lost = (r7 > 0) & (b7 == 0)
+    assert lost.sum() > 5000  # the saturated strip
+    assert (b6[lost] > 0).all()  # band 6 of the same pixels is kept
+    np.testing.assert_array_equal(b7[~lost], r7[~lost])
