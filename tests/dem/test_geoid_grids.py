@@ -132,3 +132,22 @@ def test_a_missing_grid_says_the_three_ways_to_get_it(proj_dir, monkeypatch):
     # PROJ's network enabled by the user: the grid is left to PROJ to fetch (by its name)
     monkeypatch.setenv("PROJ_NETWORK", "ON")
     assert geoid.find_geoid_grid(EGM2008) == "us_nga_egm08_25.tif"
+
+
+def test_a_pip_only_machine_sees_no_system_grid(monkeypatch):
+    """MERIS_ORTHO_PROJ_SYSTEM_DIRS="" (scripts/pip_only.sh) takes Debian's /usr/share/proj out
+    of the search; the simulator then says why it skips its geoid-referenced DEM exports."""
+    from napari_meris_ortho.simulate.scene import _missing_geoid_grid
+
+    monkeypatch.setattr(geoid, "_local", type(geoid._local)())
+    monkeypatch.setenv("PROJ_NETWORK", "OFF")
+    monkeypatch.delenv("MERIS_ORTHO_GEOID", raising=False)
+    if DEBIAN_GRID.is_file():
+        assert _missing_geoid_grid() is None
+    monkeypatch.setenv("MERIS_ORTHO_PROJ_SYSTEM_DIRS", "")
+    assert Path("/usr/share/proj") not in geoid._directories()
+    if not any((d / n).is_file() for d in geoid._directories() for n in EGM96_NAMES):
+        assert "projsync --file us_nga_egm96_15.tif" in (_missing_geoid_grid() or "")
+
+
+EGM96_NAMES = ("egm96_15.gtx", "us_nga_egm96_15.tif")

@@ -73,8 +73,12 @@ def _directories() -> list[Path]:
         dirs.append(Path(pyproj.datadir.get_user_data_dir()))
     except (ImportError, RuntimeError):  # pragma: no cover
         pass
+    # the system directories of PROJ's Debian/conda packages; MERIS_ORTHO_PROJ_SYSTEM_DIRS
+    # replaces them (empty: none, as on a machine with pip packages only)
+    system = os.environ.get("MERIS_ORTHO_PROJ_SYSTEM_DIRS")
+    search = _SEARCH if system is None else [Path(p) for p in system.split(os.pathsep) if p]
     out: list[Path] = []
-    for d in [*dirs, *_SEARCH]:
+    for d in [*dirs, *search]:
         if d not in out:
             out.append(d)
     return out

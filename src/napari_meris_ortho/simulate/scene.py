@@ -5,6 +5,7 @@ from __future__ import annotations
 import copy
 import hashlib
 import json
+import logging
 import math
 import os
 from dataclasses import dataclass, field
@@ -17,7 +18,7 @@ import numpy as np
 from numba import njit, prange
 
 from .._atomic import atomic_path
-from ..errors import OptionsError, OutputError
+from ..errors import DemError, OptionsError, OutputError
 from ..geometry.earth import MEAN_EARTH_RADIUS
 from ..progress import ProgressCallback
 from . import sensor
@@ -33,6 +34,8 @@ from .radiometry import (
     truth_radiance_kernel,
 )
 from .terrain import DemGrid, Terrain, auxiliary_dem, block_max, make_terrain
+
+log = logging.getLogger(__name__)
 
 #: bump when the generator changes its output for a given config (part of the cache key)
 GENERATOR_VERSION = 2
@@ -638,6 +641,11 @@ def _write_exports(target: Path, cfg: dict, scene: SimulatedScene, terrain: Terr
              ("geotiff_utm", ex.get("geotiff_utm")), ("copernicus", ex.get("copernicus")),
              ("reference", ex.get("reference"))]
     keys = [k for k, on in steps if on]
+    missing = _missing_geoid_grid()
+    for key in ("srtm30", "copernicus"):
+        if key in keys and missing:
+            log.warning("%s DEM export skipped (heights above the geoid): %s", key, missing)
+            keys.remove(key)
     reference = None
     for i, key in enumerate(keys):
         if key == "geotiff":
@@ -667,3 +675,14 @@ def _write_exports(target: Path, cfg: dict, scene: SimulatedScene, terrain: Terr
         if progress is not None:
             progress(i + 1, len(keys))
     return paths, reference
+
+
+def _missing_geoid_grid() -> str | None:
+    """Why the EGM96 grid the geoid-referenced exports need is missing, or None."""
+    from ..dem.geoid import EGM96, geoid_grid_path
+
+    try:
+        geoid_grid_path(EGM96)
+    except DemError as exc:
+        return str(exc)
+    return None
