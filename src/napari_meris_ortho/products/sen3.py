@@ -49,6 +49,7 @@ import numpy as np
 from .. import flags as fl
 from .._atomic import atomic_dir
 from ..errors import OptionsError, Sen3FormatError
+from ..geometry.parallax import stored_corrections
 from ..geometry.tiepoints import TiePoints
 from ..progress import ProgressCallback
 from .n1.format import (
@@ -471,11 +472,9 @@ def _tie_points(p: Path, files: _Files, height: int, width: int
           "dem_rough": np.zeros(shape),
           "sun_zenith": deg(geom["SZA"]), "sun_azimuth": deg(geom["SAA"]) % 360.0,
           "view_zenith": deg(geom["OZA"]), "view_azimuth": deg(geom["OAA"]) % 360.0}
-    # the N1 convention of the stored DEM corrections (NOTES.md), derived
-    t = tp["dem_alt"] * np.tan(np.radians(tp["view_zenith"])) / 6370997.0
-    va = np.radians(tp["view_azimuth"])
-    tp["lat_corr"] = np.degrees(t * np.cos(va))
-    tp["lon_corr"] = -np.degrees(t * np.sin(va) / np.cos(np.radians(lat)))
+    # the DEM corrections as operational N1 products store them (0 over sea), derived
+    tp["lat_corr"], tp["lon_corr"] = stored_corrections(
+        tp["dem_alt"], tp["view_zenith"], tp["view_azimuth"], lat)
     if meteo:
         wind = meteo["horizontal_wind"].astype(np.float64)
         tp["zonal_wind"], tp["merid_wind"] = wind[..., 0], wind[..., 1]
