@@ -111,7 +111,7 @@ def test_broken_fsg_and_misshapen_sen3_exit_2(geolocated, tmp_path, capsys):
 def test_map_of_an_rrg_in_pixel_mode_against_the_truth(rr_small, rrg, tmp_path, capsys):
     """``map MER_RRG_1P --geolocation pixel`` end to end: the antecedents it writes
     (``--diagnostics``) are those of the simulator's lines of sight, as for the FSG
-    (``test_ortho_pixel``): <= 0.05 RR px RMS."""
+    (``test_ortho_pixel``): 0.0034 RR px RMS measured (1 km pixels: little relief per pixel)."""
     out = tmp_path / "rrg.tif"
     code, _, err = _run(capsys, "map", rrg, "-o", out, "--geolocation", "pixel", "--bands", "7",
                         "--crs", "EPSG:32632", "--diagnostics")
@@ -126,5 +126,5 @@ def test_map_of_an_rrg_in_pixel_mode_against_the_truth(rr_small, rrg, tmp_path, 
     tl, tc = rr_small.true_antecedent(lon, lat, rr_small.dem_height(lon, lat))
     e = np.hypot(diag[0].ravel()[pick] - tl, diag[1].ravel()[pick] - tc)
     rms = float(np.sqrt(np.mean(e ** 2)))
-    assert rms <= 0.05, rms
-    assert np.percentile(e, 99) < 0.25
+    assert rms <= 0.02, rms
+    assert np.percentile(e, 99) < 0.05 and e.max() < 0.5
