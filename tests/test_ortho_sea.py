@@ -65,6 +65,30 @@ def test_seabed_gives_no_parallax_in_tiepoint_mode(pacific):
     assert np.median(shift[onshore]) > 200.0
 
 
+def test_seabed_gives_no_parallax_where_a_dem_falls_back_to_the_tie_points(pacific, tmp_path):
+    """Elevation "dem" with a DEM that has no data over the sea (as SRTM): the tie points give
+    the height there (source -1), and it is 0, not the seabed."""
+    import rasterio
+    from rasterio.transform import from_origin
+
+    path, _ = pacific
+    none = orthorectify(path, bands=[1], elevation="none", diagnostics=True)
+    dem = tmp_path / "nodata.tif"
+    with rasterio.open(dem, "w", driver="GTiff", width=400, height=300, count=1,
+                       dtype="float32", crs="EPSG:4326", nodata=-32768.0,
+                       transform=from_origin(-125.0, -8.0, 0.02, 0.02)) as ds:
+        ds.write(np.full((1, 300, 400), -32768.0, np.float32))
+    r = orthorectify(path, dems=[f"{dem}:ellipsoid"], grid=none.grid, bands=[1],
+                     elevation="dem", diagnostics=True)
+    d = r.diagnostics
+    sea = r.valid & none.valid & (none.diagnostics["col"] < 240.0)
+    assert sea.sum() > 10_000
+    assert np.all(d["elevation_source"][sea] == -1)
+    assert np.max(np.abs(d["elevation"][sea])) == 0.0
+    np.testing.assert_array_equal(d["col"][sea], none.diagnostics["col"][sea])
+    np.testing.assert_array_equal(d["line"][sea], none.diagnostics["line"][sea])
+
+
 def test_the_location_models_take_no_height_below_zero():
     """``TiePointGrid`` (what every location kernel reads) holds the seabed as 0, land as is."""
     g = analytic_swath(height=65, width=129, df=16, dj=16)
