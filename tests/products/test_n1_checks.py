@@ -60,7 +60,8 @@ def expect_file_error(path, *fragments) -> str:
         ("longitude", -181_000_000, (0, 0), ["longitude[0, 0] = -181", "[-180, 180]"]),
         ("view_zenith", 1_250_000_000, (1, 2), ["view_zenith[1, 2] = 1250", "[0, 90)"]),
         ("view_zenith", 90_000_000, None, ["view_zenith[0, 0] = 90", "(12 tie points)"]),
-        ("dem_alt", 12_000, (3, 0), ["dem_alt[3, 0] = 12000", "[-500, 9000]"]),
+        ("dem_alt", 12_000, (3, 0), ["dem_alt[3, 0] = 12000", "[-11500, 9000]"]),
+        ("dem_alt", -12_000, (2, 1), ["dem_alt[2, 1] = -12000", "[-11500, 9000]"]),
         ("lat_corr", 2**31 - 1, (0, 1), ["lat_corr[0, 1] = 2147.48"]),
         ("sun_zenith", 2**32 - 1, (0, 0), ["sun_zenith[0, 0] = 4294.97", "[0, 180]"]),
         ("view_azimuth", -400_000_000, (0, 0), ["view_azimuth[0, 0] = -400"]),
@@ -70,6 +71,17 @@ def test_impossible_tie_points(tmp_path, rr, field, raw, where, fragments):
     data, product = rr
     bad = set_tie_point(data, product, field, raw, where)
     expect_error(tmp_path, bad, "Tie points ADS", *fragments)
+
+
+@pytest.mark.parametrize("depth", [-228, -5103, -11_000])
+def test_seabed_heights_are_read(tmp_path, rr, depth):
+    """Real products store bathymetry as negative dem_alt over sea (-228 m off Portugal in
+    MER_FRS_1PNMAP20070709, -5103 m over the Pacific in MER_RR__1PRACR20060116); the deepest
+    seabed is about -10 935 m. Such a product is read, with its values."""
+    data, product = rr
+    path = tmp_path / "sea.N1"
+    path.write_bytes(set_tie_point(data, product, "dem_alt", depth, (1, 2)))
+    assert read_product(path).tie_points["dem_alt"][1, 2] == depth
 
 
 @pytest.mark.parametrize(
@@ -91,7 +103,7 @@ def test_scaling_factors_finite_and_positive(tmp_path, rr, name, value, index, f
 def test_altitude_factor_out_of_range_heights(tmp_path, rr):
     data, product = rr  # a huge but finite factor scales the stored heights out of range
     bad = set_scaling(data, product, "altitude", 3e30)
-    expect_error(tmp_path, bad, "dem_alt", "[-500, 9000]")
+    expect_error(tmp_path, bad, "dem_alt", "[-11500, 9000]")
 
 
 def test_record_times_beyond_plausible_dates(tmp_path, rr):

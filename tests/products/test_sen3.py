@@ -70,6 +70,23 @@ def test_sen3_reads_like_the_n1_product(scene, products):
     np.testing.assert_allclose(s3.wavelengths, n1.wavelengths, atol=1e-3)
 
 
+def test_sen3_derives_the_corrections_as_operational_n1_products_store_them(products):
+    """The format has no lat_corr/lon_corr: the reader derives them from its own tie points with
+    the sign of ``geodetic_correction`` (operational N1 products) and 0 where the tie-point
+    altitude is the seabed (< 0), as ESA writes them."""
+    from napari_meris_ortho import geodetic_correction
+
+    tp = read_sen3(products[0]["sen3"]).tie_points
+    h = tp["dem_alt"]
+    dlon, dlat = geodetic_correction(h, tp["view_zenith"], tp["view_azimuth"], tp["latitude"])
+    land, sea = h > 0, h < 0
+    assert land.any() and sea.any()
+    np.testing.assert_allclose(tp["lat_corr"][land], dlat[land], rtol=1e-12, atol=0)
+    np.testing.assert_allclose(tp["lon_corr"][land], dlon[land], rtol=1e-12, atol=0)
+    assert np.abs(tp["lon_corr"][land]).max() > 0.005
+    assert np.all(tp["lat_corr"][sea] == 0.0) and np.all(tp["lon_corr"][sea] == 0.0)
+
+
 def test_fsg_n1_reads_the_same_pixel_geolocation(scene, products):
     paths, truth = products
     frg = read_product(paths["fsg"])

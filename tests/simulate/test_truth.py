@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from napari_meris_ortho import geodetic_correction
 from napari_meris_ortho.geometry.earth import MEAN_EARTH_RADIUS
 from napari_meris_ortho.products.n1 import (
     FLAG_BRIGHT,
@@ -115,16 +116,30 @@ def test_vegetation_ndvi_and_flags(fr_small):
     assert not (p.flags[land] & FLAG_GLINT_RISK).any()
 
 
-def test_stored_corrections_follow_eq2_with_the_real_sign_convention(fr_small):
-    """lat_corr = +h tan(vz) cos(va) / R, lon_corr = -h tan(vz) sin(va) / (R cos lat)."""
+def test_stored_corrections_as_operational_products_store_them(fr_small):
+    """lat_corr/lon_corr with the sign of ``geodetic_correction`` (the correction added, as in
+    2003 NRT and 2007 MERIS/5.04 products): within 0.2 m of it on land (the 1e-6 deg
+    quantization), exactly 0 over the sea, where dem_alt holds the seabed (< 0)."""
     tp = read_product(fr_small.product_path).tie_points
-    h, vz, va = tp["dem_alt"], np.radians(tp["view_zenith"]), np.radians(tp["view_azimuth"])
-    lat_corr = np.degrees(h * np.tan(vz) * np.cos(va) / MEAN_EARTH_RADIUS)
-    lon_corr = np.degrees(-h * np.tan(vz) * np.sin(va)
-                          / (MEAN_EARTH_RADIUS * np.cos(np.radians(tp["latitude"]))))
-    assert np.max(np.abs(tp["lat_corr"] - lat_corr)) < 2e-6
-    assert np.max(np.abs(tp["lon_corr"] - lon_corr)) < 2e-6
-    assert tp["lon_corr"].min() < -0.01  # west side of a descending pass: negative lon_corr
+    h, lat = tp["dem_alt"], tp["latitude"]
+    dlon, dlat = geodetic_correction(h, tp["view_zenith"], tp["view_azimuth"], lat)
+    land, sea = h > 0, h < 0
+    assert land.sum() > 40 and sea.sum() >= 3
+    m_per_deg = np.pi * MEAN_EARTH_RADIUS / 180.0
+    assert np.max(np.abs(tp["lat_corr"] - dlat)[land]) * m_per_deg < 0.2
+    east = np.abs(tp["lon_corr"] - dlon) * np.cos(np.radians(lat))
+    assert np.max(east[land]) * m_per_deg < 0.2
+    assert np.abs(tp["lon_corr"][land]).max() > 0.005  # real corrections, up to ~1 km
+    assert np.all(tp["lat_corr"][sea] == 0.0) and np.all(tp["lon_corr"][sea] == 0.0)
+
+
+def test_open_sea_tie_points_store_the_seabed(fr_small):
+    """Over the open sea (the truth sea under the tie point, the smoothed DEM 0) dem_alt is the
+    seabed, negative, as in real products; the truth DEM keeps the sea surface at 0."""
+    tp = read_product(fr_small.product_path).tie_points
+    sea = tp["dem_alt"] < 0
+    assert np.all(fr_small.dem_height(tp["longitude"][sea], tp["latitude"][sea]) == 0.0)
+    assert -5500.0 <= tp["dem_alt"].min() <= -20.0
 
 
 def test_tie_point_dem_is_smoothed_so_peaks_are_too_low(fr_small):

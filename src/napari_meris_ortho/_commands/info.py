@@ -33,7 +33,8 @@ def register(subparsers: Any) -> None:
     )
     p.add_argument(
         "product", metavar="PRODUCT", help="MERIS L1b product: N1 file (MER_FR__1P, "
-        "MER_RR__1P, MER_FRG_1P, MER_FSG_1P...) or .SEN3 directory (ME_1_FRG___, ME_1_RRG___)"
+        "MER_RR__1P, MER_FRG_1P, MER_FSG_1P, MER_RRG_1P...) or .SEN3 directory (ME_1_FRG___, "
+        "ME_1_RRG___)"
     )
     p.add_argument(
         "--every",

@@ -30,7 +30,8 @@ def register(subparsers: Any) -> None:
                    help='config overrides as JSON, e.g. \'{"clouds": {"seed": 2, '
                    '"fraction": 0.3}}\'')
     p.add_argument("--fsg", action="store_true",
-                   help="also write the per-pixel geolocated AMORGOS-like MER_FRG_1P N1 (FR)")
+                   help="also write the per-pixel geolocated AMORGOS-like N1: MER_FRG_1P (FR "
+                   "scenes) or MER_RRG_1P (RR scenes)")
     p.add_argument("--sen3", action="store_true",
                    help="also write the 4th-reprocessing-like ME_1_FRG___/ME_1_RRG___ .SEN3 "
                    "directory (per-pixel truth geolocation)")

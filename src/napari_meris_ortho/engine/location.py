@@ -21,6 +21,7 @@ import numpy as np
 from numba import njit
 
 from ..geometry.earth import MEAN_EARTH_RADIUS, WGS84_A, WGS84_E2
+from ..geometry.parallax import geodetic_offsets
 from ..geometry.tiepoints import TiePointGrid
 from ..options import Geolocation, Parallax, parse
 from .threads import split_range
@@ -191,22 +192,8 @@ def geodetic_correction(height_m, view_zenith_deg, view_azimuth_deg, lat_deg,
 
     ``model="handbook"``: sphere R = 6 370 997 m (MERSYN 02.05, BEAM; reproduces Appendix D).
     ``model="ellipsoid"``: WGS84 meridian (M) and prime-vertical (N) radii at ``lat_deg``.
-    Vectorised over numpy broadcasting.
+    Vectorised over numpy broadcasting; ``geometry.parallax.geodetic_offsets`` with the model
+    named as the options name it.
     """
-    code = parallax_code(model)
-    h, vz, va, lat = np.broadcast_arrays(*(np.asarray(a, dtype=np.float64) for a in (
-        height_m, view_zenith_deg, view_azimuth_deg, lat_deg)))
-    dx = h * np.tan(np.radians(vz))
-    east = dx * np.sin(np.radians(va))
-    north = dx * np.cos(np.radians(va))
-    phi = np.radians(lat)
-    if code == 0:
-        rm = rn = np.full(phi.shape, MEAN_EARTH_RADIUS)
-    else:
-        w = 1.0 - WGS84_E2 * np.sin(phi) ** 2
-        rn = WGS84_A / np.sqrt(w)
-        rm = WGS84_A * (1.0 - WGS84_E2) / w ** 1.5
-        if code == 2:
-            rn = rn + h
-            rm = rm + h
-    return np.degrees(east / (rn * np.cos(phi))), np.degrees(north / rm)
+    return geodetic_offsets(height_m, view_zenith_deg, view_azimuth_deg, lat_deg,
+                            parallax_code(model))

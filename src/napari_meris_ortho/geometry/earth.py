@@ -21,6 +21,10 @@ METRES_PER_DEGREE = 111_320.0
 #: highest terrain expected (m): how far beyond the zero-height segment boundary a terrain point
 #: may lie (section 3.1)
 MAX_TERRAIN_M = 9000.0
-#: lowest terrain expected (m): the Dead Sea shore is at -430 m; a DEM value or tie-point height
-#: outside MIN_TERRAIN_M..MAX_TERRAIN_M is no data (DEMs) or an error (N1 tie points)
+#: lowest terrain expected (m): the Dead Sea shore is at -430 m; a DEM value outside
+#: MIN_TERRAIN_M..MAX_TERRAIN_M is no data (tie-point heights: MIN_SEABED_M)
 MIN_TERRAIN_M = -500.0
+#: lowest tie-point ``dem_alt`` (m): real products store the seabed over sea (bathymetry, down
+#: to -5103 m in MER_RR__1PRACR20060116 over the Pacific); the deepest seabed, the Challenger
+#: Deep, lies about 10 935 m below sea level, plus a margin for the geoid and the auxiliary DEM
+MIN_SEABED_M = -11_500.0

@@ -20,6 +20,7 @@ import numpy as np
 
 from ..errors import GeometryError
 from .earth import MEAN_EARTH_RADIUS
+from .parallax import parallax_height
 
 #: the tie-point quantities the location models need (section 2.2)
 _NEEDED = ("latitude", "longitude", "view_zenith", "view_azimuth", "dem_alt")
@@ -148,7 +149,13 @@ def facet_coefficients(arrays: tuple[np.ndarray, ...]) -> np.ndarray:
 
 @dataclass
 class TiePointGrid:
-    """Tie-point arrays (n_tie_lines, n_tie_cols) plus DF, DJ and the product size H x W."""
+    """Tie-point arrays (n_tie_lines, n_tie_cols) plus DF, DJ and the product size H x W.
+
+    ``dem_alt`` is kept as ``parallax.parallax_height`` gives it (0 where the product stores
+    bathymetry below 0): every height the location models take from the tie points (elevation
+    "tiepoints", the DEM modes' fallback, the prediction's height rates) gives no parallax over
+    sea, as ESA's zero ``lat_corr``/``lon_corr`` there say.
+    """
 
     latitude: np.ndarray
     longitude: np.ndarray
@@ -166,7 +173,8 @@ class TiePointGrid:
 
     def __post_init__(self) -> None:
         arrays = [np.ascontiguousarray(a, dtype=np.float64) for a in (
-            self.latitude, self.longitude, self.view_zenith, self.view_azimuth, self.dem_alt)]
+            self.latitude, self.longitude, self.view_zenith, self.view_azimuth,
+            parallax_height(self.dem_alt))]
         self.latitude, self.longitude, self.view_zenith, self.view_azimuth, self.dem_alt = arrays
         shape = self.latitude.shape
         if len(shape) != 2 or shape[0] < 2 or shape[1] < 2:

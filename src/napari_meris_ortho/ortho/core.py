@@ -334,7 +334,8 @@ def _pixel_grids(prod: MerisProduct) -> tuple[np.ndarray, np.ndarray, np.ndarray
     if not getattr(prod, "has_pixel_geolocation", False):
         raise OptionsError(
             f"{getattr(prod, 'path', prod)}: geolocation 'pixel' needs a product with a "
-            "per-pixel geolocation (MER_FRG_1P / MER_FSG_1P N1 or a .SEN3 directory)")
+            "per-pixel geolocation (MER_FRG_1P / MER_FSG_1P / MER_RRG_1P N1 or a .SEN3 "
+            "directory)")
     geolocated: Any = prod  # FRG/FSG N1 or SEN3 (products.open): the per-pixel accessors
     return (geolocated.pixel_longitude(), geolocated.pixel_latitude(),
             geolocated.pixel_altitude())

@@ -1,5 +1,6 @@
 """Per-pixel geolocated versions of a simulated scene (issue 16): the AMORGOS-like
-``MER_FRG_1P`` N1 product and the fourth-reprocessing-like ``ME_1_FRG___`` ``.SEN3`` directory.
+``MER_FRG_1P`` (FR) or ``MER_RRG_1P`` (RR) N1 product and the fourth-reprocessing-like
+``ME_1_FRG___``/``ME_1_RRG___`` ``.SEN3`` directory.
 
 Both carry the same radiances, flags and tie points as the scene's standard L1b product, plus
 the truth geolocation of every pixel centre: the terrain point T where its line of sight first
@@ -41,9 +42,9 @@ def pixel_truth(scene, progress: ProgressCallback | None = None) -> dict[str, np
 def write_geocorrected(scene, fsg: bool = True, sen3: bool = True,
                        out_dir: str | os.PathLike[str] | None = None,
                        progress: ProgressCallback | None = None) -> dict[str, Path]:
-    """Write the FRG N1 (``"fsg"``) and/or the ``.SEN3`` directory (``"sen3"``) of ``scene`` into
-    ``out_dir`` (default: the scene's directory); existing outputs of the same product are
-    reused. Returns their paths by kind."""
+    """Write the FRG (FR) or RRG (RR) N1 (``"fsg"``) and/or the ``.SEN3`` directory (``"sen3"``)
+    of ``scene`` into ``out_dir`` (default: the scene's directory); existing outputs of the same
+    product are reused. Returns their paths by kind."""
     from ..products.n1 import read_product, write_product
     from ..products.n1.writer import default_product_name
     from ..products.sen3 import default_sen3_name, write_sen3
@@ -55,12 +56,9 @@ def write_geocorrected(scene, fsg: bool = True, sen3: bool = True,
     start = np.datetime64(g.first_line_datetime.replace(tzinfo=None), "us")
     resolution = "FR" if prod.product_type == "MER_FR__1P" else "RR"
     paths: dict[str, Path] = {}
+    amorgos = "MER_FRG_1P" if resolution == "FR" else "MER_RRG_1P"
     if fsg:
-        if resolution != "FR":
-            from ..errors import OptionsError
-
-            raise OptionsError("AMORGOS FRG/FSG products exist for full resolution only")
-        paths["fsg"] = target / default_product_name("MER_FRG_1P", start, g.lines * g.frame_time)
+        paths["fsg"] = target / default_product_name(amorgos, start, g.lines * g.frame_time)
     if sen3:
         paths["sen3"] = target / default_sen3_name(resolution, start, g.lines * g.frame_time)
     todo = {k: p for k, p in paths.items() if not _newer(p, scene.product_path)}
@@ -71,7 +69,7 @@ def write_geocorrected(scene, fsg: bool = True, sen3: bool = True,
     flags = np.ascontiguousarray(prod.flags, dtype=np.uint8)
     det = np.ascontiguousarray(prod.detector_index, dtype=np.int16)
     if "fsg" in todo:
-        write_product(todo["fsg"], product_type="MER_FRG_1P", tie_points=prod.tie_points,
+        write_product(todo["fsg"], product_type=amorgos, tie_points=prod.tie_points,
                       counts=counts, flags=flags, detector_index=det,
                       first_line_time=start, line_interval_s=g.frame_time,
                       scaling=prod.scaling, product_name=todo["fsg"].name,

@@ -19,7 +19,7 @@ from numba import njit, prange
 
 from .._atomic import atomic_path
 from ..errors import DemError, OptionsError, OutputError
-from ..geometry.earth import MEAN_EARTH_RADIUS
+from ..geometry.parallax import stored_corrections
 from ..progress import ProgressCallback
 from . import sensor
 from .orbit import Orbit, solve_pass
@@ -33,13 +33,12 @@ from .radiometry import (
     solar_angles,
     truth_radiance_kernel,
 )
-from .terrain import DemGrid, Terrain, auxiliary_dem, block_max, make_terrain
+from .terrain import DemGrid, Terrain, auxiliary_dem, bathymetry, block_max, make_terrain
 
 log = logging.getLogger(__name__)
 
 #: bump when the generator changes its output for a given config (part of the cache key)
-GENERATOR_VERSION = 2
-#: mean Earth radius of eq. 2 (handbook section 2.2)
+GENERATOR_VERSION = 3
 RESOLUTIONS = {
     # frame time (s), column spacing (m), tie-point spacing DF = DJ, product type
     "FR": (0.044, 260.0, 64, "MER_FR__1P"),
@@ -402,8 +401,14 @@ def build_truth(cfg: dict, geom: SceneGeometry) -> tuple[DemGrid, Terrain, Groun
     return grid, terrain, truth
 
 
-def tie_point_values(geom: SceneGeometry, grid: DemGrid, dem: np.ndarray) -> dict[str, np.ndarray]:
-    """The Tie points ADS in physical units (handbook section 2.2, eq. 2, Appendix E)."""
+def tie_point_values(geom: SceneGeometry, grid: DemGrid, dem: np.ndarray,
+                     seabed: np.ndarray | None = None) -> dict[str, np.ndarray]:
+    """The Tie points ADS in physical units (handbook section 2.2, eq. 2, Appendix E).
+
+    ``seabed``: bathymetry on the DEM posts (``terrain.bathymetry``): a tie point over the
+    open sea (the smoothed DEM 0 there, the sea under it) stores the seabed as a negative
+    ``dem_alt``, as real products do; its corrections are 0 (``geometry.parallax``).
+    """
     e = locate(geom, geom.tie_lines, geom.tie_cols)
     lon, lat, vz, va = e[..., 0], e[..., 1], e[..., 2], e[..., 3]
     alt, rough = auxiliary_dem(dem, grid.spacing)
@@ -415,13 +420,15 @@ def tie_point_values(geom: SceneGeometry, grid: DemGrid, dem: np.ndarray) -> dic
     # stored as integers (altitude and roughness factors 1.0, Appendix A): eq. 2 uses those
     dem_alt = np.round(np.nan_to_num(dem_alt))
     dem_rough = np.round(np.nan_to_num(dem_rough))
+    if seabed is not None:
+        floor = _sample_dem(np.ascontiguousarray(seabed, np.float32), geo, flat_lon, flat_lat)
+        floor = np.round(np.nan_to_num(floor.reshape(lon.shape)))
+        open_sea = (dem_alt == 0.0) & (floor < 0.0)
+        dem_alt = np.where(open_sea, floor, dem_alt)
     times = geom.line_time(geom.tie_lines)[:, None] * np.ones_like(lon)
     sz, sa = solar_angles(times, lon, lat)
-    # eq. 2 with the sign convention of real products (Appendix E): lon_corr has the minus sign
-    dx = dem_alt * np.tan(np.radians(vz))
-    lat_corr = np.degrees(dx * np.cos(np.radians(va)) / MEAN_EARTH_RADIUS)
-    lon_corr = np.degrees(-dx * np.sin(np.radians(va))
-                          / (MEAN_EARTH_RADIUS * np.cos(np.radians(lat))))
+    # eq. 2 as operational products store it: the sign of the correction added, 0 over sea
+    lat_corr, lon_corr = stored_corrections(dem_alt, vz, va, lat)
     tp = {"latitude": lat, "longitude": lon, "dem_alt": dem_alt, "dem_rough": dem_rough,
           "lat_corr": lat_corr, "lon_corr": lon_corr, "sun_zenith": sz, "sun_azimuth": sa,
           "view_zenith": vz, "view_azimuth": va}
@@ -572,8 +579,8 @@ def generate_scene(name_or_config: str | dict, out_dir: str | os.PathLike[str] |
     if progress is not None:
         progress(10, 100)
     counts, flags = render_product(cfg, geom, grid, dem, truth, _stage(progress, 10, 55))
-    product_path = _write_product(target, cfg, geom, grid, dem, counts, flags,
-                                  _stage(progress, 65, 10))
+    product_path = _write_product(target, cfg, geom, grid, dem, bathymetry(terrain), counts,
+                                  flags, _stage(progress, 65, 10))
     del counts
     scene = SimulatedScene(config=cfg, out_dir=target, product_path=product_path,
                            dem_paths={}, reference_path=None, geometry=geom, dem_grid=grid,
@@ -600,12 +607,12 @@ def generate_scene(name_or_config: str | dict, out_dir: str | os.PathLike[str] |
 
 
 def _write_product(target: Path, cfg: dict, geom: SceneGeometry, grid: DemGrid,
-                   dem: np.ndarray, counts: np.ndarray, flags: np.ndarray,
+                   dem: np.ndarray, seabed: np.ndarray, counts: np.ndarray, flags: np.ndarray,
                    progress: ProgressCallback | None) -> Path:
     from ..products.n1 import write_product
     from ..products.n1.writer import default_product_name
 
-    tp = tie_point_values(geom, grid, dem)
+    tp = tie_point_values(geom, grid, dem, seabed)
     det = np.broadcast_to(detector_index(geom), flags.shape)
     start = np.datetime64(geom.first_line_datetime.replace(tzinfo=None), "us")
     name = default_product_name(geom.product_type, start, geom.lines * geom.frame_time,

@@ -4,7 +4,7 @@ The DEM is a geographic grid of posts (rows North to South, posts at pixel centr
 above the WGS84 ellipsoid; the terrain surface is *bilinear between these posts* everywhere in the
 simulator. Relief: ridged multifractal mountain ranges (sharp ridges, deep valleys) inside
 envelopes given by the scene config, low rolling plains, a sea (height 0) behind a fractal
-coastline, and flat lakes.
+coastline, and flat lakes; under the sea a seabed (``bathymetry``) for the tie points.
 """
 
 from __future__ import annotations
@@ -203,6 +203,31 @@ def make_terrain(grid: DemGrid, cfg: dict, seed: int) -> Terrain:
             lake |= mask
             height[mask] = level
     return Terrain(grid=grid, height=height.astype(np.float32), sea=sea, lake=lake)
+
+
+#: seabed model of ``bathymetry``: depth at the coast (m), shelf slope (m/km) over the first
+#: ``SHELF_KM``, continental slope (m/km) beyond, abyssal plain depth (m)
+COAST_DEPTH_M, SHELF_SLOPE, SHELF_KM = 20.0, 3.0, 50.0
+CONTINENTAL_SLOPE, ABYSSAL_DEPTH_M = 37.0, 5500.0
+
+
+def bathymetry(terrain: Terrain) -> np.ndarray:
+    """Seabed height (float32, m, negative) under the sea posts of ``terrain``, 0 elsewhere: a
+    shelf falling 3 m/km from -20 m at the coast for 50 km, then 37 m/km down to an abyssal
+    plain at -5500 m (real tie points: -228 m off Portugal, -5103 m in the open Pacific).
+    The scene's DEM keeps the sea surface (height 0), as DEMs do; only the tie points' auxiliary
+    DEM carries the seabed, as ESA's does."""
+    from scipy.ndimage import distance_transform_edt
+
+    if not terrain.sea.any():
+        return np.zeros(terrain.sea.shape, np.float32)
+    g = terrain.grid
+    lat_c = g.lat0 - 0.5 * g.nrows * g.spacing
+    cell = (g.spacing * KM_PER_DEG, g.spacing * KM_PER_DEG * math.cos(math.radians(lat_c)))
+    d = distance_transform_edt(terrain.sea, sampling=cell)
+    depth = (COAST_DEPTH_M + SHELF_SLOPE * np.minimum(d, SHELF_KM)
+             + CONTINENTAL_SLOPE * np.maximum(d - SHELF_KM, 0.0))
+    return np.where(terrain.sea, -np.minimum(depth, ABYSSAL_DEPTH_M), 0.0).astype(np.float32)
 
 
 def box_smooth(a: np.ndarray, size: int) -> np.ndarray:

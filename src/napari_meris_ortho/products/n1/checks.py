@@ -18,15 +18,15 @@ from pathlib import Path
 import numpy as np
 
 from ...errors import N1FormatError
-from ...geometry.earth import MAX_TERRAIN_M, MIN_TERRAIN_M
+from ...geometry.earth import MAX_TERRAIN_M, MIN_SEABED_M
 from .format import Resolution, ScalingFactors, tie_lines
 
 #: an Envisat orbit lasts 6036 s: no product holds more lines than one orbit (FR 137 189)
 MAX_PRODUCT_DURATION_S = 6100.0
 #: widest MERIS line: the FR full swath (MER_FRS_1P) has 4481 samples
 MAX_FR_WIDTH = 4481
-#: terrain heights a tie point may hold (m): Dead Sea shore to above Mount Everest
-HEIGHT_RANGE_M = (MIN_TERRAIN_M, MAX_TERRAIN_M)
+#: heights a tie point may hold (m): the deepest seabed (bathymetry over sea) to above Everest
+HEIGHT_RANGE_M = (MIN_SEABED_M, MAX_TERRAIN_M)
 #: largest stored DEM correction (deg): h tan(vz)/R at 9000 m and 60 deg is 0.14 deg; the
 #: longitude correction grows as 1/cos(lat)
 MAX_CORRECTION_DEG = 10.0
@@ -40,7 +40,7 @@ TIE_POINT_RANGES: dict[str, tuple[float, float, bool]] = {
     "latitude": (-90.0, 90.0, True),
     "longitude": (-180.0, 180.0, True),
     "dem_alt": (*HEIGHT_RANGE_M, True),
-    "dem_rough": (0.0, HEIGHT_RANGE_M[1], True),
+    "dem_rough": (0.0, MAX_TERRAIN_M, True),
     "lat_corr": (-MAX_CORRECTION_DEG, MAX_CORRECTION_DEG, True),
     "lon_corr": (-MAX_CORRECTION_DEG, MAX_CORRECTION_DEG, True),
     "sun_zenith": (0.0, 180.0, True),

@@ -63,18 +63,20 @@ FULL_RESOLUTION = Resolution("FR", 2241, 64, 64, 0.043997, 260.0, 512)
 REDUCED_RESOLUTION = Resolution("RR", 1121, 16, 16, 0.175988, 1040.0, 128)
 
 #: product types the reader accepts, with their resolution. MER_FRS_1P (FR full swath) and
-#: MER_FRG_1P / MER_FSG_1P (geo-corrected FR variants) share the FR L1b datasets; extra datasets
-#: they carry are ignored.
+#: MER_FRG_1P / MER_FSG_1P (geo-corrected FR variants) share the FR L1b datasets, MER_RRG_1P
+#: (the geo-corrected RR variant) the RR ones; extra datasets they carry are ignored.
 PRODUCT_TYPES: dict[str, Resolution] = {
     FR: FULL_RESOLUTION,
     "MER_FRS_1P": FULL_RESOLUTION,
     "MER_FRG_1P": FULL_RESOLUTION,
     "MER_FSG_1P": FULL_RESOLUTION,
     RR: REDUCED_RESOLUTION,
+    "MER_RRG_1P": REDUCED_RESOLUTION,
 }
-#: AMORGOS (third reprocessing) geo-corrected FR types: three more MDS after Flags MDS(16) hold
-#: the per-pixel terrain-corrected position (BEAM's DDDB ``MER_FSG_1P.dd`` / ``MER_FRG_1P.dd``)
-PIXEL_GEOLOCATION_TYPES = ("MER_FRG_1P", "MER_FSG_1P")
+#: AMORGOS (third reprocessing) geo-corrected types: three more MDS after Flags MDS(16) hold
+#: the per-pixel terrain-corrected position (SNAP's DDDB ``MER_FSG_1P.dd``, ``MER_FRG_1P.dd``
+#: and ``MER_RRG_1P.dd``: the same MDS 17-19 at FR and RR)
+PIXEL_GEOLOCATION_TYPES = ("MER_FRG_1P", "MER_FSG_1P", "MER_RRG_1P")
 #: product types the writer produces
 WRITABLE_PRODUCT_TYPES = (FR, RR, *PIXEL_GEOLOCATION_TYPES)
 
@@ -355,7 +357,7 @@ def flags_dtype(width: int) -> np.dtype:
 
 @dataclass(frozen=True)
 class GeolocationMds:
-    """A per-pixel geolocation MDS of FRG/FSG products (BEAM's ``MER_FSG_1P_MDSR_17..19``):
+    """A per-pixel geolocation MDS of FRG/FSG/RRG products (BEAM's ``MER_FSG_1P_MDSR_17..19``):
     13-byte header + ``dtype``[W]; physical = raw x ``scale``."""
 
     name: str  #: DS_NAME
@@ -479,7 +481,7 @@ def plan_layout(product_type: str, width: int, height: int, n_tie_lines: int) ->
     """The 30 DSDs of a MERIS L1b product of ``width`` x ``height`` pixels, laid out like
     Appendix A: Quality ADS, Scaling Factor GADS, Tie points ADS, Radiance MDS(1..15),
     Flags MDS(16), 10 reference DSDs, 1 spare. Offsets follow MPH (1247) + SPH (9942).
-    FRG/FSG products have 33: the three geolocation MDS (17..19) follow Flags MDS(16).
+    FRG/FSG/RRG products have 33: the three geolocation MDS (17..19) follow Flags MDS(16).
     """
     res = PRODUCT_TYPES[product_type]
     n_cols = tie_columns(width, res.samples_per_tie_point)
@@ -507,7 +509,7 @@ def plan_layout(product_type: str, width: int, height: int, n_tie_lines: int) ->
 
 
 def num_dsd(product_type: str) -> int:
-    """DSDs of a product type: 30, plus the 3 geolocation MDS of FRG/FSG products."""
+    """DSDs of a product type: 30, plus the 3 geolocation MDS of FRG/FSG/RRG products."""
     return NUM_DSD + (len(GEOLOCATION_MDS) if product_type in PIXEL_GEOLOCATION_TYPES else 0)
 
 

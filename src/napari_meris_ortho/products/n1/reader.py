@@ -169,7 +169,7 @@ class MerisL1bProduct:
     float64 grids), ``tie_point_times``, ``line_times`` (float64 seconds since 2000-01-01),
     ``wavelengths`` (nm); methods ``counts(band)``, ``radiance(band)``; properties ``flags``,
     ``detector_index``. Band arrays are big-endian memory maps of the file (``>u2``, ``>i2``).
-    FRG/FSG (AMORGOS) products also have a per-pixel geolocation (``has_pixel_geolocation``,
+    FRG/FSG/RRG (AMORGOS) products also have a per-pixel geolocation (``has_pixel_geolocation``,
     ``pixel_longitude()``, ``pixel_latitude()``, ``pixel_altitude()``: MDS(17..19)).
     """
 
@@ -320,7 +320,7 @@ class MerisL1bProduct:
         rec = self._records(radiance_mds(1), radiance_dtype(self.width))  # headers only read
         return mjd2000_to_seconds(rec["days"], rec["seconds"], rec["microseconds"])
 
-    # -- per-pixel geolocation (MER_FRG_1P / MER_FSG_1P) ------------------------------------
+    # -- per-pixel geolocation (MER_FRG_1P / MER_FSG_1P / MER_RRG_1P) -----------------------
     @property
     def has_pixel_geolocation(self) -> bool:
         """True for products with the Corrected Longitude/Latitude and Altitude MDS(17..19)."""
@@ -536,7 +536,7 @@ def _check_dsds(path: Path, dsds: list[Dsd], file_size: int, data_start: int) ->
 
 def _check_geolocation_mds(path: Path, by_name: dict[str, Dsd], product_type: str, width: int,
                            height: int) -> None:
-    """FRG/FSG products need MDS(17..19), one record of W values per product line."""
+    """FRG/FSG/RRG products need MDS(17..19), one record of W values per product line."""
     for mds in GEOLOCATION_MDS:
         d = by_name.get(mds.name)
         if d is None:

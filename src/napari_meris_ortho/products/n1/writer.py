@@ -2,7 +2,7 @@
 
 MPH (1247 bytes), SPH text (1542 bytes) and 30 DSDs of 280 bytes, then Quality ADS, Scaling Factor
 GADS, Tie points ADS, Radiance MDS(1..15) and Flags MDS(16), with the offsets and sizes of
-Appendix A for a 2241 x 2241 FR product. AMORGOS types (MER_FRG_1P, MER_FSG_1P) add the
+Appendix A for a 2241 x 2241 FR product. AMORGOS types (MER_FRG_1P, MER_FSG_1P, MER_RRG_1P) add the
 Corrected Longitude/Latitude and Altitude MDS(17..19) of the per-pixel terrain point. The bands
 are streamed a block of lines at a time, so memory-mapped inputs of any size are welcome. The file
 is written to a temporary name and renamed.
@@ -262,9 +262,9 @@ def write_product(
     ``line_interval_s``: default 0.043997 s (FR) / 0.175988 s (RR); ``scaling``: default
     :meth:`ScalingFactors.appendix_a` with the sampling rate set to the line interval;
     ``mph``/``sph``: overrides of header values by file key (``{"PROC_CENTER": "UK-PAC"}``);
-    ``pixel_geolocation``: for MER_FRG_1P / MER_FSG_1P only (and required there), the per-pixel
-    terrain point as (H, W) ``longitude``, ``latitude`` (deg, stored in 1e-6 deg) and
-    ``altitude`` (m, stored as int16). Bad arguments raise :class:`OptionsError`.
+    ``pixel_geolocation``: for MER_FRG_1P / MER_FSG_1P / MER_RRG_1P only (and required there),
+    the per-pixel terrain point as (H, W) ``longitude``, ``latitude`` (deg, stored in 1e-6 deg)
+    and ``altitude`` (m, stored as int16). Bad arguments raise :class:`OptionsError`.
     """
     if product_type not in WRITABLE_PRODUCT_TYPES:
         raise OptionsError(

@@ -7,7 +7,7 @@ CF attributes (``layout.cf_decode``); no-data is NaN (radiances, geolocation, me
 band's ``no_data_count`` in ``counts``, which the mapping keeps out of every resampling.
 
 The tie-point ``lat_corr``/``lon_corr`` (absent from the format) are derived from ``dem_alt``
-and the view angles with the N1 convention (NOTES.md).
+and the view angles as operational N1 products store them (``geometry.parallax``; 0 over sea).
 """
 
 from __future__ import annotations
@@ -24,6 +24,8 @@ from typing import Any
 import numpy as np
 
 from ...errors import Sen3FormatError
+from ...geometry.earth import MAX_TERRAIN_M, MIN_SEABED_M
+from ...geometry.parallax import stored_corrections
 from ...geometry.tiepoints import TiePoints
 from ..n1.format import (
     APPENDIX_A_BANDWIDTHS,
@@ -63,7 +65,8 @@ log = logging.getLogger(__name__)
 
 #: physical range of each geolocation and angle variable (degrees, metres)
 PHYSICAL_RANGE: dict[str, tuple[float, float]] = {
-    "latitude": (-90.0, 90.0), "longitude": (-180.0, 360.0), "altitude": (-11_000.0, 9_000.0),
+    "latitude": (-90.0, 90.0), "longitude": (-180.0, 360.0),
+    "altitude": (MIN_SEABED_M, MAX_TERRAIN_M),
     "SZA": (0.0, 180.0), "OZA": (0.0, 90.0), "SAA": (-180.0, 360.0), "OAA": (-180.0, 360.0),
 }
 #: optional tie-point meteo variables, each on its own (none is used by the geometry)
@@ -441,11 +444,9 @@ def _tie_points(members: Members, height: int, width: int
           "sun_azimuth": decoded(geom, attrs, "SAA", TIE_GEOMETRY_FILE) % 360.0,
           "view_zenith": decoded(geom, attrs, "OZA", TIE_GEOMETRY_FILE),
           "view_azimuth": decoded(geom, attrs, "OAA", TIE_GEOMETRY_FILE) % 360.0}
-    # the N1 convention of the stored DEM corrections (NOTES.md), derived
-    t = tp["dem_alt"] * np.tan(np.radians(tp["view_zenith"])) / 6370997.0
-    va = np.radians(tp["view_azimuth"])
-    tp["lat_corr"] = np.degrees(t * np.cos(va))
-    tp["lon_corr"] = -np.degrees(t * np.sin(va) / np.cos(np.radians(lat)))
+    # the DEM corrections as operational N1 products store them (0 over sea), derived
+    tp["lat_corr"], tp["lon_corr"] = stored_corrections(
+        tp["dem_alt"], tp["view_zenith"], tp["view_azimuth"], lat)
     tp.update(_meteo(meteo, meteo_attrs, shape))
     return tp, df, dj
 
