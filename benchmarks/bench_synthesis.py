@@ -136,16 +136,17 @@ def main() -> None:
     parser.add_argument("--products", type=int, default=8)
     parser.add_argument("--tile", type=int, default=1024)
     parser.add_argument("--bands", type=int, default=15, help="bands 1..N (plus 7 and 13)")
-    parser.add_argument("--workers", default="0,1,2", help="worker counts to run")
+    parser.add_argument("--workers", default="0,1,2",
+                        help="worker counts to run ('' : only the update table)")
     args = parser.parse_args()
 
     from napari_meris_ortho.geometry.grid import OutputGrid
+    from napari_meris_ortho.ortho import product_grid
     from napari_meris_ortho.products.n1 import read_product
-    from napari_meris_ortho.synthesis.tiling import new_grid
 
     paths = products(args.products, args.scene)
     bands = sorted(set(range(1, min(args.bands, 15) + 1)) | {7, 13})
-    grid = new_grid(read_product(paths[0]), "EPSG:4326", None)
+    grid = product_grid(read_product(paths[0]), "EPSG:4326")
     europe = OutputGrid("EPSG:4326", EUROPE[0], EUROPE[1], PIXEL_260M, PIXEL_260M,
                         round(EUROPE[2] / PIXEL_260M), round(EUROPE[3] / PIXEL_260M))
     print(f"{len(paths)} {args.scene} products, {len(bands)} bands, grid {grid.width} x "
@@ -153,8 +154,8 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp_dir:
         tmp = Path(tmp_dir)
         rows = [throughput(paths, grid, bands, args.tile, int(w), tmp)
-                for w in args.workers.split(",")]
-        one = next((r for r in rows if r["workers"] == 1), rows[0])
+                for w in args.workers.split(",") if w]
+        one = next((r for r in rows if r["workers"] == 1), rows[0] if rows else {})
         print(f"\n{'workers':>10s} {'seconds':>8s} {'prod/min':>9s} {'speed-up':>9s} "
               f"{'tasks':>6s} {'s/task':>7s} {'peak MB per worker':>20s}")
         for r in rows:
@@ -166,10 +167,10 @@ def main() -> None:
         updates = [update_cost(paths, g, bands, args.tile, tmp, name)
                    for name, g in (("small", grid), ("Europe", europe))]
     print(f"\n{'store':>8s} {'grid':>15s} {'overviews':>9s} {'update s':>9s} "
-          f"{'bytes added':>12s} {'files added':>12s}")
+          f"{'MB added':>9s} {'files added':>12s}")
     for u in updates:
         print(f"{u['store']:>8s} {u['size']:>15s} {u['levels']:9d} {u['seconds']:9.2f} "
-              f"{u['bytes']:12d} {u['files']:12d}")
+              f"{u['bytes'] / 1e6:9.1f} {u['files']:12d}")
 
 
 if __name__ == "__main__":

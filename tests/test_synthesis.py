@@ -106,7 +106,10 @@ def test_store_layout_history_and_snapshots(products, tmp_path) -> None:
     assert store.layers() == ["band_07", "band_13", "ndvi", "count", "product"]
     assert store.overviews == [2] == st.overview_factors(540, 340, 256)
     root = zarr.open_group(store.session.store, mode="r")
-    for name, dtype in (("band_07", "float32"), ("ndvi", "uint16"), ("count", "uint16"),
+    # compact band layers: uint16 counts with the band's Appendix A factor as CF scale_factor
+    assert root["band_07"].attrs["scale_factor"] == st.BAND_SCALES[7] == 0.006815
+    assert store.read("band_07").dtype == np.float32
+    for name, dtype in (("band_07", "uint16"), ("ndvi", "uint16"), ("count", "uint16"),
                         ("product", "int32")):
         assert root[name].dtype == dtype and root[name].chunks == (256, 256)
         assert root[name].shape == (340, 540)
@@ -538,3 +541,30 @@ def test_tie_points_and_boundary_built_once_per_product(tmp_path, monkeypatch) -
             assert not tile[~valid].any()
             compared += 1
     assert compared >= 4
+
+
+@pytest.mark.parametrize("sampling", ["nearest", "bilinear"])
+def test_compact_layers_round_trip_within_half_a_count(products, tmp_path, sampling) -> None:
+    """Band layers are uint16 counts of the band's Appendix A factor: a standard product's
+    nearest-neighbour radiances come back exactly, interpolated ones within half a count; the
+    layers read back as float32 radiances, and smaller than float32 would be."""
+    from napari_meris_ortho.products.open import read_product
+
+    out = tmp_path / "s"
+    synthesize([products["clear"]], out, grid=GRID, bands=BANDS, tile=256,
+               elevation="tiepoints", sampling=sampling)
+    store = open_synthesis(out)
+    mapped = orthorectify(read_product(products["clear"]), GRID, bands=BANDS,
+                          elevation="tiepoints", sampling=sampling)
+    for b in BANDS:
+        stored, want = store.band(b), mapped.bands[b]
+        inside = store.read("count") > 0
+        assert stored.dtype == np.float32 and inside.sum() > 50_000
+        error = np.abs(stored[inside].astype(np.float64) - want[inside])
+        if sampling == "nearest":
+            assert error.max() == 0.0
+        else:
+            # half a count, plus the float32 rounding of the radiances themselves
+            ulp = float(np.spacing(np.float32(want.max())))
+            assert error.max() <= st.BAND_SCALES[b] / 2 + 2 * ulp and error.max() > 0
+        assert (stored[~inside] == 0).all()

@@ -30,7 +30,13 @@ def pyramid(store: SynthesisStore, name: str) -> list[Any]:
     levels = [zarr.open_array(session_store, path=name, mode="r")]
     levels += [zarr.open_array(session_store, path=f"overview_{f}/{name}", mode="r")
                for f in store.overviews]
-    return levels
+    scale = st.stored_scale(levels[0]) if name.startswith("band_") else None
+    if scale is None:
+        return levels
+    import dask.array as da
+
+    # compact band layers: uint16 counts decoded to radiances chunk by chunk, lazily
+    return [da.from_zarr(level).astype(np.float32) * np.float32(scale) for level in levels]
 
 
 def store_layers(path: str | Path, at: str | None = None) -> list[LayerData]:

@@ -185,6 +185,9 @@ class Spec:
     tile: int
     names: tuple[str, ...]
     overviews: tuple[int, ...]
+    #: band layers stored as uint16 counts (store version 3): every product's radiances are
+    #: quantized to them before the merge, so the merge compares what the store holds
+    compact: bool = True
 
     @property
     def needed(self) -> tuple[int, ...]:
@@ -277,6 +280,9 @@ def segment_task(spec: Spec, index: int, path: str, window: Window,
     valid = validated_pixels(inside, np.ascontiguousarray(result.flags, dtype=np.uint8),
                              spec.reject_bright)
     _no_data_out(result, spec, valid)
+    if spec.compact:
+        for b in spec.bands:
+            result.bands[b] = st.quantized(result.bands[b], st.BAND_SCALES[b])
     piece = Piece(index, window, None, int(inside.sum()), int(valid.sum()))
     rows, cols = np.flatnonzero(valid.any(axis=1)), np.flatnonzero(valid.any(axis=0))
     if rows.size == 0:
@@ -505,7 +511,8 @@ class Synthesis:
                     tuple(self.dems), replace(self.options, bands=needed, diagnostics=False),
                     self.reject_bright,
                     self.tile, tuple(st.layer_names(self.bands, self.algorithm)),
-                    tuple(st.overview_factors(shape[1], shape[0], self.tile)))
+                    tuple(st.overview_factors(shape[1], shape[0], self.tile)),
+                    self._version >= 3)
 
     def _session(self, spec: Spec) -> tuple[Any, Callable[..., str]]:
         """A writable session without uncommitted changes (forks need one) and the function
@@ -537,9 +544,15 @@ class Synthesis:
             with contextlib.suppress(Exception):
                 self.target.repo.delete_branch(self._branch)
 
+    @property
+    def _version(self) -> int:
+        """The store format: an update keeps its store's (2: float32 band layers)."""
+        old = self.target.synthesis
+        return st.VERSION if old is None else int(old.attrs.get("version", 2))
+
     def _attributes(self, table: list[dict[str, Any]]) -> dict[str, Any]:
         shape = (self.grid.height, self.grid.width)
-        return {"format": st.FORMAT, "version": st.VERSION, "algorithm": self.algorithm,
+        return {"format": st.FORMAT, "version": self._version, "algorithm": self.algorithm,
                 "bands": list(self.bands), "grid": grid_to_dict(self.grid), "tile": self.tile,
                 "overviews": st.overview_factors(shape[1], shape[0], self.tile),
                 "radiance": RADIANCE_NOTE, "products": table}

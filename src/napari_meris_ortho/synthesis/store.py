@@ -4,7 +4,11 @@ Layout (``STORE`` is an Icechunk repository; branch ``main`` is the synthesis)::
 
     /                       attributes: format, version, algorithm, bands, grid, tile,
                             overview factors, products (the product table)
-    /band_07 ...            float32 radiance of each MERIS band (0 = background)
+    /band_07 ...            radiance of each MERIS band as uint16 counts, CF ``scale_factor`` =
+                            the band's Appendix A factor (``BAND_SCALES``; 0 = background):
+                            standard products' radiances round-trip exactly, others within
+                            half a count; stores of version 2 hold float32 radiances (read and
+                            updated as they are)
     /ndvi                   uint16 NDVI of the maximum-NDVI rule (Appendix C: [1, 65535], 0 =
                             background); absent for the minimum-radiance rule
     /count                  uint16 number of products that gave a valid pixel
@@ -33,9 +37,14 @@ from typing import Any
 import numpy as np
 
 from ..errors import OptionsError, OutputError
+from ..products.n1.format import ScalingFactors
 
 FORMAT = "napari-meris-ortho synthesis"
-VERSION = 2
+VERSION = 3
+#: stored radiance of a band count: count x the band's Appendix A factor (Scaling Factor GADS)
+BAND_SCALES: dict[int, float] = dict(enumerate(ScalingFactors().radiance, start=1))
+#: largest stored count (radiances above 65535 x the scale are clipped to it)
+MAX_COUNT = 65535
 BRANCH = "main"
 LOCK_SUFFIX = ".meris-ortho-lock"
 COMMIT_KEY = "meris_ortho"
@@ -71,7 +80,40 @@ def layer_names(bands: Sequence[int], algorithm: str) -> list[str]:
 
 
 def layer_dtype(name: str) -> str:
+    """The dtype a reader gets (band layers decoded to float32 radiances)."""
     return {"ndvi": "uint16", "count": "uint16", "product": "int32"}.get(name, "float32")
+
+
+def _band_number(name: str) -> int | None:
+    return int(name[5:]) if name.startswith("band_") else None
+
+
+def encode_band(values: np.ndarray, scale: float) -> np.ndarray:
+    """float32 radiances -> uint16 counts: round(v / scale) on [1, MAX_COUNT] for v > 0, 0 for
+    the background (v <= 0 or NaN)."""
+    v = np.asarray(values, np.float64)
+    with np.errstate(invalid="ignore"):
+        counts = np.clip(np.floor(v / float(np.float32(scale)) + 0.5), 1, MAX_COUNT)
+        return np.where(v > 0, counts, 0).astype(np.uint16)
+
+
+def decode_band(counts: np.ndarray, scale: float) -> np.ndarray:
+    """uint16 counts -> float32 radiances ``float32(count) x float32(scale)`` (the arithmetic of
+    a product's own radiances), 0 stays 0."""
+    return np.asarray(counts).astype(np.float32) * np.float32(scale)
+
+
+def quantized(values: np.ndarray, scale: float) -> np.ndarray:
+    """The radiances a compact store holds for ``values`` (decode(encode(values)))."""
+    return decode_band(encode_band(values, scale), scale)
+
+
+def stored_scale(array: Any) -> float | None:
+    """The ``scale_factor`` of a compact band array (None: float32 radiances, version 2)."""
+    if np.dtype(array.dtype) != np.uint16:
+        return None
+    scale = array.attrs.get("scale_factor")
+    return None if scale is None else float(scale)
 
 
 def overview_factors(width: int, height: int, tile: int) -> list[int]:
@@ -145,17 +187,25 @@ def create_layout(store: Any, attrs: dict[str, Any], shape: tuple[int, int], til
                   names: Sequence[str], factors: Sequence[int]) -> None:
     """Empty (fill value 0) arrays of a new synthesis, chunked by the tile, and overviews."""
     import zarr
+    from zarr.codecs import ZstdCodec
+
+    def create(group: Any, name: str, shape: tuple[int, int], chunk: int) -> None:
+        band = _band_number(name)
+        attrs = {} if band is None else {"scale_factor": BAND_SCALES[band], "add_offset": 0.0,
+                                         "units": "mW m-2 sr-1 nm-1",
+                                         "long_name": f"TOA radiance of MERIS band {band}"}
+        group.create_array(name, shape=shape, chunks=(chunk, chunk),
+                           dtype="uint16" if band is not None else layer_dtype(name),
+                           fill_value=0, dimension_names=("y", "x"), attributes=attrs,
+                           compressors=ZstdCodec(level=3))
 
     root = zarr.open_group(store, mode="w", attributes=attrs)
     for name in names:
-        root.create_array(name, shape=shape, chunks=(tile, tile), dtype=layer_dtype(name),
-                          fill_value=0, dimension_names=("y", "x"))
+        create(root, name, shape, tile)
     for f in factors:
         level = root.create_group(f"overview_{f}")
         for name in names:
-            level.create_array(name, shape=(-(-shape[0] // f), -(-shape[1] // f)),
-                               chunks=(tile // f, tile // f), dtype=layer_dtype(name),
-                               fill_value=0, dimension_names=("y", "x"))
+            create(level, name, (-(-shape[0] // f), -(-shape[1] // f)), tile // f)
 
 
 def set_attributes(store: Any, attrs: dict[str, Any]) -> None:
@@ -172,8 +222,13 @@ def read_window(store: Any, names: Sequence[str], window: Window, level: int = 1
 
     r0, r1, c0, c1 = window
     prefix = "" if level == 1 else f"overview_{level}/"
-    return {n: np.asarray(zarr.open_array(store, path=prefix + n, mode="r")[r0:r1, c0:c1])
-            for n in names}
+    out = {}
+    for n in names:
+        array = zarr.open_array(store, path=prefix + n, mode="r")
+        values = np.asarray(array[r0:r1, c0:c1])
+        scale = stored_scale(array) if _band_number(n) is not None else None
+        out[n] = values if scale is None else decode_band(values, scale)
+    return out
 
 
 def write_tile(store: Any, window: Window, arrays: dict[str, np.ndarray],
@@ -183,7 +238,11 @@ def write_tile(store: Any, window: Window, arrays: dict[str, np.ndarray],
 
     r0, r1, c0, c1 = window
     for name, values in arrays.items():
-        zarr.open_array(store, path=name, mode="r+")[r0:r1, c0:c1] = values
+        array = zarr.open_array(store, path=name, mode="r+")
+        scale = stored_scale(array) if _band_number(name) is not None else None
+        if scale is not None:
+            values = encode_band(values, scale)
+        array[r0:r1, c0:c1] = values
         for f in factors:  # tile corners are multiples of every factor
             level = zarr.open_array(store, path=f"overview_{f}/{name}", mode="r+")
             dec = values[::f, ::f]
