@@ -102,7 +102,9 @@ def _segment_fill(bands: np.ndarray, winner: np.ndarray, segment: np.ndarray,
         for j in range(cols):
             if valid[i, j]:
                 winner[i, j] = index
-                for b in range(n_bands):
+        for b in range(n_bands):  # band planes one after the other: contiguous rows
+            for j in range(cols):
+                if valid[i, j]:
                     v = segment[b, i, j]
                     bands[b, i, j] = v if v > 0.0 else np.float32(0.0)
 
