@@ -126,3 +126,14 @@ def test_saturated_pixels_are_no_data_for_their_band_in_a_synthesis(pair, sen3_c
     assert lost.sum() > 5000  # the saturated strip
     assert (b6[lost] > 0).all()  # band 6 of the same pixels is kept
     np.testing.assert_array_equal(b7[~lost], r7[~lost])
+
+
+def test_napari_shows_the_sen3_and_its_n1_the_same_way_round(pair):
+    """The plugin's product layers (radiance stack, RGB quick-look, flags) of the SEN3 equal the
+    N1's, pixel for pixel: a real SEN3's mirrored columns are not shown mirrored."""
+    from napari_meris_ortho._napari.reader import n1_layers
+
+    n1, s3 = n1_layers(pair[0]), n1_layers(pair[1])
+    np.testing.assert_array_equal(np.asarray(n1[0][0][6]), np.asarray(s3[0][0][6]))
+    np.testing.assert_array_equal(n1[1][0], s3[1][0])
+    np.testing.assert_array_equal(n1[2][0], s3[2][0])
