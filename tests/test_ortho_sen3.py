@@ -137,3 +137,16 @@ def test_napari_shows_the_sen3_and_its_n1_the_same_way_round(pair):
     np.testing.assert_array_equal(np.asarray(n1[0][0][6]), np.asarray(s3[0][0][6]))
     np.testing.assert_array_equal(n1[1][0], s3[1][0])
     np.testing.assert_array_equal(n1[2][0], s3[2][0])
+
+
+def test_info_describes_a_zipped_sen3(pair, tmp_path, capsys):
+    archive = tmp_path / (pair[1].name + ".zip")
+    with zipfile.ZipFile(archive, "w", zipfile.ZIP_DEFLATED) as z:
+        for f in sorted(pair[1].iterdir()):
+            z.write(f, f"{pair[1].name}/{f.name}")
+    assert main(["info", str(archive)]) == 0
+    out = capsys.readouterr().out
+    assert "SAFE .SEN3 zip archive, 23 files" in out and "ME_1_FRG___" in out
+    size = (pair[1] / "M07_radiance.nc").stat().st_size
+    line = next(x for x in out.splitlines() if "M07_radiance.nc" in x)
+    assert line.split()[-2:] == [str(size), "bytes"]

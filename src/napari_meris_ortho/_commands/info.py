@@ -77,8 +77,9 @@ def describe(product: MerisProduct, every: int = 8) -> list[str]:
     """The lines ``meris-ortho info`` prints."""
     mph, sph = product.mph, product.sph
     res = _RESOLUTION_NAMES.get(product.resolution.name, product.resolution.name)
-    is_dir = product.path.is_dir()
-    size = (sum(f.stat().st_size for f in product.path.iterdir() if f.is_file()) if is_dir
+    members: Any = getattr(product, "members", None)  # a .SEN3 (products.sen3.Members)
+    is_dir = members is not None
+    size = (sum(members.sizes().values()) if is_dir and not members.archived
             else product.path.stat().st_size)
     times = product.line_times
     lines = [
@@ -152,8 +153,10 @@ def describe(product: MerisProduct, every: int = 8) -> list[str]:
 
 def _headers_line(product: MerisProduct) -> str:
     mph = product.mph
-    if product.path.is_dir():
-        return f"Format         SAFE .SEN3 directory, {len(list(product.path.iterdir()))} files"
+    members = getattr(product, "members", None)  # a .SEN3 (products.sen3.Members)
+    if members is not None:
+        kind = "zip archive" if members.archived else "directory"
+        return f"Format         SAFE .SEN3 {kind}, {len(members.sizes())} files"
     return (f"Headers        MPH 1247 bytes, SPH {mph['SPH_SIZE']} bytes, {mph['NUM_DSD']} DSDs, "
             f"{mph.get('NUM_DATA_SETS', '?')} data sets, total {mph['TOT_SIZE']} bytes")
 
@@ -171,11 +174,11 @@ def _geolocation_lines(product: MerisProduct) -> list[str]:
 
 
 def _member_lines(product: MerisProduct) -> list[str]:
-    """The member files of a .SEN3 directory with their sizes."""
+    """The member files of a .SEN3 directory or archive with their sizes."""
+    members: Any = getattr(product, "members", None)
     out = ["Member files"]
-    for f in sorted(product.path.iterdir()):
-        if f.is_file():
-            out.append(f"  {f.name:<28} {f.stat().st_size:>12} bytes")
+    for name, size in members.sizes().items():
+        out.append(f"  {name:<28} {size:>12} bytes")
     return out
 
 

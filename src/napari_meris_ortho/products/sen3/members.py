@@ -83,6 +83,16 @@ class Members:
     def archived(self) -> bool:
         return self.prefix is not None
 
+    def sizes(self) -> dict[str, int]:
+        """Member file -> its size in bytes (uncompressed in an archive), by name."""
+        if self.prefix is None:
+            return {p.name: p.stat().st_size for p in sorted(self.path.iterdir())
+                    if p.is_file()}
+        with zipfile.ZipFile(self.path) as z:
+            return {i.filename[len(self.prefix):]: i.file_size
+                    for i in sorted(z.infolist(), key=lambda i: i.filename)
+                    if i.filename.startswith(self.prefix) and not i.is_dir()}
+
     def where(self, name: str) -> str:
         """The member as messages name it."""
         return str(self.path / name) if self.prefix is None else f"{self.path}!{name}"
