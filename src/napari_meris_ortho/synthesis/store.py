@@ -164,16 +164,20 @@ def set_attributes(store: Any, attrs: dict[str, Any]) -> None:
     zarr.open_group(store, mode="r+").attrs.update(attrs)
 
 
+def open_layer(store: Any, name: str, level: int = 1) -> Any:
+    """The Zarr array of layer ``name`` (at overview ``level``), read only."""
+    import zarr
+
+    prefix = "" if level == 1 else f"overview_{level}/"
+    return zarr.open_array(store, path=prefix + name, mode="r")
+
+
 def read_window(store: Any, names: Sequence[str], window: Window, level: int = 1
                 ) -> dict[str, np.ndarray]:
     """Arrays ``names`` over ``window`` (rows/columns of the full grid; at overview ``level``
     the window is in that level's pixels)."""
-    import zarr
-
     r0, r1, c0, c1 = window
-    prefix = "" if level == 1 else f"overview_{level}/"
-    return {n: np.asarray(zarr.open_array(store, path=prefix + n, mode="r")[r0:r1, c0:c1])
-            for n in names}
+    return {n: np.asarray(open_layer(store, n, level)[r0:r1, c0:c1]) for n in names}
 
 
 def write_tile(store: Any, window: Window, arrays: dict[str, np.ndarray],
