@@ -10,7 +10,6 @@ from typing import Any
 import numpy as np
 
 from ..errors import OptionsError
-from ..ortho.antecedents import RADIANCE_UNITS
 from . import store as st
 from .tiling import grid_from_dict
 
@@ -96,6 +95,7 @@ class SynthesisStore:
         import dask.array as da
 
         from ..engine.synthesis import ndvi_decode
+        from ..ortho.antecedents import RADIANCE_UNITS
         from ..output.dataset import grid_dataset, require_xarray
         from ..products.n1.format import APPENDIX_A_WAVELENGTHS
 
