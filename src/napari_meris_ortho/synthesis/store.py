@@ -203,24 +203,39 @@ def lock_path(directory: Path) -> Path:
 @contextlib.contextmanager
 def locked(directory: Path) -> Iterator[None]:
     """Exclusive advisory lock of the store ``directory`` (released by the OS if the run
-    dies)."""
+    dies). On release, when ``directory`` holds no repository (the run made none, or removed
+    what it made), the lock file is removed too, still under the lock; a run that locked a
+    lock file removed meanwhile (another inode at the path) is refused as a concurrent one."""
     try:
         import fcntl
     except ImportError:  # pragma: no cover - no advisory locks (Windows): unguarded
         yield
         return
+    path = lock_path(directory)
     try:
-        fh = open(lock_path(directory), "a+b")  # held for the whole run
+        fh = open(path, "a+b")  # held for the whole run
     except OSError as exc:
         raise OutputError(f"{directory}: cannot write in the synthesis store ({exc})") from exc
+    held = False
     try:
         try:
             fcntl.flock(fh.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
+            if os.fstat(fh.fileno()).st_ino != os.stat(path).st_ino:
+                raise OSError("lock file replaced")
         except OSError:
             raise OptionsError(f"{directory}: another synthesis run is using it") from None
+        held = True
         yield
     finally:
+        if held and not is_repository(directory):
+            remove_lock(directory)
         fh.close()
+
+
+def remove_lock(directory: Path) -> None:
+    """Remove the lock file of ``directory`` (none: nothing)."""
+    with contextlib.suppress(OSError):
+        lock_path(directory).unlink()
 
 
 @dataclass
