@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import time
 
 import numpy as np
 import pytest
@@ -78,6 +79,17 @@ def test_disparity_cli_errors(image_pair, tmp_path, capsys):
     assert err.count("\n") == 1 and "not found" in err
     assert main(["disparity", str(a), str(a), "--explore", "8", "19"]) == 2
     assert "--explore" in capsys.readouterr().err
+    assert main(["disparity", str(a), str(a), "--band", "3"]) == 2
+    assert "no band 3" in capsys.readouterr().err
+    # issue 26: 99999 x 999999 hung (killed at 60 s); bounded: one message, at once
+    t0 = time.perf_counter()
+    assert main(["disparity", str(a), str(a), "--explore", "99999", "999999"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "at most 129 lines and columns" in err
+    assert main(["disparity", str(other), str(other), "--explore", "9", "101"]) == 2  # 40 x 40
+    assert "101 columns explore shifts beyond the images' 40 columns (at most 79)" in (
+        capsys.readouterr().err)
+    assert time.perf_counter() - t0 < 5.0
     assert main(["disparity", str(a), str(a), "--band", "3"]) == 2
     assert "no band 3" in capsys.readouterr().err
     assert main(["disparity", str(a), str(a), "--vectors", str(tmp_path / "no" / "v.csv")]) == 2

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import shutil
 from pathlib import Path
 
 from napari_meris_ortho.cli import main
@@ -51,3 +52,30 @@ def test_sample_bad_input_exits_2(tmp_path, capsys):
     code = main(["sample", "fr-small", "--out", str(blocker / "x"), "--set", json.dumps(SMALL)])
     assert code == 2
     assert "cannot create the output directory" in capsys.readouterr().err
+
+
+def test_sample_rerun_after_the_product_was_deleted(tmp_path, capsys):
+    """Issue 26: a rerun into a folder whose N1 was deleted regenerates it and rewrites the
+    per-pixel geolocated FRG N1 and .SEN3 in place (before: it failed on the existing .SEN3
+    folder and deleted the FRG N1 that was there)."""
+    out = tmp_path / "scene"
+    args = ["-q", "sample", "fr-small", "--out", str(out), "--set", json.dumps(SMALL), "--fsg",
+            "--sen3"]
+    assert main(args) == 0
+    first = dict(line.split(None, 1) for line in capsys.readouterr().out.splitlines())
+    product, fsg, sen3 = (Path(first[k]) for k in ("product", "fsg", "sen3"))
+    before = {p.name: p.read_bytes() for p in (product, fsg)}
+    members = sorted(p.name for p in sen3.iterdir())
+    assert fsg.name.startswith("MER_FRG_1P") and sen3.suffix == ".SEN3" and len(members) > 15
+    product.unlink()
+    assert main(args) == 0
+    again = dict(line.split(None, 1) for line in capsys.readouterr().out.splitlines())
+    assert again == first
+    assert {p.name: p.read_bytes() for p in (product, fsg)} == before
+    assert sorted(p.name for p in sen3.iterdir()) == members
+    assert not [p.name for p in out.iterdir() if p.name.startswith(".")]  # no leftovers
+    shutil.rmtree(sen3)  # a .SEN3 name taken by a file is still refused with one message
+    sen3.write_bytes(b"x")
+    product.unlink()
+    assert main(args) == 2
+    assert "output exists and is a regular file, not a directory" in capsys.readouterr().err

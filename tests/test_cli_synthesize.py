@@ -200,3 +200,32 @@ def test_shared_grid_and_height_options_refused_alike(products, tmp_path, capsys
         main(["-q", command, products[0], *out, "--bands", "7,16"])
     assert exc.value.code == 2 and "MERIS bands are 1..15" in capsys.readouterr().err
     assert not any(tmp_path.iterdir())
+
+
+def test_refused_or_empty_runs_leave_nothing_behind(products, tmp_path, capsys) -> None:
+    """A new synthesis refused under the lock (grid too big for --max-pixels, known only from
+    the products) or that merges nothing leaves the folder as it was: no store, no
+    ``.STORE.meris-ortho-lock`` (issue 26), an empty given directory empty again; the lock
+    file of an existing synthesis stays."""
+    work = tmp_path / "work"
+    work.mkdir()
+    (work / "given").mkdir()
+    bad = tmp_path / "truncated.N1"
+    bad.write_bytes(Path(products[0]).read_bytes()[:5000])
+    for store in ("new", "given"):
+        code = main(["-q", "synthesize", products[0], "--out", str(work / store),
+                     "--pixel-size", "0.0001", "--max-pixels", "100000", *COMMON])
+        assert code == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and "exceeds the limit of 1e+05 pixels" in err
+        assert sorted(p.name for p in work.rglob("*")) == ["given"], store
+        code = main(["-q", "synthesize", str(bad), "--out", str(work / store), *GRID_ARGS,
+                     *COMMON])
+        assert code == 1  # the only product failed: nothing merged
+        assert sorted(p.name for p in work.rglob("*")) == ["given"], store
+    assert main(["-q", "synthesize", products[0], "--out", str(work / "given"), *GRID_ARGS,
+                 *COMMON]) == 0
+    assert (work / ".given.meris-ortho-lock").is_file()
+    assert main(["-q", "synthesize", products[0], "--out", str(work / "given"), *COMMON]) == 2
+    assert (work / ".given.meris-ortho-lock").is_file() and len(
+        open_synthesis(work / "given").history()) == 1

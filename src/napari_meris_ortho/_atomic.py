@@ -293,13 +293,30 @@ def _umask() -> int:
     return mask
 
 
+def _directory_target(path: str | os.PathLike[str]) -> Path:
+    """An output directory ``path``: absent (its parent writable) or an existing directory
+    (replaced: a rerun rewrites it); anything else there is an OutputError."""
+    out = Path(path)
+    try:
+        mode = out.stat().st_mode
+    except FileNotFoundError:
+        return check_writable_dir(out)
+    except OSError as exc:
+        raise OutputError(f"{out}: cannot use as output ({exc.strerror or exc})") from None
+    if not stat.S_ISDIR(mode):
+        kind = "a regular file" if stat.S_ISREG(mode) else _kind(mode)
+        raise OutputError(f"{out}: output exists and is {kind}, not a directory")
+    parent = out.parent if str(out.parent) else Path(".")
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise OutputError(f"{out}: output directory {parent} is not writable")
+    return out
+
+
 @contextlib.contextmanager
 def atomic_dir(path: str | os.PathLike[str]) -> Iterator[Path]:
     """Yield a temporary directory next to ``path``; on success it replaces ``path`` (an older
     directory of that name is removed only then). On any exception nothing is left behind."""
-    import shutil
-
-    out = check_writable_dir(path)
+    out = _directory_target(path)
     tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".part", dir=out.parent))
     try:
         yield tmp

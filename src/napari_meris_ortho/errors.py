@@ -41,3 +41,8 @@ class OptionsError(MerisOrthoError, ValueError):
 
 class OutputError(MerisOrthoError):
     """An output that cannot be written (missing or read-only directory...)."""
+
+
+class MissingDependencyError(MerisOrthoError, ImportError):
+    """An optional dependency (an extra of the package) that a requested feature needs is not
+    installed; the message says how to install it."""

@@ -95,3 +95,40 @@ def test_map_warns_about_a_dem_that_gives_no_height(tmp_path, caplog):
     warnings = [r.getMessage() for r in caplog.records if r.levelno == logging.WARNING]
     assert warnings == [f"warning: DEM {wrong_entry} contributed no height (outside the product, "
                         "wrong CRS, or only no data / heights outside -500..9000 m)"]
+
+
+LOCAL_CS = ('LOCAL_CS["site grid",LOCAL_DATUM["site",0],UNIT["metre",1],AXIS["X",EAST],'
+            'AXIS["Y",NORTH]]')
+MARS_GEOGCS = ('GEOGCS["Mars 2000",DATUM["D_Mars_2000",SPHEROID["Mars_2000_IAU_IAG",3396190,'
+               '169.8944472236118]],PRIMEM["Reference_Meridian",0],'
+               'UNIT["degree",0.0174532925199433]]')
+
+
+@pytest.mark.parametrize(("crs", "message"), [
+    (LOCAL_CS, "'site grid' is an engineering (local) CRS, not tied to the Earth"),
+    (MARS_GEOGCS, "'Mars 2000' is not on the Earth (ellipsoid 'Mars_2000_IAU_IAG', "
+                  "semi-major axis 3396190 m)"),
+    ("IAU_2015:49900", "is not on the Earth (ellipsoid 'Mars (2015) - Sphere', semi-major axis "
+                       "3396190 m)"),
+])
+@pytest.mark.parametrize("ignore_body", ["", "YES"])
+def test_dem_off_the_earth_is_one_message(tmp_path, capsys, monkeypatch, crs, message,
+                                          ignore_body):
+    """A DEM in an engineering CRS or on Mars (issue 26): one message naming the DEM and its
+    CRS, exit 2, no output, also when PROJ is told to ignore the celestial body."""
+    import pyproj
+
+    if ignore_body:
+        monkeypatch.setenv("PROJ_IGNORE_CELESTIAL_BODY", ignore_body)
+    prod = make_product(tmp_path / "p.N1", height=130, width=321, lon0=15.0, nadir_col=-800.0)
+    dem = write_tif(tmp_path / "dem.tif", np.full((50, 50), 500.0, np.float32),
+                    from_origin(14.0, 48.0, 0.05, 0.05),
+                    crs=rasterio.crs.CRS.from_wkt(pyproj.CRS(crs).to_wkt("WKT1_GDAL")))
+    out = tmp_path / "out.tif"
+    assert main(["-q", "map", str(prod), "-o", str(out), "--bands", "1", "--dem", str(dem)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith("meris-ortho: error: ")
+    assert f"{dem}: the DEM's CRS " in err and message in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["dem.tif", "p.N1"]
+    with pytest.raises(DemError, match="not tied to the Earth|not on the Earth"):
+        open_dem(dem)

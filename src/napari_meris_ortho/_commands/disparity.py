@@ -36,7 +36,8 @@ def register(subparsers: Any) -> None:
     p.add_argument("--stat-window", type=int, default=5, metavar="N",
                    help="statistical window size (odd, default 5)")
     p.add_argument("--explore", type=int, nargs=2, default=(9, 19), metavar=("LINES", "COLUMNS"),
-                   help="exploration window height and width (odd, default 9 19)")
+                   help="exploration window height and width (odd, default 9 19, at most "
+                   "129 129: displacements up to +-64 px)")
     p.add_argument("--threshold", type=float, default=95.0, metavar="PERCENT",
                    help="confidence threshold in %% (default 95)")
     p.add_argument("--step", type=int, default=1, metavar="N",

@@ -47,6 +47,12 @@ __all__ = ["DisparityResult", "disparity", "displacement_statistics", "format_re
 _ROW_CHUNK = 256
 #: consecutive lines sharing running column sums in the whole-pixel search
 _BLOCK = 32
+#: largest exploration window side (lines or columns): displacements up to +-64 px, one FR
+#: tie-point interval (about 19 km), seven times the handbook's 9 x 19 (+-4 lines, +-9 columns,
+#: section 4.6). Disparities of orthorectified images are geolocation errors of a few pixels;
+#: the whole-pixel search costs one ZNCC per pixel and candidate shift, so its time grows with
+#: the window's area (400 x 400 px: 0.7 s at 9 x 19, 5.3 s at 121 x 121, 27 s at 241 x 241)
+MAX_EXPLORE = 129
 #: pixels whose parabola vertex forecasts a confidence above (threshold - this, in %) are refined
 _REFINE_MARGIN = 10.0
 
@@ -198,6 +204,16 @@ def _check_options(shape, stat_window, explore, threshold, step) -> None:
     if len(explore) != 2 or any(e < 1 or e % 2 == 0 for e in explore):
         raise OptionsError(f"--explore must be two positive odd numbers (lines columns), "
                            f"got {explore}")
+    if max(explore) > MAX_EXPLORE:
+        raise OptionsError(f"--explore {explore[0]} {explore[1]}: at most {MAX_EXPLORE} lines "
+                           f"and columns (displacements up to +-{MAX_EXPLORE // 2} px; the "
+                           "handbook's DISPAR explores 9 x 19; the search time grows with the "
+                           "window's area)")
+    for n, size, what in ((explore[0], shape[0], "lines"), (explore[1], shape[1], "columns")):
+        if n > 2 * size - 1:
+            raise OptionsError(f"--explore {explore[0]} {explore[1]}: {n} {what} explore "
+                               f"shifts beyond the images' {size} {what} (at most "
+                               f"{2 * size - 1})")
     if not 0.0 <= threshold <= 100.0:
         raise OptionsError(f"--threshold must be between 0 and 100 %, got {threshold}")
     if step < 1:

@@ -18,6 +18,36 @@ from .geoid import EGM96, EGM2008, ELLIPSOID, crs_datum
 _WGS84 = pyproj.CRS.from_epsg(4326)
 
 
+#: semi-major axes (m) of the Earth's ellipsoids and spheres (WGS84 a = 6 378 137 m, the
+#: handbook's sphere R = 6 370 997 m, Clarke 1866 6 378 206.4 m ...); a CRS outside this range
+#: is on another body (Mars: 3 396 190 m, the Moon: 1 737 400 m)
+EARTH_SEMI_MAJOR_M = (6.3e6, 6.4e6)
+
+
+def earth_crs(path: str | Path, wkt: str) -> tuple[pyproj.CRS, pyproj.Transformer]:
+    """The CRS of the DEM ``path`` (its WKT) and the WGS84 lon/lat -> DEM (x, y) transformer;
+    DemError for an engineering (local) CRS, a CRS of another celestial body, or any CRS PROJ
+    cannot relate to WGS84: a DEM must be placed on the Earth."""
+    try:
+        crs = pyproj.CRS.from_user_input(wkt)
+    except pyproj.exceptions.CRSError as exc:
+        raise DemError(f"{path}: unreadable coordinate reference system ({exc})") from None
+    name = crs.name or "unnamed"
+    if crs.is_engineering:
+        raise DemError(f"{path}: the DEM's CRS {name!r} is an engineering (local) CRS, not "
+                       "tied to the Earth: give the DEM in a geographic or projected CRS")
+    ellipsoid = crs.ellipsoid
+    if ellipsoid is not None and not (
+            EARTH_SEMI_MAJOR_M[0] <= ellipsoid.semi_major_metre <= EARTH_SEMI_MAJOR_M[1]):
+        raise DemError(f"{path}: the DEM's CRS {name!r} is not on the Earth (ellipsoid "
+                       f"{ellipsoid.name!r}, semi-major axis {ellipsoid.semi_major_metre:.0f} m)")
+    try:
+        return crs, pyproj.Transformer.from_crs(_WGS84, crs, always_xy=True)
+    except pyproj.exceptions.ProjError as exc:
+        raise DemError(f"{path}: no transformation from WGS84 to the DEM's CRS {name!r} "
+                       f"({exc})") from None
+
+
 # ---------------------------------------------------------------------- GDAL rasters
 class RasterSource(DemSource):
     """Any raster GDAL opens (GeoTIFF...), any CRS; posts at pixel centres; nodata honoured."""
@@ -45,13 +75,16 @@ class RasterSource(DemSource):
             raise DemError(f"{path}: {ds.count} bands, not a DEM (a DEM has one band of "
                            "heights; radiance GeoTIFFs are not DEMs)")
         self.n_rows, self.n_cols = ds.height, ds.width
-        self.crs = pyproj.CRS.from_user_input(ds.crs.to_wkt())
+        try:
+            self.crs, self._tr = earth_crs(path, ds.crs.to_wkt())
+        except DemError:
+            ds.close()
+            raise
         self.datum = _raster_datum(ds, self.crs)
         self._inv = ~ds.transform
         self._nodata = ds.nodatavals[band - 1]
         self._scale = float((ds.scales or (1.0,))[band - 1] or 1.0)
         self._offset = float((ds.offsets or (0.0,))[band - 1] or 0.0)
-        self._tr = pyproj.Transformer.from_crs(_WGS84, self.crs, always_xy=True)
         self._geographic = self.crs.is_geographic
         #: lon/lat are the DEM's x/y (WGS84 geographic DEM): no transformation needed
         self._lonlat = self.crs.equals(_WGS84, ignore_axis_order=True)

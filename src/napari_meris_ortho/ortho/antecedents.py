@@ -60,6 +60,45 @@ class OrthoResult:
         already radiances."""
         return band_metadata(self.stats, list(self.bands))
 
+    def to_xarray(self) -> Any:
+        """The result as an ``xarray.Dataset`` (``output.dataset.grid_dataset``): ``radiance``
+        (band, y, x; W m-2 sr-1 um-1, NaN where no antecedent is inside the product) with the
+        band numbers and central wavelengths as coordinates, ``flags`` (L1b flag bits, CF
+        ``flag_masks``), ``valid`` and the diagnostics layers (y, x); the CRS as the CF grid
+        mapping ``spatial_ref`` (rioxarray reads it). Needs xarray (extra ``xarray``)."""
+        from ..flags import FLAG_NAMES
+        from ..output.dataset import grid_dataset, require_xarray
+
+        require_xarray()
+        bands = sorted(self.bands)
+        radiance = np.empty((len(bands), *self.grid.shape), np.float32)
+        for k, b in enumerate(bands):
+            np.copyto(radiance[k], self.bands[b])
+            radiance[k][~self.valid] = np.nan
+        meta = {m["meris_band"]: m for m in self.band_metadata()}
+        variables: dict[str, Any] = {
+            "radiance": (("band", "y", "x"), radiance, {
+                "long_name": "TOA radiance", "units": RADIANCE_UNITS,
+                "sf_rad": [float(meta[b].get("sf_rad", np.nan)) for b in bands]}),
+            "flags": (("y", "x"), self.flags, {
+                "long_name": "MERIS L1b flags of the nearest pixel (0: background)",
+                "flag_masks": np.array([1 << k for k in range(len(FLAG_NAMES))], np.uint8),
+                "flag_meanings": " ".join(n.lower() for n in FLAG_NAMES)}),
+            "valid": (("y", "x"), np.asarray(self.valid), {
+                "long_name": "antecedent inside the product"}),
+        }
+        for name, values in self.diagnostics.items():
+            variables[name] = (("y", "x"), values, {"long_name": f"diagnostics: {name}"})
+        s = self.stats
+        attrs = {"product": s.product, "product_name": s.product_name,
+                 "elevation": s.elevation, "parallax": s.parallax,
+                 "geolocation": s.geolocation, "sampling": s.sampling,
+                 "tolerance_px": s.tolerance, "software": "napari-meris-ortho"}
+        return grid_dataset(self.grid, variables, bands=bands,
+                            wavelengths=[meta[b].get("wavelength_nm") for b in bands],
+                            attrs={k: str(v) if not isinstance(v, int | float) else v
+                                   for k, v in attrs.items()})
+
 
 def band_metadata(stats: RunStats, bands: Sequence[int]) -> list[dict[str, Any]]:
     """Per band (sorted band numbers): MERIS band number, central wavelength and bandwidth

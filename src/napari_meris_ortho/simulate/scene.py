@@ -617,8 +617,8 @@ def _write_product(target: Path, cfg: dict, geom: SceneGeometry, grid: DemGrid,
     start = np.datetime64(geom.first_line_datetime.replace(tzinfo=None), "us")
     name = default_product_name(geom.product_type, start, geom.lines * geom.frame_time,
                                 counter=int(cfg.get("file_counter", 0)))
-    for old in target.glob("MER_*.N1"):
-        if old.name != name:
+    for old in target.glob(f"{geom.product_type}*.N1"):  # an older config's product; the
+        if old.name != name:  # per-pixel geolocated ones (MER_FRG_1P...) are rewritten after
             old.unlink()
     return write_product(target / name, product_type=geom.product_type, tie_points=tp,
                          counts=[counts[b] for b in range(15)], flags=flags,

@@ -76,26 +76,42 @@ def synthesize(products: Sequence[str | os.PathLike[str]], out: str | os.PathLik
     paths = [str(Path(p).absolute()) if scheduler else str(p) for p in products]
     with run.engine(workers, scheduler) as runner:
         created = _make_dir(out_dir)
-        owner = False  # this run holds the lock of out_dir
-        try:
-            with contextlib.ExitStack() as locks:
-                locks.enter_context(st.locked(out_dir))
-                owner = True
+        with contextlib.ExitStack() as locks:
+            locks.enter_context(st.locked(out_dir))
+            # from here, under the lock: a run that commits nothing leaves out_dir as it
+            # found it (no directory, or the empty directory); the lock file goes with it
+            was_empty = not created and not any(out_dir.iterdir())
+            try:
                 if source_path is not None and source_path.resolve() != out_dir.resolve():
                     locks.enter_context(st.locked(source_path))
                 target = _target(out_dir, source_path, algorithm)
                 result = run.Synthesis(
                     target, paths, algorithm=algorithm, grid=grid, crs=crs,
                     pixel_size=pixel_size, dems=[str(d) for d in dems], options=opts,
-                    bands=bands, reject_bright=reject_bright, tile=tile, progress=progress,
-                    max_pixels=max_pixels).run(runner)
-                if created and result.snapshot is None:  # nothing merged: no store
-                    shutil.rmtree(out_dir, ignore_errors=True)
-        except BaseException:
-            if created and owner and not is_synthesis(out_dir):
-                shutil.rmtree(out_dir, ignore_errors=True)
-            raise
+                    bands=bands, reject_bright=reject_bright, tile=tile,
+                    progress=progress, max_pixels=max_pixels).run(runner)
+            except BaseException:
+                _undo(out_dir, created, was_empty)
+                raise
+            if result.snapshot is None:  # nothing merged: no store
+                _undo(out_dir, created, was_empty)
     return result
+
+
+def _undo(out_dir: Path, created: bool, was_empty: bool) -> None:
+    """Under the lock, when a run committed nothing: remove the store directory this run
+    created, or empty again the empty directory it was given (a repository without a
+    synthesis is no result); a synthesis that is there stays."""
+    if is_synthesis(out_dir) or not (created or was_empty):
+        return
+    if created:
+        shutil.rmtree(out_dir, ignore_errors=True)
+        return
+    for child in out_dir.iterdir():
+        if child.is_dir() and not child.is_symlink():
+            shutil.rmtree(child, ignore_errors=True)
+        else:
+            child.unlink(missing_ok=True)
 
 
 def _make_dir(out_dir: Path) -> bool:

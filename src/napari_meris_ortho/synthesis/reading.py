@@ -5,15 +5,12 @@ from __future__ import annotations
 import os
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
 from ..errors import OptionsError
 from . import store as st
-
-if TYPE_CHECKING:
-    pass
 from .tiling import grid_from_dict
 
 # --------------------------------------------------------------------------- reading a store
@@ -87,6 +84,55 @@ class SynthesisStore:
     def product_names(self) -> dict[int, str]:
         """Index in the ``product`` layer -> product name."""
         return {int(p["index"]): str(p["product_name"]) for p in self.products}
+
+    def to_xarray(self) -> Any:
+        """The synthesis as a lazy ``xarray.Dataset`` (dask arrays chunked by the store's tile;
+        ``output.dataset.grid_dataset``): ``radiance`` (band, y, x; NaN = background) with the
+        band numbers and their Appendix A central wavelengths as coordinates, ``ndvi`` decoded
+        (Appendix C; maximum NDVI only), ``count`` and ``product`` (index into the dataset's
+        ``products`` attribute, 0 = background), the CRS as the CF grid mapping
+        ``spatial_ref``. Needs xarray (extra ``xarray``)."""
+        import dask.array as da
+
+        from ..engine.synthesis import ndvi_decode
+        from ..ortho.antecedents import RADIANCE_UNITS
+        from ..output.dataset import grid_dataset, require_xarray
+        from ..products.n1.format import APPENDIX_A_WAVELENGTHS
+
+        require_xarray()
+        session = self.session
+
+        def lazy(name: str) -> Any:
+            array = st.open_layer(session.store, name)
+            out = da.from_array(array, chunks=array.chunks, name=f"{self.snapshot}-{name}",
+                                asarray=True)
+            scale = st.stored_scale(array) if name.startswith("band_") else None
+            # compact band layers: counts x the CF scale_factor, chunk by chunk
+            return out if scale is None else out.astype(np.float32) * np.float32(scale)
+
+        bands = list(self.bands)
+        stack = da.stack([lazy(st.band_layer(b)) for b in bands])
+        variables: dict[str, Any] = {
+            "radiance": (("band", "y", "x"), da.where(stack == 0, np.float32(np.nan), stack),
+                         {"long_name": "TOA radiance of the selected product",
+                          "units": RADIANCE_UNITS}),
+            "count": (("y", "x"), lazy("count"),
+                      {"long_name": "number of products with a valid pixel"}),
+            "product": (("y", "x"), lazy("product"),
+                        {"long_name": "index (1-based) of the selected product in the "
+                         "products attribute (0: background)"}),
+        }
+        if self.algorithm == "max-ndvi":
+            variables["ndvi"] = (("y", "x"), lazy("ndvi").map_blocks(ndvi_decode,
+                                                                     dtype=np.float32),
+                                 {"long_name": "NDVI of the selected product (Appendix C)"})
+        names = self.product_names()
+        attrs = {"algorithm": self.algorithm, "snapshot": self.snapshot,
+                 "products": [names.get(k, "") for k in range(1, max(names, default=0) + 1)],
+                 "software": "napari-meris-ortho"}
+        return grid_dataset(self.grid, variables, bands=bands,
+                            wavelengths=[APPENDIX_A_WAVELENGTHS[b - 1] for b in bands],
+                            attrs=attrs)
 
     def history(self) -> list[st.Commit]:
         """The synthesis commits up to this snapshot, newest first."""

@@ -214,17 +214,22 @@ def set_attributes(store: Any, attrs: dict[str, Any]) -> None:
     zarr.open_group(store, mode="r+").attrs.update(attrs)
 
 
+def open_layer(store: Any, name: str, level: int = 1) -> Any:
+    """The Zarr array of layer ``name`` (at overview ``level``), read only."""
+    import zarr
+
+    prefix = "" if level == 1 else f"overview_{level}/"
+    return zarr.open_array(store, path=prefix + name, mode="r")
+
+
 def read_window(store: Any, names: Sequence[str], window: Window, level: int = 1
                 ) -> dict[str, np.ndarray]:
     """Arrays ``names`` over ``window`` (rows/columns of the full grid; at overview ``level``
     the window is in that level's pixels)."""
-    import zarr
-
     r0, r1, c0, c1 = window
-    prefix = "" if level == 1 else f"overview_{level}/"
     out = {}
     for n in names:
-        array = zarr.open_array(store, path=prefix + n, mode="r")
+        array = open_layer(store, n, level)
         values = np.asarray(array[r0:r1, c0:c1])
         scale = stored_scale(array) if _band_number(n) is not None else None
         out[n] = values if scale is None else decode_band(values, scale)
@@ -258,24 +263,39 @@ def lock_path(directory: Path) -> Path:
 @contextlib.contextmanager
 def locked(directory: Path) -> Iterator[None]:
     """Exclusive advisory lock of the store ``directory`` (released by the OS if the run
-    dies)."""
+    dies). On release, when ``directory`` holds no repository (the run made none, or removed
+    what it made), the lock file is removed too, still under the lock; a run that locked a
+    lock file removed meanwhile (another inode at the path) is refused as a concurrent one."""
     try:
         import fcntl
     except ImportError:  # pragma: no cover - no advisory locks (Windows): unguarded
         yield
         return
+    path = lock_path(directory)
     try:
-        fh = open(lock_path(directory), "a+b")  # held for the whole run
+        fh = open(path, "a+b")  # held for the whole run
     except OSError as exc:
         raise OutputError(f"{directory}: cannot write in the synthesis store ({exc})") from exc
+    held = False
     try:
         try:
             fcntl.flock(fh.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
+            if os.fstat(fh.fileno()).st_ino != os.stat(path).st_ino:
+                raise OSError("lock file replaced")
         except OSError:
             raise OptionsError(f"{directory}: another synthesis run is using it") from None
+        held = True
         yield
     finally:
+        if held and not is_repository(directory):
+            remove_lock(directory)
         fh.close()
+
+
+def remove_lock(directory: Path) -> None:
+    """Remove the lock file of ``directory`` (none: nothing)."""
+    with contextlib.suppress(OSError):
+        lock_path(directory).unlink()
 
 
 @dataclass
