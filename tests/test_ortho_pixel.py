@@ -67,16 +67,6 @@ def test_pixel_geolocation_needs_a_geolocated_product(fr_small, geolocated):
         orthorectify(geolocated["fsg"], geolocation="pixel", dems=[fr_small.dem_paths["geotiff"]])
 
 
-#: a 9 km relief seen from 23 to 41 deg view zenith (FR, 128 lines x 1089 columns): a range of
-#: 8.7 km peaks (the DEM mode refuses heights above 9000 m) on 30" posts, no sea
-STEEP = {"base": "fr-small", "name": "fr-steep", "lines": 128, "columns": 1089,
-         "first_column": 1152, "dem": {"spacing_deg": 1 / 120, "margin_deg": 0.25},
-         "exports": {"getasse30": False, "getasse30_beam": False, "srtm30": False,
-                     "geotiff_utm": False, "reference": False},
-         "terrain": {"ranges": [{"from": [10.0, 46.6], "to": [14.5, 46.6], "width_km": 45,
-                                 "height": 8700}], "seas": [], "lakes": []}}
-
-
 def _visible(scene, lon, lat, h, line, col):
     """Ground points the sensor sees: no terrain above the line of sight from the point towards
     the satellite (view angles of the tie points at the true antecedent; 20 m steps)."""
@@ -102,17 +92,17 @@ def _visible(scene, lon, lat, h, line, col):
 
 
 def test_pixel_geolocation_in_steep_terrain(tmp_path_factory):
-    """9 km relief at up to 41 deg view zenith: every output point whose ground the sensor sees
-    is mapped (the cell holding it is searched along its product line, where the parallax moves
-    it), within 0.08 px RMS of the truth (the floor of a bilinear model between terrain points
-    of pixel centres, 260 m apart, on this relief); ground hidden by the relief is reported
-    (iterations -2, counted in the statistics), not a silent hole. Before: 2.4 % of the seen
-    ground unmapped, the hidden ground neither mapped nor reported."""
+    """9 km relief at up to 41 deg view zenith (scene fr-steep): every output point whose
+    ground the sensor sees is mapped (the cell holding it is searched along its product line,
+    where the parallax moves it), within 0.08 px RMS of the truth (the floor of a bilinear model
+    between terrain points of pixel centres, 260 m apart, on this relief); ground hidden by the
+    relief is reported (iterations -2, counted in the statistics), not a silent hole. Before:
+    2.4 % of the seen ground unmapped, the hidden ground neither mapped nor reported."""
     from napari_meris_ortho.engine.pixelgeo import OCCLUDED
     from napari_meris_ortho.simulate.geocorrected import write_geocorrected
     from napari_meris_ortho.simulate.scene import generate_scene
 
-    scene = generate_scene(STEEP)
+    scene = generate_scene("fr-steep")
     sen3 = write_geocorrected(scene, fsg=False, out_dir=tmp_path_factory.mktemp("steep"))["sen3"]
     ref = orthorectify(scene.product_path, dems=[scene.dem_paths["geotiff"]], bands=[7],
                        parallax="ellipsoid", diagnostics=True)

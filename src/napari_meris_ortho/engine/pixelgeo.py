@@ -375,16 +375,16 @@ def find_pixel_antecedents(tlon_a, tlat_a, ptr, start, stop, cl, cp, step, lon, 
                 continue
             ci = -1
             reach = step + _LINE_REACH  # predicted within a primary step of the product
-            if -reach <= gl <= nl + reach and -reach <= gp <= npx + reach:
+            near = -reach <= gl <= nl + reach and -reach <= gp <= npx + reach
+            if near:
                 ci, cj, u, v, it = cell_search(tlon, tlat, gl, lon, lat)
-                if ci < 0:  # a prediction from a missing node: lines within a primary step
-                    ci, cj, u, v, it = cell_search(tlon, tlat, gl, lon, lat,
-                                                   int(step) + _LINE_REACH)
             if ci < 0:  # beyond reach of the prediction: a correction, then its cell
                 l2, p2, it, ok = correct(tlon, tlat, gl, gp, lon, lat, tol, max_iter)
-                if not ok or not (-0.5 <= l2 < nl - 0.5 and -0.5 <= p2 < npx - 0.5):
-                    continue
-                ci, cj, u, v, it = cell_search(tlon, tlat, l2, lon, lat)
+                if ok and -0.5 <= l2 < nl - 0.5 and -0.5 <= p2 < npx - 0.5:
+                    ci, cj, u, v, it = cell_search(tlon, tlat, l2, lon, lat)
+                elif not ok and near:  # lost in folds: the lines within a primary step
+                    ci, cj, u, v, it = cell_search(tlon, tlat, gl, lon, lat,
+                                                   int(step) + _LINE_REACH)
                 if ci < 0:
                     continue
             l2, p2, seen = seen_antecedent(tlon, tlat, ci, cj, u, v, lon, lat)
