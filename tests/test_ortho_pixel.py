@@ -118,20 +118,20 @@ def test_pixel_geolocation_in_steep_terrain(tmp_path_factory):
     hidden = inside & ~seen
     assert 0.02 < hidden.sum() / inside.sum() < 0.05  # a steep scene indeed (2.8 %)
     it = r.diagnostics["iterations"]
-    # the seen ground is mapped: 0.05 % left, all within 0.5 px of the product edge or taken
+    # the seen ground is mapped: 0.014 % left, all within 0.5 px of the product edge or taken
     # for hidden ground at a crest (before: 2.4 %)
     lost = seen & ~r.valid
-    assert lost.sum() < 5e-4 * seen.sum()
+    assert lost.sum() < 2e-4 * seen.sum()
     edge = np.minimum.reduce([tl + 0.5, g.lines - 0.5 - tl, tc + 0.5, g.columns - 0.5 - tc])
     assert np.all((edge[lost] < 0.5) | (it[lost] == OCCLUDED))
     e = np.hypot(r.diagnostics["line"] - tl, r.diagnostics["col"] - tc)[seen & r.valid]
     assert np.sqrt(np.mean(e ** 2)) < 0.08 and np.percentile(e, 99) < 0.35 and e.max() < 2.5
-    # hidden ground is reported: counted, 90 % of the reported points truly hidden; the hidden
+    # hidden ground is reported: counted, 95 % of the reported points truly hidden; the hidden
     # ground not reported is mapped (a crest sampled between pixel centres hides it) or at the
     # product edge, never dropped unexplained (before: 3372 of 6262)
     reported = it == OCCLUDED
-    assert r.stats.facet_search["occluded"] == reported.sum() > 0.1 * hidden.sum()
-    assert (reported & hidden).sum() > 0.85 * reported.sum()
+    assert r.stats.facet_search["occluded"] == reported.sum() > 0.03 * hidden.sum()
+    assert (reported & hidden).sum() > 0.9 * reported.sum()
     assert np.count_nonzero(hidden & (it == -1) & (edge > 0.5)) < 2e-3 * hidden.sum()
     assert not np.any(r.valid & reported)
     assert any("points hidden by the relief (no antecedent) = " in line
