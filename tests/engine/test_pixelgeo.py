@@ -84,3 +84,31 @@ def test_terrain_pixel_inverse_is_consistent_with_the_direct_model(lon0):
     dy = (la - lat[ok]) * 111320 / 260.0
     assert np.max(np.hypot(dx, dy)) < 1e-3
     assert np.all(res["iterations"][ok] <= 10)
+
+
+def test_a_jump_cell_hides_the_ground_behind_a_crest():
+    """Terrain points of a product line step 1 unit per pixel except across a crest, where the
+    line of sight jumps 10 units (pixels 4 -> 5): ground within three neighbour steps of either
+    side (seen slopes may be steeper than their neighbours) is seen, at the chord's position;
+    the middle of the jump is hidden; ordinary cells are not affected. Found by the bracketing
+    search from a prediction 3 lines off."""
+    from napari_meris_ortho.engine.pixelgeo import cell_search, seen_antecedent
+
+    x = np.r_[np.arange(5.0), np.arange(14.0, 44.0)] * 0.01  # 35 columns
+    lon = np.tile(10.0 + x, (6, 1))
+    lat = 45.0 - 0.01 * np.arange(6.0)[:, None] * np.ones_like(lon)
+
+    def where(gx, gy):
+        i, j, u, v, _ = cell_search(10.0 + gx * 0.01, 45.0 - gy * 0.01, gy + 3.0, lon, lat)
+        assert i >= 0
+        return seen_antecedent(10.0 + gx * 0.01, 45.0 - gy * 0.01, i, j, u, v, lon, lat)
+
+    for gx, col in ((2.5, 2.5), (4.5, 4.05), (6.9, 4.29), (11.1, 4.71), (13.5, 4.95),
+                    (24.25, 15.25)):
+        line, c, seen = where(gx, 2.5)
+        assert seen and line == pytest.approx(2.5) and c == pytest.approx(col)
+    for gx in (7.1, 9.0, 10.9):
+        assert not where(gx, 2.5)[2]
+    # outside the product, no cell (the outer half pixel belongs to the edge cells)
+    assert cell_search(10.0 + 44.0 * 0.01, 45.0 - 0.025, 2.5, lon, lat)[0] == -1
+    assert cell_search(10.0 + 43.4 * 0.01, 45.0 - 0.025, 2.5, lon, lat)[:2] == (2, 33)

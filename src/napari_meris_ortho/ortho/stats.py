@@ -40,7 +40,8 @@ class RunStats:
     #: False for elevation "none" (MERSYN ``-ort NO``)
     orthorectification: bool
     #: facet-search counts by case: "same", "4-connex", "8-connex", "all", "not found",
-    #: "primary grid" (section 3.4)
+    #: "primary grid" (section 3.4); pixel geolocation: "primary warm/seeded/not found/outside"
+    #: and "occluded" (output points on ground hidden from the sensor by the relief)
     facet_search: dict[str, int]
     #: points solved after k iterations of the prediction/correction loop (section 3.2)
     iterations_histogram: list[int]
@@ -88,6 +89,7 @@ class RunStats:
         fs = dict(s.facet_search)
         primary = fs.pop("primary grid", None)
         fs.pop("not found", None)
+        occluded = fs.pop("occluded", None)
         n = sum(fs.values()) or 1
         nb = fs.get("4-connex", 0) + fs.get("8-connex", 0)
         what = "primary-grid nodes" if primary is not None else "points"
@@ -95,6 +97,8 @@ class RunStats:
                    f"-neighbour= {100 * nb / n:.1f}% -all= {100 * fs.get('all', 0) / n:.1f}%")
         if primary is not None:
             out.append(f"points predicted from the primary grid = {primary}")
+        if occluded is not None:  # pixel geolocation: ground no pixel sees (iterations -2)
+            out.append(f"points hidden by the relief (no antecedent) = {occluded}")
         sec = s.seconds
         out.append(f"Total elapsed time={sec['total']:.3f} seconds "
                    f"(prediction/correction {sec['prediction_correction']:.3f} s, "
