@@ -86,3 +86,36 @@ def test_cancel_acts_within_half_a_second(make_napari_viewer, qtbot, fr_small):
     assert "cancelled" in widget.status.value
     assert len(viewer.layers) == 0
     assert widget.run_button.enabled and not widget.cancel_button.enabled
+
+
+def _rss() -> int:
+    import gc
+
+    import psutil
+
+    gc.collect()
+    return int(psutil.Process().memory_info().rss)
+
+
+def test_finished_runs_keep_nothing_but_their_layers(make_napari_viewer, qtbot, tiny_n1,
+                                                     fr_small):
+    viewer = make_napari_viewer()
+    widget = OrthorectifyWidget(viewer)
+    widget.products.value = [tiny_n1]
+    widget.elevation.value = "tiepoints"
+    _run(widget, qtbot)  # warm-up: kernels, napari's layer kinds
+    viewer.layers.clear()
+    qtbot.wait(200)
+    widget.products.value = [fr_small.product_path]
+    widget.bands.value = "all"
+    widget.pixel_size.value = 130.0  # 0.65 M output pixels: 40 MB of bands a run
+    before = _rss()
+    for _ in range(4):
+        _run(widget, qtbot)
+        run_mb = sum(layer.data.nbytes for layer in viewer.layers
+                     if not isinstance(layer.data, list)) / 2**20
+        viewer.layers.clear()  # the next run's layers replace nothing: all four would stay
+    qtbot.wait(200)  # napari's layer controls are deleted by the event loop (deleteLater)
+    after = _rss()
+    assert run_mb > 40
+    assert after < 1.10 * before, f"{before / 2**20:.0f} MB -> {after / 2**20:.0f} MB"
