@@ -21,12 +21,13 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from magicgui.types import FileDialogMode
-from magicgui.widgets import ComboBox, Container, FileEdit, FloatSpinBox, Label, PushButton, SpinBox
+from magicgui.widgets import ComboBox, Container, FileEdit, FloatSpinBox, PushButton, SpinBox
 from qtpy.QtCore import QEvent, QObject
 
 from .._atomic import atomic_path
 from ..errors import MerisOrthoError, OptionsError
 from ..geometry.grid import OutputGrid
+from .layout import StatusLabel, compact_combo
 from .settings import remember
 from .world import layer_frame, layer_scale, layer_translate, reproject_onto, world_axes
 
@@ -125,10 +126,12 @@ class FlickerWidget(Container):
     def __init__(self, viewer: napari.viewer.Viewer) -> None:
         self.viewer = viewer
         self._closed = False
-        self.layer_a = ComboBox(label="layer A", choices=self._layer_choices, nullable=True,
-                                tooltip="first layer (e.g. orthorectified or uncorrected)")
-        self.layer_b = ComboBox(label="layer B", choices=self._layer_choices, nullable=True,
-                                tooltip="second layer (e.g. the reference)")
+        self.layer_a = compact_combo(ComboBox(
+            label="layer A", choices=self._layer_choices, nullable=True,
+            tooltip="first layer (e.g. orthorectified or uncorrected)"))
+        self.layer_b = compact_combo(ComboBox(
+            label="layer B", choices=self._layer_choices, nullable=True,
+            tooltip="second layer (e.g. the reference)"))
         self.rate = FloatSpinBox(label="rate (Hz)", value=2.0, min=0.2, max=30.0, step=0.5,
                                  tooltip="frames per second of the flicker")
         self.start_button = PushButton(text=f"Start ({FLICKER_KEY})",
@@ -143,8 +146,8 @@ class FlickerWidget(Container):
         self.disparity_button = PushButton(
             text="Measure disparity", tooltip="ZNCC disparity of B against A (section 4.6), "
                                               "in the background")
-        self.status = Label(value="stopped")
-        self.disparity_label = Label(value="")
+        self.status = StatusLabel(value="stopped")
+        self.disparity_label = StatusLabel(value="")
         super().__init__(widgets=[
             self.layer_a, self.layer_b, self.rate, self.start_button, self.stop_button,
             self.status, self.cycles, self.gif_path, self.export_button,

@@ -26,7 +26,6 @@ from magicgui.widgets import (
     Container,
     FileEdit,
     FloatSpinBox,
-    Label,
     LineEdit,
     ProgressBar,
     PushButton,
@@ -36,6 +35,7 @@ from magicgui.widgets import (
 
 from ..errors import MerisOrthoError
 from ..options import Elevation, Sampling, choices
+from .layout import StatusLabel
 from .ortho_run import (
     ALGORITHMS,
     CRS_EPSG,
@@ -190,7 +190,7 @@ class OrthorectifyWidget(Container):
                                         tooltip="stop the run at its next step")
         self.progress_bar = ProgressBar(value=0, min=0, max=1000, label="progress",
                                         tooltip="progress of the run")
-        self.status = Label(value="")
+        self.status = StatusLabel(value="")
         super().__init__(widgets=[
             self.products, self.dem_kind, self.dem_path, self.dem_add, self.dem_list,
             dem_buttons, self.elevation, self.geolocation, self.algorithm, self.sampling,
