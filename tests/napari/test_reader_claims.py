@@ -46,3 +46,29 @@ def test_plain_tiff_opens_with_napari_builtins(make_napari_viewer, tmp_path):
     (layer,) = viewer.open(str(path))  # one compatible reader: no "Choose reader"
     np.testing.assert_array_equal(np.asarray(layer.data), np.arange(30).reshape(5, 6))
     assert layer.source.reader_plugin != "napari-meris-ortho"
+
+
+def test_reader_declines_special_files_at_once(tmp_path):
+    """A FIFO named x.tif or x.N1 (reading it blocks until a writer comes) returns None within
+    1 s (issue 24, item 6: the reader hung 30 s and was killed)."""
+    import os
+    import threading
+    import time
+
+    for name in ("x.tif", "x.N1", "x.zip"):
+        fifo = tmp_path / name
+        os.mkfifo(fifo)
+        answer: list[object] = []
+        thread = threading.Thread(target=lambda f=fifo, out=answer: out.append(get_reader(str(f))),
+                                  daemon=True)
+        t0 = time.perf_counter()
+        thread.start()
+        thread.join(1.0)
+        elapsed = time.perf_counter() - t0
+        if thread.is_alive():  # unblock the reader stuck in open() before failing
+            fd = os.open(fifo, os.O_WRONLY | os.O_NONBLOCK)
+            os.close(fd)
+            thread.join(5.0)
+        assert answer == [None] and elapsed < 1.0, (name, answer, elapsed)
+    assert get_reader([str(tmp_path / "x.tif"), str(tmp_path / "x.N1")]) is None
+    assert get_reader(str(tmp_path)) is None  # a plain directory: not a product nor a store

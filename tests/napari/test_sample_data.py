@@ -68,3 +68,49 @@ def test_disparity_of_sample_ortho_against_reference(make_napari_viewer):
     # satellite is east): B is displaced by -dX, several pixels on the high range
     assert np.nanpercentile(flat.dx[flat.candidate], 5) < -2.0
     assert flat.global_displacement[0] < dx - 0.2
+
+
+#: longest event-loop gap while a sample loads (one napari layer insertion on a loaded machine)
+MAX_GAP_S = 2.0
+
+
+def test_sample_from_the_menu_loads_in_the_background(make_napari_viewer, qtbot, tmp_path,
+                                                      monkeypatch):
+    """File > Open Sample (inside the running event loop) returns at once and simulates the
+    scene in another process, maps it off the GUI thread and adds one layer per turn
+    (issue 24, item 7: fr-small froze napari 21 s)."""
+    import time
+
+    from qtpy.QtCore import QTimer
+
+    from napari_meris_ortho._napari import sample_data
+
+    monkeypatch.setenv("MERIS_ORTHO_CACHE", str(tmp_path))  # simulated afresh
+    viewer = make_napari_viewer(show=True)
+    # napari's first layer of each kind sets up GL (up to 2 s on Xvfb): not the sample's
+    viewer.add_image(np.zeros((2, 2), np.float32))
+    viewer.add_shapes([np.array([[0.0, 0.0], [0.0, 1.0], [1.0, 1.0]])], shape_type="polygon")
+    viewer.add_vectors(np.zeros((1, 2, 2)))
+    viewer.add_labels(np.zeros((2, 2), np.uint8))
+    qtbot.wait(100)
+    viewer.layers.clear()
+    stamps: list[float] = []
+    timer = QTimer()
+    timer.timeout.connect(lambda: stamps.append(time.perf_counter()))
+    timer.start(10)
+    took: list[float] = []
+
+    def open_sample() -> None:
+        t0 = time.perf_counter()
+        viewer.open_sample("napari-meris-ortho", "fr-small")
+        took.append(time.perf_counter() - t0)
+
+    QTimer.singleShot(0, open_sample)
+    qtbot.waitUntil(lambda: "footprint" in viewer.layers and not sample_data.loading(),
+                    timeout=120_000)
+    timer.stop()
+    names = [layer.name for layer in viewer.layers]
+    assert "reference b7" in names and "orthorectified b7" in names
+    assert not any(name.startswith("MERIS sample") for name in names)  # placeholder gone
+    assert took[0] < 1.0  # main: the whole simulation and both mappings (11 s)
+    assert float(np.diff(stamps).max()) < MAX_GAP_S

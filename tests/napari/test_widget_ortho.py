@@ -12,6 +12,7 @@ from napari_meris_ortho._napari.widget_ortho import (
     CRS_GEOGRAPHIC,
     OrthorectifyWidget,
     parse_bands,
+    run_orthorectify,
 )
 from napari_meris_ortho.engine.boundary import segment_boundary
 from napari_meris_ortho.errors import OptionsError
@@ -63,8 +64,8 @@ def test_widget_runs_end_to_end(make_napari_viewer, qtbot, tiny_n1, tiny_dem):
     assert band7.data.shape == (expected.height, expected.width)
     assert np.count_nonzero(band7.data) > 0.5 * band7.data.size
 
-    run = widget.last_run
-    item = run.items[0]
+    assert widget.last_run.items[0]["valid"] is None  # the run keeps no arrays (issue 24)
+    item = run_orthorectify(widget.settings()).items[0]  # the same run, without Qt
     # elevation source: the DEM (label 1) everywhere it was valid
     src = viewer.layers[f"elevation source{STAMP}"]
     assert isinstance(src, Labels)
@@ -116,7 +117,7 @@ def test_parallax_vectors_count_and_direction(make_napari_viewer, qtbot, tiny_n1
     widget.vector_step.value = 10
     widget.exaggeration.value = 5.0
     _run(widget, qtbot)
-    item = widget.last_run.items[0]
+    item = run_orthorectify(widget.settings()).items[0]  # the widget's run, without Qt
     diag, valid, grid = item["diagnostics"], item["valid"], item["grid"]
     vec = viewer.layers[f"parallax ×5{STAMP}"]
     assert isinstance(vec, Vectors)

@@ -145,6 +145,12 @@ class OrthoRun:
     #: what the user should know (a DEM that gave no height), as the CLI warns
     warnings: list[str] = field(default_factory=list)
 
+    def release(self) -> None:
+        """Drop the arrays of every item (bands, diagnostics, masks, extra layers) once they are
+        in layers: a finished run keeps its grids, tie points, statistics and names only."""
+        for item in self.items:
+            item.update(bands={}, extra=[], valid=None, diagnostics={})
+
     def summary(self) -> str:
         """The status line of a finished run."""
         if self.options.algorithm == MAPPING:

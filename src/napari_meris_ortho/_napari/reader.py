@@ -44,7 +44,9 @@ def get_reader(path: str | list[str]) -> Callable[[str | list[str]], list[LayerD
     with ``PRODUCT="``), a ``.SEN3`` product or a geocoded raster GDAL opens; None otherwise,
     so that napari falls back to its own readers (a plain TIFF)."""
     paths = [path] if isinstance(path, str | Path) else list(path)
-    if paths and all(_readable(Path(p)) for p in paths):
+    if not paths or not all(_file_or_directory(p) for p in paths):
+        return None
+    if all(_readable(Path(p)) for p in paths):
         return read_layers
     from .synthesis_layers import is_store
 
@@ -58,6 +60,18 @@ def read_store(path: str | list[str]) -> list[LayerData]:
     from .synthesis_layers import store_layers
 
     return store_layers(path[0] if isinstance(path, list) else path)
+
+
+def _file_or_directory(path: str | Path) -> bool:
+    """True for a regular file or a directory (following links); False for a FIFO, socket or
+    device, which reading would block on or consume (``stat`` itself never blocks)."""
+    import stat
+
+    try:
+        mode = Path(path).stat().st_mode
+    except OSError:
+        return False
+    return stat.S_ISREG(mode) or stat.S_ISDIR(mode)
 
 
 def _readable(path: Path) -> bool:

@@ -1,7 +1,8 @@
 """napari sample data: a simulated MERIS FR scene, mapped without and with terrain correction.
 
 The scene is generated on first use by the simulator (``simulate.generate_scene``, cached in
-``$MERIS_ORTHO_CACHE`` or ``~/.cache/napari-meris-ortho``) with a napari progress bar; the
+``$MERIS_ORTHO_CACHE`` or ``~/.cache/napari-meris-ortho``) with a napari progress bar, off the
+GUI thread when opened from napari's menu (``SampleLoader``); the
 two mappings (MERSYN use case 3 with ``-ort NO`` and with the DEM, handbook sections 3.1-3.4)
 are computed on each load (about a second for fr-small). Every layer is placed in one world
 frame: the output grid in the UTM zone of the footprint (``_layers`` module doc); the DEM and
@@ -136,14 +137,149 @@ def _napari_progress(name: str) -> tuple[Any, ProgressCallback]:
 
 
 def _make(name: str) -> list[LayerData]:
+    """The sample's layers. From napari's running event loop (File > Open Sample) the scene is
+    built in the background (``SampleLoader``) and a placeholder layer is returned at once;
+    from a script or a test (no event loop running yet) the layers are built here."""
     from .status import show_map_coordinates
 
-    show_map_coordinates(_current_viewer())
+    viewer = _current_viewer()
+    show_map_coordinates(viewer)
+    if viewer is not None and _event_loop_running():
+        return [SampleLoader(name, viewer).placeholder()]
     bar, update = _napari_progress(name)
     try:
         return sample_layers(build_sample(name, update))
     finally:
         bar.close()
+
+
+def _event_loop_running() -> bool:
+    """True inside a running Qt event loop on the GUI thread (napari's menus, not a script)."""
+    try:
+        from qtpy.QtCore import QThread
+        from qtpy.QtWidgets import QApplication
+    except ImportError:
+        return False
+    app, thread = QApplication.instance(), QThread.currentThread()
+    return (app is not None and thread is not None and thread is app.thread()
+            and thread.loopLevel() > 0)
+
+
+#: the loaders at work (kept alive until their layers are in the viewer)
+_LOADERS: set[SampleLoader] = set()
+
+
+def loading() -> bool:
+    """True while a sample is being built or added in the background."""
+    return bool(_LOADERS)
+
+
+class SampleLoader:
+    """A sample built off the GUI thread (simulation, mappings, layer data and napari layer
+    objects) with a napari progress bar; its layers are then added one per event-loop turn
+    and the placeholder removed. An error ends in the placeholder's name and napari's log."""
+
+    def __init__(self, name: str, viewer: Any) -> None:
+        import threading
+
+        from napari.utils import progress
+        from qtpy.QtCore import QTimer
+
+        self.name, self.viewer = name, viewer
+        self.state: tuple[int, int] = (0, 1)
+        self.layers: list[Any] | None = None
+        self.error: BaseException | None = None
+        self.label = f"MERIS sample {name} (generating...)"
+        self._bar = progress(total=100, desc=f"MERIS sample {name}")
+        self._timer = QTimer()
+        self._timer.timeout.connect(self._poll)
+        self._timer.start(50)
+        self._thread = threading.Thread(target=self._build, name="meris-ortho-sample",
+                                        daemon=True)
+        _LOADERS.add(self)
+        self._thread.start()
+
+    def placeholder(self) -> LayerData:
+        """A hidden 1-pixel image named after the sample, removed when the layers arrive."""
+        return (np.zeros((1, 1), np.float32), {
+            "name": self.label, "visible": False, "contrast_limits": (0.0, 1.0),
+            "metadata": {"sample_loader": id(self)}}, "image")
+
+    def _report(self, done: int, total: int) -> None:
+        self.state = (done, total)
+
+    def _build(self) -> None:
+        from napari.layers import Layer
+
+        try:
+            simulate_in_subprocess(self.name, lambda done, total: self._report(
+                done // 2, total))  # the simulator's kernels hold the GIL: another process
+            data = sample_layers(build_sample(self.name, self._report))
+            self.layers = [Layer.create(d, kwargs, kind) for d, kwargs, kind in data]
+        except BaseException as exc:  # shown in the placeholder's name, logged by napari
+            self.error = exc
+
+    def _poll(self) -> None:
+        done, total = self.state
+        self._bar.update(max(int(100 * done / max(total, 1)) - self._bar.n, 0))
+        if self._thread.is_alive():
+            return
+        self._timer.stop()
+        self._bar.close()
+        if self.error is not None:
+            self._rename(f"MERIS sample {self.name} failed: {self.error}")
+            _LOADERS.discard(self)
+            raise self.error
+        self._step()
+
+    def _placeholders(self) -> list[Any]:
+        return [x for x in self.viewer.layers if x.metadata.get("sample_loader") == id(self)]
+
+    def _rename(self, text: str) -> None:
+        for layer in self._placeholders():
+            layer.name = text
+
+    def _step(self) -> None:
+        """Add one layer, then come back on the next turn; remove the placeholder at the end."""
+        from qtpy.QtCore import QTimer
+
+        if self.layers:
+            self.viewer.layers.append(self.layers.pop(0))
+            QTimer.singleShot(0, self._step)
+            return
+        for layer in self._placeholders():
+            self.viewer.layers.remove(layer)
+        _LOADERS.discard(self)
+
+
+def simulate_in_subprocess(name: str, progress: ProgressCallback | None = None) -> None:
+    """Generate scene ``name`` into the simulator's cache in another Python process, so that
+    its numba kernels (which hold the GIL) never stall napari; progress read from its output.
+    A scene already cached costs one process start; an error is raised as SimulationError."""
+    import subprocess
+    import sys
+
+    from ..errors import MerisOrthoError
+
+    proc = subprocess.Popen([sys.executable, "-m", __name__, name], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    assert proc.stdout is not None
+    for line in proc.stdout:
+        done, _, total = line.partition(" ")
+        if progress is not None and done.isdigit() and total.strip().isdigit():
+            progress(int(done), int(total))
+    error = proc.stderr.read() if proc.stderr is not None else ""
+    if proc.wait() != 0:
+        raise MerisOrthoError(f"simulation of sample {name} failed: "
+                              f"{error.strip().splitlines()[-1] if error.strip() else '?'}")
+
+
+def _simulate_main(name: str) -> None:
+    """``python -m napari_meris_ortho._napari.sample_data NAME``: generate the scene, printing
+    "done total" progress lines."""
+    from ..simulate.scene import generate_scene
+
+    generate_scene(name, progress=lambda done, total: print(done, total, flush=True))
 
 
 def _current_viewer() -> Any:
@@ -163,3 +299,9 @@ def make_sample_alps() -> list[LayerData]:
 def make_sample_small() -> list[LayerData]:
     """Sample "fr-small": 320 x 513 pixels of the same scene (seconds to generate)."""
     return _make("fr-small")
+
+
+if __name__ == "__main__":
+    import sys
+
+    _simulate_main(sys.argv[1])

@@ -21,12 +21,13 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from magicgui.types import FileDialogMode
-from magicgui.widgets import ComboBox, Container, FileEdit, FloatSpinBox, Label, PushButton, SpinBox
+from magicgui.widgets import ComboBox, Container, FileEdit, FloatSpinBox, PushButton, SpinBox
 from qtpy.QtCore import QEvent, QObject
 
 from .._atomic import atomic_path
 from ..errors import MerisOrthoError, OptionsError
 from ..geometry.grid import OutputGrid
+from .layout import StatusLabel, compact_combo
 from .settings import remember
 from .world import layer_frame, layer_scale, layer_translate, reproject_onto, world_axes
 
@@ -119,16 +120,70 @@ class _OnClose(QObject):
         return False
 
 
+def layer_band(layer: Any) -> int | None:
+    """The MERIS band of a layer: ``metadata["band"]``, else "b7" in its name."""
+    import re
+
+    band = getattr(layer, "metadata", {}).get("band")
+    if band is not None:
+        return int(band)
+    found = re.search(r"\bb(\d{1,2})\b", str(layer.name))
+    return int(found.group(1)) if found else None
+
+
+def is_ortho(layer: Any) -> bool:
+    """An orthorectified radiance band: "ortho b7 · ..." (widget), "orthorectified b7" (sample)."""
+    from napari.layers import Image
+
+    return (isinstance(layer, Image) and not layer.rgb and str(layer.name).startswith("ortho")
+            and layer_band(layer) is not None)
+
+
+def default_pair(layers: list[Any]) -> tuple[Any, Any] | None:
+    """The check the flicker exists for (handbook section 4.4): A = the newest orthorectified
+    band, B = the reference image (same band when there is one); without a reference, the
+    previous product's orthorectified band, then the uncorrected one; without an orthorectified
+    band, the two top-most images. None with fewer than two images."""
+    from napari.layers import Image, Labels
+
+    images = [x for x in layers if isinstance(x, Image | Labels)]
+    if len(images) < 2:
+        return None
+    ortho = [x for x in images if is_ortho(x)]
+    references = [x for x in images if str(x.name).startswith("reference")]
+    if not ortho:
+        return images[-1], images[-2]
+    if references:
+        bands = {layer_band(r) for r in references}
+        a = next((x for x in reversed(ortho) if layer_band(x) in bands), ortho[-1])
+        return a, next((r for r in reversed(references) if layer_band(r) == layer_band(a)),
+                       references[-1])
+    newest = [x for x in ortho if x.metadata.get("path") == ortho[-1].metadata.get("path")]
+
+    def partners(a: Any) -> list[Any]:
+        same_band = [x for x in images if x is not a and layer_band(x) == layer_band(a)]
+        previous = [x for x in same_band if is_ortho(x)
+                    and x.metadata.get("path") != a.metadata.get("path")]
+        return previous or [x for x in same_band if str(x.name).startswith("uncorrected")]
+
+    for a in reversed(newest):  # a band of the newest product that has a partner
+        if partners(a):
+            return a, partners(a)[-1]
+    return ortho[-1], [x for x in images if x is not ortho[-1]][-1]
+
+
 class FlickerWidget(Container):
     """Alternate two layers at a chosen rate; start/stop, key binding, GIF export, disparity."""
 
     def __init__(self, viewer: napari.viewer.Viewer) -> None:
         self.viewer = viewer
         self._closed = False
-        self.layer_a = ComboBox(label="layer A", choices=self._layer_choices, nullable=True,
-                                tooltip="first layer (e.g. orthorectified or uncorrected)")
-        self.layer_b = ComboBox(label="layer B", choices=self._layer_choices, nullable=True,
-                                tooltip="second layer (e.g. the reference)")
+        self.layer_a = compact_combo(ComboBox(
+            label="layer A", choices=self._layer_choices, nullable=True,
+            tooltip="first layer (e.g. orthorectified or uncorrected)"))
+        self.layer_b = compact_combo(ComboBox(
+            label="layer B", choices=self._layer_choices, nullable=True,
+            tooltip="second layer (e.g. the reference)"))
         self.rate = FloatSpinBox(label="rate (Hz)", value=2.0, min=0.2, max=30.0, step=0.5,
                                  tooltip="frames per second of the flicker")
         self.start_button = PushButton(text=f"Start ({FLICKER_KEY})",
@@ -143,8 +198,8 @@ class FlickerWidget(Container):
         self.disparity_button = PushButton(
             text="Measure disparity", tooltip="ZNCC disparity of B against A (section 4.6), "
                                               "in the background")
-        self.status = Label(value="stopped")
-        self.disparity_label = Label(value="")
+        self.status = StatusLabel(value="stopped")
+        self.disparity_label = StatusLabel(value="")
         super().__init__(widgets=[
             self.layer_a, self.layer_b, self.rate, self.start_button, self.stop_button,
             self.status, self.cycles, self.gif_path, self.export_button,
@@ -190,22 +245,26 @@ class FlickerWidget(Container):
         return [(layer.name, layer) for layer in self.viewer.layers
                 if isinstance(layer, Image | Labels)]
 
-    def _refresh_choices(self, _event: Any = None) -> None:
+    def _refresh_choices(self, event: Any = None) -> None:
         self.layer_a.reset_choices()
         self.layer_b.reset_choices()
         if self.running and not self._pair_present():
             self.stop()
-        self._default_pair()
+        inserted = getattr(event, "type", "") == "inserted"
+        # a new orthorectified band (a run just ended) brings the default pair back
+        self._default_pair(force=inserted and not self.running and is_ortho(event.value))
 
-    def _default_pair(self) -> None:
-        """Pre-select the two top-most images when nothing (or a removed layer) is selected."""
-        layers = [layer for _, layer in self._layer_choices()]
-        if len(layers) < 2:
+    def _default_pair(self, force: bool = False) -> None:
+        """Pre-select ``default_pair`` when nothing (or a removed layer) is selected, or when
+        ``force`` (a new orthorectified layer)."""
+        pair = default_pair(list(self.viewer.layers))
+        if pair is None:
             return
-        if self.layer_a.value is None:
-            self.layer_a.value = layers[-1]
-        if self.layer_b.value is None or self.layer_b.value is self.layer_a.value:
-            self.layer_b.value = next(x for x in reversed(layers) if x is not self.layer_a.value)
+        a, b = pair
+        if force or self.layer_a.value is None:
+            self.layer_a.value = a
+        if force or self.layer_b.value is None or self.layer_b.value is self.layer_a.value:
+            self.layer_b.value = b if b is not self.layer_a.value else a
 
     def _pair_present(self) -> bool:
         return all(x.value in self.viewer.layers for x in (self.layer_a, self.layer_b))

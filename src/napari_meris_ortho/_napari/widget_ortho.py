@@ -5,8 +5,11 @@ section 3.3), the elevation source, the selection algorithm (mapping = use case 
 radiance or maximum NDVI synthesis = use cases 1-2), sampling, output CRS and pixel size, bands
 and an optional output file. The work (``ortho_run``) runs in a napari thread worker with a
 progress bar in the widget and in the activity dock, and a cancel button; closing the viewer
-cancels it. The result is added in the world frame (``world``) with its geometry layers; a rerun
-replaces the layers of the same names. The settings are remembered (``settings``).
+cancels it. Everything heavy (reading, orthorectification, layer data, contrast limits, RGB
+stretch, geometry, the napari layer objects) runs in the job (``build_layers``); the Qt thread
+only inserts the ready layers, one per event-loop turn, in the world frame (``world``); a rerun
+replaces the layers of the same names. A finished run keeps nothing alive but its layers.
+The settings are remembered (``settings``).
 """
 
 from __future__ import annotations
@@ -23,7 +26,6 @@ from magicgui.widgets import (
     Container,
     FileEdit,
     FloatSpinBox,
-    Label,
     LineEdit,
     ProgressBar,
     PushButton,
@@ -33,6 +35,7 @@ from magicgui.widgets import (
 
 from ..errors import MerisOrthoError
 from ..options import Elevation, Sampling, choices
+from .layout import StatusLabel
 from .ortho_run import (
     ALGORITHMS,
     CRS_EPSG,
@@ -104,8 +107,25 @@ class _Job:
         self.thread.start()
         self.thread.join()
         if "error" in self._outcome:
-            raise self._outcome["error"]
-        return self._outcome["value"]
+            raise self._outcome.pop("error")
+        return self._outcome.pop("value")  # the job keeps nothing of the result
+
+
+def build_layers(options: RunSettings, report: Any, check: Any, world: Any
+                 ) -> tuple[OrthoRun, list[Any]]:
+    """The whole run off the Qt thread: orthorectification, layer data (contrast limits, RGB
+    stretch, reprojection into the viewer's ``world`` frame, geometry) and the napari layer
+    objects themselves, so that the Qt thread only inserts them; ``check()`` raises Cancelled
+    between layers. The returned run keeps no arrays (``OrthoRun.release``)."""
+    from napari.layers import Layer
+
+    run = run_orthorectify(options, report)
+    layers = []
+    for data, kwargs, kind in run_layers(run, world):
+        check()
+        layers.append(Layer.create(data, kwargs, kind))
+    run.release()
+    return run, layers
 
 
 class OrthorectifyWidget(Container):
@@ -170,7 +190,7 @@ class OrthorectifyWidget(Container):
                                         tooltip="stop the run at its next step")
         self.progress_bar = ProgressBar(value=0, min=0, max=1000, label="progress",
                                         tooltip="progress of the run")
-        self.status = Label(value="")
+        self.status = StatusLabel(value="")
         super().__init__(widgets=[
             self.products, self.dem_kind, self.dem_path, self.dem_add, self.dem_list,
             dem_buttons, self.elevation, self.geolocation, self.algorithm, self.sampling,
@@ -186,6 +206,9 @@ class OrthorectifyWidget(Container):
         self._timer: Any = None
         self._job: _Job | None = None
         self.worker: Any = None
+        #: layer changes (remove an old layer, append a new one) left to make, one per turn
+        self._queue: list[tuple[Any, Any]] = []
+        self._queued, self._summary = 0, ""
         self.last_run: OrthoRun | None = None
         remembered = {"elevation": self.elevation, "geolocation": self.geolocation,
                       "algorithm": self.algorithm,
@@ -284,10 +307,14 @@ class OrthorectifyWidget(Container):
         return options
 
     # ---------------------------------------------------------------- running
-    def _report(self, done: int, total: int) -> None:
-        """Progress callback (job thread): records the state, raises on cancel."""
+    def _check(self) -> None:
+        """Raise Cancelled when the user pressed Cancel or closed the viewer (job thread)."""
         if self._cancel.is_set() or getattr(self.worker, "abort_requested", False):
             raise Cancelled("cancelled by the user")
+
+    def _report(self, done: int, total: int) -> None:
+        """Progress callback (job thread): records the state, raises on cancel."""
+        self._check()
         self.progress_state = (done, total)
         if self.progress_hook is not None:
             self.progress_hook(done, total)
@@ -298,6 +325,8 @@ class OrthorectifyWidget(Container):
         from napari.utils import progress
         from qtpy.QtCore import QTimer
 
+        if self.running:
+            return None
         try:
             options = self.settings()
         except MerisOrthoError as exc:
@@ -311,7 +340,8 @@ class OrthorectifyWidget(Container):
         self._timer = QTimer()
         self._timer.timeout.connect(self._update_progress)
         self._timer.start(100)
-        self._job = _Job(run_orthorectify, options, self._report)
+        self._job = _Job(build_layers, options, self._report, self._check,
+                         viewer_frame(self.viewer.layers))
         self.worker = create_worker(self._job, _start_thread=False, _connect={
             "returned": self._done, "errored": self._failed, "finished": self._finished})
         self.run_button.enabled, self.cancel_button.enabled = False, True
@@ -321,8 +351,8 @@ class OrthorectifyWidget(Container):
 
     @property
     def running(self) -> bool:
-        """True from ``start`` until the worker has finished (results added)."""
-        return self._pbar is not None
+        """True from ``start`` until the worker has finished and its layers are all added."""
+        return self._pbar is not None or bool(self._queue)
 
     def cancel(self) -> None:
         """Ask the running worker to stop at its next progress report."""
@@ -351,21 +381,51 @@ class OrthorectifyWidget(Container):
             self._pbar.update(max(target - self._pbar.n, 0))
             self.progress_bar.value = target
 
-    def _done(self, run: OrthoRun) -> None:
+    def _done(self, value: tuple[OrthoRun, list[Any]]) -> None:
+        """The job's layers are ready: queue the removal of the layers they replace (same
+        names, an earlier run) and their insertion, one per event-loop turn (``_step``)."""
         if self._closed:
             return
+        run, layers = value
         self.last_run = run
-        self._add_layers(run_layers(run, viewer_frame(self.viewer.layers)))
-        self.progress_bar.value = self.progress_bar.max
-        self.status.value = run.summary()
+        names = {layer.name for layer in layers}
+        # napari collects garbage at every removal (0.3-0.5 s): one removal per turn too
+        self._queue = [*((self._remove_layer, old) for old in self.viewer.layers
+                         if old.name in names),
+                       *((self.viewer.layers.append, layer) for layer in layers)]
+        self._queued = len(self._queue)
+        self._summary = run.summary()
+        self._schedule_step()
 
-    def _add_layers(self, layers: list[Any]) -> None:
-        """Add the run's layers; layers of the same names (an earlier run) are replaced."""
-        names = {kwargs["name"] for _, kwargs, _ in layers}
-        for old in [layer for layer in self.viewer.layers if layer.name in names]:
-            self.viewer.layers.remove(old)
-        for data, kwargs, kind in layers:
-            getattr(self.viewer, f"add_{kind}")(data, **kwargs)
+    def _remove_layer(self, layer: Any) -> None:
+        if layer in self.viewer.layers:
+            self.viewer.layers.remove(layer)
+
+    def _schedule_step(self) -> None:
+        from qtpy.QtCore import QTimer
+
+        QTimer.singleShot(0, self._step)
+
+    def _step(self) -> None:
+        """One queued layer change per event-loop turn, so that the viewer repaints and Cancel
+        responds between them; Cancel drops the changes not yet made."""
+        if self._closed or not self._queue:
+            self._queue = []
+            return
+        if self._cancel.is_set():
+            added = self._queued - len(self._queue)
+            self._queue = []
+            self.status.value = f"cancelled after {added} of {self._queued} layer changes"
+            self._end()
+            return
+        change, layer = self._queue.pop(0)
+        change(layer)
+        if self._queue:
+            self._schedule_step()
+            return
+        self.progress_bar.value = self.progress_bar.max
+        self.status.value = self._summary
+        self._end()
 
     def _failed(self, exc: BaseException) -> None:
         if self._closed:
@@ -376,11 +436,19 @@ class OrthorectifyWidget(Container):
             self.status.value = f"failed: {type(exc).__name__}: {exc}"
 
     def _finished(self) -> None:
+        """The worker has ended (result, error or cancel): drop it and its job, so that nothing
+        of the run stays alive but its layers; the buttons come back once the queue is empty."""
+        self.worker, self._job = None, None
         if self._closed:
             return
         if self._timer is not None:
             self._timer.stop()
+            self._timer = None
         if self._pbar is not None:
             self._pbar.close()
             self._pbar = None
+        if not self._queue:
+            self._end()
+
+    def _end(self) -> None:
         self.run_button.enabled, self.cancel_button.enabled = True, False

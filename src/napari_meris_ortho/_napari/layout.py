@@ -1,0 +1,61 @@
+"""Dock widgets of a fixed width: text never widens them (issue 24, item 7).
+
+A QLabel without word wrap asks for the width of its whole text, and a QComboBox for its
+longest item: a long status message, path or layer name widened the dock from 477 to 1066 px.
+Labels wrap at spaces and ignore their text width (the full text is also their tooltip);
+combo boxes ask for ``COMBO_CHARS`` characters and elide the rest.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from magicgui.widgets import Label
+
+#: characters a combo box asks room for (longer layer names are elided)
+COMBO_CHARS = 24
+
+
+class StatusLabel(Label):
+    """A magicgui ``Label`` that wraps its text and never asks for more width than the dock
+    has; its tooltip is the full text (an unbroken path may be clipped, the tooltip shows it)."""
+
+    def __init__(self, **kwargs: Any) -> None:
+        from qtpy.QtWidgets import QSizePolicy
+
+        super().__init__(**kwargs)
+        native = self.native
+        native.setWordWrap(True)
+        policy = QSizePolicy(QSizePolicy.Policy.Ignored, QSizePolicy.Policy.Preferred)
+        policy.setHeightForWidth(True)
+        native.setSizePolicy(policy)
+        native.setMinimumWidth(1)
+        native.setToolTip(str(self.value))
+
+    @property
+    def value(self) -> Any:
+        return Label.value.fget(self)  # type: ignore[attr-defined]
+
+    @value.setter
+    def value(self, value: Any) -> None:
+        Label.value.fset(self, value)  # type: ignore[attr-defined]
+        self.native.setToolTip(str(value))
+        self.fit()
+
+    def fit(self) -> None:
+        """Ask for the height of the wrapped text at the label's width (the dock's scroll
+        area does not pass height-for-width on)."""
+        native = self.native
+        native.setMinimumHeight(max(native.heightForWidth(max(native.width(), 100)), 0))
+
+
+def compact_combo(combo: Any) -> Any:
+    """A magicgui ``ComboBox`` asking room for ``COMBO_CHARS`` characters, not its longest item."""
+    from qtpy.QtCore import Qt
+    from qtpy.QtWidgets import QComboBox
+
+    native = combo.native
+    native.setSizeAdjustPolicy(QComboBox.SizeAdjustPolicy.AdjustToMinimumContentsLengthWithIcon)
+    native.setMinimumContentsLength(COMBO_CHARS)
+    native.view().setTextElideMode(Qt.TextElideMode.ElideMiddle)
+    return combo

@@ -1,0 +1,51 @@
+"""Flicker defaults know their job (issue 24, item 5): the newest orthorectified band against
+the reference image, not the two top-most layers ("elevation source" / "elevation")."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from napari_meris_ortho._napari.widget_flicker import FlickerWidget, default_pair
+from napari_meris_ortho._napari.widget_ortho import OrthorectifyWidget
+from napari_meris_ortho.simulate.scene import generate_scene
+
+
+def test_sample_then_run_pairs_newest_ortho_with_reference(make_napari_viewer, qtbot):
+    viewer = make_napari_viewer()
+    viewer.open_sample("napari-meris-ortho", "fr-small")
+    flicker = FlickerWidget(viewer)
+    assert flicker.layer_a.value is viewer.layers["orthorectified b7"]
+    assert flicker.layer_b.value is viewer.layers["reference b7"]
+
+    ortho = OrthorectifyWidget(viewer)
+    scene = generate_scene("fr-small")  # the sample's scene (cached)
+    ortho.products.value = [scene.product_path]
+    ortho.add_dem(scene.dem_paths["geotiff"])
+    ortho.geometry.value = False
+    assert ortho.start() is not None, ortho.status.value
+    qtbot.waitUntil(lambda: not ortho.running, timeout=120_000)
+    assert ortho.status.value.startswith("done"), ortho.status.value
+    newest = [layer for layer in viewer.layers if layer.name.startswith("ortho b7 ·")]
+    assert len(newest) == 1
+    assert flicker.layer_a.value is newest[0]  # the run's band 7, the newest
+    assert flicker.layer_b.value is viewer.layers["reference b7"]
+    # the pair is the check of section 4.4: the same scene, pixel on pixel
+    a, b = flicker.layer_a.value.data, flicker.layer_b.value.data
+    both = (a > 0) & (b > 0)
+    assert both.sum() > 100_000 and np.corrcoef(a[both], b[both])[0, 1] > 0.95
+
+
+def test_without_reference_the_previous_product_then_the_uncorrected(make_napari_viewer):
+    viewer = make_napari_viewer()
+    img = np.ones((8, 8), np.float32)
+    uncorrected = viewer.add_image(img, name="uncorrected b7", metadata={"band": 7})
+    first = viewer.add_image(img, name="ortho b7 · 2003-09-21 09:23",
+                             metadata={"band": 7, "path": "/a.N1"})
+    viewer.add_image(img, name="elevation · 2003-09-21 09:23")
+    viewer.add_labels(np.zeros((8, 8), np.uint8), name="elevation source · 2003-09-21 09:23")
+    assert default_pair(list(viewer.layers)) == (first, uncorrected)
+    second = viewer.add_image(img, name="ortho b7 · 2003-10-07 09:30",
+                              metadata={"band": 7, "path": "/b.N1"})
+    viewer.add_image(img, name="ortho b5 · 2003-10-07 09:30", metadata={"band": 5,
+                                                                          "path": "/b.N1"})
+    assert default_pair(list(viewer.layers)) == (second, first)
