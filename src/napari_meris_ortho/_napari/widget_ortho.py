@@ -35,7 +35,7 @@ from magicgui.widgets import (
 
 from ..errors import MerisOrthoError
 from ..options import Elevation, Sampling, choices
-from .layout import StatusLabel
+from .layout import StatusLabel, canvas_updates
 from .ortho_run import (
     ALGORITHMS,
     CRS_EPSG,
@@ -395,7 +395,11 @@ class OrthorectifyWidget(Container):
                        *((self.viewer.layers.append, layer) for layer in layers)]
         self._queued = len(self._queue)
         self._summary = run.summary()
+        self._canvas_updates(False)
         self._schedule_step()
+
+    def _canvas_updates(self, enabled: bool) -> None:
+        canvas_updates(self.viewer, enabled)
 
     def _remove_layer(self, layer: Any) -> None:
         if layer in self.viewer.layers:
@@ -419,7 +423,12 @@ class OrthorectifyWidget(Container):
             self._end()
             return
         change, layer = self._queue.pop(0)
-        change(layer)
+        try:
+            change(layer)
+        except Exception:
+            self._queue = []
+            self._end()
+            raise
         if self._queue:
             self._schedule_step()
             return
@@ -451,4 +460,5 @@ class OrthorectifyWidget(Container):
             self._end()
 
     def _end(self) -> None:
+        self._canvas_updates(True)
         self.run_button.enabled, self.cancel_button.enabled = True, False
