@@ -19,8 +19,10 @@ from qtpy.QtCore import QTimer
 from napari_meris_ortho._napari.widget_ortho import OrthorectifyWidget
 from napari_meris_ortho.simulate.scene import generate_scene
 
-#: longest event-loop gap allowed during a run (one napari layer insertion on a loaded machine)
-MAX_GAP_S = 1.5
+#: longest event-loop gap allowed during a run: one napari layer insertion, with room for a loaded
+#: 2-core machine (0.2-0.8 s measured quiet, 1.52 s once in the whole suite beside other jobs);
+#: before, one turn built and added every layer: 4-7 s
+MAX_GAP_S = 2.5
 
 
 @pytest.fixture(scope="module")
@@ -94,7 +96,19 @@ def _rss() -> int:
     import psutil
 
     gc.collect()
+    _trim()
     return int(psutil.Process().memory_info().rss)
+
+
+def _trim() -> None:
+    """Give glibc's free heap pages back to the system (what the process holds, not what the
+    allocator keeps for reuse, is what this test measures)."""
+    import ctypes
+    import ctypes.util
+
+    name = ctypes.util.find_library("c")
+    if name:
+        ctypes.CDLL(name).malloc_trim(0)
 
 
 def test_finished_runs_keep_nothing_but_their_layers(make_napari_viewer, qtbot, tiny_n1,
@@ -119,3 +133,28 @@ def test_finished_runs_keep_nothing_but_their_layers(make_napari_viewer, qtbot, 
     after = _rss()
     assert run_mb > 40
     assert after < 1.10 * before, f"{before / 2**20:.0f} MB -> {after / 2**20:.0f} MB"
+
+
+def test_camera_frames_the_result(make_napari_viewer, qtbot, tiny_n1):
+    """After a run the camera frames the result, not the whole viewer (issue 24, item 4: the
+    result showed as a small patch in a mostly black canvas)."""
+    from napari_meris_ortho._napari.world import geo_image_kwargs
+    from napari_meris_ortho.geometry.grid import OutputGrid
+
+    viewer = make_napari_viewer(show=True)
+    # a map 20 x 20 times the size of the result, in the same UTM zone, already in the viewer
+    big = OutputGrid.from_transform("EPSG:32632", (5000.0, 0, 0.0, 0, -5000.0, 5.6e6),
+                                    (400, 400))
+    viewer.add_image(np.ones((400, 400), np.float32), **geo_image_kwargs(big, name="map"))
+    widget = OrthorectifyWidget(viewer)
+    widget.products.value = [tiny_n1]
+    widget.elevation.value = "tiepoints"
+    _run(widget, qtbot)
+    rgb = next(layer for layer in viewer.layers if layer.name.startswith("ortho RGB"))
+    (top, left), (bottom, right) = np.asarray(rgb.extent.world)[:, -2:]
+    centre = np.asarray(viewer.camera.center)[-2:]
+    np.testing.assert_allclose(centre, [(top + bottom) / 2, (left + right) / 2],
+                               atol=0.05 * (right - left))
+    zoom_result = viewer.camera.zoom
+    viewer.fit_to_view()
+    assert zoom_result > 5 * viewer.camera.zoom  # framed on the result, not on the map

@@ -1,4 +1,5 @@
-"""Dock widgets of a fixed width: text never widens them (issue 24, item 7).
+"""Layout of the plugin's widgets: docks of a fixed width, text never widens them (issue 24,
+item 7); the canvas held still while layers go in (``canvas_updates``).
 
 A QLabel without word wrap asks for the width of its whole text, and a QComboBox for its
 longest item: a long status message, path or layer name widened the dock from 477 to 1066 px.
@@ -59,3 +60,21 @@ def compact_combo(combo: Any) -> Any:
     native.setMinimumContentsLength(COMBO_CHARS)
     native.view().setTextElideMode(Qt.TextElideMode.ElideMiddle)
     return combo
+
+
+def canvas_updates(viewer: Any, enabled: bool) -> None:
+    """Stop (and restart) the canvas repainting while a run's or a sample's layers go in one per
+    event-loop turn: a draw between two insertions crashed Mesa's software GL under Xvfb
+    (segmentation fault in glDrawArrays); the rest of the window (progress bar, Cancel, the
+    layer list) keeps responding. No-op without a Qt window."""
+    import contextlib
+
+    window = getattr(viewer, "window", None)
+    qt_viewer = getattr(window, "_qt_viewer", None)
+    native = getattr(getattr(qt_viewer, "canvas", None), "native", None)
+    if native is None:
+        return
+    with contextlib.suppress(RuntimeError):  # the Qt object is already deleted
+        native.setUpdatesEnabled(enabled)
+        if enabled:
+            native.update()

@@ -22,6 +22,7 @@ import numpy as np
 from ..geometry.grid import OutputGrid
 from ..progress import ProgressCallback
 from .geometry_layers import geometry_layers
+from .layout import canvas_updates
 from .product_layers import band_layers, contrast_limits
 from .world import geo_image_kwargs, reproject_onto
 
@@ -230,6 +231,7 @@ class SampleLoader:
             self._rename(f"MERIS sample {self.name} failed: {self.error}")
             _LOADERS.discard(self)
             raise self.error
+        canvas_updates(self.viewer, False)
         self._step()
 
     def _placeholders(self) -> list[Any]:
@@ -243,12 +245,21 @@ class SampleLoader:
         """Add one layer, then come back on the next turn; remove the placeholder at the end."""
         from qtpy.QtCore import QTimer
 
-        if self.layers:
-            self.viewer.layers.append(self.layers.pop(0))
-            QTimer.singleShot(0, self._step)
-            return
-        for layer in self._placeholders():
-            self.viewer.layers.remove(layer)
+        try:
+            if self.layers:
+                self.viewer.layers.append(self.layers.pop(0))
+                QTimer.singleShot(0, self._step)
+                return
+            for layer in self._placeholders():
+                self.viewer.layers.remove(layer)
+        except Exception:
+            self.layers = None
+            self._finish()
+            raise
+        self._finish()
+
+    def _finish(self) -> None:
+        canvas_updates(self.viewer, True)
         _LOADERS.discard(self)
 
 

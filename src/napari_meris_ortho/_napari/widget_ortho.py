@@ -35,7 +35,7 @@ from magicgui.widgets import (
 
 from ..errors import MerisOrthoError
 from ..options import Elevation, Sampling, choices
-from .layout import StatusLabel
+from .layout import StatusLabel, canvas_updates
 from .ortho_run import (
     ALGORITHMS,
     CRS_EPSG,
@@ -209,6 +209,7 @@ class OrthorectifyWidget(Container):
         #: layer changes (remove an old layer, append a new one) left to make, one per turn
         self._queue: list[tuple[Any, Any]] = []
         self._queued, self._summary = 0, ""
+        self._new_layers: list[Any] = []
         self.last_run: OrthoRun | None = None
         remembered = {"elevation": self.elevation, "geolocation": self.geolocation,
                       "algorithm": self.algorithm,
@@ -394,8 +395,13 @@ class OrthorectifyWidget(Container):
                          if old.name in names),
                        *((self.viewer.layers.append, layer) for layer in layers)]
         self._queued = len(self._queue)
+        self._new_layers = layers
         self._summary = run.summary()
+        self._canvas_updates(False)
         self._schedule_step()
+
+    def _canvas_updates(self, enabled: bool) -> None:
+        canvas_updates(self.viewer, enabled)
 
     def _remove_layer(self, layer: Any) -> None:
         if layer in self.viewer.layers:
@@ -419,13 +425,27 @@ class OrthorectifyWidget(Container):
             self._end()
             return
         change, layer = self._queue.pop(0)
-        change(layer)
+        try:
+            change(layer)
+        except Exception:
+            self._queue = []
+            self._end()
+            raise
         if self._queue:
             self._schedule_step()
             return
         self.progress_bar.value = self.progress_bar.max
         self.status.value = self._summary
+        self._frame_result()
         self._end()
+
+    def _frame_result(self) -> None:
+        """Point the camera at the run's visible layers (the result, not the whole viewer)."""
+        shown = [layer for layer in self._new_layers
+                 if layer.visible and layer in self.viewer.layers]
+        self._new_layers = []
+        if shown:
+            self.viewer.fit_to_view(layers=shown)
 
     def _failed(self, exc: BaseException) -> None:
         if self._closed:
@@ -451,4 +471,5 @@ class OrthorectifyWidget(Container):
             self._end()
 
     def _end(self) -> None:
+        self._canvas_updates(True)
         self.run_button.enabled, self.cancel_button.enabled = True, False

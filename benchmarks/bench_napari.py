@@ -1,0 +1,165 @@
+"""napari at engine speed (issue 24, item 9): what a user of the plugin waits for, on fr-alps.
+
+One run prints, in a real napari viewer (run it under Xvfb: ``xvfb-run -a``):
+
+1. open: ``viewer.open`` of the N1 with the plugin's reader, to the first frame drawn
+   (``viewer.screenshot`` of the canvas);
+2. Orthorectify runs (fr-alps with its GeoTIFF DEM, bands 7,5,2, geometry layers, the widget's
+   defaults), from Run to the last layer in the viewer: wall time and the longest gap between
+   two turns of the Qt event loop (a 10 ms QTimer recording timestamps); the first run loads
+   the numba kernels into the process, the later ones are warm;
+3. resident memory after the first run, and after ``RUNS`` runs with every layer removed
+   (``gc.collect()``, napari's deferred deletions processed), also once glibc's ``malloc_trim``
+   has returned the free heap (what is kept for reuse is not held by anything).
+
+A benchmark, not a test: ``xvfb-run -a python benchmarks/bench_napari.py [--json FILE]``; for
+the figures before a change, the same command with ``PYTHONPATH`` on the older source tree.
+The machine is shared: read the figures as such.
+"""
+
+from __future__ import annotations
+
+import argparse
+import gc
+import json
+import os
+import time
+from typing import Any
+
+import numpy as np
+import psutil
+
+#: Orthorectify runs in a row (issue 24: memory of four runs)
+RUNS = 4
+
+
+def _rss_mb() -> float:
+    gc.collect()
+    return psutil.Process().memory_info().rss / 2**20
+
+
+def _trimmed_rss_mb() -> float:
+    """RSS once glibc has handed its free heap back (``malloc_trim``): what is still in use,
+    apart from memory the allocator keeps for reuse."""
+    import contextlib
+    import ctypes
+
+    with contextlib.suppress(OSError, AttributeError):
+        ctypes.CDLL(None).malloc_trim(0)
+    return _rss_mb()
+
+
+class LoopTurns:
+    """Timestamps of a 10 ms QTimer: the event loop's turns while the block runs."""
+
+    def __enter__(self) -> LoopTurns:
+        from qtpy.QtCore import QTimer
+
+        self.stamps: list[float] = [time.perf_counter()]
+        self.timer = QTimer()
+        self.timer.timeout.connect(lambda: self.stamps.append(time.perf_counter()))
+        self.timer.start(10)
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.timer.stop()
+        self.stamps.append(time.perf_counter())
+
+    @property
+    def longest_gap(self) -> float:
+        return float(np.diff(self.stamps).max())
+
+
+def _spin(app: Any, until: Any, timeout: float = 600.0) -> None:
+    """Run the Qt event loop (as napari.run would) until ``until()`` or the timeout."""
+    from qtpy.QtCore import QEventLoop, QTimer
+
+    loop = QEventLoop()
+    check = QTimer()
+    check.timeout.connect(lambda: loop.quit() if until() else None)
+    check.start(5)
+    QTimer.singleShot(int(timeout * 1000), loop.quit)
+    loop.exec_()
+    check.stop()
+
+
+def bench(scene_name: str) -> dict[str, Any]:
+    import tempfile
+
+    os.environ.setdefault("MERIS_ORTHO_NO_WARMUP", "1")  # no compiler thread competing
+    # napari's settings (and the widget's remembered choices) in a fresh place, not the user's
+    os.environ["NAPARI_CONFIG"] = os.path.join(tempfile.mkdtemp(prefix="bench-napari-"),
+                                               "settings.yaml")
+    from qtpy.QtWidgets import QApplication
+
+    import napari
+    import napari_meris_ortho
+    from napari_meris_ortho.simulate.scene import generate_scene
+
+    scene = generate_scene(scene_name)
+    viewer = napari.Viewer(show=True)
+    app = QApplication.instance()
+    _spin(app, lambda: False, 1.0)  # the window is up
+    out: dict[str, Any] = {"source": os.path.dirname(napari_meris_ortho.__file__),
+                           "scene": scene_name, "rss_start_mb": _rss_mb()}
+
+    with LoopTurns() as turns:
+        t0 = time.perf_counter()
+        viewer.open(str(scene.product_path), plugin="napari-meris-ortho")
+        viewer.screenshot(canvas_only=True)  # the first frame drawn
+        out["open_to_first_pixels_s"] = time.perf_counter() - t0
+    out["open_longest_stall_s"] = turns.longest_gap
+    viewer.layers.clear()
+    _spin(app, lambda: False, 0.3)
+
+    _, widget = viewer.window.add_plugin_dock_widget("napari-meris-ortho", "Orthorectify")
+    widget.products.value = [scene.product_path]
+    widget.add_dem(scene.dem_paths["geotiff"])
+    widget.bands.value = "7,5,2"
+    widget.elevation.value, widget.pixel_size.value, widget.geometry.value = "dem", 0.0, True
+    runs = []
+    rss_before = _rss_mb()
+    for k in range(RUNS):
+        with LoopTurns() as turns:
+            t0 = time.perf_counter()
+            assert widget.start() is not None, widget.status.value
+            _spin(app, lambda: not widget.running)
+            seconds = time.perf_counter() - t0
+        assert widget.status.value.startswith("done"), widget.status.value
+        runs.append({"run_s": seconds, "longest_stall_s": turns.longest_gap,
+                     "layers": len(viewer.layers)})
+        if k == 0:
+            out["rss_after_first_run_mb"] = _rss_mb()
+        viewer.layers.clear()
+        _spin(app, lambda: False, 0.3)  # napari's deferred deletions
+    out["runs"] = runs
+    out["rss_before_runs_mb"] = rss_before
+    out["rss_after_runs_removed_mb"] = _rss_mb()
+    out["rss_after_malloc_trim_mb"] = _trimmed_rss_mb()
+    viewer.close()
+    return out
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--scene", default="fr-alps")
+    parser.add_argument("--json", help="write the figures to this file")
+    args = parser.parse_args()
+    out = bench(args.scene)
+    print(f"source: {out['source']}")
+    print(f"open {args.scene} N1 to first pixels: {out['open_to_first_pixels_s']:.2f} s "
+          f"(longest stall {out['open_longest_stall_s']:.2f} s)")
+    for k, run in enumerate(out["runs"]):
+        print(f"run {k + 1}: {run['run_s']:.2f} s, longest UI stall "
+              f"{run['longest_stall_s']:.2f} s, {run['layers']} layers")
+    print(f"memory: {out['rss_before_runs_mb']:.0f} MB before the runs, "
+          f"{out['rss_after_first_run_mb']:.0f} MB after the first, "
+          f"{out['rss_after_runs_removed_mb']:.0f} MB after {RUNS} runs, layers removed "
+          f"({out['rss_after_malloc_trim_mb']:.0f} MB after malloc_trim)")
+    if args.json:
+        with open(args.json, "w") as fh:
+            json.dump(out, fh, indent=1)
+
+
+if __name__ == "__main__":
+    main()
