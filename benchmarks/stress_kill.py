@@ -20,8 +20,10 @@ first trial, so the kills fall in the middle of numba compiling and writing cach
 Result (issue 26, 2 shared cores, other jobs running): 600 killed updates (500 killed 0.1-1.2 s
 in, 100 killed 0.5-25 s in with a cold numba cache) and 0 readers that failed after them; the
 abort is not caused by the kill: readers with no writer at all aborted too (1 of 128 reading
-every layer; exit probe 7 of 800, then 5 of 400 with --no-settle against 0 of 400 with the
-hook, run side by side). gdb on a core: a tokio thread of Icechunk in
+every layer; exit probe 7 of 800; then, run side by side, ``--probe --no-writer
+--no-settle --trials 400``: 9 of 400 readers exit -6, ``--probe --no-writer --trials 400``
+with the hook: 0 of 400; with the hook, ``--trials 150``: 146 killed, 4 done, 0 readers
+failed). gdb on a core: a tokio thread of Icechunk in
 ``pyo3_async_runtimes::set_result`` -> ``loop.call_soon_threadsafe`` -> ``sock.send`` re-takes
 the GIL after the main thread began finalizing -> ``PyThread_exit_thread`` -> ``abort``
 (CPython gh-87135). ``store.settle_at_exit`` removes it.
