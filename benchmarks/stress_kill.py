@@ -13,7 +13,20 @@ exit code (-6 = SIGABRT). A commit that landed is reset away (branch back to the
 commit) so every trial kills the same update. ``--cold-numba`` gives every killed update and
 reader a numba cache directory of its own run (``NUMBA_CACHE_DIR``) that starts empty at the
 first trial, so the kills fall in the middle of numba compiling and writing cache entries.
-``--no-writer``: the baseline, the same readers with no update started or killed.
+``--no-writer``: the baseline, the same readers with no update started or killed;
+``--probe``: readers that open five sessions and exit (the exit race below, more often);
+``--no-settle``: readers without the exit hook, as before the fix.
+
+Result (issue 26, 2 shared cores, other jobs running): 600 killed updates (500 killed 0.1-1.2 s
+in, 100 killed 0.5-25 s in with a cold numba cache) and 0 readers that failed after them; the
+abort is not caused by the kill: readers with no writer at all aborted too (1 of 128 reading
+every layer; exit probe 7 of 800; then, run side by side, ``--probe --no-writer
+--no-settle --trials 400``: 9 of 400 readers exit -6, ``--probe --no-writer --trials 400``
+with the hook: 0 of 400; with the hook, ``--trials 150``: 146 killed, 4 done, 0 readers
+failed). gdb on a core: a tokio thread of Icechunk in
+``pyo3_async_runtimes::set_result`` -> ``loop.call_soon_threadsafe`` -> ``sock.send`` re-takes
+the GIL after the main thread began finalizing -> ``PyThread_exit_thread`` -> ``abort``
+(CPython gh-87135). ``store.settle_at_exit`` removes it.
 
 Prints, per outcome, the count of trials: the update's fate ("killed", or "exit N" when it
 ended before the kill) and the reader's exit code; any reader that did not exit 0 has its
@@ -33,10 +46,14 @@ import tempfile
 import time
 from pathlib import Path
 
-#: a fresh process: open the store and read every layer at full resolution
+#: a fresh process: open the store and read every layer at full resolution (argv[2] "0": the
+#: exit hook ``store.settle_at_exit`` left out, as before issue 26)
 READER = """
 import sys
+from napari_meris_ortho.synthesis import store as st
 from napari_meris_ortho.synthesis.reading import open_synthesis
+if sys.argv[2] == "0":
+    st._SETTLE_REGISTERED.append(True)
 store = open_synthesis(sys.argv[1])
 total = 0
 for name in store.layers():
@@ -44,6 +61,19 @@ for name in store.layers():
 if store.algorithm == "max-ndvi":
     store.ndvi()
 print(len(store.history()), total)
+"""
+#: the exit probe: five read-only sessions of the store, one window read in each, and exit
+#: (the moment a Rust thread of Icechunk may still run Python code)
+PROBE = """
+import sys
+import zarr
+from napari_meris_ortho.synthesis import store as st
+if sys.argv[2] == "0":
+    st._SETTLE_REGISTERED.append(True)
+repo = st.open_repository(sys.argv[1])
+for _ in range(5):
+    session = repo.readonly_session(branch="main")
+    zarr.open_array(session.store, path="band_07", mode="r")[0:300, 0:300]
 """
 COMMON = ["--elevation", "tiepoints", "--tile", "256", "--workers", "0"]
 GRID = ["--crs", "EPSG:4326", "--ul", "13.45", "46.70", "--lr", "14.26", "46.19",
@@ -79,6 +109,10 @@ def main() -> int:
                     help="a numba cache of this run's own, empty at the start")
     ap.add_argument("--no-writer", action="store_true",
                     help="baseline: no update is started or killed, only the readers run")
+    ap.add_argument("--probe", action="store_true",
+                    help="readers: the exit probe (PROBE) instead of reading every layer")
+    ap.add_argument("--no-settle", action="store_true",
+                    help="readers without the exit hook store.settle_at_exit (before issue 26)")
     ap.add_argument("--dir", default=None, help="work directory (default: a temporary one)")
     args = ap.parse_args()
 
@@ -113,7 +147,8 @@ def main() -> int:
                 proc.wait(timeout=60)
             writer = (f"killed at {delay:.1f}s" if proc.returncode == -signal.SIGKILL
                       else f"exit {proc.returncode}")
-        reader = subprocess.run([sys.executable, "-c", READER, str(store)], env=env,
+        reader = subprocess.run([sys.executable, "-c", PROBE if args.probe else READER,
+                                 str(store), "0" if args.no_settle else "1"], env=env,
                                 capture_output=True, text=True, timeout=600)
         outcomes[(writer.split(" at")[0], reader.returncode)] += 1
         if reader.returncode != 0:

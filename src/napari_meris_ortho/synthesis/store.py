@@ -126,10 +126,44 @@ def overview_factors(width: int, height: int, tile: int) -> list[int]:
     return factors
 
 
+#: longest wait at interpreter exit for Icechunk's threads to leave Python (``settle_at_exit``)
+SETTLE_TIMEOUT_S = 2.0
+_SETTLE_REGISTERED: list[bool] = []
+
+
+def settle_at_exit(timeout: float = SETTLE_TIMEOUT_S) -> None:
+    """At exit (``atexit``, before the interpreter finalizes): wait until no thread that Python
+    did not start is running Python code. Icechunk resolves each awaited future from one of its
+    Rust (tokio) threads through ``loop.call_soon_threadsafe``, which writes to the event
+    loop's socket with the GIL released; when the process's main thread ends meanwhile, the
+    Rust thread re-takes the GIL during finalization, CPython 3.11-3.13 ``pthread_exit``s it
+    and the forced unwind through Rust frames aborts the process (SIGABRT, "Fatal Python
+    error: Aborted"; CPython gh-87135). Such a thread shows in ``sys._current_frames`` until
+    it has left Python, unlike the threads of ``threading``; polled every millisecond, with the
+    GIL released, for at most ``timeout`` seconds."""
+    import sys
+    import threading
+    import time
+
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        known = {t.ident for t in threading.enumerate()}
+        if all(ident in known for ident in sys._current_frames()):
+            return
+        time.sleep(0.001)
+
+
 def _storage(path: Path) -> Any:
     import icechunk
 
     quiet_icechunk()
+    if not _SETTLE_REGISTERED:  # after zarr's own exit handler: runs before it (LIFO)
+        import atexit
+
+        import zarr  # noqa: F401  (its exit handler, which stops its event loop, first)
+
+        atexit.register(settle_at_exit)
+        _SETTLE_REGISTERED.append(True)
     return icechunk.local_filesystem_storage(str(path))
 
 
