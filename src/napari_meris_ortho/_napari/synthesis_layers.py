@@ -30,7 +30,7 @@ def pyramid(store: SynthesisStore, name: str) -> list[Any]:
     levels = [zarr.open_array(session_store, path=name, mode="r")]
     levels += [zarr.open_array(session_store, path=f"overview_{f}/{name}", mode="r")
                for f in store.overviews]
-    scale = st.stored_scale(levels[0]) if name.startswith("band_") else None
+    scale = st.stored_scale(levels[0])
     if scale is None:
         return levels
     import dask.array as da

@@ -106,7 +106,7 @@ class SynthesisStore:
             array = st.open_layer(session.store, name)
             out = da.from_array(array, chunks=array.chunks, name=f"{self.snapshot}-{name}",
                                 asarray=True)
-            scale = st.stored_scale(array) if name.startswith("band_") else None
+            scale = st.stored_scale(array)
             # compact band layers: counts x the CF scale_factor, chunk by chunk
             return out if scale is None else out.astype(np.float32) * np.float32(scale)
 

@@ -109,7 +109,8 @@ def quantized(values: np.ndarray, scale: float) -> np.ndarray:
 
 
 def stored_scale(array: Any) -> float | None:
-    """The ``scale_factor`` of a compact band array (None: float32 radiances, version 2)."""
+    """The ``scale_factor`` of a compact band array; None for any other layer (only band
+    arrays carry one) and for the float32 bands of version-2 stores."""
     if np.dtype(array.dtype) != np.uint16:
         return None
     scale = array.attrs.get("scale_factor")
@@ -265,7 +266,7 @@ def read_window(store: Any, names: Sequence[str], window: Window, level: int = 1
     for n in names:
         array = open_layer(store, n, level)
         values = np.asarray(array[r0:r1, c0:c1])
-        scale = stored_scale(array) if _band_number(n) is not None else None
+        scale = stored_scale(array)
         out[n] = values if scale is None else decode_band(values, scale)
     return out
 
@@ -278,7 +279,7 @@ def write_tile(store: Any, window: Window, arrays: dict[str, np.ndarray],
     r0, r1, c0, c1 = window
     for name, values in arrays.items():
         array = zarr.open_array(store, path=name, mode="r+")
-        scale = stored_scale(array) if _band_number(name) is not None else None
+        scale = stored_scale(array)
         if scale is not None:
             values = encode_band(values, scale)
         array[r0:r1, c0:c1] = values
