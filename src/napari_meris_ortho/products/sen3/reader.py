@@ -368,19 +368,18 @@ def _read(members: Members) -> MerisSen3Product:
         variables[v] = a
     times, _ = _variables(members, TIME_FILE, ["time_stamp"], (height,))
     tie_points, df, dj = _tie_points(members, height, width)
-    spectral, _ = _variables(members, INSTRUMENT_FILE, ["solar_flux", "lambda0", "FWHM"], None,
-                             optional=True)
+    spectral, instrument = _variables(members, INSTRUMENT_FILE,
+                                      ["solar_flux", "lambda0", "FWHM"], None, optional=True)
     wavelengths = _band_means(spectral.get("lambda0"), APPENDIX_A_WAVELENGTHS)
     bandwidths = _band_means(spectral.get("FWHM"), APPENDIX_A_BANDWIDTHS)
     sun_flux = _band_means(spectral.get("solar_flux"), ScalingFactors().sun_flux)
     scaling = replace(ScalingFactors(), radiance=tuple(
         float(np.asarray(variables[radiance_variable(b)].get("scale_factor", 1.0)))
         for b in range(1, NUM_BANDS + 1)), sun_flux=sun_flux)
-    _, gattrs = _variables(members, INSTRUMENT_FILE, [], None)
     return MerisSen3Product(
         members, product_type, width, height, df, dj, tie_points,
         times["time_stamp"].astype(np.float64) * 1e-6, scaling, wavelengths, bandwidths,
-        gattrs[""], variables)
+        instrument[""], variables)
 
 
 def _band_means(values: np.ndarray | None, default: tuple[float, ...]) -> tuple[float, ...]:
