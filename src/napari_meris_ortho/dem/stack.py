@@ -201,31 +201,30 @@ def _datums(src: DemSource) -> set[str | None]:
     return set().union(*(_datums(p) for p in parts)) if parts else {src.datum}
 
 
-def _resolve_geoids(src: DemSource) -> None:
-    """EGM2008 heights with EGM96 when only its grid is there (``geoid.resolve_datum``)."""
+def _set_datums(src: DemSource, datum_of: Callable[[str | None], str | None]) -> None:
+    """Give every single source (every part of a composite, at any depth) the datum
+    ``datum_of(its datum)`` when that differs and is not None; a composite then has its parts'
+    datum when they share one, else None."""
     parts = getattr(src, "sources", None)
     if parts is None:
-        resolved = resolve_datum(src.datum)
-        if resolved != src.datum and resolved is not None:
-            src.set_datum(resolved)
+        datum = datum_of(src.datum)
+        if datum is not None and datum != src.datum:
+            src.set_datum(datum)
         return
     for p in parts:
-        _resolve_geoids(p)
+        _set_datums(p, datum_of)
     datums = _datums(src)
     src.datum = datums.pop() if len(datums) == 1 else None
+
+
+def _resolve_geoids(src: DemSource) -> None:
+    """EGM2008 heights with EGM96 when only its grid is there (``geoid.resolve_datum``)."""
+    _set_datums(src, resolve_datum)
 
 
 def _assume_ellipsoid(src: DemSource) -> None:
     """Ellipsoidal heights where a source (or a part of it) does not say its datum."""
-    parts = getattr(src, "sources", None)
-    if parts is None:
-        if src.datum is None:
-            src.set_datum(ELLIPSOID)
-        return
-    for p in parts:
-        _assume_ellipsoid(p)
-    datums = _datums(src)
-    src.datum = datums.pop() if len(datums) == 1 else None
+    _set_datums(src, lambda datum: ELLIPSOID if datum is None else datum)
 
 
 def _open_path(p: Path) -> DemSource:
