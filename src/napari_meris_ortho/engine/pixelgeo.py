@@ -101,6 +101,22 @@ def pixel_value(line: float, col: float, grid: np.ndarray) -> float:
             + u * ((1 - v) * grid[i + 1, j] + v * grid[i + 1, j + 1]))
 
 
+@njit(cache=True, inline="always")
+def _newton_step(tlon: float, tlat: float, point: tuple) -> tuple[float, float, bool]:
+    """One Newton step of the bilinear model towards (tlon, tlat) from ``point`` = (x, y, xl,
+    xp, yl, yp), a position and its partial derivatives along the two pixel axes: (d1, d2, True), or
+    (NaN, NaN, False) on a degenerate cell (zero or NaN Jacobian)."""
+    x, y, xl, xp, yl, yp = point
+    rx = tlon - x
+    if rx > 180.0 or rx < -180.0:
+        rx = wrap180(rx)
+    ry = tlat - y
+    det = xl * yp - xp * yl
+    if det == 0.0 or math.isnan(det):
+        return math.nan, math.nan, False
+    return (rx * yp - ry * xp) / det, (xl * ry - yl * rx) / det, True
+
+
 @njit(cache=True)
 def correct(tlon: float, tlat: float, line: float, col: float, lon: np.ndarray,
             lat: np.ndarray, tol: float, max_iter: int):
@@ -111,16 +127,9 @@ def correct(tlon: float, tlat: float, line: float, col: float, lon: np.ndarray,
     it = 0
     while it < max_iter:
         it += 1
-        x, y, xl, xp, yl, yp = pixel_point(line, col, lon, lat)
-        rx = tlon - x
-        if rx > 180.0 or rx < -180.0:
-            rx = wrap180(rx)
-        ry = tlat - y
-        det = xl * yp - xp * yl
-        if det == 0.0 or math.isnan(det):
+        dl, dp, ok = _newton_step(tlon, tlat, pixel_point(line, col, lon, lat))
+        if not ok:
             return math.nan, math.nan, it, False
-        dl = (rx * yp - ry * xp) / det
-        dp = (xl * ry - yl * rx) / det
         big = max(abs(dl), abs(dp))
         if big > _MAX_STEP:  # damped: folded (terrain-corrected) cells must not throw it far
             dl *= _MAX_STEP / big
@@ -142,16 +151,9 @@ def cell_solve(tlon: float, tlat: float, i: int, j: int, lon: np.ndarray, lat: n
     it = 0
     while it < max_iter:
         it += 1
-        x, y, xl, xp, yl, yp = cell_point(i, j, u, v, lon, lat)
-        rx = tlon - x
-        if rx > 180.0 or rx < -180.0:
-            rx = wrap180(rx)
-        ry = tlat - y
-        det = xl * yp - xp * yl
-        if det == 0.0 or math.isnan(det):
+        du, dv, ok = _newton_step(tlon, tlat, cell_point(i, j, u, v, lon, lat))
+        if not ok:
             return math.nan, math.nan, it, False
-        du = (rx * yp - ry * xp) / det
-        dv = (xl * ry - yl * rx) / det
         u += du
         v += dv
         if abs(du) <= tol and abs(dv) <= tol:
