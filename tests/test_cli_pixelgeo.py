@@ -67,8 +67,9 @@ def test_synthesize_with_the_pixel_geolocation(geolocated, tmp_path, capsys):
 
 def test_bad_inputs_exit_2(fr_small, geolocated, tmp_path, capsys):
     code, _, err = _run(capsys, "map", geolocated["sen3"], "-o", tmp_path / "a.tif",
-                        "--geolocation", "pixel", "--dem", fr_small.dem_paths["geotiff"])
-    assert code == 2 and "DEMs given with geolocation 'pixel'" in err
+                        "--geolocation", "pixel", "--elevation", "none", "--dem",
+                        fr_small.dem_paths["geotiff"])
+    assert code == 2 and "DEMs are only used with elevation 'dem'" in err
     code, _, err = _run(capsys, "map", fr_small.product_path, "-o", tmp_path / "b.tif",
                         "--geolocation", "pixel")
     assert code == 2 and "per-pixel geolocation" in err and err.count("\n") == 1

@@ -63,8 +63,10 @@ def test_pixel_geolocation_without_terrain_correction_would_be_wrong(fr_small, g
 def test_pixel_geolocation_needs_a_geolocated_product(fr_small, geolocated):
     with pytest.raises(OptionsError, match="per-pixel geolocation"):
         orthorectify(fr_small.product_path, geolocation="pixel", bands=[7])
-    with pytest.raises(OptionsError, match="DEMs given with geolocation 'pixel'"):
-        orthorectify(geolocated["fsg"], geolocation="pixel", dems=[fr_small.dem_paths["geotiff"]])
+    # DEMs go with elevation "dem" (the pixel geolocation's heights then come from them)
+    with pytest.raises(OptionsError, match="DEMs are only used with elevation 'dem'"):
+        orthorectify(geolocated["fsg"], geolocation="pixel", elevation="tiepoints",
+                     dems=[fr_small.dem_paths["geotiff"]])
 
 
 def _visible(scene, lon, lat, h, line, col):

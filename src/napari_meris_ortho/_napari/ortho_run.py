@@ -56,7 +56,8 @@ class RunSettings:
     pixel_size_m: float = 0.0  # 0: the nominal FR 260 m / RR 1040 m
     bands: tuple[int, ...] | None = (7, 5, 2)
     #: location model: "tiepoints" (with the parallax) or "pixel" (FRG/FSG/SEN3 per-pixel
-    #: terrain-corrected geolocation, no DEM)
+    #: terrain-corrected geolocation; with DEMs, moved back to the ellipsoid and given their
+    #: parallax: ``engine.pixeldem``)
     geolocation: str = "tiepoints"
     output: Path | None = None
     geometry: bool = True
@@ -70,8 +71,8 @@ class RunSettings:
 
     @property
     def dem_list(self) -> list[str]:
-        """The DEMs used (none with the per-pixel geolocation)."""
-        return [] if self.pixel else [str(d) for d in self.dems]
+        """The DEMs used (as strings)."""
+        return [str(d) for d in self.dems]
 
     def options(self) -> OrthoOptions:
         """The checked ``OrthoOptions`` of the run (``OrthoOptions.of``, as the CLI)."""

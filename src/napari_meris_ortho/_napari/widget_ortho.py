@@ -159,7 +159,8 @@ class OrthorectifyWidget(Container):
         self.geolocation = ComboBox(label="geolocation", choices=list(GEOLOCATIONS),
                                     value="tiepoints",
                                     tooltip="tie points with the parallax from the DEMs, or the "
-                                            "product's per-pixel geolocation (FRG/FSG/SEN3)")
+                                            "product's per-pixel geolocation (FRG/FSG/SEN3; "
+                                            "with DEMs, given their parallax)")
         self.algorithm = ComboBox(label="selection", choices=list(ALGORITHMS), value=MAPPING,
                                   tooltip="mapping of every product, or a synthesis keeping the "
                                           "minimum radiance or the maximum NDVI (section 3.1)")
