@@ -21,7 +21,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 
 from .location import facet_of, parallax_factors
 from .pixelgeo import (
@@ -38,6 +38,7 @@ from .pixelgeo import (
     seen_antecedent,
 )
 from .predcorr import _columns, _predict, primary_nodes
+from .threads import split_range
 
 #: fixed-point passes of the parallax inversion (the latitude of the radii moves < 1e-9 deg
 #: after the second one)
@@ -64,13 +65,11 @@ def look_at(line: float, col: float, coef: np.ndarray, df: float, dj: float):
             (c[13] + c[15] * v) / df, (c[14] + c[15] * u) / dj)
 
 
-@njit(cache=True, parallel=True)
-def _ellipsoid_grid(lon, lat, alt, coef, df, dj, model):
-    """E_ij of every pixel (see ``ellipsoid_grid``)."""
-    nl, nc = lon.shape
-    elon = np.empty((nl, nc))
-    elat = np.empty((nl, nc))
-    for i in prange(nl):
+@njit(cache=True, nogil=True)
+def _ellipsoid_rows(lo, hi, lon, lat, alt, coef, df, dj, model, elon, elat):
+    """Rows [lo, hi) of ``ellipsoid_grid`` into its outputs."""
+    nc = lon.shape[1]
+    for i in range(lo, hi):
         for j in range(nc):
             h = max(alt[i, j], 0.0)  # parallax_height: no parallax below 0 (sea)
             if math.isnan(h):
@@ -83,7 +82,6 @@ def _ellipsoid_grid(lon, lat, alt, coef, df, dj, model):
             ke, kn = parallax_factors(y, h, model)
             elon[i, j] = lon[i, j] - ke * h * e
             elat[i, j] = y
-    return elon, elat
 
 
 def ellipsoid_grid(lon: np.ndarray, lat: np.ndarray, altitude: np.ndarray, coef: np.ndarray,
@@ -97,7 +95,11 @@ def ellipsoid_grid(lon: np.ndarray, lat: np.ndarray, altitude: np.ndarray, coef:
     if alt.shape != lon_g.shape:
         raise ValueError(f"altitude grid {alt.shape} differs from the geolocation "
                          f"{lon_g.shape}")
-    return _ellipsoid_grid(lon_g, lat_g, alt, coef, float(df), float(dj), np.int64(model))
+    elon = np.empty(lon_g.shape)
+    elat = np.empty(lon_g.shape)
+    args = (lon_g, lat_g, alt, coef, float(df), float(dj), np.int64(model), elon, elat)
+    split_range(lambda lo, hi: _ellipsoid_rows(lo, hi, *args), lon_g.shape[0])
+    return elon, elat
 
 
 @njit(cache=True, inline="always")
@@ -134,25 +136,14 @@ def correct_dem(tlon, tlat, line, col, h, elon, elat, coef, df, dj, model, tol, 
     return line, col, it, False
 
 
-@njit(cache=True, parallel=True)
-def find_dem_antecedents(tlon_a, tlat_a, height, ptr, start, stop, cl, cp, step, lon, lat,
-                         elon, elat, alt, coef, df, dj, model, tol, max_iter, diagnostics):
-    """Antecedents of output points with heights ``height`` (NaN: the product's geolocation):
-    rows in parallel over the CSR column spans, predicted from the primary grid on E, then
-    corrected by ``correct_dem``. Returns line, col (float32, NaN dropped), iterations (int8:
-    -1 dropped, ``OCCLUDED`` hidden ground of the fallback) and with ``diagnostics`` the height
-    used and its parallax shift east/north (m), else 1x1 arrays."""
-    nr, nc = tlon_a.shape
+@njit(cache=True, nogil=True)
+def _dem_rows(lo, hi, tlon_a, tlat_a, height, ptr, start, stop, cl, cp, step, lon, lat, elon,
+              elat, alt, coef, df, dj, model, tol, max_iter, diagnostics, out_l, out_p, iters,
+              h_used, sh_e, sh_n):
+    """Rows [lo, hi) of ``find_dem_antecedents`` into its (pre-filled) outputs."""
     nl, npx = lon.shape
-    out_l = np.full((nr, nc), np.nan, np.float32)
-    out_p = np.full((nr, nc), np.nan, np.float32)
-    iters = np.full((nr, nc), -1, np.int8)
-    dshape = (nr, nc) if diagnostics else (1, 1)
-    h_used = np.full(dshape, np.nan, np.float32)
-    sh_e = np.full(dshape, np.nan, np.float32)
-    sh_n = np.full(dshape, np.nan, np.float32)
     no_rates = np.zeros((3, 1, 1))  # the prediction is the zero-height inverse on E
-    for i in prange(nr):
+    for i in range(lo, hi):
         for j in _columns(ptr, start, stop, i):
             tlon = tlon_a[i, j]
             tlat = tlat_a[i, j]
@@ -187,6 +178,27 @@ def find_dem_antecedents(tlon_a, tlat_a, height, ptr, start, stop, cl, cp, step,
                 h_used[i, j] = h
                 sh_e[i, j] = h * e
                 sh_n[i, j] = h * n
+
+
+def find_dem_antecedents(tlon_a, tlat_a, height, ptr, start, stop, cl, cp, step, lon, lat,
+                         elon, elat, alt, coef, df, dj, model, tol, max_iter, diagnostics):
+    """Antecedents of output points with heights ``height`` (NaN: the product's geolocation):
+    rows split over threads, over the CSR column spans, predicted from the primary grid on E,
+    then corrected by ``correct_dem``. Returns line, col (float32, NaN dropped), iterations
+    (int8: -1 dropped, ``OCCLUDED`` hidden ground of the fallback) and with ``diagnostics`` the
+    height used and its parallax shift east/north (m), else 1x1 arrays."""
+    nr, nc = tlon_a.shape
+    out_l = np.full((nr, nc), np.nan, np.float32)
+    out_p = np.full((nr, nc), np.nan, np.float32)
+    iters = np.full((nr, nc), -1, np.int8)
+    dshape = (nr, nc) if diagnostics else (1, 1)
+    h_used = np.full(dshape, np.nan, np.float32)
+    sh_e = np.full(dshape, np.nan, np.float32)
+    sh_n = np.full(dshape, np.nan, np.float32)
+    args = (tlon_a, tlat_a, height, ptr, start, stop, cl, cp, step, lon, lat, elon, elat, alt,
+            coef, df, dj, model, tol, max_iter, diagnostics, out_l, out_p, iters, h_used, sh_e,
+            sh_n)
+    split_range(lambda lo, hi: _dem_rows(lo, hi, *args), nr)
     return out_l, out_p, iters, h_used, sh_e, sh_n
 
 
@@ -216,7 +228,7 @@ def solve_pixel_dem(lon_grid: np.ndarray, lat_grid: np.ndarray, ellipsoid: tuple
     cl, cp, counts = primary_grid_pixel(nlon, nlat, elon, elat, SEED_STEP, _NODE_OUT)
     line, col, iters, h_used, sh_e, sh_n = find_dem_antecedents(
         lon, lat, h, ptr, start, stop, cl, cp, float(step), lon_g, lat_g, elon, elat, alt,
-        coef, float(df), float(dj), np.int64(model), float(tolerance), int(max_iter),
+        coef, float(df), float(dj), np.int64(model), float(tolerance), np.int64(max_iter),
         bool(diagnostics))
     out = {"line": line, "col": col, "iterations": iters,
            "search": {"primary warm": int(counts[0]), "primary seeded": int(counts[1]),
