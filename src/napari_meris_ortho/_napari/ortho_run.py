@@ -24,7 +24,7 @@ from ..options import Elevation, MergeRule, OrthoOptions, choices, parse_band_li
 from ..progress import ProgressCallback
 from .geometry_layers import geometry_layers
 from .product_layers import band_layers, diagnostic_layers
-from .world import geo_image_kwargs, move_to_frame, same_crs
+from .world import footprint_utm, geo_image_kwargs, move_to_frame, same_crs
 
 #: "mapping" orthorectifies every product on its own; the merge rules build a synthesis
 MAPPING = "mapping"
@@ -105,7 +105,7 @@ parse_bands = parse_band_list
 
 def output_crs(options: RunSettings, tie_points: Mapping[str, np.ndarray]) -> Any:
     """The output CRS: the UTM zone of the footprint centre, EPSG:4326 or the given EPSG code."""
-    from ..geometry.grid import parse_crs, utm_crs_for
+    from ..geometry.grid import parse_crs
 
     if options.crs == CRS_GEOGRAPHIC:
         return parse_crs("EPSG:4326")
@@ -113,9 +113,7 @@ def output_crs(options: RunSettings, tie_points: Mapping[str, np.ndarray]) -> An
         if not options.epsg:
             raise OptionsError("output CRS 'EPSG code' needs an EPSG code")
         return parse_crs(f"EPSG:{int(options.epsg)}")
-    lat, lon = tie_points["latitude"], tie_points["longitude"]
-    centre_lon = float(np.degrees(np.angle(np.mean(np.exp(1j * np.radians(lon))))))
-    return utm_crs_for(centre_lon, float(np.mean(lat)))
+    return footprint_utm(tie_points)
 
 
 def _pixel_size(options: RunSettings, product: Any, crs: Any) -> float:

@@ -19,6 +19,7 @@ import threading
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+import numpy as np
 from magicgui.types import FileDialogMode
 from magicgui.widgets import (
     CheckBox,
@@ -444,8 +445,20 @@ class OrthorectifyWidget(Container):
         shown = [layer for layer in self._new_layers
                  if layer.visible and layer in self.viewer.layers]
         self._new_layers = []
-        if shown:
+        if not shown:
+            return
+        if max(layer.ndim for layer in shown) == self.viewer.dims.ndim:
             self.viewer.fit_to_view(layers=shown)
+            return
+        # 2-D results over a band stack (an opened N1): napari 0.9's fit_to_view(layers=...)
+        # indexes their 2-D extent with the viewer's 3-D displayed axes; frame them directly
+        extents = np.array([np.asarray(layer.extent.world, np.float64)[:, -2:]
+                            for layer in shown])
+        low, high = extents[:, 0].min(axis=0), extents[:, 1].max(axis=0)
+        size = np.where(np.isclose(high - low, 0.0), 1.0, high - low)
+        self.viewer.camera.center = tuple(float(v) for v in (low + high) / 2.0)
+        canvas = np.asarray(self.viewer.canvas.size, np.float64)
+        self.viewer.camera.zoom = float(0.95 * np.min(canvas / size))
 
     def _failed(self, exc: BaseException) -> None:
         if self._closed:
