@@ -8,8 +8,8 @@ import datetime as dt
 
 import numpy as np
 
-from napari_meris_ortho.ortho import orthorectify
 from napari_meris_ortho.options import Geolocation, Parallax, SearchMethod
+from napari_meris_ortho.ortho import orthorectify
 from napari_meris_ortho.products.n1 import read_product, write_product
 from napari_meris_ortho.synthesis.reading import open_synthesis
 
