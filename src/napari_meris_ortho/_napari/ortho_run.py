@@ -3,8 +3,9 @@ product (MERSYN use case 3) or a synthesis (use cases 1-2, handbook section 3.1)
 layer tuples of the result in the viewer's world frame (``world``).
 
 Layer names are short and distinct: "ortho b7 · 2003-09-21 09:23" (the product's first line
-time), "footprint · ...", "parallax ×10 · ..."; the full product name and path are in the
-layer metadata ("product", "path").
+time), "footprint · ...", "parallax ×10 · ..."; with the per-pixel geolocation
+"ortho b7 (pixel geolocation) · ..."; the full product name and path are in the layer metadata
+("product", "path").
 """
 
 from __future__ import annotations
@@ -236,10 +237,13 @@ def _run_mapping(options: RunSettings, progress: ProgressCallback | None) -> Ort
             written.append(write_map(_output_path(options.output, k, n), ante,
                                      software="napari-meris-ortho widget"))
         result = ante.result()
-        prefix = "ortho pixel-geolocation" if options.pixel else "ortho"
-        items.append(_item(product, prefix, bands=result.bands, grid=result.grid,
+        # the model after the band ("ortho b7 (pixel geolocation) · ..."): names differ within
+        # the width the layer list shows, and differ from the tie-point run's
+        extra = {"suffix": f" (pixel geolocation) · {product_stamp(product)}"} \
+            if options.pixel else {}
+        items.append(_item(product, bands=result.bands, grid=result.grid,
                            valid=result.valid, diagnostics=result.diagnostics,
-                           stats=result.stats))
+                           stats=result.stats, **extra))
     return OrthoRun(items, options, written, warnings=warnings)
 
 

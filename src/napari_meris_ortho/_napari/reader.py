@@ -21,6 +21,7 @@ import numpy as np
 from ..errors import MerisOrthoError, N1FormatError
 from ..geometry.grid import OutputGrid
 from .product_layers import QUICKLOOK_BANDS, contrast_limits, stretch_rgb
+from .status import BAND_AXIS
 from .world import geo_image_kwargs, place_on_frame, viewer_frame
 
 if TYPE_CHECKING:
@@ -230,7 +231,7 @@ def n1_layers(path: str | Path, frame: OutputGrid | None = None) -> list[LayerDa
     suffix = f" · {product_stamp(product)}"
     place = _placement(product, frame, meta)
     band_axis = {"affine": _with_band_axis(place["affine"]), "units": ("pixel", *place["units"]),
-                 "axis_labels": ("MERIS band", *place["axis_labels"])}
+                 "axis_labels": (BAND_AXIS, *place["axis_labels"])}
     flags = np.asarray(product.flags)
     return [
         (radiance_stack(product), {"name": f"radiance{suffix}", "metadata": meta,
