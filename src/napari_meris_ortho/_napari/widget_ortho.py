@@ -37,6 +37,7 @@ from magicgui.widgets import (
 from ..errors import MerisOrthoError
 from ..options import PARALLAX_CHOICES, Elevation, Parallax, Sampling, SearchMethod, choices
 from .layout import StatusLabel, canvas_updates
+from .legend import show_legends
 from .ortho_run import (
     ALGORITHMS,
     CRS_EPSG,
@@ -255,6 +256,7 @@ class OrthorectifyWidget(Container):
         self.cancel_button.changed.connect(lambda _=None: self.cancel())
         self.native.destroyed.connect(self._shutdown)
         show_map_coordinates(viewer)
+        show_legends(viewer)
         _import_engine()
         warm_up_in_background()  # numba compiles while the user fills the form
 
