@@ -266,11 +266,12 @@ def _placement(product: Any, frame: OutputGrid | None, meta: dict[str, Any]) -> 
     opened first founds the world in the UTM zone of its footprint."""
     from .world import WORLD_KEY, geo_metadata, product_world, world_axes
 
+    over_map = frame is not None  # a coarse fit matters when there is a map to overlay
     affine, rms, frame = product_world(product, frame)
     meta[WORLD_KEY] = geo_metadata(frame)
     meta["placement"] = {"affine": affine.tolist(), "rms_error": rms,
                          "note": "approximate: affine fit of the tie points"}
-    if rms > 2.0 * max(frame.dx, frame.dy):
+    if over_map and rms > 2.0 * max(frame.dx, frame.dy):
         import warnings
 
         warnings.warn(f"{Path(product.path).name}: placed on the map by an affine fit of its "
