@@ -100,6 +100,15 @@ def test_synthesis_update_from_the_widget(make_napari_viewer, qtbot, tiny_n1, tm
     assert np.mean(winner[count == 3] == third_index) > 0.99
     layer = next(x for x in viewer.layers if x.name == "synthesis min-radiance b7")
     np.testing.assert_allclose(layer.data, synthesis.band(7))
+    # another rule than the store's, or a directory that is no store: one message before Run
+    widget.algorithm.value = "max-ndvi"
+    assert widget.start() is None
+    assert widget.status.value.startswith(f"input synthesis {store}: is a min-radiance "
+                                          "synthesis, cannot update it with max-ndvi")
+    widget.input_store.value = tmp_path
+    assert widget.start() is None
+    assert widget.status.value == f"input synthesis {tmp_path}: not a synthesis store"
+    assert len(open_synthesis(store).history()) == 2  # nothing written
 
 
 def test_mode_label_and_remembered_selection(make_napari_viewer, tiny_n1, tiny_dem):

@@ -118,10 +118,15 @@ class RunSettings:
             raise OptionsError("elevation 'dem' needs a DEM: add one, or choose elevation "
                                "'tiepoints' (the product's tie-point heights) or 'none'")
         if self.input_store is not None:
-            from ..synthesis.reading import is_synthesis
+            from ..synthesis.reading import is_synthesis, open_synthesis
 
             if not is_synthesis(self.input_store):
                 raise OptionsError(f"input synthesis {self.input_store}: not a synthesis store")
+            rule = open_synthesis(self.input_store).algorithm
+            if self.algorithm not in (MAPPING, rule):
+                raise OptionsError(f"input synthesis {self.input_store}: is a {rule} synthesis, "
+                                   f"cannot update it with {self.algorithm} (choose selection "
+                                   f"{rule!r} or 'mapping')")
         if self.output is not None and not self.synthesis:
             from ..ortho.writing import check_outputs
 
