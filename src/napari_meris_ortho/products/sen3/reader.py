@@ -48,10 +48,12 @@ from .layout import (
     TIE_GEOMETRY_FILE,
     TIE_METEO_FILE,
     TIME_FILE,
+    attribute_number,
     cf_decode,
     flag_coding,
     mirror_columns,
     no_data,
+    packing_problem,
     product_type_of,
     quality_to_l1b,
     radiance_file,
@@ -89,7 +91,7 @@ class MerisSen3Product:
                  dj: int, tie_points: Mapping[str, np.ndarray], line_times: np.ndarray,
                  scaling: ScalingFactors, wavelengths: tuple[float, ...],
                  bandwidths: tuple[float, ...], attrs: dict[str, Any],
-                 variables: dict[str, dict[str, Any]]) -> None:
+                 variables: dict[str, dict[str, Any]], dtypes: dict[str, np.dtype]) -> None:
         self.members = members
         self.path = members.path
         self.product_type = product_type
@@ -106,6 +108,8 @@ class MerisSen3Product:
         self.attrs = attrs
         #: CF attributes of the image variables, by variable name
         self.variables = variables
+        #: stored dtypes of the radiance variables, by variable name
+        self.dtypes = dtypes
         self._warned: set[str] = set()
         n = self.n_tie_lines
         self.tie_point_times = line_times[0] + self.line_interval_s * df * np.arange(n)
@@ -170,24 +174,31 @@ class MerisSen3Product:
     # -- bands ----------------------------------------------------------------------------
 
     def no_data_count(self, band: int) -> int:
-        """The stored value of a band's no-data pixels in :meth:`counts` (its ``_FillValue``)."""
-        fill = self.variables[radiance_variable(band)].get("_FillValue", RADIANCE_FILL)
-        return int(np.asarray(fill))
+        """The value of a band's no-data pixels in :meth:`counts`: its ``_FillValue`` where
+        that is a uint16 value, else 65535 (which no valid value of a 16-bit band takes)."""
+        attrs = self.variables[radiance_variable(band)]
+        fill = attribute_number(attrs, "_FillValue", RADIANCE_FILL)
+        if self.dtypes[radiance_variable(band)] == np.uint16 and fill in range(65536):
+            return int(fill)
+        return RADIANCE_FILL
 
     def counts(self, band: int) -> np.ndarray:
         """Stored uint16 values of ``band`` (1..15), radiance = counts x scaling.radiance[b-1];
-        no-data pixels (fill, outside valid_min/valid_max) hold ``no_data_count(band)``."""
+        no-data pixels (fill, outside valid_min/valid_max, negative) hold
+        ``no_data_count(band)``."""
         if isinstance(band, bool) or not isinstance(band, int | np.integer):
             raise TypeError(f"band must be an integer 1..15, got {band!r}")
         if not 1 <= band <= NUM_BANDS:
             raise ValueError(f"band must be 1..15, got {band}")
         raw = self._raw(radiance_file(band), radiance_variable(band))
         attrs = self.variables[radiance_variable(band)]
-        if any(k in attrs for k in ("valid_min", "valid_max", "valid_range")):
-            bad = no_data(raw, attrs)
-            if bad.any():
-                raw[bad] = self.no_data_count(band)
-        return raw.astype(np.uint16, copy=False)
+        if raw.dtype == np.uint16 and not any(k in attrs for k in ("valid_min", "valid_max",
+                                                                   "valid_range")):
+            return raw
+        bad = no_data(raw, attrs) | (raw < 0)
+        out = raw.astype(np.uint16)
+        out[bad] = self.no_data_count(band)
+        return out
 
     def radiance(self, band: int, lines: slice | None = None) -> np.ndarray:
         """TOA radiance (mW m-2 sr-1 nm-1) of ``band``, float32 (H, W) or the given lines;
@@ -299,17 +310,27 @@ def _variables(members: Members, name: str, variables: list[str], shape: tuple[i
             var.set_auto_maskandscale(False)
             out[v] = np.asarray(var[...])
             attrs[v] = {k: var.getncattr(k) for k in var.ncattrs()}
+            _check_packing(members, name, v, attrs[v])
     return out, attrs
 
 
 def _variable_info(members: Members, name: str, variable: str
-                   ) -> tuple[tuple[int, ...], dict[str, Any]]:
-    """Shape and attributes of one variable (no data read)."""
+                   ) -> tuple[tuple[int, ...], dict[str, Any], np.dtype]:
+    """Shape, attributes (their CF packing checked) and stored dtype of one variable (no data
+    read)."""
     with members.dataset(name) as ds:
         if variable not in ds.variables:
             raise Sen3FormatError(members.where(name), f"has no variable {variable!r}")
         var = ds.variables[variable]
-        return tuple(var.shape), {k: var.getncattr(k) for k in var.ncattrs()}
+        attrs = {k: var.getncattr(k) for k in var.ncattrs()}
+        _check_packing(members, name, variable, attrs)
+        return tuple(var.shape), attrs, np.dtype(var.dtype)
+
+
+def _check_packing(members: Members, name: str, variable: str, attrs: dict[str, Any]) -> None:
+    problem = packing_problem(attrs, variable)
+    if problem is not None:
+        raise Sen3FormatError(members.where(name), problem)
 
 
 def _product_type(members: Members) -> str:
@@ -334,34 +355,41 @@ def _product_type(members: Members) -> str:
 
 def _read(members: Members) -> MerisSen3Product:
     product_type = _product_type(members)
-    shape, _ = _variable_info(members, radiance_file(1), radiance_variable(1))
+    shape, _, _ = _variable_info(members, radiance_file(1), radiance_variable(1))
     if len(shape) != 2 or min(shape) < 2:
         raise Sen3FormatError(members.where(radiance_file(1)), f"M01_radiance has shape "
                               f"{shape}, a 2-D (rows, columns) image expected")
     height, width = shape
     variables: dict[str, dict[str, Any]] = {}
+    dtypes: dict[str, np.dtype] = {}
     for b in range(1, NUM_BANDS + 1):
-        got, a = _variable_info(members, radiance_file(b), radiance_variable(b))
+        got, a, dtype = _variable_info(members, radiance_file(b), radiance_variable(b))
+        if dtype.kind not in "iu" or dtype.itemsize > 2:
+            raise Sen3FormatError(members.where(radiance_file(b)), f"{radiance_variable(b)} is "
+                                  f"stored as {dtype}: MERIS Level 1 radiances are 16-bit "
+                                  "integers with a scale_factor (ESA's products: uint16); "
+                                  "other types are not supported")
+        dtypes[radiance_variable(b)] = dtype
         if got != shape:
             raise Sen3FormatError(members.where(radiance_file(b)), f"variable "
                                   f"{radiance_variable(b)!r} has shape {got}, M01_radiance has "
                                   f"{shape}")
-        if float(np.asarray(a.get("add_offset", 0.0))) != 0.0:
+        if attribute_number(a, "add_offset", 0.0) != 0.0:
             raise Sen3FormatError(members.where(radiance_file(b)), "radiances with a non-zero "
                                   "add_offset are not supported")
-        scale = float(np.asarray(a.get("scale_factor", 1.0)))
+        scale = attribute_number(a, "scale_factor", 1.0)
         if not (math.isfinite(scale) and scale > 0):
             raise Sen3FormatError(members.where(radiance_file(b)), f"scale_factor {scale!r} of "
                                   f"{radiance_variable(b)} is not a positive number")
         variables[radiance_variable(b)] = a
     for v in ("latitude", "longitude", "altitude"):
-        got, a = _variable_info(members, GEO_FILE, v)
+        got, a, _ = _variable_info(members, GEO_FILE, v)
         if got != shape:
             raise Sen3FormatError(members.where(GEO_FILE), f"variable {v!r} has shape {got}, "
                                   f"the radiances have {shape}")
         variables[f"geo.{v}"] = a
     for name, v in ((INSTRUMENT_FILE, "detector_index"), (QUALITY_FILE, "quality_flags")):
-        got, a = _variable_info(members, name, v)
+        got, a, _ = _variable_info(members, name, v)
         if got != shape:
             raise Sen3FormatError(members.where(name), f"variable {v!r} has shape {got}, the "
                                   f"radiances have {shape}")
@@ -374,12 +402,12 @@ def _read(members: Members) -> MerisSen3Product:
     bandwidths = _band_means(spectral.get("FWHM"), APPENDIX_A_BANDWIDTHS)
     sun_flux = _band_means(spectral.get("solar_flux"), ScalingFactors().sun_flux)
     scaling = replace(ScalingFactors(), radiance=tuple(
-        float(np.asarray(variables[radiance_variable(b)].get("scale_factor", 1.0)))
+        attribute_number(variables[radiance_variable(b)], "scale_factor", 1.0)
         for b in range(1, NUM_BANDS + 1)), sun_flux=sun_flux)
     return MerisSen3Product(
         members, product_type, width, height, df, dj, tie_points,
         times["time_stamp"].astype(np.float64) * 1e-6, scaling, wavelengths, bandwidths,
-        instrument[""], variables)
+        instrument[""], variables, dtypes)
 
 
 def _band_means(values: np.ndarray | None, default: tuple[float, ...]) -> tuple[float, ...]:
@@ -395,7 +423,7 @@ def _band_means(values: np.ndarray | None, default: tuple[float, ...]) -> tuple[
 def _tie_points(members: Members, height: int, width: int
                 ) -> tuple[dict[str, np.ndarray], int, int]:
     """Tie points in physical units with the N1 names, N1 column order; (tie points, DF, DJ)."""
-    shape, _ = _variable_info(members, TIE_GEOMETRY_FILE, "SZA")
+    shape, _, _ = _variable_info(members, TIE_GEOMETRY_FILE, "SZA")
     geom, attrs = _variables(members, TIE_GEOMETRY_FILE, ["SZA", "SAA", "OZA", "OAA"], shape)
     where = members.where(TIE_GEOMETRY_FILE)
     try:
