@@ -167,3 +167,34 @@ def test_a_truncated_zip_says_so(product_dir, tmp_path):
     archive.write_bytes(archive.read_bytes()[:-30])
     with pytest.raises(Sen3FormatError, match="truncated or damaged zip archive"):
         read_product(archive)
+
+
+def _declare_m01(copy: Path, rows: int, columns: int) -> None:
+    """M01_radiance.nc declaring rows x columns pixels, never written (a few kB on disk)."""
+    f = copy / "M01_radiance.nc"
+    with netCDF4.Dataset(f) as a:
+        v = a.variables["M01_radiance"]
+        attrs = {k: v.getncattr(k) for k in v.ncattrs() if k != "_FillValue"}
+        glob = {k: a.getncattr(k) for k in a.ncattrs()}
+    f.unlink()
+    with netCDF4.Dataset(f, "w") as b:
+        b.setncatts(glob)
+        b.createDimension("rows", rows)
+        b.createDimension("columns", columns)
+        v = b.createVariable("M01_radiance", "u2", ("rows", "columns"), zlib=True,
+                             chunksizes=(256, 256), fill_value=np.uint16(65535))
+        v.setncatts(attrs)
+
+
+@pytest.mark.parametrize(("rows", "columns", "message"), [
+    (40_000, 1121, r"40000 rows: more lines than one orbit \(34661 RR lines\)"),
+    (1617, 300_001, r"300001 columns: a ME_1_RRG___ line has at most 1121 columns"),
+])
+def test_dimensions_no_meris_product_has_are_refused_before_any_read(copy, rows, columns,
+                                                                      message):
+    """A file of a few kB declaring more lines than one orbit or wider lines than the
+    instrument's (a forged product: info would allocate 8 bytes per pixel) is refused at open,
+    as N1 products are (``products/n1/checks``)."""
+    _declare_m01(copy, rows, columns)
+    with pytest.raises(Sen3FormatError, match=message):
+        read_product(copy)

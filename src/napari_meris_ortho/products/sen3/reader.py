@@ -27,6 +27,7 @@ from ...errors import Sen3FormatError
 from ...geometry.earth import MAX_TERRAIN_M, MIN_SEABED_M
 from ...geometry.parallax import stored_corrections
 from ...geometry.tiepoints import TiePoints
+from ..n1.checks import MAX_FR_WIDTH, max_lines
 from ..n1.format import (
     APPENDIX_A_BANDWIDTHS,
     APPENDIX_A_WAVELENGTHS,
@@ -360,6 +361,7 @@ def _read(members: Members) -> MerisSen3Product:
         raise Sen3FormatError(members.where(radiance_file(1)), f"M01_radiance has shape "
                               f"{shape}, a 2-D (rows, columns) image expected")
     height, width = shape
+    _check_size(members, product_type, height, width)
     variables: dict[str, dict[str, Any]] = {}
     dtypes: dict[str, np.dtype] = {}
     for b in range(1, NUM_BANDS + 1):
@@ -408,6 +410,20 @@ def _read(members: Members) -> MerisSen3Product:
         members, product_type, width, height, df, dj, tie_points,
         times["time_stamp"].astype(np.float64) * 1e-6, scaling, wavelengths, bandwidths,
         instrument[""], variables, dtypes)
+
+
+def _check_size(members: Members, product_type: str, height: int, width: int) -> None:
+    """At most one orbit of lines and the instrument's widest line (``n1.checks``), before any
+    array is read: a forged file of a few kB can declare billions of pixels."""
+    res = SEN3_TYPES[product_type]
+    where = members.where(radiance_file(1))
+    if height > max_lines(res):
+        raise Sen3FormatError(where, f"{height} rows: more lines than one orbit "
+                              f"({max_lines(res)} {res.name} lines)")
+    widest = MAX_FR_WIDTH if res.name == "FR" else res.width
+    if width > widest:
+        raise Sen3FormatError(where, f"{width} columns: a {product_type} line has at most "
+                              f"{widest} columns")
 
 
 def _band_means(values: np.ndarray | None, default: tuple[float, ...]) -> tuple[float, ...]:
