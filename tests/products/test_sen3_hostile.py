@@ -198,3 +198,12 @@ def test_dimensions_no_meris_product_has_are_refused_before_any_read(copy, rows,
     _declare_m01(copy, rows, columns)
     with pytest.raises(Sen3FormatError, match=message):
         read_product(copy)
+
+
+def test_a_product_type_that_contradicts_the_detectors_is_refused(tmp_path):
+    """The manifest says FR (ME_1_FRG___) over an RR product (925 detectors): refused, not
+    mapped with FR's pixel size and timing."""
+    d = real.write_real_like(tmp_path, manifest_type="ME_1_FRG___")
+    with pytest.raises(Sen3FormatError, match=r"ME_1_FRG___ product, but instrument_data.nc "
+                                              r"has 925 detectors \(RR\)"):
+        read_product(d)

@@ -38,6 +38,7 @@ from ..n1.format import (
     tie_lines,
 )
 from .layout import (
+    DETECTORS,
     DOBSON_KG_M2,
     GEO_FILE,
     INSTRUMENT_FILE,
@@ -400,6 +401,7 @@ def _read(members: Members) -> MerisSen3Product:
     tie_points, df, dj = _tie_points(members, height, width)
     spectral, instrument = _variables(members, INSTRUMENT_FILE,
                                       ["solar_flux", "lambda0", "FWHM"], None, optional=True)
+    _check_detectors(members, product_type, spectral)
     wavelengths = _band_means(spectral.get("lambda0"), APPENDIX_A_WAVELENGTHS)
     bandwidths = _band_means(spectral.get("FWHM"), APPENDIX_A_BANDWIDTHS)
     sun_flux = _band_means(spectral.get("solar_flux"), ScalingFactors().sun_flux)
@@ -424,6 +426,19 @@ def _check_size(members: Members, product_type: str, height: int, width: int) ->
     if width > widest:
         raise Sen3FormatError(where, f"{width} columns: a {product_type} line has at most "
                               f"{widest} columns")
+
+
+def _check_detectors(members: Members, product_type: str, spectral: dict[str, np.ndarray]
+                     ) -> None:
+    """The (bands, detectors) arrays of instrument_data.nc must not have the detectors of the
+    other resolution (FR 3700, RR 925): a product type contradicted by the data."""
+    res = SEN3_TYPES[product_type].name
+    for name, values in spectral.items():
+        n = values.shape[-1] if values.ndim == 2 else None
+        other = next((r for r, count in DETECTORS.items() if count == n and r != res), None)
+        if other is not None:
+            raise Sen3FormatError(members.where(INSTRUMENT_FILE), f"a {product_type} product, "
+                                  f"but {INSTRUMENT_FILE} has {n} detectors ({other}) in {name}")
 
 
 def _band_means(values: np.ndarray | None, default: tuple[float, ...]) -> tuple[float, ...]:
