@@ -207,3 +207,13 @@ def test_a_product_type_that_contradicts_the_detectors_is_refused(tmp_path):
     with pytest.raises(Sen3FormatError, match=r"ME_1_FRG___ product, but instrument_data.nc "
                                               r"has 925 detectors \(RR\)"):
         read_product(d)
+
+
+@pytest.mark.parametrize("stamp", [2**62, -(2**63)])
+def test_time_stamps_outside_meris_years_are_one_error(copy, stamp):
+    """time_stamp (microseconds since 2000) of year 146 000 or the int64 minimum: one error
+    naming the variable (was a ValueError from the date formatting)."""
+    _set(copy / "time_coordinates.nc", "time_stamp", slice(0, 3), np.int64(stamp))
+    with pytest.raises(Sen3FormatError, match=r"time_coordinates.nc: 3 time_stamp values are "
+                                              r"not MERIS times \(1990 to 2100\)"):
+        read_product(copy)

@@ -27,7 +27,7 @@ from ...errors import Sen3FormatError
 from ...geometry.earth import MAX_TERRAIN_M, MIN_SEABED_M
 from ...geometry.parallax import stored_corrections
 from ...geometry.tiepoints import TiePoints
-from ..n1.checks import MAX_FR_WIDTH, max_lines
+from ..n1.checks import DAYS_RANGE, MAX_FR_WIDTH, max_lines
 from ..n1.format import (
     APPENDIX_A_BANDWIDTHS,
     APPENDIX_A_WAVELENGTHS,
@@ -397,7 +397,8 @@ def _read(members: Members) -> MerisSen3Product:
             raise Sen3FormatError(members.where(name), f"variable {v!r} has shape {got}, the "
                                   f"radiances have {shape}")
         variables[v] = a
-    times, _ = _variables(members, TIME_FILE, ["time_stamp"], (height,))
+    times, time_attrs = _variables(members, TIME_FILE, ["time_stamp"], (height,))
+    _check_times(members, times["time_stamp"], time_attrs["time_stamp"])
     tie_points, df, dj = _tie_points(members, height, width)
     spectral, instrument = _variables(members, INSTRUMENT_FILE,
                                       ["solar_flux", "lambda0", "FWHM"], None, optional=True)
@@ -426,6 +427,18 @@ def _check_size(members: Members, product_type: str, height: int, width: int) ->
     if width > widest:
         raise Sen3FormatError(where, f"{width} columns: a {product_type} line has at most "
                               f"{widest} columns")
+
+
+def _check_times(members: Members, stamps: np.ndarray, attrs: dict[str, Any]) -> None:
+    """Every ``time_stamp`` (microseconds since 2000-01-01) a MERIS time: days 1990 .. 2100
+    (``n1.checks.DAYS_RANGE``); a fill is no time either."""
+    low, high = DAYS_RANGE
+    with np.errstate(invalid="ignore", over="ignore"):
+        days = stamps.astype(np.float64) / 86_400e6
+        bad = ~((days >= low) & (days <= high)) | no_data(stamps, attrs)
+    if bad.any():
+        raise Sen3FormatError(members.where(TIME_FILE), f"{int(bad.sum())} time_stamp values are "
+                              "not MERIS times (1990 to 2100)")
 
 
 def _check_detectors(members: Members, product_type: str, spectral: dict[str, np.ndarray]
