@@ -210,10 +210,19 @@ def test_a_product_type_that_contradicts_the_detectors_is_refused(tmp_path):
 
 
 @pytest.mark.parametrize("stamp", [2**62, -(2**63)])
-def test_time_stamps_outside_meris_years_are_one_error(copy, stamp):
-    """time_stamp (microseconds since 2000) of year 146 000 or the int64 minimum: one error
-    naming the variable (was a ValueError from the date formatting)."""
-    _set(copy / "time_coordinates.nc", "time_stamp", slice(0, 3), np.int64(stamp))
-    with pytest.raises(Sen3FormatError, match=r"time_coordinates.nc: 3 time_stamp values are "
-                                              r"not MERIS times \(1990 to 2100\)"):
+def test_time_stamps_outside_meris_years_are_interpolated_with_a_count(copy, product_dir, stamp,
+                                                                      caplog):
+    """time_stamp (microseconds since 2000) of year 146 000 or the int64 minimum (was a
+    ValueError from the date formatting): interpolated from the valid rows, with a warning
+    that counts them; no valid stamps at all is one error."""
+    f = copy / "time_coordinates.nc"
+    _set(f, "time_stamp", slice(0, 3), np.int64(stamp))
+    _set(f, "time_stamp", 700, np.int64(stamp))
+    with caplog.at_level(logging.WARNING):
+        times = read_product(copy).line_times
+    assert "4 of 1617 time_stamp values" in caplog.text
+    np.testing.assert_allclose(times, read_product(product_dir).line_times, rtol=0, atol=1e-6)
+    _set(f, "time_stamp", slice(None), np.int64(stamp))
+    with pytest.raises(Sen3FormatError, match=r"time_coordinates.nc: 1617 of 1617 time_stamp "
+                                              r"values are fill or not MERIS times"):
         read_product(copy)

@@ -398,7 +398,8 @@ def _read(members: Members) -> MerisSen3Product:
                                   f"radiances have {shape}")
         variables[v] = a
     times, time_attrs = _variables(members, TIME_FILE, ["time_stamp"], (height,))
-    _check_times(members, times["time_stamp"], time_attrs["time_stamp"])
+    line_times = _line_times(members, product_type, times["time_stamp"],
+                             time_attrs["time_stamp"])
     tie_points, df, dj = _tie_points(members, height, width)
     spectral, instrument = _variables(members, INSTRUMENT_FILE,
                                       ["solar_flux", "lambda0", "FWHM"], None, optional=True)
@@ -411,7 +412,7 @@ def _read(members: Members) -> MerisSen3Product:
         for b in range(1, NUM_BANDS + 1)), sun_flux=sun_flux)
     return MerisSen3Product(
         members, product_type, width, height, df, dj, tie_points,
-        times["time_stamp"].astype(np.float64) * 1e-6, scaling, wavelengths, bandwidths,
+        line_times, scaling, wavelengths, bandwidths,
         instrument[""], variables, dtypes)
 
 
@@ -429,16 +430,32 @@ def _check_size(members: Members, product_type: str, height: int, width: int) ->
                               f"{widest} columns")
 
 
-def _check_times(members: Members, stamps: np.ndarray, attrs: dict[str, Any]) -> None:
-    """Every ``time_stamp`` (microseconds since 2000-01-01) a MERIS time: days 1990 .. 2100
-    (``n1.checks.DAYS_RANGE``); a fill is no time either."""
+def _line_times(members: Members, product_type: str, stamps: np.ndarray,
+                attrs: dict[str, Any]) -> np.ndarray:
+    """Seconds since 2000-01-01 of every row from ``time_stamp`` (microseconds). A stamp that is
+    fill or no MERIS time (days 1990 .. 2100, ``n1.checks.DAYS_RANGE``) is interpolated
+    between the valid ones (extrapolated at the ends with their median interval) and counted
+    in a warning; fewer than two valid stamps is one error (the map does not use the times)."""
     low, high = DAYS_RANGE
     with np.errstate(invalid="ignore", over="ignore"):
-        days = stamps.astype(np.float64) / 86_400e6
-        bad = ~((days >= low) & (days <= high)) | no_data(stamps, attrs)
-    if bad.any():
-        raise Sen3FormatError(members.where(TIME_FILE), f"{int(bad.sum())} time_stamp values are "
-                              "not MERIS times (1990 to 2100)")
+        seconds = stamps.astype(np.float64) * 1e-6
+        bad = ~((seconds >= low * 86_400.0) & (seconds <= high * 86_400.0))
+    bad |= no_data(stamps, attrs)
+    if not bad.any():
+        return seconds
+    rows = np.arange(seconds.size)
+    good = rows[~bad]
+    if good.size < 2:
+        raise Sen3FormatError(members.where(TIME_FILE), f"{int(bad.sum())} of {seconds.size} "
+                              "time_stamp values are fill or not MERIS times (1990 to 2100)")
+    step = float(np.median(np.diff(seconds[good]) / np.diff(good)))
+    out = np.interp(rows, good, seconds[good])
+    out[rows < good[0]] = seconds[good[0]] - (good[0] - rows[rows < good[0]]) * step
+    out[rows > good[-1]] = seconds[good[-1]] + (rows[rows > good[-1]] - good[-1]) * step
+    log.warning("%s: %d of %d time_stamp values of %s are fill or not MERIS times (1990 to "
+                "2100): interpolated", members.path.name, int(bad.sum()), seconds.size,
+                TIME_FILE)
+    return out
 
 
 def _check_detectors(members: Members, product_type: str, spectral: dict[str, np.ndarray]
