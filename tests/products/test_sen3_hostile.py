@@ -226,3 +226,18 @@ def test_time_stamps_outside_meris_years_are_interpolated_with_a_count(copy, pro
     with pytest.raises(Sen3FormatError, match=r"time_coordinates.nc: 1617 of 1617 time_stamp "
                                               r"values are fill or not MERIS times"):
         read_product(copy)
+
+
+def test_radiance_fill_pixels_are_counted_in_a_warning(copy, caplog):
+    """Fill radiances are no data, and the user is told how many, once per band (the
+    product's own fill pixel in M07 plus a 10 x 10 block)."""
+    _set(copy / "M07_radiance.nc", "M07_radiance", (slice(100, 110), slice(200, 210)),
+         np.uint16(65535))
+    p = read_product(copy)
+    with caplog.at_level(logging.WARNING):
+        r = p.radiance(7)
+        p.radiance(7)
+        p.radiance(5)
+    assert np.isnan(r).sum() == 101
+    assert caplog.text.count("101 of 1812657 M07_radiance values") == 1
+    assert "M05_radiance" not in caplog.text

@@ -187,19 +187,23 @@ class MerisSen3Product:
     def counts(self, band: int) -> np.ndarray:
         """Stored uint16 values of ``band`` (1..15), radiance = counts x scaling.radiance[b-1];
         no-data pixels (fill, outside valid_min/valid_max, negative) hold
-        ``no_data_count(band)``."""
+        ``no_data_count(band)`` (counted in a warning, once per band)."""
         if isinstance(band, bool) or not isinstance(band, int | np.integer):
             raise TypeError(f"band must be an integer 1..15, got {band!r}")
         if not 1 <= band <= NUM_BANDS:
             raise ValueError(f"band must be 1..15, got {band}")
         raw = self._raw(radiance_file(band), radiance_variable(band))
         attrs = self.variables[radiance_variable(band)]
+        nd = self.no_data_count(band)
         if raw.dtype == np.uint16 and not any(k in attrs for k in ("valid_min", "valid_max",
                                                                    "valid_range")):
-            return raw
-        bad = no_data(raw, attrs) | (raw < 0)
-        out = raw.astype(np.uint16)
-        out[bad] = self.no_data_count(band)
+            out = raw
+        else:
+            bad = no_data(raw, attrs) | (raw < 0)
+            out = raw.astype(np.uint16)
+            out[bad] = nd
+        self._warn(f"{radiance_variable(band)} values (fill or outside the valid range)",
+                   int(np.count_nonzero(out == nd)), out.size)
         return out
 
     def radiance(self, band: int, lines: slice | None = None) -> np.ndarray:
