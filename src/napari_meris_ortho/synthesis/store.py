@@ -49,6 +49,10 @@ FORMAT = "napari-meris-ortho synthesis"
 VERSION = 4
 #: chunk side (pixels) of a version-4 store's full-resolution arrays; tiles are multiples of it
 CHUNK = 512
+#: zstd level of new stores: radiance counts of simulated (noisy) products compress to 0.74 of
+#: their bytes at level 1 and 0.73 at levels 3-15 (11.3 bits of entropy per count), level 1 in
+#: about half the time of level 3
+ZSTD_LEVEL = 1
 #: stored radiance of a band count: count x the band's Appendix A factor (Scaling Factor GADS)
 BAND_SCALES: dict[int, float] = dict(enumerate(ScalingFactors().radiance, start=1))
 #: largest stored count (radiances above 65535 x the scale are clipped to it)
@@ -255,7 +259,7 @@ def create_layout(store: Any, attrs: dict[str, Any], shape: tuple[int, int], til
         group.create_array(name, shape=shape, chunks=(chunk, chunk),
                            dtype="uint16" if band is not None else layer_dtype(name),
                            fill_value=0, dimension_names=("y", "x"), attributes=attrs,
-                           compressors=ZstdCodec(level=3))
+                           compressors=ZstdCodec(level=ZSTD_LEVEL))
 
     root = zarr.open_group(store, mode="w", attributes=attrs)
     for name in names:
