@@ -202,7 +202,10 @@ def _needed(bands: Sequence[int], algorithm: str) -> tuple[int, ...]:
 
 @dataclass
 class Piece:
-    """One product's contribution to one tile (``state`` covers ``window``; None: nothing)."""
+    """One product's contribution to one tile (``state`` covers ``window``; None: nothing).
+    In a compact store (``Spec.compact``) the state's bands are the store's uint16 counts
+    (``store.encode_band`` of radiances already quantized to them: exact), decoded by
+    ``tile_task`` just before the merge."""
 
     index: int
     window: Window
@@ -274,6 +277,7 @@ def segment_task(spec: Spec, index: int, path: str, window: Window,
     try:
         segment = _segment(spec, path, window if extent is None else extent)
         result = segment.precompute(_grid(spec).window(*window), allow_empty=True).result()
+        _release_pages(segment.prod)
     except DemError as exc:
         return Piece(index, window, None, dem_error=message_of(exc))
     except (MerisOrthoError, OSError, ValueError) as exc:
@@ -295,8 +299,26 @@ def segment_task(spec: Spec, index: int, path: str, window: Window,
         red = result.bands[NDVI_RED_BAND][r0:r1, c0:c1]
         nir = result.bands[NDVI_NIR_BAND][r0:r1, c0:c1]
     piece.state = segment_state(segment, valid[r0:r1, c0:c1], index, red, nir)
+    if spec.compact:  # the store's counts: half the bytes to ship and hold until the merge
+        piece.state.bands = np.stack([st.encode_band(piece.state.bands[k], st.BAND_SCALES[b])
+                                      for k, b in enumerate(spec.bands)])
     piece.window = (window[0] + r0, window[0] + r1, window[2] + c0, window[2] + c1)
     return piece
+
+
+def _release_pages(product: Any) -> None:
+    """Drop the pages of the product's memory-mapped file (N1) that the task read from this
+    process's resident memory (``madvise(MADV_DONTNEED)`` on the read-only map): the kernel
+    keeps them in its page cache, a later task maps them again without reading the disk. A
+    worker then holds the lines of the task at hand, not every product it was given
+    (section 3.1: a tile reads the antecedent lines only)."""
+    import mmap
+
+    mapped = getattr(product, "__dict__", {}).get("_file_map")  # opened: np.memmap
+    raw = getattr(mapped, "_mmap", None)
+    if isinstance(raw, mmap.mmap) and hasattr(mmap, "MADV_DONTNEED"):
+        with contextlib.suppress(OSError, ValueError):  # closed meanwhile: nothing to drop
+            raw.madvise(mmap.MADV_DONTNEED)
 
 
 def _quantize(result: Any, spec: Spec, product: Any) -> None:
@@ -345,7 +367,7 @@ def tile_task(fork: Any, spec: Spec, window: Window, pieces: list[Piece], rank: 
             continue
         r0, r1, c0, c1 = (p.window[0] - window[0], p.window[1] - window[0],
                           p.window[2] - window[2], p.window[3] - window[2])
-        combine(state.window(r0, r1, c0, c1), p.state, rank)
+        combine(state.window(r0, r1, c0, c1), _radiances(p.state, spec), rank)
     done.chunks = st.write_tile(fork.store, window, _arrays_of(state, spec), stored,
                                 spec.overviews)
     ids, counts = np.unique(state.winner, return_counts=True)
@@ -368,6 +390,16 @@ def _state_of(arrays: dict[str, np.ndarray], spec: Spec) -> TileState:
     return TileState(bands, arrays["count"].astype(np.uint16),
                      arrays["product"].astype(np.int32),
                      arrays["ndvi"].astype(np.uint16) if "ndvi" in arrays else None)
+
+
+def _radiances(state: TileState, spec: Spec) -> TileState:
+    """A piece's state with float32 radiances (compact store: its counts decoded)."""
+    if not spec.compact:
+        return state
+    bands = np.empty(state.bands.shape, np.float32)
+    for k, b in enumerate(spec.bands):
+        st.decode_band(state.bands[k], st.BAND_SCALES[b], out=bands[k])
+    return TileState(bands, state.count, state.winner, state.ndvi)
 
 
 def _arrays_of(state: TileState, spec: Spec) -> dict[str, np.ndarray]:
