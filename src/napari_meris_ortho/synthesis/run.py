@@ -185,7 +185,7 @@ class Spec:
     tile: int
     names: tuple[str, ...]
     overviews: tuple[int, ...]
-    #: band layers stored as uint16 counts (store version 3): every product's radiances are
+    #: band layers stored as uint16 counts (store versions 3, 4): every product's radiances are
     #: quantized to them before the merge, so the merge compares what the store holds
     compact: bool = True
 
