@@ -1,7 +1,7 @@
 """Benchmark of the synthesis on dask workers (handbook section 3.1, use cases 1-2).
 
     .venv/bin/python benchmarks/bench_synthesis.py [--scene fr-alps] [--products 8]
-                                                    [--tile 1024] [--bands 15]
+                                [--tile 1024] [--bands 15] [--workers 0,1,2] [--repeat 1]
 
 Prints two tables:
 
@@ -17,7 +17,7 @@ Prints two tables:
    written, so neither should grow with the store.
 
 The paper estimate of 10 000 products on 32 workers (README) uses the measured seconds per
-task. The machine is shared: figures are loaded.
+task. The machine is shared: figures are loaded; ``--repeat N`` prints the median of N runs.
 """
 
 from __future__ import annotations
@@ -65,6 +65,7 @@ def store_bytes(path: Path) -> tuple[int, int]:
 def throughput(paths: list[str], grid, bands: list[int], tile: int, workers: int,
                tmp: Path) -> dict:
     """One new synthesis of every product; workers = 0: in this process."""
+    tmp = Path(tempfile.mkdtemp(dir=tmp))  # a new directory per repetition
     from distributed import Client, LocalCluster
 
     from napari_meris_ortho.synthesis.api import synthesize
@@ -116,7 +117,7 @@ def update_cost(paths: list[str], grid, bands: list[int], tile: int, tmp: Path,
     from napari_meris_ortho.synthesis.api import synthesize
     from napari_meris_ortho.synthesis.store import overview_factors
 
-    out = tmp / f"update-{name}"
+    out = Path(tempfile.mkdtemp(dir=tmp)) / f"update-{name}"
     synthesize(paths[:1], out, grid=grid, bands=bands, algorithm="max-ndvi", tile=tile,
                elevation="tiepoints")
     before, files0 = store_bytes(out)
@@ -130,6 +131,16 @@ def update_cost(paths: list[str], grid, bands: list[int], tile: int, tmp: Path,
             "bytes": after - before, "files": files1 - files0, "levels": levels}
 
 
+def median(runs: list[dict]) -> dict:
+    """The run of median seconds (the lower middle one of an even count), with the range of
+    the seconds of all runs as ``range``."""
+    ordered = sorted(runs, key=lambda r: r["seconds"])
+    out = dict(ordered[(len(ordered) - 1) // 2])
+    out["range"] = (f"({len(runs)} runs: {ordered[0]['seconds']:.1f}-"
+                    f"{ordered[-1]['seconds']:.1f} s)" if len(runs) > 1 else "")
+    return out
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--scene", default="fr-alps", help="simulated scene (fr-small: quick)")
@@ -138,6 +149,9 @@ def main() -> None:
     parser.add_argument("--bands", type=int, default=15, help="bands 1..N (plus 7 and 13)")
     parser.add_argument("--workers", default="0,1,2",
                         help="worker counts to run ('' : only the update table)")
+    parser.add_argument("--repeat", type=int, default=1,
+                        help="runs of every row; the median (by seconds) is printed, with "
+                             "the range of the seconds")
     args = parser.parse_args()
 
     from napari_meris_ortho.geometry.grid import OutputGrid
@@ -153,7 +167,8 @@ def main() -> None:
           f"{grid.height}, tile {args.tile}; {os.cpu_count()} cores (shared, loaded)")
     with tempfile.TemporaryDirectory() as tmp_dir:
         tmp = Path(tmp_dir)
-        rows = [throughput(paths, grid, bands, args.tile, int(w), tmp)
+        rows = [median([throughput(paths, grid, bands, args.tile, int(w), tmp)
+                        for _ in range(args.repeat)])
                 for w in args.workers.split(",") if w]
         one = next((r for r in rows if r["workers"] == 1), rows[0] if rows else {})
         print(f"\n{'workers':>10s} {'seconds':>8s} {'prod/min':>9s} {'speed-up':>9s} "
@@ -163,14 +178,15 @@ def main() -> None:
             per_task = r["seconds"] * max(r["workers"], 1) / max(r["tasks"], 1)
             print(f"{label:>10s} {r['seconds']:8.1f} {r['per_minute']:9.2f} "
                   f"{one['seconds'] / r['seconds']:9.2f} {r['tasks']:6d} {per_task:7.2f} "
-                  f"{' '.join(f'{p:.0f}' for p in r['peaks']):>20s}")
-        updates = [update_cost(paths, g, bands, args.tile, tmp, name)
+                  f"{' '.join(f'{p:.0f}' for p in r['peaks']):>20s}  {r['range']}")
+        updates = [median([update_cost(paths, g, bands, args.tile, tmp, name)
+                           for _ in range(args.repeat)])
                    for name, g in (("small", grid), ("Europe", europe))]
     print(f"\n{'store':>8s} {'grid':>15s} {'overviews':>9s} {'update s':>9s} "
           f"{'MB added':>9s} {'files added':>12s}")
     for u in updates:
         print(f"{u['store']:>8s} {u['size']:>15s} {u['levels']:9d} {u['seconds']:9.2f} "
-              f"{u['bytes'] / 1e6:9.1f} {u['files']:12d}")
+              f"{u['bytes'] / 1e6:9.1f} {u['files']:12d}  {u['range']}")
 
 
 if __name__ == "__main__":

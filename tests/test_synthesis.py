@@ -568,3 +568,70 @@ def test_compact_layers_round_trip_within_half_a_count(products, tmp_path, sampl
             ulp = float(np.spacing(np.float32(want.max())))
             assert error.max() <= st.BAND_SCALES[b] / 2 + 2 * ulp and error.max() > 0
         assert (stored[~inside] == 0).all()
+
+
+def test_update_writes_only_the_chunks_it_changes(products, tmp_path, monkeypatch) -> None:
+    """An update rewrites exactly the chunks whose values change, counted in Icechunk's diff
+    of the two commits: for ``count``, the chunks holding a validated pixel of the new product
+    (at every overview level, its decimated pixels); for every layer, the chunks that differ
+    between the snapshots, none else. Chunks (64 here) are smaller than the tile (256)."""
+    from napari_meris_ortho.products.open import read_product
+
+    monkeypatch.setattr(st, "CHUNK", 64)
+    grid = OutputGrid("EPSG:4326", 12.80, 46.70, 0.0025, 0.0025, 600, 204)
+    out = tmp_path / "s"
+    first = synthesize([products["west"]], out, grid=grid, bands=BANDS, tile=256,
+                       elevation="tiepoints")
+    second = synthesize([products["east"]], out, input=out, elevation="tiepoints")
+    store = open_synthesis(out)
+    assert store.overviews == [2]
+    diff = store.repo.diff(from_snapshot_id=first.snapshot, to_snapshot_id=second.snapshot)
+    written = {path.strip("/"): {tuple(c) for c in coords}
+               for path, coords in diff.updated_chunks.items()}
+
+    def chunks(mask: np.ndarray) -> set[tuple[int, int]]:
+        rows, cols = np.nonzero(mask)
+        return set(zip((rows // 64).tolist(), (cols // 64).tolist(), strict=True))
+
+    direct = orthorectify(read_product(products["east"]), grid=grid, elevation="tiepoints",
+                          bands=[7])
+    touched = validated_pixels(direct.valid, direct.flags, False)
+    assert chunks(touched) == written["count"]
+    assert chunks(touched[::2, ::2]) == written["overview_2/count"]
+    assert 10 <= len(written["count"]) < 4 * 10  # 4 x 10 chunks of 64 in the grid
+    before = layers(out, at=first.snapshot)
+    for name, after in layers(out).items():
+        for level in (1, 2):
+            old, new = before[name][::level, ::level], after[::level, ::level]
+            path = name if level == 1 else f"overview_2/{name}"
+            assert written.get(path, set()) == chunks(old != new), path
+    # a tile (4 x 4 chunks) the product only partly covers is only partly rewritten
+    partial = [(ti, tj) for ti in range(1) for tj in range(3)
+               if 0 < len({c for c in written["count"] if (c[0] // 4, c[1] // 4) == (ti, tj)})
+               < len({(i, j) for i in range(4) for j in range(4 * tj, min(4 * tj + 4, 10))})]
+    assert partial
+
+
+def test_version_3_store_is_updated_in_its_own_layout(products, tmp_path, monkeypatch) -> None:
+    """A store of version 3 (one chunk per tile, overviews by the tile / factor) keeps its
+    layout and version when updated, and holds the layers a version-4 store gets."""
+    import zarr
+
+    names = [products["cloudy1"], products["cloudy2"]]
+    old = tmp_path / "v3"
+    with monkeypatch.context() as m:
+        m.setattr(st, "VERSION", 3)
+        m.setattr(st, "CHUNK", 1024)  # level_chunk(1024, 256, f) = 256 / f: the v3 layout
+        synthesize(names[:1], old, grid=GRID, bands=BANDS, tile=256, algorithm="max-ndvi",
+                   elevation="tiepoints")
+    synthesize(names[1:], old, input=old, elevation="tiepoints")
+    monkeypatch.setattr(st, "CHUNK", 64)
+    synthesize(names, tmp_path / "v4", grid=GRID, bands=BANDS, tile=256, algorithm="max-ndvi",
+               elevation="tiepoints")
+    store = open_synthesis(old)
+    root = zarr.open_group(store.session.store, mode="r")
+    assert store.attrs["version"] == 3 and open_synthesis(tmp_path / "v4").attrs["version"] == 4
+    assert root["band_07"].chunks == (256, 256) and root["overview_2/count"].chunks == (128, 128)
+    new = layers(tmp_path / "v4")
+    for key, value in layers(old).items():
+        assert value.tobytes() == new[key].tobytes(), key

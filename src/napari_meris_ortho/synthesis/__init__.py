@@ -1,6 +1,6 @@
 """Synthesis of many MERIS products (MERSYN use cases 1 and 2, handbook section 3.1, Appendix C).
 
-A synthesis is an Icechunk repository holding Zarr v3 arrays chunked by the output tile
+A synthesis is an Icechunk repository holding Zarr v3 arrays chunked inside the output tile
 (:mod:`.store`). The work is split into tasks: one per (product,
 output tile) pair -- orthorectify the product on the tile and make its contribution
 (:func:`engine.synthesis.segment_state`) -- and one per tile -- merge the contributions into
@@ -8,7 +8,8 @@ the stored tile with the associative, commutative rule of :func:`engine.synthesi
 (ties: sensing time, then name) and write it. Tasks run in this process (``workers=0``), on an
 embedded ``distributed.LocalCluster`` or on an existing dask cluster (``scheduler``); each tile
 task writes into its own fork of the Icechunk session, the forks are merged and the run ends in
-one commit listing the products. Only the tiles the products touch are read and written.
+one commit listing the products. Only the tiles the products touch are read, and only the
+chunks whose values change are written.
 
 A run killed or failed before its commit leaves the store at its previous commit. A product
 already in the synthesis (same product name and sensing time) is reported and skipped.

@@ -86,7 +86,7 @@ class SynthesisStore:
         return {int(p["index"]): str(p["product_name"]) for p in self.products}
 
     def to_xarray(self) -> Any:
-        """The synthesis as a lazy ``xarray.Dataset`` (dask arrays chunked by the store's tile;
+        """The synthesis as a lazy ``xarray.Dataset`` (dask arrays chunked as the store;
         ``output.dataset.grid_dataset``): ``radiance`` (band, y, x; NaN = background) with the
         band numbers and their Appendix A central wavelengths as coordinates, ``ndvi`` decoded
         (Appendix C; maximum NDVI only), ``count`` and ``product`` (index into the dataset's

@@ -185,7 +185,7 @@ class Spec:
     tile: int
     names: tuple[str, ...]
     overviews: tuple[int, ...]
-    #: band layers stored as uint16 counts (store version 3): every product's radiances are
+    #: band layers stored as uint16 counts (store versions 3, 4): every product's radiances are
     #: quantized to them before the merge, so the merge compares what the store holds
     compact: bool = True
 
@@ -202,7 +202,10 @@ def _needed(bands: Sequence[int], algorithm: str) -> tuple[int, ...]:
 
 @dataclass
 class Piece:
-    """One product's contribution to one tile (``state`` covers ``window``; None: nothing)."""
+    """One product's contribution to one tile (``state`` covers ``window``; None: nothing).
+    In a compact store (``Spec.compact``) the state's bands are the store's uint16 counts
+    (``store.encode_band`` of radiances already quantized to them: exact), decoded by
+    ``tile_task`` just before the merge."""
 
     index: int
     window: Window
@@ -220,6 +223,8 @@ class TileDone:
     fork: Any
     window: Window
     winners: dict[int, int] = field(default_factory=dict)
+    #: chunks written (every layer and overview level)
+    chunks: int = 0
     pieces: list[Piece] = field(default_factory=list)  # without their states
 
 
@@ -272,6 +277,7 @@ def segment_task(spec: Spec, index: int, path: str, window: Window,
     try:
         segment = _segment(spec, path, window if extent is None else extent)
         result = segment.precompute(_grid(spec).window(*window), allow_empty=True).result()
+        _release_pages(segment.prod)
     except DemError as exc:
         return Piece(index, window, None, dem_error=message_of(exc))
     except (MerisOrthoError, OSError, ValueError) as exc:
@@ -281,8 +287,7 @@ def segment_task(spec: Spec, index: int, path: str, window: Window,
                              spec.reject_bright)
     _no_data_out(result, spec, valid)
     if spec.compact:
-        for b in spec.bands:
-            result.bands[b] = st.quantized(result.bands[b], st.BAND_SCALES[b])
+        _quantize(result, spec, _product(path))
     piece = Piece(index, window, None, int(inside.sum()), int(valid.sum()))
     rows, cols = np.flatnonzero(valid.any(axis=1)), np.flatnonzero(valid.any(axis=0))
     if rows.size == 0:
@@ -294,8 +299,39 @@ def segment_task(spec: Spec, index: int, path: str, window: Window,
         red = result.bands[NDVI_RED_BAND][r0:r1, c0:c1]
         nir = result.bands[NDVI_NIR_BAND][r0:r1, c0:c1]
     piece.state = segment_state(segment, valid[r0:r1, c0:c1], index, red, nir)
+    if spec.compact:  # the store's counts: half the bytes to ship and hold until the merge
+        piece.state.bands = np.stack([st.encode_band(piece.state.bands[k], st.BAND_SCALES[b])
+                                      for k, b in enumerate(spec.bands)])
     piece.window = (window[0] + r0, window[0] + r1, window[2] + c0, window[2] + c1)
     return piece
+
+
+def _release_pages(product: Any) -> None:
+    """Drop the pages of the product's memory-mapped file (N1) that the task read from this
+    process's resident memory (``madvise(MADV_DONTNEED)`` on the read-only map): the kernel
+    keeps them in its page cache, a later task maps them again without reading the disk. A
+    worker then holds the lines of the task at hand, not every product it was given
+    (section 3.1: a tile reads the antecedent lines only)."""
+    import mmap
+
+    mapped = getattr(product, "__dict__", {}).get("_file_map")  # opened: np.memmap
+    raw = getattr(mapped, "_mmap", None)
+    if isinstance(raw, mmap.mmap) and hasattr(mmap, "MADV_DONTNEED"):
+        with contextlib.suppress(OSError, ValueError):  # closed meanwhile: nothing to drop
+            raw.madvise(mmap.MADV_DONTNEED)
+
+
+def _quantize(result: Any, spec: Spec, product: Any) -> None:
+    """The radiances of ``result`` as a compact store holds them (``store.quantized``). A band
+    sampled at the nearest pixel of a product whose scale is the store's (Appendix A factor)
+    is already count x scale: left as it is (the same values, one pass less)."""
+    from ..options import Sampling
+
+    nearest = spec.options.sampling is Sampling.NEAREST
+    for b in spec.bands:
+        scale = st.BAND_SCALES[b]
+        if not (nearest and np.float32(product.scaling.radiance[b - 1]) == np.float32(scale)):
+            result.bands[b] = st.quantized(result.bands[b], scale)
 
 
 def _no_data_out(result: Any, spec: Spec, valid: np.ndarray) -> None:
@@ -324,15 +360,16 @@ def tile_task(fork: Any, spec: Spec, window: Window, pieces: list[Piece], rank: 
                                           for p in pieces])
     if not usable:
         return done
-    stored = st.read_window(fork.store, spec.names, window)
+    stored = st.read_tile(fork.store, spec.names, window)  # as stored: counts (compact)
     state = _state_of(stored, spec)
     for p in sorted(usable, key=lambda p: int(rank[p.index])):  # any order gives the same
         if p.state is None:
             continue
         r0, r1, c0, c1 = (p.window[0] - window[0], p.window[1] - window[0],
                           p.window[2] - window[2], p.window[3] - window[2])
-        combine(state.window(r0, r1, c0, c1), p.state, rank)
-    st.write_tile(fork.store, window, _arrays_of(state, spec), spec.overviews)
+        combine(state.window(r0, r1, c0, c1), _radiances(p.state, spec), rank)
+    done.chunks = st.write_tile(fork.store, window, _arrays_of(state, spec), stored,
+                                spec.overviews)
     ids, counts = np.unique(state.winner, return_counts=True)
     new = {p.index for p in usable}
     done.winners = {int(i): int(n) for i, n in zip(ids, counts, strict=True) if int(i) in new}
@@ -341,14 +378,34 @@ def tile_task(fork: Any, spec: Spec, window: Window, pieces: list[Piece], rank: 
 
 
 def _state_of(arrays: dict[str, np.ndarray], spec: Spec) -> TileState:
-    bands = np.stack([arrays[st.band_layer(b)] for b in spec.bands]).astype(np.float32)
+    """The merge state of a stored tile (``read_tile``; compact band counts decoded)."""
+    shape = arrays["count"].shape
+    bands = np.empty((len(spec.bands), *shape), np.float32)
+    for k, b in enumerate(spec.bands):
+        values = arrays[st.band_layer(b)]
+        if spec.compact:
+            st.decode_band(values, st.BAND_SCALES[b], out=bands[k])
+        else:
+            bands[k] = values
     return TileState(bands, arrays["count"].astype(np.uint16),
                      arrays["product"].astype(np.int32),
                      arrays["ndvi"].astype(np.uint16) if "ndvi" in arrays else None)
 
 
+def _radiances(state: TileState, spec: Spec) -> TileState:
+    """A piece's state with float32 radiances (compact store: its counts decoded)."""
+    if not spec.compact:
+        return state
+    bands = np.empty(state.bands.shape, np.float32)
+    for k, b in enumerate(spec.bands):
+        st.decode_band(state.bands[k], st.BAND_SCALES[b], out=bands[k])
+    return TileState(bands, state.count, state.winner, state.ndvi)
+
+
 def _arrays_of(state: TileState, spec: Spec) -> dict[str, np.ndarray]:
-    out = {st.band_layer(b): state.bands[k] for k, b in enumerate(spec.bands)}
+    """The layers of a merged tile as stored (compact band layers: counts)."""
+    out = {st.band_layer(b): (st.encode_band(state.bands[k], st.BAND_SCALES[b]) if spec.compact
+                              else state.bands[k]) for k, b in enumerate(spec.bands)}
     if state.ndvi is not None:
         out["ndvi"] = state.ndvi
     out["count"] = state.count
@@ -532,7 +589,7 @@ class Synthesis:
         base = repo.lookup_branch(st.BRANCH)
         layout = repo.writable_session(st.BRANCH)
         st.create_layout(layout.store, self._attributes([]), (self.grid.height, self.grid.width),
-                         self.tile, spec.names, spec.overviews)
+                         self.tile, spec.names, spec.overviews, st.CHUNK)
         snapshot = layout.flush("synthesis layout: grid, bands, empty arrays")
         self._branch = f"{st.RUN_BRANCH_PREFIX}{uuid.uuid4().hex[:12]}"
         repo.create_branch(self._branch, snapshot)
