@@ -307,18 +307,13 @@ def segment_task(spec: Spec, index: int, path: str, window: Window,
 
 
 def _release_pages(product: Any) -> None:
-    """Drop the pages of the product's memory-mapped file (N1) that the task read from this
-    process's resident memory (``madvise(MADV_DONTNEED)`` on the read-only map): the kernel
-    keeps them in its page cache, a later task maps them again without reading the disk. A
-    worker then holds the lines of the task at hand, not every product it was given
-    (section 3.1: a tile reads the antecedent lines only)."""
-    import mmap
-
-    mapped = getattr(product, "__dict__", {}).get("_file_map")  # opened: np.memmap
-    raw = getattr(mapped, "_mmap", None)
-    if isinstance(raw, mmap.mmap) and hasattr(mmap, "MADV_DONTNEED"):
-        with contextlib.suppress(OSError, ValueError):  # closed meanwhile: nothing to drop
-            raw.madvise(mmap.MADV_DONTNEED)
+    """Drop the product's file pages that the task read from this worker's resident memory
+    (``release_pages`` of an N1; other products hold no file map). A worker then holds the
+    lines of the task at hand, not every product it was given (section 3.1: a tile reads the
+    antecedent lines only)."""
+    release = getattr(product, "release_pages", None)
+    if callable(release):
+        release()
 
 
 def _quantize(result: Any, spec: Spec, product: Any) -> None:

@@ -11,8 +11,10 @@ handbook's benchmark use them); :func:`west_to_east` gives the mirrored view BEA
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import math
+import mmap
 import os
 import re
 import stat
@@ -269,6 +271,17 @@ class MerisL1bProduct:
     def _file_map(self) -> np.memmap:
         """The whole file, memory-mapped read-only on first use (nothing is read)."""
         return np.memmap(self.path, dtype=np.uint8, mode="r")
+
+    def release_pages(self) -> None:
+        """Drop the pages of the file map that this process has read from its resident memory
+        (``madvise(MADV_DONTNEED)`` on the read-only map). The kernel keeps them in its page
+        cache, so a later read maps them again without going to the disk. Does nothing if the
+        file was never mapped, is closed, or the platform lacks ``MADV_DONTNEED``."""
+        mapped = self.__dict__.get("_file_map")  # cached_property: present once opened
+        raw = getattr(mapped, "_mmap", None)
+        if isinstance(raw, mmap.mmap) and hasattr(mmap, "MADV_DONTNEED"):
+            with contextlib.suppress(OSError, ValueError):  # closed meanwhile
+                raw.madvise(mmap.MADV_DONTNEED)
 
     def _records(self, name: str, dtype: np.dtype) -> np.ndarray:
         """Records of data set ``name`` as a structured memmap view (validated at open)."""
