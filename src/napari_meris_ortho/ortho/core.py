@@ -450,7 +450,7 @@ def _run(job: _Job, progress: ProgressCallback | None) -> Antecedents:
     if job.pixel is not None and job.ellipsoid is not None:
         assert stack is not None
         bounds = lonlat_bounds(grid)
-        march = occlusion.ceiling_and_step(
+        march = occlusion.Sightlines.of(
             stack, 0.5 * (bounds[1] + bounds[3]) if bounds is not None else 0.0)
     for r0 in range(0, nr, _BLOCK_ROWS):
         r1 = min(r0 + _BLOCK_ROWS, nr)
@@ -474,7 +474,7 @@ def _run(job: _Job, progress: ProgressCallback | None) -> Antecedents:
         if march is not None:  # pixel geolocation with DEMs: hidden ground reported
             assert stack is not None and h is not None
             t0 = time.perf_counter()
-            occlusion.report_hidden(stack, job.tp.kernel_args(), lon, lat, h, res, *march)
+            occlusion.report_hidden(march, job.tp.kernel_args(), lon, lat, h, res)
             t_dem += time.perf_counter() - t0
         t_engine += time.perf_counter() - t0
         blocks.add(r0, r1, res, src, hmode)
