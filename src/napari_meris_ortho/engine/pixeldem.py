@@ -65,6 +65,18 @@ def look_at(line: float, col: float, coef: np.ndarray, df: float, dj: float):
             (c[13] + c[15] * v) / df, (c[14] + c[15] * u) / dj)
 
 
+@njit(cache=True)
+def look_vectors(line: np.ndarray, col: np.ndarray, coef: np.ndarray, df: float, dj: float
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """Tie-point look vectors (tan vz sin va, tan vz cos va) at the antecedents (``line``,
+    ``col``, flat float64; ``look_at``): the direction and slope of the lines of sight."""
+    e = np.empty(line.size)
+    n = np.empty(line.size)
+    for k in range(line.size):
+        e[k], n[k], _, _, _, _ = look_at(line[k], col[k], coef, df, dj)
+    return e, n
+
+
 @njit(cache=True, nogil=True)
 def _ellipsoid_rows(lo, hi, lon, lat, alt, coef, df, dj, model, elon, elat):
     """Rows [lo, hi) of ``ellipsoid_grid`` into its outputs."""

@@ -32,6 +32,7 @@ from ..geometry.tiepoints import TiePointGrid
 from ..options import Elevation, Geolocation, OrthoOptions, SearchMethod
 from ..products.protocol import MerisProduct
 from ..progress import ProgressCallback
+from . import occlusion
 from .antecedents import Antecedents, OrthoResult, antecedent_line_window
 from .heights import dem_heights
 from .stats import SOURCE_NONE, SOURCE_TIEPOINTS, TIMINGS, RunStats, per_band, source_counts
@@ -445,6 +446,12 @@ def _run(job: _Job, progress: ProgressCallback | None) -> Antecedents:
                            len(stack.sources) if stack is not None else 0)
     t_dem = t_lonlat = t_engine = 0.0
     total = nr + len(opts.bands)
+    march = None
+    if job.pixel is not None and job.ellipsoid is not None:
+        assert stack is not None
+        bounds = lonlat_bounds(grid)
+        march = occlusion.Sightlines.of(
+            stack, 0.5 * (bounds[1] + bounds[3]) if bounds is not None else 0.0)
     for r0 in range(0, nr, _BLOCK_ROWS):
         r1 = min(r0 + _BLOCK_ROWS, nr)
         t0 = time.perf_counter()
@@ -464,6 +471,11 @@ def _run(job: _Job, progress: ProgressCallback | None) -> Antecedents:
         t0 = time.perf_counter()
         res = _solve(job, lon, lat, h, (ptr, start, stop), r0,
                      (blocks.line[r0:r1], blocks.col[r0:r1], blocks.iters[r0:r1]))
+        if march is not None:  # pixel geolocation with DEMs: hidden ground reported
+            assert stack is not None and h is not None
+            t0 = time.perf_counter()
+            occlusion.report_hidden(march, job.tp.kernel_args(), lon, lat, h, res)
+            t_dem += time.perf_counter() - t0
         t_engine += time.perf_counter() - t0
         blocks.add(r0, r1, res, src, hmode)
         if progress is not None:

@@ -1,0 +1,183 @@
+"""Ground hidden from the sensor by the relief, for the pixel geolocation with DEMs (issue 22,
+item 8): such an output point has no antecedent (the pixel whose line of sight passes through
+it shows the ridge in front), so it is reported ``OCCLUDED`` and left no data.
+
+An output point T (lon, lat) at the DEM height h is seen when no terrain rises above its line
+of sight towards the satellite. The ray leaves T along the view azimuth va of the tie points
+at T's antecedent (look vector (tan vz sin va, tan vz cos va), eq. 5a-5b, as the parallax of
+eq. 6a uses it); at a ground distance d its height above the ellipsoid is
+h + d / tan vz + d^2 / (2 R) (the Earth's surface drops below the tangent plane; R the mean
+radius). T is hidden where the terrain rises more than ``TOLERANCE_M`` above the ray: ground
+just below a crest, whose ray grazes it, stays seen. The terrain is the DEM stack of the run,
+the same heights as the output points got: a stack of one geographic ellipsoidal lattice read
+into memory is marched by ``engine.sightline`` (cell by cell, the maximum of terrain minus ray
+in each cell exact, tiles' maxima to jump); other stacks, and rays leaving that window, by two
+marches of ``ortho.heights.dem_heights`` (the DEMs tried in order; where none has data the ray
+goes on): every eighth of a DEM post with ``MARGIN_M`` of slack finds the candidates, every
+32nd of a post decides them (fr-steep: 97.8 % of the hidden ground found, none seen lost).
+Both stop once the ray is above the highest post of the DEMs.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from ..engine import sightline
+from ..engine.pixeldem import look_vectors
+from ..engine.pixelgeo import OCCLUDED
+from ..geometry.earth import MAX_TERRAIN_M, MEAN_EARTH_RADIUS
+from .heights import dem_heights
+
+if TYPE_CHECKING:
+    from ..dem.base import LatticeWindow
+    from ..dem.stack import DemStack
+
+#: terrain above the line of sight by more than this (m) hides a point
+TOLERANCE_M = 1.0
+#: first march's step as a fraction of the finest DEM post (fr-steep, 30" posts: one march
+#: every half post finds 73 % of the hidden ground, its ridges rise between the samples)
+STEP_OF_POST = 0.125
+#: slack (m) of the first march: a point whose ray passes less than this above the sampled
+#: terrain is a candidate (the terrain between two samples may rise above them)
+MARGIN_M = 50.0
+#: the second march (the candidates) steps by the first's step divided by this
+FINE = 4
+#: first march's step (m) when no DEM gives its post spacing (a lattice read lazily): an
+#: eighth of a 30" post
+DEFAULT_STEP_M = 115.0
+#: metres per degree of latitude on the mean sphere
+_DEGREE_M = math.radians(1.0) * MEAN_EARTH_RADIUS
+
+
+@dataclass
+class Sightlines:
+    """What the marches of a run need, once: the ceiling (the highest post of the DEMs'
+    prepared windows; MAX_TERRAIN_M when a DEM has none), the first march's ``step`` (m) and,
+    for a stack of one geographic ellipsoidal lattice in memory, its window with the tiles'
+    maxima and its shortest post (m) for ``engine.sightline``, which marches there."""
+
+    stack: DemStack
+    ceiling: float
+    step: float
+    window: LatticeWindow | None = None
+    tmax: tuple[np.ndarray, ...] = ()
+    post: float = 0.0
+
+    @classmethod
+    def of(cls, stack: DemStack, lat: float) -> Sightlines:
+        """The ceiling and step of ``stack`` (``STEP_OF_POST`` of its finest post spacing at
+        latitude ``lat``), its window when ``engine.sightline`` can march it."""
+        top, post = -math.inf, math.inf
+        windows = []
+        for dem in stack.sources:
+            for part, datum in dem.parts():
+                window = part.lattice_window()
+                windows.append((window, datum))
+                if window is None:
+                    top = MAX_TERRAIN_M
+                    continue
+                if window.data.size and np.isfinite(window.data).any():
+                    top = max(top, float(np.nanmax(window.data)))
+                a, e = abs(window.inv[0]), abs(window.inv[4])  # posts per unit of x, of y
+                if window.transform is None:  # degrees
+                    post = min(post, _DEGREE_M / e, _DEGREE_M * math.cos(math.radians(lat)) / a)
+                else:  # a projected DEM: its units (metres)
+                    post = min(post, 1.0 / a, 1.0 / e)
+        out = cls(stack, top if math.isfinite(top) else MAX_TERRAIN_M,
+                  STEP_OF_POST * post if math.isfinite(post) else DEFAULT_STEP_M)
+        if len(windows) == 1:
+            window, datum = windows[0]
+            if (window is not None and window.transform is None and datum in (None, "ellipsoid")
+                    and window.inv[1] == 0.0 and window.inv[3] == 0.0 and window.data.size):
+                # the shortest post (m) anywhere in the window: its latitude furthest from 0
+                rows = window.lattice[0] + np.array([0.0, window.data.shape[0]])
+                lats = (rows - window.inv[5]) / window.inv[4]
+                cos = math.cos(math.radians(min(float(np.max(np.abs(lats))), 89.0)))
+                shortest = min(_DEGREE_M / abs(window.inv[4]), _DEGREE_M * cos / abs(window.inv[0]))
+                out.window = window
+                out.tmax = tuple(sightline.tile_maxima(window.data, t) for t in sightline.TILES)
+                out.post = 0.99 * shortest
+        return out
+
+    def hidden(self, lon: np.ndarray, lat: np.ndarray, h: np.ndarray, line: np.ndarray,
+               col: np.ndarray, coef: np.ndarray, df: float, dj: float) -> np.ndarray:
+        """True where the point (``lon``, ``lat``, height ``h``; flat) with the antecedent
+        (``line``, ``col``) is hidden by the terrain (module docstring); ``coef``, ``df``,
+        ``dj``: the tie-point grid's ``kernel_args``. In the window: ``engine.sightline``
+        every ``step / FINE``; elsewhere two marches of the stack: every ``step`` with a slack
+        of ``MARGIN_M`` finds the candidates, every ``step / FINE`` decides them."""
+        e, n = look_vectors(np.asarray(line, np.float64), np.asarray(col, np.float64), coef,
+                            float(df), float(dj))
+        ray = (np.asarray(lon, np.float64), np.asarray(lat, np.float64),
+               np.asarray(h, np.float64), e, n)
+        out = np.zeros(e.shape, bool)
+        todo = np.arange(e.size)
+        if self.window is not None:
+            w = self.window
+            res = sightline.march(*ray, w.data, w.inv, w.lattice, w.wrap_centre, self.tmax,
+                                  self.post, self.ceiling, TOLERANCE_M)
+            out = res == sightline.HIDDEN
+            todo = np.flatnonzero(res == sightline.UNDECIDED)
+        if todo.size:
+            maybe = todo[_march(self.stack, tuple(a[todo] for a in ray), self.ceiling,
+                                self.step, TOLERANCE_M - MARGIN_M)]
+            out[maybe] = _march(self.stack, tuple(a[maybe] for a in ray), self.ceiling,
+                                self.step / FINE, TOLERANCE_M)
+        return out
+
+
+def _march(stack: DemStack, ray: tuple[np.ndarray, ...], ceiling: float, step: float,
+           slack: float) -> np.ndarray:
+    """True where the terrain rises more than ``slack`` above the line of sight of a point,
+    ``ray`` = (lon, lat, h, look vector east, north), sampled every ``step`` metres."""
+    lon, lat, h, e, n = ray
+    out = np.zeros(lon.shape, bool)
+    tz = np.hypot(e, n)  # tan vz
+    live = np.flatnonzero((tz > 0.0) & (h + step / np.maximum(tz, 1e-12) < ceiling))
+    lon, lat, h, tz = lon[live], lat[live], h[live], tz[live]
+    deg = math.degrees(1.0 / MEAN_EARTH_RADIUS)
+    dx = deg * e[live] / tz / np.cos(np.radians(lat))  # degrees per metre towards the sensor
+    dy = deg * n[live] / tz
+    d = step
+    while live.size:
+        height = h + d / tz + d * d / (2.0 * MEAN_EARTH_RADIUS)
+        go = height < ceiling
+        if not go.all():
+            live, lon, lat, h, tz, dx, dy, height = (a[go] for a in (live, lon, lat, h, tz, dx,
+                                                                      dy, height))
+            if not live.size:
+                break
+        terrain, _ = dem_heights(stack, lon + d * dx, lat + d * dy, np.ones(live.size, bool))
+        up = terrain > height + slack  # (NaN: no DEM there, the ray goes on)
+        if up.any():
+            out[live[up]] = True
+            keep = ~up
+            live, lon, lat, h, tz, dx, dy = (a[keep] for a in (live, lon, lat, h, tz, dx, dy))
+        d += step
+    return out
+
+
+def report_hidden(sight: Sightlines, kernel_args: tuple, lon: np.ndarray, lat: np.ndarray,
+                  h: np.ndarray, res: dict) -> None:
+    """The antecedents in ``res`` (``pixeldem.solve_pixel_dem`` of a block of output points
+    ``lon``, ``lat`` with DEM heights ``h``) of hidden ground dropped: line and column NaN,
+    iterations ``OCCLUDED``, counted in its "occluded" search count. Points without a DEM
+    height were located on the product's own terrain points, which report their hidden ground
+    already."""
+    iters = res["iterations"]
+    test = np.flatnonzero(((iters >= 0) & np.isfinite(h)).reshape(-1))
+    if test.size == 0:
+        return
+    _, _, coef, df, dj = kernel_args
+    flon, flat, fh, fline, fcol = (a.reshape(-1) for a in (lon, lat, h, res["line"],
+                                                          res["col"]))
+    gone = test[sight.hidden(flon[test], flat[test], fh[test].astype(np.float64), fline[test],
+                             fcol[test], coef, df, dj)]
+    fline[gone] = np.nan
+    fcol[gone] = np.nan
+    iters.reshape(-1)[gone] = OCCLUDED
+    res["search"]["occluded"] = res["search"].get("occluded", 0) + int(gone.size)
