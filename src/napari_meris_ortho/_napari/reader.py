@@ -387,9 +387,9 @@ def n1_metadata(product: MerisProduct) -> dict[str, Any]:
 
 def radiance_levels(product: MerisProduct) -> list[Any]:
     """The 15 radiance bands (15, H, W) float32 (``radiance_stack``) and its decimated levels
-    (``pyramid``); one level for a small product."""
+    (``pyramid``); one level for a small product or a ``.SEN3`` (``_product_factors``)."""
     stack = radiance_stack(product)
-    return stack.levels() if len(level_factors(product.height, product.width)) > 1 else [stack]
+    return stack.levels() if len(_product_factors(product)) > 1 else [stack]
 
 
 def radiance_stack(product: MerisProduct) -> LazyArray:
@@ -420,7 +420,7 @@ def quicklook_levels(product: MerisProduct,
     """The RGB quick-look (``quicklook_rgb``) of a small product; of a big one a lazy (H, W, 3)
     uint8 array and its decimated levels, each channel stretched by the 1-99 % limits of the
     coarsest level (``stretch_channel``)."""
-    factors = level_factors(product.height, product.width)
+    factors = _product_factors(product)
     if len(factors) == 1:
         return [quicklook_rgb(product, bands)]
     f = factors[-1]
@@ -449,4 +449,15 @@ def flag_levels(product: MerisProduct) -> list[np.ndarray]:
     """The flags (H, W) uint8 and their decimated views (an N1's are views of its memory map:
     a level reads only the lines on screen)."""
     flags = np.asarray(product.flags)
-    return [flags[::f, ::f] for f in level_factors(*flags.shape)]
+    return [flags[::f, ::f] for f in _product_factors(product)]
+
+
+def _product_factors(product: MerisProduct) -> list[int]:
+    """The decimation factors of a product's levels: an N1's (``level_factors``: its memory map
+    reads only the lines of a level); one level for a ``.SEN3``, whose netCDF bands are read
+    whole at every access (as before: the quick-look computed once)."""
+    from ..products.n1.reader import MerisL1bProduct
+
+    if not isinstance(product, MerisL1bProduct):
+        return [1]
+    return level_factors(product.height, product.width)
