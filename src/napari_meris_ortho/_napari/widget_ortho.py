@@ -7,8 +7,9 @@ and an optional output file. The work (``ortho_run``) runs in a napari thread wo
 progress bar in the widget and in the activity dock, and a cancel button; closing the viewer
 cancels it. Everything heavy (reading, orthorectification, layer data, contrast limits, RGB
 stretch, geometry, the napari layer objects) runs in the job (``build_layers``); the Qt thread
-only inserts the ready layers, one per event-loop turn, in the world frame (``world``); a rerun
-replaces the layers of the same names. A finished run keeps nothing alive but its layers.
+only inserts the ready layers (rasters as pyramids), one per event-loop turn and without
+making each the active layer, in the world frame (``world``); a rerun replaces the layers of the
+same names, removed one per turn in one napari batch (one garbage collection). A finished run keeps nothing alive but its layers.
 The settings are remembered (``settings``).
 """
 
