@@ -118,3 +118,30 @@ def test_cog_opens_on_its_own_overviews(make_napari_viewer, tmp_path):
             overview[ds.read_masks(1) == 0] = 0
         np.testing.assert_array_equal(np.asarray(layer.data[k + 1]), overview)
     assert np.asarray(layer.data[1][:20]).max() == 0  # background stays 0, not nodata x scale
+
+
+def test_multiscale_layer_saves_its_full_resolution(make_napari_viewer, tmp_path):
+    """File > Save Selected Layers on a multiscale layer writes level 0 (the plugin's writer;
+    np.asarray of napari's multiscale data would not even be an image)."""
+    from napari_meris_ortho._napari.writer import write_geotiff_layer
+
+    viewer = make_napari_viewer()
+    (layer,) = viewer.open(str(_cog(tmp_path)), plugin="napari-meris-ortho")
+    assert layer.multiscale
+    data, meta, _ = layer.as_layer_data_tuple()
+    (out,) = write_geotiff_layer(str(tmp_path / "saved.tif"), data, meta)
+    with rasterio.open(out) as ds:
+        assert ds.shape == (1300, 2500)
+        np.testing.assert_array_equal(ds.read(1), np.asarray(layer.data[0]))
+
+
+def _cog(tmp_path):
+    from napari_meris_ortho.engine.resample import overview_level
+    from napari_meris_ortho.geometry.grid import OutputGrid
+    from napari_meris_ortho.output.geotiff import write_cog
+
+    grid = OutputGrid("EPSG:32632", 400_000.0, 5_100_000.0, 300.0, 300.0, 2500, 1300)
+    rows, cols = np.mgrid[0:1300, 0:2500]
+    counts = ((rows * 7 + cols * 3) % 5000 + 1).astype(np.uint16)
+    return write_cog(tmp_path / "cog.tif", [counts], grid, count=1, scales=[0.01],
+                     offsets=[0.0], halve=overview_level)

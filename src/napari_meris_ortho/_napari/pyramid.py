@@ -129,10 +129,6 @@ def memory_levels(data: np.ndarray, nodata: float | None = 0.0, resampling: str 
 
 
 def full_resolution(data: Any) -> Any:
-    """Level 0 of a layer's data (a napari ``MultiScaleData`` or a list of levels), else the
-    data itself."""
-    from napari.layers._multiscale_data import MultiScaleData
-
-    if isinstance(data, MultiScaleData | list | tuple):
-        return data[0]
-    return data
+    """Level 0 of a layer's data (napari's multiscale data and a list of levels are sequences,
+    arrays are not), else the data itself."""
+    return data[0] if isinstance(data, Sequence) else data
