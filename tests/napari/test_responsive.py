@@ -23,10 +23,10 @@ from napari_meris_ortho.simulate.scene import generate_scene
 
 #: longest event-loop gap allowed during a run: one napari layer insertion or napari's one
 #: garbage collection after the replaced layers went, with room for a loaded 2-core machine
-#: (0.39-1.13 s measured beside three other agents' jobs, load average 5-9); before this, the
-#: replaced layers' removals collected garbage one by one and every insertion switched the layer
-#: controls: 0.64-1.44 s in the same conditions (2.5 s allowed); before issue 24, one turn built
-#: and added every layer: 4-7 s
+#: (0.51-0.83 s measured beside three other agents' jobs, load average 5.7-7.3); before this, the
+#: replaced layers' removals collected garbage one by one, every insertion switched the layer
+#: controls and two steps could run in one turn: 0.64-1.79 s in the same conditions (2.5 s
+#: allowed); before issue 24, one turn built and added every layer: 4-7 s
 MAX_GAP_S = 1.5
 
 

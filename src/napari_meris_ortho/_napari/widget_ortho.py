@@ -432,9 +432,11 @@ class OrthorectifyWidget(Container):
             self.viewer.layers.remove(layer)
 
     def _schedule_step(self) -> None:
+        """The next step on a 1 ms timer: Qt delivers a 0 ms single shot as a posted event,
+        which can run right after the previous step, before the timers and paints due."""
         from qtpy.QtCore import QTimer
 
-        QTimer.singleShot(0, self._step)
+        QTimer.singleShot(1, self._step)
 
     def _step(self) -> None:
         """One queued layer change per event-loop turn, so that the viewer repaints and Cancel
