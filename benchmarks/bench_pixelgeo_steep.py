@@ -1,11 +1,12 @@
 """Pixel geolocation on steep terrain (issue 22, item 8): seen ground left unmapped, error on
 seen ground and over all mapped points, hidden ground reported, beside the tie points + DEM.
 
-The scene's SEN3 (per-pixel truth geolocation) mapped with ``geolocation="pixel"`` on the grid of
-the tie-point + DEM run; every output point whose true antecedent lies in the product is checked
-against ``true_antecedent`` and classed seen/hidden by marching its line of sight towards the
-satellite over the truth DEM. A benchmark, not a test:
-``python benchmarks/bench_pixelgeo_steep.py [--scene fr-steep] [--set JSON]``.
+The scene's SEN3 (per-pixel truth geolocation) mapped with ``geolocation="pixel"``, without and
+with the scene's DEM (``engine.pixeldem``), on the grid of the tie-point + DEM run; every output
+point whose true antecedent lies in the product is checked against ``true_antecedent`` and
+classed seen/hidden by marching its line of sight towards the satellite over the truth DEM.
+A benchmark, not a test: ``python benchmarks/bench_pixelgeo_steep.py
+[--scene fr-steep] [--set JSON]``.
 """
 
 from __future__ import annotations
@@ -65,6 +66,11 @@ def main() -> None:
         pix = orthorectify(sen3, grid=ref.grid, geolocation="pixel", bands=[7],
                            diagnostics=True)
         t_pix = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        pdem = orthorectify(sen3, grid=ref.grid, dems=[scene.dem_paths["geotiff"]],
+                            geolocation="pixel", parallax="ellipsoid", bands=[7],
+                            diagnostics=True)
+        t_pdem = time.perf_counter() - t0
     lon, lat = ref.grid.lonlat()
     h = scene.dem_height(lon, lat)
     tl, tc = scene.true_antecedent(lon, lat, h)
@@ -78,7 +84,8 @@ def main() -> None:
     print(f"{'model':<24} {'seen unmapped':>15} {'RMS seen':>9} {'p99':>6} {'max':>6} "
           f"{'RMS all':>8} {'max all':>8} {'reported hidden (true)':>23} {'hidden dropped':>15} "
           f"{'time s':>7}")
-    for label, r, seconds in (("tie points + DEM", ref, t_ref), ("SEN3 pixel", pix, t_pix)):
+    for label, r, seconds in (("tie points + DEM", ref, t_ref), ("SEN3 pixel", pix, t_pix),
+                              ("SEN3 pixel + DEM", pdem, t_pdem)):
         e = np.hypot(r.diagnostics["line"] - tl, r.diagnostics["col"] - tc)
         es, ea = e[r.valid & seen], e[r.valid & inside]
         it = r.diagnostics["iterations"]

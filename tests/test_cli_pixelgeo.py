@@ -54,6 +54,26 @@ def test_map_with_the_pixel_geolocation(geolocated, tmp_path, capsys):
     assert grid.crs.to_epsg() == 32632 and np.count_nonzero(arrays[0]) > 100_000
 
 
+def test_map_with_the_pixel_geolocation_and_a_dem(fr_small, geolocated, tmp_path, capsys):
+    """``--geolocation pixel --dem``: the per-pixel geolocation with the DEM's parallax
+    (before: exit 2, "DEMs given with geolocation 'pixel'"); on fr-small's gentle relief the
+    same pixels as without the DEM almost everywhere, not everywhere."""
+    args = ("--geolocation", "pixel", "--bands", "7", "--crs", "EPSG:32632", "--pixel-size",
+            "300")
+    code, _, err = _run(capsys, "map", geolocated["sen3"], "-o", tmp_path / "dem.tif", *args,
+                        "--dem", fr_small.dem_paths["geotiff"])
+    assert code == 0, err
+    with_dem, grid, _ = read_geotiff(tmp_path / "dem.tif")
+    assert _run(capsys, "map", geolocated["sen3"], "-o", tmp_path / "bare.tif", *args)[0] == 0
+    bare, grid_bare, _ = read_geotiff(tmp_path / "bare.tif")
+    assert grid.crs.to_epsg() == 32632
+    assert (grid.x0, grid.y0, grid.shape) == (grid_bare.x0, grid_bare.y0, grid_bare.shape)
+    both = (with_dem[0] > 0) & (bare[0] > 0)
+    assert both.sum() > 100_000 and abs(int((with_dem[0] > 0).sum()) - int(both.sum())) < 100
+    same = np.mean(with_dem[0][both] == bare[0][both])
+    assert 0.95 < same < 1.0, same
+
+
 def test_synthesize_with_the_pixel_geolocation(geolocated, tmp_path, capsys):
     from napari_meris_ortho.synthesis.reading import open_synthesis
 
@@ -67,8 +87,9 @@ def test_synthesize_with_the_pixel_geolocation(geolocated, tmp_path, capsys):
 
 def test_bad_inputs_exit_2(fr_small, geolocated, tmp_path, capsys):
     code, _, err = _run(capsys, "map", geolocated["sen3"], "-o", tmp_path / "a.tif",
-                        "--geolocation", "pixel", "--dem", fr_small.dem_paths["geotiff"])
-    assert code == 2 and "DEMs given with geolocation 'pixel'" in err
+                        "--geolocation", "pixel", "--elevation", "none", "--dem",
+                        fr_small.dem_paths["geotiff"])
+    assert code == 2 and "DEMs are only used with elevation 'dem'" in err
     code, _, err = _run(capsys, "map", fr_small.product_path, "-o", tmp_path / "b.tif",
                         "--geolocation", "pixel")
     assert code == 2 and "per-pixel geolocation" in err and err.count("\n") == 1

@@ -150,9 +150,6 @@ class OrthoOptions:
         par = parse(Parallax, parallax)
         geo = (Geolocation.default_for(par) if geolocation is None
                else parse(Geolocation, geolocation))
-        if geo is Geolocation.PIXEL and n_dems > 0:
-            raise OptionsError("DEMs given with geolocation 'pixel': the product's per-pixel "
-                               "geolocation is already terrain-corrected, no DEM is used")
         return cls(elev, parse(Sampling, sampling), par, geo, parse(SearchMethod, method),
                    float(tolerance), check_bands(bands), bool(diagnostics))
 

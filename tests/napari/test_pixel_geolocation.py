@@ -59,7 +59,7 @@ def test_flicker_tiepoint_against_pixel_geolocation(make_napari_viewer, qtbot, s
     ortho.geolocation.value = "pixel"
     _run(ortho, qtbot)
     (tie,) = [x for x in viewer.layers if x.name.startswith("ortho b7 · ")]
-    (pix,) = [x for x in viewer.layers if x.name.startswith("ortho pixel-geolocation b7 · ")]
+    (pix,) = [x for x in viewer.layers if x.name.startswith("ortho b7 (pixel geolocation) · ")]
     assert isinstance(tie, Image) and isinstance(pix, Image)
     assert tie.data.shape == pix.data.shape
     both = (tie.data > 0) & (pix.data > 0)

@@ -115,3 +115,34 @@ def test_pyepr_does_not_know_the_amorgos_types(frg, tmp_path):
         np.testing.assert_allclose(rad[:, ::-1], ours, rtol=1e-6)  # EPR mirrors the columns
     finally:
         prod.close()
+
+
+def test_pixel_geolocation_outside_its_physical_range_is_masked_with_a_count(frg, tmp_path,
+                                                                               caplog):
+    """A corrected latitude of 2000 deg or an altitude of -32768 m (held-out hostile FSG): no
+    data (NaN) with one warning per variable that counts the pixels, never a position."""
+    import logging
+
+    from napari_meris_ortho.products.n1.format import geolocation_dtype
+
+    path, kw, geo = frg
+    bad = tmp_path / "bad.N1"
+    bad.write_bytes(path.read_bytes())
+    p = read_product(bad)
+    by_name = {d.name: d for d in p.dsds}
+    for mds, rows, value in ((GEOLOCATION_MDS[1], slice(5, 7), 2_000_000_000),
+                             (GEOLOCATION_MDS[2], slice(0, 1), -32768)):
+        records = np.memmap(bad, dtype=geolocation_dtype(mds, 257), mode="r+",
+                            offset=by_name[mds.name].offset, shape=(70,))
+        records["values"][rows, :50] = value
+        records.flush()
+        del records
+    p = read_product(bad)
+    with caplog.at_level(logging.WARNING):
+        lat, alt, lon = p.pixel_latitude(), p.pixel_altitude(), p.pixel_longitude()
+        p.pixel_latitude()
+    assert np.isnan(lat).sum() == 100 and np.isnan(lat[5:7, :50]).all()
+    assert np.isnan(alt).sum() == 50 and not np.isnan(lon).any()
+    np.testing.assert_allclose(lat[7:], geo["latitude"][7:], atol=5.1e-7)
+    assert caplog.text.count("100 of 17990 corrected latitudes") == 1
+    assert "50 of 17990 altitudes" in caplog.text

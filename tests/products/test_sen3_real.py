@@ -17,6 +17,7 @@ import sen3_real as real
 from napari_meris_ortho import flags as fl
 from napari_meris_ortho.errors import Sen3FormatError
 from napari_meris_ortho.products.open import is_product_path, read_product
+from napari_meris_ortho.products.sen3.layout import product_type_of
 
 
 @pytest.fixture(scope="module")
@@ -132,9 +133,11 @@ def test_zip_archives_and_esas_other_names_open(product_dir, tmp_path):
     # EN1_MDSI names, the type from the manifest, or from the name when the manifest has none
     en1 = real.write_real_like(tmp_path / "a", name="EN1_MDSI_MER_RR__1P_20120406T085654.SEN3")
     assert read_product(en1).product_type == "ME_1_RRG___"
-    frs = real.write_real_like(tmp_path / "b", manifest_type=None,
-                               name="EN1_MDSI_MER_FRS_1P_20120406T085654.SEN3")
-    assert read_product(frs).product_type == "ME_1_FRG___"
+    rr = real.write_real_like(tmp_path / "b", manifest_type=None,
+                              name="EN1_MDSI_MER_RR__1P_20120406T085654.SEN3")
+    assert read_product(rr).product_type == "ME_1_RRG___"
+    # (an FR name over this RR product's 925 detectors is refused: test_sen3_hostile)
+    assert product_type_of("EN1_MDSI_MER_FRS_1P_20120406T085654.SEN3") == "ME_1_FRG___"
     plain = tmp_path / "product.zip"
     plain.write_bytes(b"PK\x05\x06" + b"\0" * 18)
     assert not is_product_path(plain)

@@ -49,7 +49,8 @@ def register(subparsers: Any) -> None:
                    help="tie-point position interpolation: bilinear lon/lat (eq. 4a-4b) or "
                    "ecef unit vectors (default: bilinear with --parallax handbook, ecef with "
                    "ellipsoid); or pixel: the product's own per-pixel terrain-corrected "
-                   "geolocation (MER_FRG_1P/MER_FSG_1P/MER_RRG_1P, .SEN3; no DEM, no parallax)")
+                   "geolocation (MER_FRG_1P/MER_FSG_1P/MER_RRG_1P, .SEN3; with --dem: moved "
+                   "back to the ellipsoid, then the DEM's parallax)")
     p.add_argument("--search", choices=choices(SearchMethod), default="primary",
                    help="antecedent search: primary grid + Newton (fast, maps every output "
                    "point seen by the product) or MERSYN's facet search in the loop (as "

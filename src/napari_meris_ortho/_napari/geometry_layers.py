@@ -13,7 +13,7 @@ import numpy as np
 from ..engine.boundary import segment_boundary
 from ..geometry.earth import MEAN_EARTH_RADIUS
 from ..geometry.grid import OutputGrid
-from .world import crs_wkt, lonlat_to_crs, to_world, world_axes
+from .world import WORLD_KEY, crs_wkt, geo_metadata, lonlat_to_crs, to_world, world_axes
 
 
 def footprint_polygons(tp_lat: np.ndarray, tp_lon: np.ndarray, crs: Any,
@@ -152,4 +152,6 @@ def geometry_layers(tie_points: Mapping[str, np.ndarray], frame: OutputGrid, suf
             frame, diagnostics["shift_east_m"], diagnostics["shift_north_m"],
             diagnostics.get("elevation"), step=step, exaggeration=exaggeration, valid=valid,
             name=f"{parallax_name(exaggeration)}{suffix}"))
+    for _, kwargs, _ in layers:  # the world they live in (status bar, the viewer's frame)
+        kwargs["metadata"] = {**(kwargs.get("metadata") or {}), WORLD_KEY: geo_metadata(frame)}
     return layers

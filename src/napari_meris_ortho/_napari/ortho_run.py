@@ -3,8 +3,9 @@ product (MERSYN use case 3) or a synthesis (use cases 1-2, handbook section 3.1)
 layer tuples of the result in the viewer's world frame (``world``).
 
 Layer names are short and distinct: "ortho b7 · 2003-09-21 09:23" (the product's first line
-time), "footprint · ...", "parallax ×10 · ..."; the full product name and path are in the
-layer metadata ("product", "path").
+time), "footprint · ...", "parallax ×10 · ..."; with the per-pixel geolocation
+"ortho b7 (pixel geolocation) · ..."; the full product name and path are in the layer metadata
+("product", "path").
 """
 
 from __future__ import annotations
@@ -25,7 +26,7 @@ from ..progress import ProgressCallback
 from .geometry_layers import geometry_layers
 from .product_layers import band_layers, diagnostic_layers
 from .pyramid import level_factors, memory_levels
-from .world import geo_image_kwargs, move_to_frame, same_crs
+from .world import footprint_utm, geo_image_kwargs, move_to_frame, same_crs
 
 #: "mapping" orthorectifies every product on its own; the merge rules build a synthesis
 MAPPING = "mapping"
@@ -57,9 +58,17 @@ class RunSettings:
     pixel_size_m: float = 0.0  # 0: the nominal FR 260 m / RR 1040 m
     bands: tuple[int, ...] | None = (7, 5, 2)
     #: location model: "tiepoints" (with the parallax) or "pixel" (FRG/FSG/SEN3 per-pixel
-    #: terrain-corrected geolocation, no DEM)
+    #: terrain-corrected geolocation; with DEMs, moved back to the ellipsoid and given their
+    #: parallax: ``engine.pixeldem``)
     geolocation: str = "tiepoints"
     output: Path | None = None
+    #: radii of the parallax correction (eq. 6a, 2c', 6b'; CLI ``--parallax``)
+    parallax: str = "handbook"
+    #: antecedent search (section 3.2; CLI ``--search``)
+    search: str = "primary"
+    #: an existing synthesis store to update (CLI ``synthesize --input``): the products are
+    #: merged into it (or into a copy at ``output``), its grid and bands kept
+    input_store: Path | None = None
     geometry: bool = True
     exaggeration: float = 10.0
     vector_step: int = 16
@@ -70,15 +79,33 @@ class RunSettings:
         return self.geolocation == "pixel"
 
     @property
+    def synthesis(self) -> bool:
+        """True when Run builds or updates a synthesis (a merge rule or an input store)."""
+        return self.algorithm != MAPPING or self.input_store is not None
+
+    def mode(self) -> str:
+        """What Run will do, in words (the widget shows it before Run)."""
+        n = len(self.products)
+        what = f"{n} product{'s' if n != 1 else ''}"
+        if self.input_store is not None:
+            rule = "" if self.algorithm == MAPPING else f" ({self.algorithm})"
+            into = f" into a copy at {self.output}" if self.output is not None else ""
+            return f"update synthesis {Path(self.input_store).name}{rule} with {what}{into}"
+        if self.algorithm != MAPPING:
+            return f"new synthesis ({self.algorithm}) of {what}"
+        return f"mapping: orthorectify {what}, one by one"
+
+    @property
     def dem_list(self) -> list[str]:
-        """The DEMs used (none with the per-pixel geolocation)."""
-        return [] if self.pixel else [str(d) for d in self.dems]
+        """The DEMs used (as strings)."""
+        return [str(d) for d in self.dems]
 
     def options(self) -> OrthoOptions:
         """The checked ``OrthoOptions`` of the run (``OrthoOptions.of``, as the CLI)."""
         return OrthoOptions.of(n_dems=len(self.dem_list), elevation=self.elevation,
                                sampling=self.sampling, bands=self.bands,
                                geolocation="pixel" if self.pixel else None,
+                               parallax=self.parallax, method=self.search,
                                diagnostics=self.geometry)
 
     def check(self) -> None:
@@ -92,7 +119,17 @@ class RunSettings:
         if not self.pixel and self.elevation == Elevation.DEM and not self.dems:
             raise OptionsError("elevation 'dem' needs a DEM: add one, or choose elevation "
                                "'tiepoints' (the product's tie-point heights) or 'none'")
-        if self.output is not None and self.algorithm == MAPPING:
+        if self.input_store is not None:
+            from ..synthesis.reading import is_synthesis, open_synthesis
+
+            if not is_synthesis(self.input_store):
+                raise OptionsError(f"input synthesis {self.input_store}: not a synthesis store")
+            rule = open_synthesis(self.input_store).algorithm
+            if self.algorithm not in (MAPPING, rule):
+                raise OptionsError(f"input synthesis {self.input_store}: is a {rule} synthesis, "
+                                   f"cannot update it with {self.algorithm} (choose selection "
+                                   f"{rule!r} or 'mapping')")
+        if self.output is not None and not self.synthesis:
             from ..ortho.writing import check_outputs
 
             n = len(self.products)
@@ -106,7 +143,7 @@ parse_bands = parse_band_list
 
 def output_crs(options: RunSettings, tie_points: Mapping[str, np.ndarray]) -> Any:
     """The output CRS: the UTM zone of the footprint centre, EPSG:4326 or the given EPSG code."""
-    from ..geometry.grid import parse_crs, utm_crs_for
+    from ..geometry.grid import parse_crs
 
     if options.crs == CRS_GEOGRAPHIC:
         return parse_crs("EPSG:4326")
@@ -114,9 +151,7 @@ def output_crs(options: RunSettings, tie_points: Mapping[str, np.ndarray]) -> An
         if not options.epsg:
             raise OptionsError("output CRS 'EPSG code' needs an EPSG code")
         return parse_crs(f"EPSG:{int(options.epsg)}")
-    lat, lon = tie_points["latitude"], tie_points["longitude"]
-    centre_lon = float(np.degrees(np.angle(np.mean(np.exp(1j * np.radians(lon))))))
-    return utm_crs_for(centre_lon, float(np.mean(lat)))
+    return footprint_utm(tie_points)
 
 
 def _pixel_size(options: RunSettings, product: Any, crs: Any) -> float:
@@ -154,12 +189,13 @@ class OrthoRun:
 
     def summary(self) -> str:
         """The status line of a finished run."""
-        if self.options.algorithm == MAPPING:
+        if not self.options.synthesis:
             n = len(self.items)
             text = f"done: {n} product{'s' if n != 1 else ''} orthorectified"
         else:
             n = sum(1 for item in self.items if item["tie_points"] is not None)
-            text = (f"done: synthesis ({self.options.algorithm}) of {n} "
+            what = "updated synthesis" if self.options.input_store is not None else "synthesis"
+            text = (f"done: {what} ({self.items[0]['meta']['algorithm']}) of {n} "
                     f"product{'s' if n != 1 else ''}")
         if self.warnings:
             text += f"; warning: {'; '.join(self.warnings)}"
@@ -180,7 +216,7 @@ def _item(product: Any, prefix: str = "ortho", **values: Any) -> dict[str, Any]:
 def run_orthorectify(options: RunSettings, progress: ProgressCallback | None = None) -> OrthoRun:
     """Run the chosen algorithm (no Qt): mapping of every product, or a synthesis."""
     options.check()
-    if options.algorithm == MAPPING:
+    if not options.synthesis:
         return _run_mapping(options, progress)
     return _run_synthesis(options, progress)
 
@@ -208,10 +244,13 @@ def _run_mapping(options: RunSettings, progress: ProgressCallback | None) -> Ort
             written.append(write_map(_output_path(options.output, k, n), ante,
                                      software="napari-meris-ortho widget"))
         result = ante.result()
-        prefix = "ortho pixel-geolocation" if options.pixel else "ortho"
-        items.append(_item(product, prefix, bands=result.bands, grid=result.grid,
+        # the model after the band ("ortho b7 (pixel geolocation) · ..."): names differ within
+        # the width the layer list shows, and differ from the tie-point run's
+        extra = {"suffix": f" (pixel geolocation) · {product_stamp(product)}"} \
+            if options.pixel else {}
+        items.append(_item(product, bands=result.bands, grid=result.grid,
                            valid=result.valid, diagnostics=result.diagnostics,
-                           stats=result.stats))
+                           stats=result.stats, **extra))
     return OrthoRun(items, options, written, warnings=warnings)
 
 
@@ -244,20 +283,25 @@ def _run_synthesis(options: RunSettings, progress: ProgressCallback | None) -> O
     products, skipped = _readable(options.products)
     if not products:
         raise OptionsError(f"no product could be read ({'; '.join(skipped)})")
-    crs = output_crs(options, products[0].tie_points)
-    temporary = options.output is None
-    out = (Path(tempfile.mkdtemp(prefix="synthesis-")) / "store" if options.output is None
-           else Path(options.output))
+    algorithm = None if options.algorithm == MAPPING else options.algorithm
+    grid_options: dict[str, Any] = {}
+    if options.input_store is None:  # a new synthesis: its grid from the first product
+        crs = output_crs(options, products[0].tie_points)
+        grid_options = {"crs": crs, "pixel_size": _pixel_size(options, products[0], crs)}
+    temporary = options.output is None and options.input_store is None
+    out = (Path(options.output) if options.output is not None
+           else Path(options.input_store) if options.input_store is not None
+           else Path(tempfile.mkdtemp(prefix="synthesis-")) / "store")
     try:
         result = synthesize(
-            [p.path for p in products], out, algorithm=options.algorithm, crs=crs,
-            pixel_size=_pixel_size(options, products[0], crs), progress=progress,
-            dems=options.dem_list, options=options.options())
+            [p.path for p in products], out, algorithm=algorithm, input=options.input_store,
+            progress=progress, dems=options.dem_list, options=options.options(), **grid_options)
         skipped += [f"{Path(r.path).name}: {r.error}" for r in result.failed]
+        skipped += [f"{Path(r.path).name}: already in the synthesis" for r in result.skipped]
         if not result.merged:
             raise OptionsError(f"no product could be merged into the synthesis "
                                f"({'; '.join(skipped)})")
-        item = _synthesis_item(out, options.algorithm)
+        item = _synthesis_item(out)
     finally:
         if temporary:
             shutil.rmtree(out.parent, ignore_errors=True)
@@ -266,11 +310,12 @@ def _run_synthesis(options: RunSettings, progress: ProgressCallback | None) -> O
     return OrthoRun(items, options, [] if temporary else [out], skipped)
 
 
-def _synthesis_item(path: Path, algorithm: str) -> dict[str, Any]:
+def _synthesis_item(path: Path) -> dict[str, Any]:
     """The synthesis layers read into memory: bands, NDVI (maximum-NDVI rule), count."""
     from ..synthesis.reading import open_synthesis
 
     store = open_synthesis(path)
+    algorithm = store.algorithm
     grid, prefix = store.grid, f"synthesis {algorithm}"
     count = np.asarray(store.read("count"))
     extra = []
@@ -283,7 +328,8 @@ def _synthesis_item(path: Path, algorithm: str) -> dict[str, Any]:
         grid, name=f"{prefix} count", colormap="viridis", visible=False,
         contrast_limits=(0.0, float(max(int(count.max()), 1))),
         metadata={"units": "products"}), "image"))
-    return {"prefix": prefix, "suffix": "", "meta": {"synthesis": str(path)},
+    return {"prefix": prefix, "suffix": "", "meta": {"synthesis": str(path),
+                                                     "algorithm": algorithm},
             "tie_points": None, "bands": {b: np.asarray(store.band(b)) for b in store.bands},
             "extra": extra, "grid": grid, "valid": count > 0, "diagnostics": {}, "stats": {}}
 

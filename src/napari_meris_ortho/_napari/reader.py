@@ -26,6 +26,7 @@ from ..geometry.grid import OutputGrid
 from ..products.n1.format import NUM_BANDS
 from .product_layers import QUICKLOOK_BANDS, contrast_limits, stretch_channel, stretch_rgb
 from .pyramid import LazyArray, Selection, as_slice, level_factors
+from .status import BAND_AXIS
 from .world import geo_image_kwargs, place_on_frame, viewer_frame
 
 if TYPE_CHECKING:
@@ -282,8 +283,9 @@ def _contrast_limits(band: np.ndarray, nodata: float | None) -> tuple[float, flo
 def n1_layers(path: str | Path, frame: OutputGrid | None = None) -> list[LayerData]:
     """Radiance stack (band axis = MERIS band numbers 1..15), RGB quick-look (bands 7, 5, 2)
     and flags (named bits in the features) of a MERIS L1b product (N1 or .SEN3; FRG/FSG and
-    SEN3 products also carry their per-pixel altitude in the metadata), in product geometry;
-    over a map (``frame``) placed by an affine fit of its tie points (``tie_point_affine``)."""
+    SEN3 products also carry their per-pixel altitude in the metadata), in product geometry
+    placed in the world (``frame``, or a new one in the UTM zone of the footprint) by an affine
+    fit of its tie points (``_placement``)."""
     from ..products.open import read_product
     from .ortho_run import product_stamp
 
@@ -296,10 +298,8 @@ def n1_layers(path: str | Path, frame: OutputGrid | None = None) -> list[LayerDa
     meta = n1_metadata(product)
     suffix = f" · {product_stamp(product)}"
     place = _placement(product, frame, meta)
-    band_axis: dict[str, Any] = {"scale": (1.0, 1.0, 1.0), "translate": (1.0, 0.0, 0.0)}
-    if "affine" in place:
-        band_axis = {"affine": _with_band_axis(place["affine"]),
-                     "units": ("pixel", *place["units"])}
+    band_axis = {"affine": _with_band_axis(place["affine"]), "units": ("pixel", *place["units"]),
+                 "axis_labels": (BAND_AXIS, *place["axis_labels"])}
     radiance = radiance_levels(product)
     rgb = quicklook_levels(product)
     flags = flag_levels(product)
@@ -307,7 +307,6 @@ def n1_layers(path: str | Path, frame: OutputGrid | None = None) -> list[LayerDa
     return [
         (_one_or_all(radiance), {"name": f"radiance{suffix}", "metadata": meta,
                                  "colormap": "gray", **band_axis, **multiscale,
-                                 "axis_labels": ("MERIS band", "line", "column"),
                                  "contrast_limits": _contrast_limits(
                                      np.asarray(radiance[-1][6]), None)}, "image"),
         (_one_or_all(rgb), {"name": f"RGB 7-5-2{suffix}", "rgb": True, "metadata": meta,
@@ -343,17 +342,17 @@ def flag_features(flags: np.ndarray) -> dict[str, list[Any]]:
 
 
 def _placement(product: Any, frame: OutputGrid | None, meta: dict[str, Any]) -> dict[str, Any]:
-    """napari placement of product-geometry layers over a map: an affine fit of the tie points
-    in the frame's CRS (warned about when it is coarse); nothing without a map."""
-    if frame is None:
-        return {}
-    from .world import tie_point_affine, world_axes
+    """napari placement of product-geometry layers in the world (``world.product_world``): an
+    affine fit of the tie points in the world's CRS (warned about when it is coarse); a product
+    opened first founds the world in the UTM zone of its footprint."""
+    from .world import WORLD_KEY, geo_metadata, product_world, world_axes
 
-    affine, rms = tie_point_affine(product.tie_points, product.lines_per_tie_point,
-                                   product.samples_per_tie_point, frame.crs)
+    over_map = frame is not None  # a coarse fit matters when there is a map to overlay
+    affine, rms, frame = product_world(product, frame)
+    meta[WORLD_KEY] = geo_metadata(frame)
     meta["placement"] = {"affine": affine.tolist(), "rms_error": rms,
                          "note": "approximate: affine fit of the tie points"}
-    if rms > 2.0 * max(frame.dx, frame.dy):
+    if over_map and rms > 2.0 * max(frame.dx, frame.dy):
         import warnings
 
         warnings.warn(f"{Path(product.path).name}: placed on the map by an affine fit of its "

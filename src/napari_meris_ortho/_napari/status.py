@@ -1,8 +1,13 @@
 """The status bar over geocoded layers: positive northing and easting (or latitude and
-longitude) and the CRS, instead of napari's world (row, col) = (-northing, easting).
+longitude) and the CRS, instead of napari's world (row, col) = (-northing, easting); and the
+band slider of a product's radiance stack naming the MERIS band shown.
 
-napari builds the status text from ``layer.get_status``; ``show_map_coordinates(viewer)``
-wraps it for every geocoded layer of the viewer (``metadata["geo"]``), now and when added.
+napari builds the status text from the selected layer's ``get_status``;
+``show_map_coordinates(viewer)`` wraps it for every layer of the viewer that lives in the world
+(``world.world_frame``: rasters, products, footprint/facet shapes and parallax vectors), now and
+when added, so that the coordinates are right whatever layer is selected (after a run, a
+vectors layer). napari's slider shows the step index (0-14); the axis label of a radiance stack
+names the band at the dims point instead ("MERIS band 7 (665 nm)", world band axis = 1..15).
 """
 
 from __future__ import annotations
@@ -12,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from .world import GEO_KEY, layer_frame
+from .world import GEO_KEY, world_frame
 
 _WATCHED: weakref.WeakSet[Any] = weakref.WeakSet()
 _WRAPPED = "_meris_ortho_status"
@@ -38,8 +43,8 @@ def map_position(world_row: float, world_col: float, geographic: bool, label: st
 
 
 def _wrap(layer: Any) -> None:
-    """Replace ``layer.get_status`` by one reporting map coordinates (geocoded layers only)."""
-    grid = layer_frame(layer)
+    """Replace ``layer.get_status`` by one reporting map coordinates (world layers only)."""
+    grid = world_frame(layer)
     if grid is None or getattr(layer, _WRAPPED, False):
         return
     label, geographic = crs_label(grid.crs), bool(grid.is_geographic)
@@ -69,6 +74,37 @@ def show_map_coordinates(viewer: Any) -> None:
     for layer in viewer.layers:
         _wrap(layer)
     viewer.layers.events.inserted.connect(lambda event: _wrap(event.value))
+    ref = weakref.ref(viewer)
+
+    def bands(_event: Any = None) -> None:
+        alive = ref()
+        if alive is not None:
+            label_bands(alive)
+
+    viewer.dims.events.current_step.connect(bands)
+    viewer.layers.events.inserted.connect(bands)
+    bands()
 
 
-__all__ = ["GEO_KEY", "crs_label", "map_position", "show_map_coordinates"]
+#: axis label of the band axis of a radiance stack (``reader.n1_layers``)
+BAND_AXIS = "MERIS band"
+
+
+def label_bands(viewer: Any) -> None:
+    """Name the band at the dims point on the band axis of every radiance stack (a layer with
+    ``metadata["band_names"]`` whose first axis is the band axis, world band = 1..15)."""
+    for layer in viewer.layers:
+        names = getattr(layer, "metadata", {}).get("band_names")
+        labels = tuple(layer.axis_labels)
+        if not names or layer.ndim != 3 or not labels[0].startswith(BAND_AXIS):
+            continue
+        axis = viewer.dims.ndim - layer.ndim
+        band = int(round(float(viewer.dims.point[axis])))
+        text = (f"{BAND_AXIS} {names[band - 1].removeprefix('band ')}"
+                if 1 <= band <= len(names) else BAND_AXIS)
+        if labels[0] != text:
+            layer.axis_labels = (text, *labels[1:])
+
+
+__all__ = ["BAND_AXIS", "GEO_KEY", "crs_label", "label_bands", "map_position",
+           "show_map_coordinates"]

@@ -20,6 +20,7 @@ import threading
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+import numpy as np
 from magicgui.types import FileDialogMode
 from magicgui.widgets import (
     CheckBox,
@@ -35,8 +36,9 @@ from magicgui.widgets import (
 )
 
 from ..errors import MerisOrthoError
-from ..options import Elevation, Sampling, choices
+from ..options import PARALLAX_CHOICES, Elevation, Parallax, Sampling, SearchMethod, choices
 from .layout import StatusLabel, append_inactive, canvas_updates
+from .legend import show_legends
 from .ortho_run import (
     ALGORITHMS,
     CRS_EPSG,
@@ -160,10 +162,27 @@ class OrthorectifyWidget(Container):
         self.geolocation = ComboBox(label="geolocation", choices=list(GEOLOCATIONS),
                                     value="tiepoints",
                                     tooltip="tie points with the parallax from the DEMs, or the "
-                                            "product's per-pixel geolocation (FRG/FSG/SEN3)")
+                                            "product's per-pixel geolocation (FRG/FSG/SEN3; "
+                                            "with DEMs, given their parallax)")
         self.algorithm = ComboBox(label="selection", choices=list(ALGORITHMS), value=MAPPING,
                                   tooltip="mapping of every product, or a synthesis keeping the "
                                           "minimum radiance or the maximum NDVI (section 3.1)")
+        self.input_store = FileEdit(label="input synthesis (update)",
+                                    mode=FileDialogMode.EXISTING_DIRECTORY, nullable=True,
+                                    tooltip="an existing synthesis store to update with the "
+                                            "products (its grid and bands are kept); output "
+                                            "empty: updated in place, else into a copy there")
+        self.mode = StatusLabel(value="", label="Run will",
+                                tooltip="what Run does with the current choices")
+        self.parallax = ComboBox(label="parallax", choices=choices(PARALLAX_CHOICES),
+                                 value=Parallax.HANDBOOK.value,
+                                 tooltip="parallax radii: handbook sphere R = 6 370 997 m "
+                                         "(MERSYN) or the WGS84 meridian and prime-vertical "
+                                         "radii (CLI --parallax)")
+        self.search = ComboBox(label="search", choices=choices(SearchMethod),
+                               value=SearchMethod.PRIMARY.value,
+                               tooltip="antecedent search: primary grid + Newton steps (fast) "
+                                       "or MERSYN's facet search in the loop (CLI --search)")
         self.sampling = ComboBox(label="sampling", choices=choices(Sampling),
                                  value=Sampling.NEAREST.value,
                                  tooltip="resampling of the product at the antecedents")
@@ -194,10 +213,11 @@ class OrthorectifyWidget(Container):
         self.status = StatusLabel(value="")
         super().__init__(widgets=[
             self.products, self.dem_kind, self.dem_path, self.dem_add, self.dem_list,
-            dem_buttons, self.elevation, self.geolocation, self.algorithm, self.sampling,
-            self.crs, self.epsg,
+            dem_buttons, self.elevation, self.geolocation, self.algorithm, self.input_store,
+            self.parallax, self.search, self.sampling, self.crs, self.epsg,
             self.pixel_size, self.bands, self.geometry, self.exaggeration, self.vector_step,
-            self.output, self.run_button, self.cancel_button, self.progress_bar, self.status,
+            self.output, self.mode, self.run_button, self.cancel_button, self.progress_bar,
+            self.status,
         ])
         self._cancel = threading.Event()
         self._closed = False
@@ -214,13 +234,20 @@ class OrthorectifyWidget(Container):
         self._batch_open = False  # napari's batch of layer removals (``_removals``)
         self.last_run: OrthoRun | None = None
         remembered = {"elevation": self.elevation, "geolocation": self.geolocation,
-                      "algorithm": self.algorithm,
-                      "sampling": self.sampling, "crs": self.crs, "epsg": self.epsg,
+                      "algorithm": self.algorithm, "parallax": self.parallax,
+                      "search": self.search, "sampling": self.sampling, "crs": self.crs,
+                      "epsg": self.epsg,
                       "pixel_size": self.pixel_size, "bands": self.bands,
                       "geometry": self.geometry, "exaggeration": self.exaggeration,
                       "vector_step": self.vector_step}
         self.settings_widgets = list(remembered.values())
         remember("orthorectify", remembered)
+        if self.algorithm.value != MAPPING:  # never a silent switch of the mode
+            self.status.value = (f"selection {self.algorithm.value!r} from the last session: "
+                                 "Run builds a synthesis")
+        for widget in (self.products, self.algorithm, self.input_store, self.output):
+            widget.changed.connect(self._show_mode)
+        self._show_mode()
         self.epsg.visible = self.crs.value == CRS_EPSG
         self.dem_kind.changed.connect(self._dem_kind_changed)
         self.dem_add.changed.connect(lambda _=None: self.add_dem(self.dem_path.value))
@@ -232,6 +259,7 @@ class OrthorectifyWidget(Container):
         self.cancel_button.changed.connect(lambda _=None: self.cancel())
         self.native.destroyed.connect(self._shutdown)
         show_map_coordinates(viewer)
+        show_legends(viewer)
         _import_engine()
         warm_up_in_background()  # numba compiles while the user fills the form
 
@@ -293,15 +321,28 @@ class OrthorectifyWidget(Container):
         self._sync_dem_list(selected)
 
     # ---------------------------------------------------------------- options
+    def _paths(self) -> tuple[list[Path], Path | None, Path | None]:
+        """Products, output and input store as chosen (empty fields: none)."""
+        chosen = self.products.value
+        paths = chosen if isinstance(chosen, tuple | list) else () if chosen is None else (chosen,)
+        output = self.output.value if isinstance(self.output.value, Path) else None
+        store = self.input_store.value if isinstance(self.input_store.value, Path) else None
+        return [Path(p) for p in paths], output, store
+
+    def _show_mode(self, _value: Any = None) -> None:
+        """Name what Run will do (mapping, new synthesis or update of a store) before Run."""
+        products, output, store = self._paths()
+        self.mode.value = RunSettings(products=products, algorithm=self.algorithm.value,
+                                      output=output, input_store=store).mode()
+
     def settings(self) -> RunSettings:
         """The widget's values as checked RunSettings (raises OptionsError on bad input)."""
-        chosen = self.products.value
-        paths = chosen if isinstance(chosen, tuple) else () if chosen is None else (chosen,)
-        output = self.output.value if isinstance(self.output.value, Path) else None
+        products, output, store = self._paths()
         options = RunSettings(
-            products=[Path(p) for p in paths], dems=self.dems,
+            products=products, dems=self.dems,
             elevation=self.elevation.value, geolocation=self.geolocation.value,
-            algorithm=self.algorithm.value,
+            algorithm=self.algorithm.value, parallax=self.parallax.value,
+            search=self.search.value, input_store=store,
             sampling=self.sampling.value, crs=self.crs.value, epsg=int(self.epsg.value),
             pixel_size_m=float(self.pixel_size.value), bands=parse_bands(self.bands.value),
             output=output, geometry=self.geometry.value,
@@ -470,8 +511,20 @@ class OrthorectifyWidget(Container):
         shown = [layer for layer in self._new_layers
                  if layer.visible and layer in self.viewer.layers]
         self._new_layers = []
-        if shown:
+        if not shown:
+            return
+        if max(layer.ndim for layer in shown) == self.viewer.dims.ndim:
             self.viewer.fit_to_view(layers=shown)
+            return
+        # 2-D results over a band stack (an opened N1): napari 0.9's fit_to_view(layers=...)
+        # indexes their 2-D extent with the viewer's 3-D displayed axes; frame them directly
+        extents = np.array([np.asarray(layer.extent.world, np.float64)[:, -2:]
+                            for layer in shown])
+        low, high = extents[:, 0].min(axis=0), extents[:, 1].max(axis=0)
+        size = np.where(np.isclose(high - low, 0.0), 1.0, high - low)
+        self.viewer.camera.center = tuple(float(v) for v in (low + high) / 2.0)
+        canvas = np.asarray(self.viewer.canvas.size, np.float64)
+        self.viewer.camera.zoom = float(0.95 * np.min(canvas / size))
 
     def _failed(self, exc: BaseException) -> None:
         if self._closed:

@@ -17,6 +17,13 @@ overlay exactly. A raster in another CRS is reprojected onto the frame's grid on
 
 The georeference of a layer lives in ``layer.metadata["geo"]``: ``{"crs": WKT, "transform":
 (a, b, c, d, e, f), "shape": (rows, cols)}``.
+
+Layers placed in the world without a raster grid of their own (products in their acquisition
+geometry, placed by an affine fit of their tie points; footprint, facets and parallax vectors)
+carry the grid of the world they were placed in as ``layer.metadata["world"]`` (same entries):
+the viewer's world is the grid of its bottom-most layer holding either (``viewer_frame``), and a
+product opened into an empty viewer founds a world in the UTM zone of its footprint (metres), so
+that every layer shares one CRS and one unit (napari keeps its units and the scale bar).
 """
 
 from __future__ import annotations
@@ -29,6 +36,8 @@ import numpy as np
 from ..geometry.grid import OutputGrid, parse_crs
 
 GEO_KEY = "geo"
+#: the world grid a layer without a raster grid of its own was placed in (module doc)
+WORLD_KEY = "world"
 
 
 def crs_wkt(crs: Any) -> str:
@@ -72,13 +81,48 @@ def layer_frame(layer: Any) -> OutputGrid | None:
     return OutputGrid.from_transform(geo["crs"], geo["transform"], geo["shape"])
 
 
+def world_frame(layer: Any) -> OutputGrid | None:
+    """The world grid a layer lives in: its own grid (``metadata["geo"]``) or the grid it was
+    placed in (``metadata["world"]``, product and geometry layers); None for a foreign layer."""
+    frame = layer_frame(layer)
+    if frame is not None:
+        return frame
+    world = getattr(layer, "metadata", {}).get(WORLD_KEY)
+    return OutputGrid.from_transform(world["crs"], world["transform"], world["shape"]) \
+        if world else None
+
+
 def viewer_frame(layers: Iterable[Any]) -> OutputGrid | None:
-    """The world frame of a viewer: the grid of its first (bottom-most) geocoded layer."""
+    """The world frame of a viewer: the world grid of its first (bottom-most) layer in one."""
     for layer in layers:
-        frame = layer_frame(layer)
+        frame = world_frame(layer)
         if frame is not None:
             return frame
     return None
+
+
+def footprint_utm(tie_points: Mapping[str, np.ndarray]) -> Any:
+    """The UTM zone CRS of a product's footprint centre (circular mean of the tie-point
+    longitudes, mean latitude): the default world and output CRS."""
+    from ..geometry.grid import utm_crs_for
+
+    lat, lon = tie_points["latitude"], tie_points["longitude"]
+    centre_lon = float(np.degrees(np.angle(np.mean(np.exp(1j * np.radians(lon))))))
+    return utm_crs_for(centre_lon, float(np.mean(lat)))
+
+
+def product_world(product: Any, frame: OutputGrid | None) -> tuple[np.ndarray, float, OutputGrid]:
+    """Where a product-geometry layer goes: the affine fit of its tie points into the world
+    ``frame`` (``tie_point_affine``), its RMS error (CRS units) and the world grid; without a
+    world yet, the product's default grid (``ortho.product_grid``, section 3.1) in the UTM zone
+    of its footprint founds it."""
+    if frame is None:
+        from ..ortho import product_grid
+
+        frame = product_grid(product, footprint_utm(product.tie_points))
+    affine, rms = tie_point_affine(product.tie_points, product.lines_per_tie_point,
+                                   product.samples_per_tie_point, frame.crs)
+    return affine, rms, frame
 
 
 def layer_scale(frame: OutputGrid) -> tuple[float, float]:
@@ -202,11 +246,26 @@ def move_to_frame(layer: tuple[Any, dict, str], source: OutputGrid, target: Outp
         kwargs.update(geo_image_kwargs(target, metadata=meta))
         return out, kwargs, kind
     kwargs.update(world_axes(target.crs))
+    kwargs["metadata"] = {**(kwargs.get("metadata") or {}), WORLD_KEY: geo_metadata(target)}
     if kind == "shapes":
-        return [transform_world(p, source.crs, target.crs) for p in data], kwargs, kind
+        moved = [transform_world(p, source.crs, target.crs) for p in data]
+        _rescale_width(kwargs, np.concatenate(data), np.concatenate(moved))
+        return moved, kwargs, kind
     if kind == "vectors":
         vec = np.asarray(data, np.float64)
         start = transform_world(vec[:, 0], source.crs, target.crs)
         end = transform_world(vec[:, 0] + vec[:, 1], source.crs, target.crs)
+        _rescale_width(kwargs, vec[:, 0], start)
         return np.stack([start, end - start], axis=1), kwargs, kind
     return layer
+
+
+def _rescale_width(kwargs: dict[str, Any], before: np.ndarray, after: np.ndarray) -> None:
+    """Edge width of moved shapes/vectors in the target world's units (degrees -> metres and
+    back): scaled as the extent of their vertices."""
+    if "edge_width" not in kwargs or len(before) < 2:
+        return
+    extent_before = float(np.ptp(np.asarray(before).reshape(-1, 2), axis=0).max())
+    extent_after = float(np.ptp(np.asarray(after).reshape(-1, 2), axis=0).max())
+    if extent_before > 0 and np.isfinite(extent_after):
+        kwargs["edge_width"] = float(kwargs["edge_width"]) * extent_after / extent_before

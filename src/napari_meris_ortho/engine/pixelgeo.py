@@ -299,12 +299,12 @@ def nearest_node(tlon: float, tlat: float, lon: np.ndarray, lat: np.ndarray, ste
 
 
 @njit(cache=True)
-def primary_grid_pixel(nlon, nlat, lon, lat, seed_step):
+def primary_grid_pixel(nlon, nlat, lon, lat, seed_step, node_out=_NODE_OUT):
     """Exact inverse at the primary-grid nodes (2-D lon/lat): cell search from the previous
     node's antecedent, else from the nearest subsampled pixel (hidden ground keeps the
     antecedent of its jump cell: a prediction). Returns (line, col, counts[warm, seeded,
-    failed, outside]): nodes whose antecedent lies more than ``_NODE_OUT`` pixels outside the
-    product are left out (the extended edge cells are no prediction there)."""
+    failed, outside]): nodes whose antecedent lies more than ``node_out`` pixels outside the
+    product are left out (the extended edge cells of T are no prediction there)."""
     nr, nc = nlon.shape
     cl = np.full((nr, nc), np.nan)
     cp = np.full((nr, nc), np.nan)
@@ -320,13 +320,13 @@ def primary_grid_pixel(nlon, nlat, lon, lat, seed_step):
             state = _FAILED
             if not math.isnan(last_l):
                 l2, p2, state = _node_antecedent(tlon, tlat, last_l, last_p, lon, lat,
-                                                 _LINE_REACH)
+                                                 _LINE_REACH, node_out)
                 if state != _FAILED:
                     counts[0 if state == _FOUND else 3] += 1
             if state == _FAILED:
                 g_l, g_p = nearest_node(tlon, tlat, lon, lat, seed_step)
                 l2, p2, state = _node_antecedent(tlon, tlat, g_l, g_p, lon, lat,
-                                                 seed_step + _LINE_REACH)
+                                                 seed_step + _LINE_REACH, node_out)
                 counts[1 if state == _FOUND else 2 if state == _FAILED else 3] += 1
             if state == _FOUND:
                 cl[r, c] = l2
@@ -337,7 +337,7 @@ def primary_grid_pixel(nlon, nlat, lon, lat, seed_step):
 
 
 @njit(cache=True)
-def _node_antecedent(tlon, tlat, gl, gp, lon, lat, line_reach):
+def _node_antecedent(tlon, tlat, gl, gp, lon, lat, line_reach, node_out):
     """A primary node's antecedent from a guess: its cell, else (just outside the product: the
     edge cells extended) the Newton correction. Returns (line, col, _FOUND | _OUTSIDE |
     _FAILED)."""
@@ -348,7 +348,7 @@ def _node_antecedent(tlon, tlat, gl, gp, lon, lat, line_reach):
     if not ok:
         return l2, p2, _FAILED
     nl, nc = lon.shape
-    near = -_NODE_OUT <= l2 <= nl - 1 + _NODE_OUT and -_NODE_OUT <= p2 <= nc - 1 + _NODE_OUT
+    near = -node_out <= l2 <= nl - 1 + node_out and -node_out <= p2 <= nc - 1 + node_out
     return l2, p2, _FOUND if near else _OUTSIDE
 
 

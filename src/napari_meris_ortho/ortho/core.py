@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ..engine import pixelgeo, predcorr
+from ..engine import pixeldem, pixelgeo, predcorr
 from ..engine.boundary import RowSpans, row_spans, segment_boundary
 from ..errors import DemError, OptionsError
 from ..geometry.grid import (
@@ -137,9 +137,11 @@ def orthorectify(product: ProductLike, grid: OutputGrid | None = None,
     "handbook" (sphere) or "ellipsoid" (WGS84 radii); ``geolocation``: "bilinear" lon/lat
     (eq. 4a-4b) or "ecef" (default: bilinear with the handbook parallax, ecef with the
     ellipsoid one) tie points, or "pixel": the per-pixel terrain-corrected geolocation of
-    MER_FRG_1P/MER_FSG_1P and .SEN3 products (``engine.pixelgeo``; no parallax, no DEM, the
-    elevation is ignored); ``method``: "primary" (primary grid + Newton) or "handbook" (MERSYN's
-    facet search in the loop); ``diagnostics``: the per-point layers of ``OrthoResult``.
+    MER_FRG_1P/MER_FSG_1P and .SEN3 products (``engine.pixelgeo``: bilinear between terrain
+    points, no parallax; with DEMs, ``engine.pixeldem``: the terrain points moved back to the
+    ellipsoid, then the parallax of the DEM height at the output point); ``method``: "primary"
+    (primary grid + Newton) or "handbook" (MERSYN's facet search in the loop);
+    ``diagnostics``: the per-point layers of ``OrthoResult``.
     ``allow_empty``: a ``grid`` holding no pixel centre inside the
     zero-height segment boundary gives an all-background result instead of an OptionsError
     (synthesis tiles: terrain points may still lie there, section 3.1); ``max_pixels``: largest
@@ -215,6 +217,8 @@ class Segment:
     pixel: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
     #: the DEM stack was read under a grid holding every later one (``prepare_dems``)
     dems_prepared: bool = False
+    #: per-pixel ellipsoid points (lon, lat) of the pixel geolocation with DEMs, else None
+    ellipsoid: tuple[np.ndarray, np.ndarray] | None = None
 
     def prepare_dems(self, extent: OutputGrid) -> None:
         """Read the DEM window under ``extent`` once; the grids of later ``precompute`` calls
@@ -257,11 +261,14 @@ def open_segment(product: str | os.PathLike[str] | MerisProduct,
         if stack is not None:
             _check_dem_coverage(stack, boundary)
         pixel = _pixel_grids(prod) if opts.geolocation is Geolocation.PIXEL else None
+        ellipsoid = (_ellipsoid_grid(pixel, tp, opts)
+                     if pixel is not None and stack is not None else None)
     except BaseException:
         if stack is not None:
             stack.close()
         raise
-    return Segment(prod, tp, boundary, stack, opts, [str(d) for d in dems], pixel)
+    return Segment(prod, tp, boundary, stack, opts, [str(d) for d in dems], pixel,
+                   ellipsoid=ellipsoid)
 
 
 @dataclass
@@ -283,6 +290,8 @@ class _Job:
     t_start: float
     #: per-pixel (lon, lat, altitude) grids of the pixel geolocation model, else None
     pixel: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+    #: their ellipsoid points (lon, lat) with DEMs (``engine.pixeldem``), else None
+    ellipsoid: tuple[np.ndarray, np.ndarray] | None = None
 
 
 def _height_mode(elevation: Elevation, has_dems: bool) -> int:
@@ -323,10 +332,12 @@ def _prepare(seg: Segment, grid: OutputGrid | None, crs: Any, pixel_size: float 
               if pixel is not None or opts.method is SearchMethod.PRIMARY else 0)
     inner = row_spans(boundary, grid)
     spans = row_spans(boundary, grid, margin=margin) if margin else inner
-    hmode = (predcorr.HEIGHT_NONE if pixel is not None
-             else _height_mode(opts.elevation, stack is not None))
+    if pixel is not None:  # the DEMs' heights with the ellipsoid grid, else none
+        hmode = predcorr.HEIGHT_NONE if seg.ellipsoid is None else predcorr.HEIGHT_GIVEN
+    else:
+        hmode = _height_mode(opts.elevation, stack is not None)
     return _Job(prod, tp, grid, spans, stack, hmode, opts, margin, inner.count, list(seg.dems),
-                t_start, pixel)
+                t_start, pixel, seg.ellipsoid)
 
 
 def _pixel_grids(prod: MerisProduct) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -341,13 +352,29 @@ def _pixel_grids(prod: MerisProduct) -> tuple[np.ndarray, np.ndarray, np.ndarray
             geolocated.pixel_altitude())
 
 
+def _ellipsoid_grid(pixel: tuple[np.ndarray, np.ndarray, np.ndarray], tp: TiePointGrid,
+                    opts: OrthoOptions) -> tuple[np.ndarray, np.ndarray]:
+    """The per-pixel terrain points moved back to the ellipsoid (``pixeldem.ellipsoid_grid``)
+    with the run's parallax model."""
+    _, _, coef, df, dj = tp.kernel_args()
+    return pixeldem.ellipsoid_grid(pixel[0], pixel[1], pixel[2], coef, df, dj,
+                                   opts.parallax.code)
+
+
 def _solve(job: _Job, lon: np.ndarray, lat: np.ndarray, h: np.ndarray | None,
            spans: tuple[np.ndarray, np.ndarray, np.ndarray], r0: int,
            out: tuple[np.ndarray, np.ndarray, np.ndarray]) -> dict:
     """Antecedents of one block of output rows: tie-point model (``predcorr``; primary search
     straight into ``out``, the block's rows of the whole grid) or the product's pixel
-    geolocation (``pixelgeo``)."""
+    geolocation (``pixelgeo``; with DEMs, on its ellipsoid points: ``pixeldem``)."""
     opts = job.options
+    if job.pixel is not None and job.ellipsoid is not None:
+        assert h is not None
+        return pixeldem.solve_pixel_dem(job.pixel[0], job.pixel[1], job.ellipsoid,
+                                        job.pixel[2], job.tp, opts.parallax.code, job.grid, lon,
+                                        lat, h, spans, row_start=r0, tolerance=opts.tolerance,
+                                        max_iter=pixelgeo.MAX_PIXEL_ITERATIONS,
+                                        diagnostics=opts.diagnostics)
     if job.pixel is not None:
         return pixelgeo.solve_pixel(job.pixel[0], job.pixel[1], job.grid, lon, lat, spans,
                                     row_start=r0, tolerance=opts.tolerance,

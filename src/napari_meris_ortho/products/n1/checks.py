@@ -35,6 +35,14 @@ LINE_TIME_INTERVAL_RANGE_US = (1, 10_000_000)
 #: record times (days since 2000-01-01) of a plausible product: 1990 .. 2100
 DAYS_RANGE = (-3653, 36525)
 
+#: physical ranges of the per-pixel geolocation of FRG/FSG/RRG products, by MDS(17..19) band
+#: name (``format.GEOLOCATION_MDS``); a value outside is no data
+PIXEL_GEOLOCATION_RANGES: dict[str, tuple[float, float]] = {
+    "corr_longitude": (-180.0, 180.0),
+    "corr_latitude": (-90.0, 90.0),
+    "altitude": HEIGHT_RANGE_M,
+}
+
 #: physical ranges of the tie points the geometry uses: (low, high, high included)
 TIE_POINT_RANGES: dict[str, tuple[float, float, bool]] = {
     "latitude": (-90.0, 90.0, True),

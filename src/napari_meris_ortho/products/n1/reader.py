@@ -11,6 +11,7 @@ handbook's benchmark use them); :func:`west_to_east` gives the mirrored view BEA
 
 from __future__ import annotations
 
+import logging
 import math
 import os
 import re
@@ -24,6 +25,7 @@ import numpy as np
 from ...errors import N1FormatError
 from ...geometry.tiepoints import TiePoints
 from .checks import (
+    PIXEL_GEOLOCATION_RANGES,
     check_counts,
     check_dimensions,
     check_header_numbers,
@@ -60,6 +62,8 @@ from .format import (
     tie_point_dtype,
     tie_point_record_size,
 )
+
+log = logging.getLogger(__name__)
 
 #: largest header block we accept (a MERIS SPH is 9942 bytes; ASAR ones are larger)
 _MAX_SPH_SIZE = 1 << 20
@@ -190,6 +194,7 @@ class MerisL1bProduct:
         tie_records: np.ndarray,
     ) -> None:
         self.path = path
+        self._warned: set[str] = set()
         self.mph = mph
         self.sph = sph
         self.dsds = dsds
@@ -334,7 +339,18 @@ class MerisL1bProduct:
         raw = self._records(mds.name, geolocation_dtype(mds, self.width))["values"]
         if lines is not None:
             raw = raw[lines]
-        return raw.astype(dtype) * dtype(mds.scale)
+        values = raw.astype(dtype) * dtype(mds.scale)
+        low, high = PIXEL_GEOLOCATION_RANGES[mds.band]
+        outside = (values < low) | (values > high)
+        n = int(outside.sum())
+        if n:
+            values[outside] = np.nan
+            if mds.name not in self._warned:
+                self._warned.add(mds.name)
+                what = mds.band.replace("corr_", "corrected ")
+                log.warning("%s: %d of %d %ss of %s (outside [%g, %g]) masked as no data",
+                            self.path.name, n, raw.size, what, mds.name, low, high)
+        return values
 
     def pixel_longitude(self, lines: slice | None = None) -> np.ndarray:
         """Terrain-corrected longitude of every pixel (Corrected Longitude MDS(17)), float64 deg."""

@@ -102,19 +102,55 @@ def mirror_columns(a: np.ndarray) -> np.ndarray:
 # ------------------------------------------------------------------------------------------
 
 
+#: CF packing attributes that hold one number each (``valid_range`` holds two)
+PACKING_ATTRIBUTES = ("scale_factor", "add_offset", "_FillValue", "valid_min", "valid_max")
+
+
+def packing_problem(attrs: Mapping[str, Any], variable: str) -> str | None:
+    """What is wrong with the CF packing attributes of ``variable`` (each one number;
+    ``valid_range`` two; ``scale_factor`` and ``add_offset`` finite, ``scale_factor``
+    non-zero), or None."""
+    for key in (*PACKING_ATTRIBUTES, "valid_range"):
+        if key not in attrs:
+            continue
+        what = f"{key} of {variable!r}"
+        try:
+            values = np.asarray(attrs[key]).astype(np.float64).reshape(-1)
+        except (TypeError, ValueError):
+            return f"{what} ({attrs[key]!r}) is not a number"
+        if values.size != (2 if key == "valid_range" else 1):
+            return f"{what} is not one number ({values.size} values)"
+        if key in ("scale_factor", "add_offset") and not np.isfinite(values[0]):
+            return f"{what} ({values[0]!r}) is not a finite number"
+        if key == "scale_factor" and values[0] == 0.0:
+            return f"{what} is 0"
+    return None
+
+
+def attribute_number(attrs: Mapping[str, Any], key: str, default: float) -> float:
+    """A packing attribute as one float (checked by :func:`packing_problem`)."""
+    return float(np.asarray(attrs.get(key, default)).astype(np.float64).reshape(-1)[0])
+
+
 def no_data(raw: np.ndarray, attrs: Mapping[str, Any]) -> np.ndarray:
     """Packed values that are no data (CF 1.8 section 2.5.1): equal to ``_FillValue``, or
-    outside ``valid_min``/``valid_max``/``valid_range`` (in packed units, as stored)."""
-    bad = np.zeros(np.shape(raw), bool)
-    fill = attrs.get("_FillValue")
-    if fill is not None:
-        bad |= raw == np.asarray(fill).astype(raw.dtype)
-    low, high = attrs.get("valid_min"), attrs.get("valid_max")
+    outside ``valid_min``/``valid_max``/``valid_range`` (in packed units, as stored); in a
+    floating-point variable also NaN and infinities."""
+    raw = np.asarray(raw)
+    floating = raw.dtype.kind == "f"
+    bad = ~np.isfinite(raw) if floating else np.zeros(raw.shape, bool)
+    if "_FillValue" in attrs:
+        fill = attribute_number(attrs, "_FillValue", 0.0)
+        if floating or (np.isfinite(fill) and fill == round(fill)
+                        and np.iinfo(raw.dtype).min <= fill <= np.iinfo(raw.dtype).max):
+            bad |= raw == np.asarray(fill).astype(raw.dtype)
+    low = attribute_number(attrs, "valid_min", -np.inf)
+    high = attribute_number(attrs, "valid_max", np.inf)
     if "valid_range" in attrs:
-        low, high = np.asarray(attrs["valid_range"]).tolist()
-    if low is not None:
+        low, high = np.asarray(attrs["valid_range"]).astype(np.float64).reshape(-1)[:2].tolist()
+    if low > -np.inf:
         bad |= raw < low
-    if high is not None:
+    if high < np.inf:
         bad |= raw > high
     return bad
 
@@ -123,13 +159,14 @@ def cf_decode(raw: np.ndarray, attrs: Mapping[str, Any], dtype: Any = np.float64
               ) -> tuple[np.ndarray, int]:
     """Physical values of a CF-packed variable: ``raw x scale_factor + add_offset`` (CF 1.8
     section 8.1) with no-data (:func:`no_data`) as NaN; (values, number of no-data values)."""
-    scale = float(np.asarray(attrs.get("scale_factor", 1.0)))
-    offset = float(np.asarray(attrs.get("add_offset", 0.0)))
-    out = np.asarray(raw).astype(dtype)
-    if scale != 1.0:
-        out *= dtype(scale)
-    if offset != 0.0:
-        out += dtype(offset)
+    scale = attribute_number(attrs, "scale_factor", 1.0)
+    offset = attribute_number(attrs, "add_offset", 0.0)
+    with np.errstate(invalid="ignore", over="ignore"):
+        out = np.asarray(raw).astype(dtype)
+        if scale != 1.0:
+            out *= dtype(scale)
+        if offset != 0.0:
+            out += dtype(offset)
     bad = no_data(np.asarray(raw), attrs)
     n_bad = int(bad.sum())
     if n_bad:

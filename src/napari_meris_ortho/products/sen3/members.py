@@ -11,6 +11,7 @@ import os
 import threading
 import xml.etree.ElementTree as ET
 import zipfile
+import zlib
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -68,6 +69,9 @@ class Members:
         if p.is_dir():
             return
         if p.suffix.lower() == ".zip":
+            if p.is_file() and not zipfile.is_zipfile(p):
+                raise Sen3FormatError(p, "not a zip archive, or a truncated or damaged zip "
+                                      "archive (its central directory cannot be read)")
             self.prefix = _zip_prefix(p)
             if self.prefix is None:
                 raise Sen3FormatError(p, "not a zip archive of a .SEN3 product (no "
@@ -108,8 +112,12 @@ class Members:
                 return (self.path / name).read_bytes()
             with zipfile.ZipFile(self.path) as z:
                 return z.read(self.prefix + name)
-        except (OSError, KeyError, zipfile.BadZipFile, EOFError) as exc:
-            raise Sen3FormatError(self.where(name), f"cannot read: {exc}") from None
+        except (OSError, KeyError, zipfile.BadZipFile, EOFError, zlib.error,
+                NotImplementedError, RuntimeError) as exc:
+            # zlib.error: a damaged compressed member; NotImplementedError: a compression
+            # method zipfile lacks (Deflate64); RuntimeError: an encrypted member
+            raise Sen3FormatError(self.where(name), f"cannot read (damaged or unsupported "
+                                  f"archive member): {exc}") from None
 
     @contextmanager
     def dataset(self, name: str) -> Iterator[Any]:

@@ -27,6 +27,7 @@ from ...errors import Sen3FormatError
 from ...geometry.earth import MAX_TERRAIN_M, MIN_SEABED_M
 from ...geometry.parallax import stored_corrections
 from ...geometry.tiepoints import TiePoints
+from ..n1.checks import DAYS_RANGE, MAX_FR_WIDTH, max_lines
 from ..n1.format import (
     APPENDIX_A_BANDWIDTHS,
     APPENDIX_A_WAVELENGTHS,
@@ -37,6 +38,7 @@ from ..n1.format import (
     tie_lines,
 )
 from .layout import (
+    DETECTORS,
     DOBSON_KG_M2,
     GEO_FILE,
     INSTRUMENT_FILE,
@@ -48,10 +50,12 @@ from .layout import (
     TIE_GEOMETRY_FILE,
     TIE_METEO_FILE,
     TIME_FILE,
+    attribute_number,
     cf_decode,
     flag_coding,
     mirror_columns,
     no_data,
+    packing_problem,
     product_type_of,
     quality_to_l1b,
     radiance_file,
@@ -89,7 +93,7 @@ class MerisSen3Product:
                  dj: int, tie_points: Mapping[str, np.ndarray], line_times: np.ndarray,
                  scaling: ScalingFactors, wavelengths: tuple[float, ...],
                  bandwidths: tuple[float, ...], attrs: dict[str, Any],
-                 variables: dict[str, dict[str, Any]]) -> None:
+                 variables: dict[str, dict[str, Any]], dtypes: dict[str, np.dtype]) -> None:
         self.members = members
         self.path = members.path
         self.product_type = product_type
@@ -106,6 +110,8 @@ class MerisSen3Product:
         self.attrs = attrs
         #: CF attributes of the image variables, by variable name
         self.variables = variables
+        #: stored dtypes of the radiance variables, by variable name
+        self.dtypes = dtypes
         self._warned: set[str] = set()
         n = self.n_tie_lines
         self.tie_point_times = line_times[0] + self.line_interval_s * df * np.arange(n)
@@ -170,24 +176,35 @@ class MerisSen3Product:
     # -- bands ----------------------------------------------------------------------------
 
     def no_data_count(self, band: int) -> int:
-        """The stored value of a band's no-data pixels in :meth:`counts` (its ``_FillValue``)."""
-        fill = self.variables[radiance_variable(band)].get("_FillValue", RADIANCE_FILL)
-        return int(np.asarray(fill))
+        """The value of a band's no-data pixels in :meth:`counts`: its ``_FillValue`` where
+        that is a uint16 value, else 65535 (which no valid value of a 16-bit band takes)."""
+        attrs = self.variables[radiance_variable(band)]
+        fill = attribute_number(attrs, "_FillValue", RADIANCE_FILL)
+        if self.dtypes[radiance_variable(band)] == np.uint16 and fill in range(65536):
+            return int(fill)
+        return RADIANCE_FILL
 
     def counts(self, band: int) -> np.ndarray:
         """Stored uint16 values of ``band`` (1..15), radiance = counts x scaling.radiance[b-1];
-        no-data pixels (fill, outside valid_min/valid_max) hold ``no_data_count(band)``."""
+        no-data pixels (fill, outside valid_min/valid_max, negative) hold
+        ``no_data_count(band)`` (counted in a warning, once per band)."""
         if isinstance(band, bool) or not isinstance(band, int | np.integer):
             raise TypeError(f"band must be an integer 1..15, got {band!r}")
         if not 1 <= band <= NUM_BANDS:
             raise ValueError(f"band must be 1..15, got {band}")
         raw = self._raw(radiance_file(band), radiance_variable(band))
         attrs = self.variables[radiance_variable(band)]
-        if any(k in attrs for k in ("valid_min", "valid_max", "valid_range")):
-            bad = no_data(raw, attrs)
-            if bad.any():
-                raw[bad] = self.no_data_count(band)
-        return raw.astype(np.uint16, copy=False)
+        nd = self.no_data_count(band)
+        if raw.dtype == np.uint16 and not any(k in attrs for k in ("valid_min", "valid_max",
+                                                                   "valid_range")):
+            out = raw
+        else:
+            bad = no_data(raw, attrs) | (raw < 0)
+            out = raw.astype(np.uint16)
+            out[bad] = nd
+        self._warn(f"{radiance_variable(band)} values (fill or outside the valid range)",
+                   int(np.count_nonzero(out == nd)), out.size)
+        return out
 
     def radiance(self, band: int, lines: slice | None = None) -> np.ndarray:
         """TOA radiance (mW m-2 sr-1 nm-1) of ``band``, float32 (H, W) or the given lines;
@@ -299,17 +316,27 @@ def _variables(members: Members, name: str, variables: list[str], shape: tuple[i
             var.set_auto_maskandscale(False)
             out[v] = np.asarray(var[...])
             attrs[v] = {k: var.getncattr(k) for k in var.ncattrs()}
+            _check_packing(members, name, v, attrs[v])
     return out, attrs
 
 
 def _variable_info(members: Members, name: str, variable: str
-                   ) -> tuple[tuple[int, ...], dict[str, Any]]:
-    """Shape and attributes of one variable (no data read)."""
+                   ) -> tuple[tuple[int, ...], dict[str, Any], np.dtype]:
+    """Shape, attributes (their CF packing checked) and stored dtype of one variable (no data
+    read)."""
     with members.dataset(name) as ds:
         if variable not in ds.variables:
             raise Sen3FormatError(members.where(name), f"has no variable {variable!r}")
         var = ds.variables[variable]
-        return tuple(var.shape), {k: var.getncattr(k) for k in var.ncattrs()}
+        attrs = {k: var.getncattr(k) for k in var.ncattrs()}
+        _check_packing(members, name, variable, attrs)
+        return tuple(var.shape), attrs, np.dtype(var.dtype)
+
+
+def _check_packing(members: Members, name: str, variable: str, attrs: dict[str, Any]) -> None:
+    problem = packing_problem(attrs, variable)
+    if problem is not None:
+        raise Sen3FormatError(members.where(name), problem)
 
 
 def _product_type(members: Members) -> str:
@@ -334,52 +361,118 @@ def _product_type(members: Members) -> str:
 
 def _read(members: Members) -> MerisSen3Product:
     product_type = _product_type(members)
-    shape, _ = _variable_info(members, radiance_file(1), radiance_variable(1))
+    shape, _, _ = _variable_info(members, radiance_file(1), radiance_variable(1))
     if len(shape) != 2 or min(shape) < 2:
         raise Sen3FormatError(members.where(radiance_file(1)), f"M01_radiance has shape "
                               f"{shape}, a 2-D (rows, columns) image expected")
     height, width = shape
+    _check_size(members, product_type, height, width)
     variables: dict[str, dict[str, Any]] = {}
+    dtypes: dict[str, np.dtype] = {}
     for b in range(1, NUM_BANDS + 1):
-        got, a = _variable_info(members, radiance_file(b), radiance_variable(b))
+        got, a, dtype = _variable_info(members, radiance_file(b), radiance_variable(b))
+        if dtype.kind not in "iu" or dtype.itemsize > 2:
+            raise Sen3FormatError(members.where(radiance_file(b)), f"{radiance_variable(b)} is "
+                                  f"stored as {dtype}: MERIS Level 1 radiances are 16-bit "
+                                  "integers with a scale_factor (ESA's products: uint16); "
+                                  "other types are not supported")
+        dtypes[radiance_variable(b)] = dtype
         if got != shape:
             raise Sen3FormatError(members.where(radiance_file(b)), f"variable "
                                   f"{radiance_variable(b)!r} has shape {got}, M01_radiance has "
                                   f"{shape}")
-        if float(np.asarray(a.get("add_offset", 0.0))) != 0.0:
+        if attribute_number(a, "add_offset", 0.0) != 0.0:
             raise Sen3FormatError(members.where(radiance_file(b)), "radiances with a non-zero "
                                   "add_offset are not supported")
-        scale = float(np.asarray(a.get("scale_factor", 1.0)))
+        scale = attribute_number(a, "scale_factor", 1.0)
         if not (math.isfinite(scale) and scale > 0):
             raise Sen3FormatError(members.where(radiance_file(b)), f"scale_factor {scale!r} of "
                                   f"{radiance_variable(b)} is not a positive number")
         variables[radiance_variable(b)] = a
     for v in ("latitude", "longitude", "altitude"):
-        got, a = _variable_info(members, GEO_FILE, v)
+        got, a, _ = _variable_info(members, GEO_FILE, v)
         if got != shape:
             raise Sen3FormatError(members.where(GEO_FILE), f"variable {v!r} has shape {got}, "
                                   f"the radiances have {shape}")
         variables[f"geo.{v}"] = a
     for name, v in ((INSTRUMENT_FILE, "detector_index"), (QUALITY_FILE, "quality_flags")):
-        got, a = _variable_info(members, name, v)
+        got, a, _ = _variable_info(members, name, v)
         if got != shape:
             raise Sen3FormatError(members.where(name), f"variable {v!r} has shape {got}, the "
                                   f"radiances have {shape}")
         variables[v] = a
-    times, _ = _variables(members, TIME_FILE, ["time_stamp"], (height,))
+    times, time_attrs = _variables(members, TIME_FILE, ["time_stamp"], (height,))
+    line_times = _line_times(members, product_type, times["time_stamp"],
+                             time_attrs["time_stamp"])
     tie_points, df, dj = _tie_points(members, height, width)
     spectral, instrument = _variables(members, INSTRUMENT_FILE,
                                       ["solar_flux", "lambda0", "FWHM"], None, optional=True)
+    _check_detectors(members, product_type, spectral)
     wavelengths = _band_means(spectral.get("lambda0"), APPENDIX_A_WAVELENGTHS)
     bandwidths = _band_means(spectral.get("FWHM"), APPENDIX_A_BANDWIDTHS)
     sun_flux = _band_means(spectral.get("solar_flux"), ScalingFactors().sun_flux)
     scaling = replace(ScalingFactors(), radiance=tuple(
-        float(np.asarray(variables[radiance_variable(b)].get("scale_factor", 1.0)))
+        attribute_number(variables[radiance_variable(b)], "scale_factor", 1.0)
         for b in range(1, NUM_BANDS + 1)), sun_flux=sun_flux)
     return MerisSen3Product(
         members, product_type, width, height, df, dj, tie_points,
-        times["time_stamp"].astype(np.float64) * 1e-6, scaling, wavelengths, bandwidths,
-        instrument[""], variables)
+        line_times, scaling, wavelengths, bandwidths,
+        instrument[""], variables, dtypes)
+
+
+def _check_size(members: Members, product_type: str, height: int, width: int) -> None:
+    """At most one orbit of lines and the instrument's widest line (``n1.checks``), before any
+    array is read: a forged file of a few kB can declare billions of pixels."""
+    res = SEN3_TYPES[product_type]
+    where = members.where(radiance_file(1))
+    if height > max_lines(res):
+        raise Sen3FormatError(where, f"{height} rows: more lines than one orbit "
+                              f"({max_lines(res)} {res.name} lines)")
+    widest = MAX_FR_WIDTH if res.name == "FR" else res.width
+    if width > widest:
+        raise Sen3FormatError(where, f"{width} columns: a {product_type} line has at most "
+                              f"{widest} columns")
+
+
+def _line_times(members: Members, product_type: str, stamps: np.ndarray,
+                attrs: dict[str, Any]) -> np.ndarray:
+    """Seconds since 2000-01-01 of every row from ``time_stamp`` (microseconds). A stamp that is
+    fill or no MERIS time (days 1990 .. 2100, ``n1.checks.DAYS_RANGE``) is interpolated
+    between the valid ones (extrapolated at the ends with their median interval) and counted
+    in a warning; fewer than two valid stamps is one error (the map does not use the times)."""
+    low, high = DAYS_RANGE
+    with np.errstate(invalid="ignore", over="ignore"):
+        seconds = stamps.astype(np.float64) * 1e-6
+        bad = ~((seconds >= low * 86_400.0) & (seconds <= high * 86_400.0))
+    bad |= no_data(stamps, attrs)
+    if not bad.any():
+        return seconds
+    rows = np.arange(seconds.size)
+    good = rows[~bad]
+    if good.size < 2:
+        raise Sen3FormatError(members.where(TIME_FILE), f"{int(bad.sum())} of {seconds.size} "
+                              "time_stamp values are fill or not MERIS times (1990 to 2100)")
+    step = float(np.median(np.diff(seconds[good]) / np.diff(good)))
+    out = np.interp(rows, good, seconds[good])
+    out[rows < good[0]] = seconds[good[0]] - (good[0] - rows[rows < good[0]]) * step
+    out[rows > good[-1]] = seconds[good[-1]] + (rows[rows > good[-1]] - good[-1]) * step
+    log.warning("%s: %d of %d time_stamp values of %s are fill or not MERIS times (1990 to "
+                "2100): interpolated", members.path.name, int(bad.sum()), seconds.size,
+                TIME_FILE)
+    return out
+
+
+def _check_detectors(members: Members, product_type: str, spectral: dict[str, np.ndarray]
+                     ) -> None:
+    """The (bands, detectors) arrays of instrument_data.nc must not have the detectors of the
+    other resolution (FR 3700, RR 925): a product type contradicted by the data."""
+    res = SEN3_TYPES[product_type].name
+    for name, values in spectral.items():
+        n = values.shape[-1] if values.ndim == 2 else None
+        other = next((r for r, count in DETECTORS.items() if count == n and r != res), None)
+        if other is not None:
+            raise Sen3FormatError(members.where(INSTRUMENT_FILE), f"a {product_type} product, "
+                                  f"but {INSTRUMENT_FILE} has {n} detectors ({other}) in {name}")
 
 
 def _band_means(values: np.ndarray | None, default: tuple[float, ...]) -> tuple[float, ...]:
@@ -395,7 +488,7 @@ def _band_means(values: np.ndarray | None, default: tuple[float, ...]) -> tuple[
 def _tie_points(members: Members, height: int, width: int
                 ) -> tuple[dict[str, np.ndarray], int, int]:
     """Tie points in physical units with the N1 names, N1 column order; (tie points, DF, DJ)."""
-    shape, _ = _variable_info(members, TIE_GEOMETRY_FILE, "SZA")
+    shape, _, _ = _variable_info(members, TIE_GEOMETRY_FILE, "SZA")
     geom, attrs = _variables(members, TIE_GEOMETRY_FILE, ["SZA", "SAA", "OZA", "OAA"], shape)
     where = members.where(TIE_GEOMETRY_FILE)
     try:

@@ -1,0 +1,71 @@
+"""The colour legend of the parallax vectors on the canvas (issue 24 item 4).
+
+A vectors layer of parallax shifts (``geometry_layers.parallax_layer_data``) is coloured by the
+terrain height (viridis); its legend (``metadata["legend"]``, the height range) is shown as
+napari's canvas text overlay while such a layer is visible, one line per visible layer:
+"parallax ×10 · 2003-09-21 09:23: colour = height, purple 412 m → yellow 2391 m".
+"""
+
+from __future__ import annotations
+
+import weakref
+from typing import Any
+
+_WATCHED: weakref.WeakSet[Any] = weakref.WeakSet()
+#: viewers whose text overlay shows a legend of ours
+_SHOWING: weakref.WeakSet[Any] = weakref.WeakSet()
+#: the ends of napari's viridis colormap, in words
+VIRIDIS_ENDS = ("purple", "yellow")
+
+
+def legend_line(layer: Any) -> str | None:
+    """The legend line of a height-coloured vectors layer, None for any other layer."""
+    meta = getattr(layer, "metadata", {}) or {}
+    if "legend" not in meta or "exaggeration" not in meta:
+        return None
+    lo, hi = (float(v) for v in layer.edge_contrast_limits)
+    low, high = VIRIDIS_ENDS
+    return f"{layer.name}: colour = height, {low} {lo:.0f} m → {high} {hi:.0f} m"
+
+
+def update_legend(viewer: Any) -> None:
+    """Show the legends of the visible parallax layers in the canvas text overlay (hide it when
+    there is none and it shows ours)."""
+    lines = [line for layer in viewer.layers if layer.visible
+             for line in [legend_line(layer)] if line is not None]
+    overlay = viewer.canvas.overlays.text
+    if lines:
+        overlay.text = "\n".join(lines)
+        overlay.position = "bottom_left"
+        overlay.font_size = 10
+        overlay.color = "white"
+        overlay.visible = True
+        _SHOWING.add(viewer)
+    elif viewer in _SHOWING:
+        overlay.text, overlay.visible = "", False
+        _SHOWING.discard(viewer)
+
+
+def show_legends(viewer: Any) -> None:
+    """Keep the parallax legend on the canvas as parallax layers come, go, show and hide."""
+    if viewer is None or viewer in _WATCHED:
+        return
+    _WATCHED.add(viewer)
+    ref = weakref.ref(viewer)
+
+    def update(_event: Any = None) -> None:
+        alive = ref()
+        if alive is not None:
+            update_legend(alive)
+
+    def watch(event: Any) -> None:
+        if legend_line(event.value) is not None:
+            event.value.events.visible.connect(update)
+        update()
+
+    viewer.layers.events.inserted.connect(watch)
+    viewer.layers.events.removed.connect(update)
+    for layer in viewer.layers:
+        if legend_line(layer) is not None:
+            layer.events.visible.connect(update)
+    update()

@@ -1,0 +1,48 @@
+"""Issue 24 item 4: the parallax colour legend is on the canvas (text overlay naming the height
+range of the colours) while a parallax layer is visible, and the widget's own warm-up DEM says
+its vertical datum (no warning at every opening of the widget)."""
+
+from __future__ import annotations
+
+import logging
+
+import numpy as np
+
+STAMP = " · 2003-09-21 09:23"
+
+
+def test_parallax_legend_on_the_canvas(make_napari_viewer, qtbot, tiny_n1, tiny_dem):
+    viewer = make_napari_viewer(show=True)  # a hidden canvas draws no overlays
+    _, widget = viewer.window.add_plugin_dock_widget("napari-meris-ortho", "Orthorectify")
+    widget.products.value = [tiny_n1]
+    widget.add_dem(tiny_dem)
+    widget.bands.value = "7"
+    assert widget.start() is not None, widget.status.value
+    qtbot.waitUntil(lambda: not widget.running, timeout=60_000)
+    vectors = viewer.layers[f"parallax ×10{STAMP}"]
+    lo, hi = vectors.edge_contrast_limits
+    heights = np.asarray(vectors.features["height"])
+    assert (lo, hi) == (heights.min(), heights.max()) and hi - lo > 500  # the DEM's relief
+    overlay = viewer.canvas.overlays.text
+    assert overlay.visible
+    assert overlay.text == (f"parallax ×10{STAMP}: colour = height, purple {lo:.0f} m → "
+                            f"yellow {hi:.0f} m")
+    shown = viewer.screenshot(canvas_only=True)
+    vectors.visible = False  # no parallax on screen: no legend
+    assert not overlay.visible and overlay.text == ""
+    hidden = viewer.screenshot(canvas_only=True)
+    # the legend is drawn: the bottom-left corner changes when it goes
+    corner = (slice(shown.shape[0] * 3 // 4, None), slice(0, shown.shape[1] // 2))
+    assert np.count_nonzero(np.any(shown[corner] != hidden[corner], axis=-1)) > 50
+    vectors.visible = True
+    assert overlay.visible
+
+
+def test_warm_up_dem_states_its_datum(tmp_path, caplog):
+    from napari_meris_ortho.dem.stack import open_dem
+    from napari_meris_ortho.warmup import _tiny_product
+
+    _, dem = _tiny_product(tmp_path)
+    with caplog.at_level(logging.WARNING):
+        open_dem(dem).close()
+    assert not [r for r in caplog.records if "vertical datum" in r.getMessage()], caplog.text

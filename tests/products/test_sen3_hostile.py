@@ -1,0 +1,243 @@
+"""``.SEN3`` products that differ from what our writer makes, as real or hostile files do
+(issue 22, held-out sweep): radiances packed in other integer types or unpacked, packing
+attributes that are not one number, non-finite geolocation, damaged zip archives. Each is read
+with correct values, masked with a warning that counts what was masked, or refused with one
+:class:`Sen3FormatError` (CLI exit 2, nothing written). Files are altered with netCDF4 directly
+from ``sen3_real`` (written from ESA's documented facts, not by our writer)."""
+
+from __future__ import annotations
+
+import logging
+import shutil
+import zipfile
+from pathlib import Path
+
+import netCDF4
+import numpy as np
+import pytest
+import sen3_real as real
+
+from napari_meris_ortho.cli import main
+from napari_meris_ortho.errors import Sen3FormatError
+from napari_meris_ortho.products.open import read_product
+
+
+@pytest.fixture(scope="module")
+def product_dir(tmp_path_factory):
+    return real.write_real_like(tmp_path_factory.mktemp("real"))
+
+
+@pytest.fixture(scope="module")
+def original(product_dir):
+    p = read_product(product_dir)
+    return {"M07": p.radiance(7), "lat": p.pixel_latitude()}
+
+
+@pytest.fixture
+def copy(product_dir, tmp_path):
+    dst = tmp_path / product_dir.name
+    shutil.copytree(product_dir, dst)
+    return dst
+
+
+def _rewrite(path: Path, name: str, dtype: str, fill, **attrs) -> None:
+    """Rewrite variable ``name`` of ``path`` as ``dtype`` holding the same physical values
+    (``attrs``: its new scale_factor/add_offset), ``fill`` where they are no data."""
+    tmp = path.with_suffix(".tmp")
+    with netCDF4.Dataset(path) as a, netCDF4.Dataset(tmp, "w") as b:
+        b.setncatts({k: a.getncattr(k) for k in a.ncattrs()})
+        for dim, d in a.dimensions.items():
+            b.createDimension(dim, len(d))
+        for vn, v in a.variables.items():
+            v.set_auto_maskandscale(vn == name)  # the old packing decoded, the others as stored
+            at = {k: v.getncattr(k) for k in v.ncattrs()}
+            old_fill = at.pop("_FillValue", None)
+            if vn != name:
+                nv = b.createVariable(vn, v.dtype, v.dimensions, fill_value=old_fill)
+                nv.set_auto_maskandscale(False)
+                nv.setncatts(at)
+                nv[...] = v[...]
+                continue
+            phys = np.ma.filled(v[...].astype(np.float64), np.nan)
+            for k in ("scale_factor", "add_offset", "valid_min", "valid_max"):
+                at.pop(k, None)
+            at.update(attrs)
+            nv = b.createVariable(vn, dtype, v.dimensions, fill_value=fill)
+            nv.set_auto_maskandscale(False)
+            nv.setncatts(at)
+            packed = (phys - float(attrs.get("add_offset", 0.0))) / float(
+                attrs.get("scale_factor", 1.0))
+            if np.dtype(dtype).kind in "iu":
+                packed = np.round(packed)
+            packed[np.isnan(phys)] = fill
+            nv[...] = packed.astype(dtype)
+    tmp.replace(path)
+
+
+def _set(path: Path, name: str, index, value) -> None:
+    with netCDF4.Dataset(path, "a") as ds:
+        v = ds.variables[name]
+        v.set_auto_maskandscale(False)
+        v[index] = value
+
+
+def _cli(args: list[str], capsys) -> tuple[int, str]:
+    rc = main(args)
+    return rc, capsys.readouterr().err
+
+
+def test_a_signed_16_bit_radiance_fill_is_no_data(copy, original):
+    """int16 radiances with _FillValue -1 (scale 0.01): the fill pixels are NaN, never the
+    65535 x 0.01 = 655.35 a uint16 cast makes of them; the others keep their values."""
+    f = copy / "M07_radiance.nc"
+    _rewrite(f, "M07_radiance", "i2", np.int16(-1), scale_factor=np.float32(0.01))
+    _set(f, "M07_radiance", (5, slice(5, 10)), np.int16(-1))
+    p = read_product(copy)
+    r = p.radiance(7)
+    n1_cols = real.WIDTH - 1 - np.arange(5, 10)
+    assert np.isnan(r[5, n1_cols]).all()
+    assert np.nanmax(r) < 100.0  # the field is 40 +- 20 + 7
+    ok = ~np.isnan(original["M07"])
+    ok[5, n1_cols] = False
+    np.testing.assert_allclose(r[ok], original["M07"][ok], atol=0.0051)
+    assert (p.counts(7)[5, n1_cols] == p.no_data_count(7)).all()
+
+
+def test_unpacked_float_radiances_are_one_error(copy, capsys, tmp_path):
+    f = copy / "M07_radiance.nc"
+    _rewrite(f, "M07_radiance", "f4", np.float32(np.nan))
+    with pytest.raises(Sen3FormatError, match=r"M07_radiance is stored as float32"):
+        read_product(copy)
+    out = tmp_path / "m.tif"
+    rc, err = _cli(["-q", "map", str(copy), "--bands", "7", "-o", str(out)], capsys)
+    assert rc == 2 and err.count("\n") == 1 and "float32" in err
+    assert not out.exists()
+
+
+def test_packing_attributes_must_be_one_number(copy):
+    with netCDF4.Dataset(copy / "geo_coordinates.nc", "a") as ds:
+        ds.variables["latitude"].scale_factor = np.array([1e-6, 1e-6])
+    with pytest.raises(Sen3FormatError, match=r"geo_coordinates.nc: scale_factor of 'latitude' "
+                                              r"is not one number"):
+        read_product(copy)
+
+
+def test_non_finite_geolocation_is_masked_and_counted(copy, original, caplog):
+    f = copy / "geo_coordinates.nc"
+    _rewrite(f, "latitude", "f8", np.float64(-999.0))
+    _rewrite(f, "longitude", "f8", np.float64(-999.0))
+    _set(f, "latitude", (10, 10), np.nan)
+    _set(f, "latitude", (11, 11), np.inf)
+    _set(f, "latitude", (12, 12), -999.0)
+    _set(f, "longitude", (13, 13), np.nan)
+    p = read_product(copy)
+    with caplog.at_level(logging.WARNING):
+        lat, lon = p.pixel_latitude(), p.pixel_longitude()
+    assert np.isnan(lat).sum() == 3 and np.isnan(lon).sum() == 1
+    assert "3 of 1812657 latitudes" in caplog.text and "1 of 1812657 longitudes" in caplog.text
+    ok = ~np.isnan(lat)
+    np.testing.assert_allclose(lat[ok], original["lat"][ok], atol=1e-6)
+
+
+def _zip(src: Path, dst: Path) -> Path:
+    with zipfile.ZipFile(dst, "w", zipfile.ZIP_DEFLATED) as z:
+        for f in sorted(src.iterdir()):
+            z.write(f, f"{src.name}/{f.name}")
+    return dst
+
+
+def test_a_corrupt_member_of_a_zip_is_one_error(product_dir, tmp_path, capsys):
+    archive = _zip(product_dir, tmp_path / (product_dir.name + ".zip"))
+    data = bytearray(archive.read_bytes())
+    with zipfile.ZipFile(archive) as z:
+        info = z.getinfo(f"{product_dir.name}/M07_radiance.nc")
+    start = info.header_offset + 30 + len(info.filename.encode()) + 200
+    data[start:start + 300] = bytes(b ^ 0x5A for b in data[start:start + 300])
+    archive.write_bytes(bytes(data))
+    with pytest.raises(Sen3FormatError, match=r"\.zip!M07_radiance\.nc: cannot read"):
+        read_product(archive)
+    out = tmp_path / "m.tif"
+    rc, err = _cli(["-q", "map", str(archive), "--bands", "7", "-o", str(out)], capsys)
+    assert rc == 2 and err.count("\n") == 1 and "M07_radiance.nc: cannot read" in err
+    assert not out.exists()
+
+
+def test_a_truncated_zip_says_so(product_dir, tmp_path):
+    archive = _zip(product_dir, tmp_path / (product_dir.name + ".zip"))
+    archive.write_bytes(archive.read_bytes()[:-30])
+    with pytest.raises(Sen3FormatError, match="truncated or damaged zip archive"):
+        read_product(archive)
+
+
+def _declare_m01(copy: Path, rows: int, columns: int) -> None:
+    """M01_radiance.nc declaring rows x columns pixels, never written (a few kB on disk)."""
+    f = copy / "M01_radiance.nc"
+    with netCDF4.Dataset(f) as a:
+        v = a.variables["M01_radiance"]
+        attrs = {k: v.getncattr(k) for k in v.ncattrs() if k != "_FillValue"}
+        glob = {k: a.getncattr(k) for k in a.ncattrs()}
+    f.unlink()
+    with netCDF4.Dataset(f, "w") as b:
+        b.setncatts(glob)
+        b.createDimension("rows", rows)
+        b.createDimension("columns", columns)
+        v = b.createVariable("M01_radiance", "u2", ("rows", "columns"), zlib=True,
+                             chunksizes=(256, 256), fill_value=np.uint16(65535))
+        v.setncatts(attrs)
+
+
+@pytest.mark.parametrize(("rows", "columns", "message"), [
+    (40_000, 1121, r"40000 rows: more lines than one orbit \(34661 RR lines\)"),
+    (1617, 300_001, r"300001 columns: a ME_1_RRG___ line has at most 1121 columns"),
+])
+def test_dimensions_no_meris_product_has_are_refused_before_any_read(copy, rows, columns,
+                                                                      message):
+    """A file of a few kB declaring more lines than one orbit or wider lines than the
+    instrument's (a forged product: info would allocate 8 bytes per pixel) is refused at open,
+    as N1 products are (``products/n1/checks``)."""
+    _declare_m01(copy, rows, columns)
+    with pytest.raises(Sen3FormatError, match=message):
+        read_product(copy)
+
+
+def test_a_product_type_that_contradicts_the_detectors_is_refused(tmp_path):
+    """The manifest says FR (ME_1_FRG___) over an RR product (925 detectors): refused, not
+    mapped with FR's pixel size and timing."""
+    d = real.write_real_like(tmp_path, manifest_type="ME_1_FRG___")
+    with pytest.raises(Sen3FormatError, match=r"ME_1_FRG___ product, but instrument_data.nc "
+                                              r"has 925 detectors \(RR\)"):
+        read_product(d)
+
+
+@pytest.mark.parametrize("stamp", [2**62, -(2**63)])
+def test_time_stamps_outside_meris_years_are_interpolated_with_a_count(copy, product_dir, stamp,
+                                                                      caplog):
+    """time_stamp (microseconds since 2000) of year 146 000 or the int64 minimum (was a
+    ValueError from the date formatting): interpolated from the valid rows, with a warning
+    that counts them; no valid stamps at all is one error."""
+    f = copy / "time_coordinates.nc"
+    _set(f, "time_stamp", slice(0, 3), np.int64(stamp))
+    _set(f, "time_stamp", 700, np.int64(stamp))
+    with caplog.at_level(logging.WARNING):
+        times = read_product(copy).line_times
+    assert "4 of 1617 time_stamp values" in caplog.text
+    np.testing.assert_allclose(times, read_product(product_dir).line_times, rtol=0, atol=1e-6)
+    _set(f, "time_stamp", slice(None), np.int64(stamp))
+    with pytest.raises(Sen3FormatError, match=r"time_coordinates.nc: 1617 of 1617 time_stamp "
+                                              r"values are fill or not MERIS times"):
+        read_product(copy)
+
+
+def test_radiance_fill_pixels_are_counted_in_a_warning(copy, caplog):
+    """Fill radiances are no data, and the user is told how many, once per band (the
+    product's own fill pixel in M07 plus a 10 x 10 block)."""
+    _set(copy / "M07_radiance.nc", "M07_radiance", (slice(100, 110), slice(200, 210)),
+         np.uint16(65535))
+    p = read_product(copy)
+    with caplog.at_level(logging.WARNING):
+        r = p.radiance(7)
+        p.radiance(7)
+        p.radiance(5)
+    assert np.isnan(r).sum() == 101
+    assert caplog.text.count("101 of 1812657 M07_radiance values") == 1
+    assert "M05_radiance" not in caplog.text
