@@ -23,9 +23,9 @@ from ..errors import MerisOrthoError, OptionsError
 from ..geometry.grid import OutputGrid
 from ..options import Elevation, MergeRule, OrthoOptions, choices, parse_band_list
 from ..progress import ProgressCallback
+from ..pyramid import level_factors, memory_levels
 from .geometry_layers import geometry_layers
 from .product_layers import band_layers, diagnostic_layers
-from .pyramid import level_factors, memory_levels
 from .world import footprint_utm, geo_image_kwargs, move_to_frame, same_crs
 
 #: "mapping" orthorectifies every product on its own; the merge rules build a synthesis

@@ -24,8 +24,8 @@ import numpy as np
 from ..errors import MerisOrthoError, N1FormatError
 from ..geometry.grid import OutputGrid
 from ..products.n1.format import NUM_BANDS
+from ..pyramid import LazyArray, Selection, as_slice, level_factors
 from .product_layers import QUICKLOOK_BANDS, contrast_limits, stretch_channel, stretch_rgb
-from .pyramid import LazyArray, Selection, as_slice, level_factors
 from .status import BAND_AXIS
 from .world import geo_image_kwargs, place_on_frame, viewer_frame
 

@@ -27,8 +27,8 @@ from qtpy.QtCore import QEvent, QObject
 from .._atomic import atomic_path
 from ..errors import MerisOrthoError, OptionsError
 from ..geometry.grid import OutputGrid
+from ..pyramid import full_resolution
 from .layout import StatusLabel, compact_combo
-from .pyramid import full_resolution
 from .settings import remember
 from .world import layer_frame, layer_scale, layer_translate, reproject_onto, world_axes
 

@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import OutputError
-from .pyramid import full_resolution
+from ..pyramid import full_resolution
 from .world import layer_frame
 
 

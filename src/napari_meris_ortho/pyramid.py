@@ -1,5 +1,5 @@
-"""Multiscale layer data (issue 24, item 2): napari loads the level that fits the canvas and
-reads only the window on screen.
+"""Multiscale layer data for the napari front end (issue 24, item 2; no Qt, no napari import):
+napari loads the level that fits the canvas and reads only the window on screen.
 
 A ``LazyArray`` is a full-resolution raster read on demand: indexing with integers and slices
 composes without reading, ``np.asarray`` reads the selection through the raster's ``read``
@@ -114,7 +114,7 @@ def memory_levels(data: np.ndarray, nodata: float | None = 0.0, resampling: str 
     """An in-memory raster (H, W) or RGB (H, W, 3) and its overview levels, each from the
     previous (``engine.resample.overview_level``: GDAL ``AVERAGE`` ignoring ``nodata``, or
     "nearest"), down to ``MAX_LEVEL_SIDE``; one level for a small raster."""
-    from ..engine.resample import overview_level
+    from .engine.resample import overview_level
 
     levels = [data]
     rows, cols = data.shape[:2]
