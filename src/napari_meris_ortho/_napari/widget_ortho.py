@@ -440,7 +440,7 @@ class OrthorectifyWidget(Container):
         if removals:
             removals = [(self._removals, True), *removals, (self._removals, False)]
         self._queue = [*removals, *((self._append, layer) for layer in layers),
-                       *((self._activate, layer) for layer in layers[:1])]
+                       *((self._activate, layer) for layer in layers[-1:])]
         self._queued = len(self._queue)
         self._new_layers = layers
         self._summary = run.summary()
