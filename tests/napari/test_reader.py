@@ -52,7 +52,10 @@ def test_n1_reader_layers(n1_path):
 
     layers = read_layers(str(n1_path))
     assert [t for _, _, t in layers] == ["image", "image", "labels"]
-    radiance, rgb, flags = (d for d, _, _ in layers)
+    # multiscale (2241 columns: levels of 2241, 1121 and 561 columns), level 0 read here
+    assert all(kw["multiscale"] for _, kw, _ in layers)
+    assert [level.shape for level in layers[0][0]] == [(15, H, W), (15, 35, 1121), (15, 18, 561)]
+    radiance, rgb, flags = (np.asarray(d[0]) for d, _, _ in layers)
     assert radiance.shape == (15, H, W)
     product = read_product(n1_path)
     np.testing.assert_array_equal(np.asarray(radiance[6]), product.radiance(7))

@@ -1,5 +1,7 @@
 """Layout of the plugin's widgets: docks of a fixed width, text never widens them (issue 24,
-item 7); the canvas held still while layers go in (``canvas_updates``).
+item 7); the canvas held still while layers go in (``canvas_updates``), layers inserted without
+switching the layer controls each time (``append_inactive``), so that no event-loop turn does
+much (item 1).
 
 A QLabel without word wrap asks for the width of its whole text, and a QComboBox for its
 longest item: a long status message, path or layer name widened the dock from 477 to 1066 px.
@@ -78,3 +80,24 @@ def canvas_updates(viewer: Any, enabled: bool) -> None:
         native.setUpdatesEnabled(enabled)
         if enabled:
             native.update()
+
+
+def append_inactive(viewer: Any, layer: Any) -> None:
+    """Append ``layer`` to the viewer without making it the active layer.
+
+    napari activates every inserted layer: the layer controls switch to it and the layer list
+    updates its selection, a third of an insertion's time (vispy visual and layer controls are
+    the rest); a run's layers go in one per event-loop turn, so that would be paid at every
+    turn. The caller activates one layer at the end (``viewer.layers.selection.active``).
+    ``_activate_on_insert`` is napari's own switch for this (``SelectableEventedList``); without
+    it (a future napari) the layer is simply activated.
+    """
+    layers = getattr(viewer, "__wrapped__", viewer).layers  # the plugin's public-only proxy
+    layers = getattr(layers, "__wrapped__", layers)
+    previous = getattr(layers, "_activate_on_insert", True)
+    layers._activate_on_insert = False
+    try:
+        layers.append(layer)
+    finally:
+        layers._activate_on_insert = previous
+

@@ -23,6 +23,7 @@ from ..errors import MerisOrthoError, OptionsError
 from ..geometry.grid import OutputGrid
 from ..options import Elevation, MergeRule, OrthoOptions, choices, parse_band_list
 from ..progress import ProgressCallback
+from ..pyramid import level_factors, memory_levels
 from .geometry_layers import geometry_layers
 from .product_layers import band_layers, diagnostic_layers
 from .world import footprint_utm, geo_image_kwargs, move_to_frame, same_crs
@@ -334,7 +335,8 @@ def _synthesis_item(path: Path) -> dict[str, Any]:
 
 
 def run_layers(run: OrthoRun, world: OutputGrid | None = None) -> list[LayerData]:
-    """napari layer tuples of a run: bands, diagnostics and geometry, in the world frame.
+    """napari layer tuples of a run: bands, diagnostics and geometry, in the world frame;
+    rasters bigger than ``MAX_LEVEL_SIDE`` multiscale (``multiscale_layer``).
 
     ``world``: the viewer's frame; results in another CRS are moved into it (reprojected).
     """
@@ -344,8 +346,26 @@ def run_layers(run: OrthoRun, world: OutputGrid | None = None) -> list[LayerData
         item_layers = _item_layers(item, frame, run.options)
         if world is not None and not same_crs(world.crs, frame.crs):
             item_layers = [move_to_frame(layer, frame, world) for layer in item_layers]
-        layers += item_layers
+        layers += [multiscale_layer(layer) for layer in item_layers]
     return layers
+
+
+def multiscale_layer(layer: LayerData) -> LayerData:
+    """A raster layer as a pyramid (``pyramid.memory_levels``) when it is bigger than
+    ``MAX_LEVEL_SIDE``: napari then uploads the level that fits the canvas, not the full
+    resolution, when the layer goes in. Radiances and elevations are averaged as the COG's
+    overviews (background 0 ignored), labels and iteration counts decimated."""
+    data, kwargs, kind = layer
+    if kind not in ("image", "labels") or kwargs.get("multiscale"):
+        return layer
+    arr = np.asarray(data)
+    rgb = bool(kwargs.get("rgb"))
+    if len(level_factors(*arr.shape[:2])) == 1:
+        return layer
+    average = kind == "image" and (rgb or arr.dtype.kind == "f")
+    levels = memory_levels(arr, 0.0 if average else None,
+                           "average" if average else "nearest", rgb=rgb)
+    return levels, {**kwargs, "multiscale": True}, kind
 
 
 def _item_layers(item: dict[str, Any], frame: OutputGrid, opts: RunSettings) -> list[LayerData]:

@@ -27,15 +27,21 @@ def contrast_limits(values: np.ndarray, background: float | None = 0.0) -> tuple
     return (float(lo), float(hi if hi > lo else lo + 1.0))
 
 
+def stretch_channel(values: np.ndarray, limits: tuple[float, float]) -> np.ndarray:
+    """One quick-look channel: ``values`` from ``limits`` (lo, hi) to 0..255 uint8, clipped;
+    no data (NaN) 0."""
+    lo, hi = limits
+    scaled = np.clip((np.asarray(values, np.float32) - lo) / (hi - lo) * 255.0, 0, 255)
+    return np.where(np.isfinite(scaled), scaled, 0).astype(np.uint8)
+
+
 def stretch_rgb(channels: Sequence[np.ndarray], valid: np.ndarray | None = None) -> np.ndarray:
     """An RGB (H, W, 3) uint8 quick-look, 1-99 % stretch per channel, background and no data
     (NaN: a product's fill values) black."""
     out = []
     for c in channels:
         c = np.asarray(c, np.float32)
-        lo, hi = contrast_limits(c)
-        scaled = np.clip((c - lo) / (hi - lo) * 255.0, 0, 255)
-        out.append(np.where(np.isfinite(scaled), scaled, 0).astype(np.uint8))
+        out.append(stretch_channel(c, contrast_limits(c)))
     rgb = np.stack(out, axis=-1)
     if valid is not None:
         rgb[~np.asarray(valid, bool)] = 0

@@ -1,13 +1,16 @@
 """napari readers: MERIS L1b ``.N1`` products and ``.SEN3`` directories (product geometry),
 geocoded GeoTIFFs and synthesis stores (directories; ``synthesis_layers``).
 
-N1: the 15 radiance bands as one multichannel image (band axis first, lazy), an RGB quick-look
+N1: the 15 radiance bands as one multichannel image (band axis first), an RGB quick-look
 from bands 7, 5, 2, the flags as a labels layer; tie points and headers in the layer metadata.
+A product wider or longer than ``pyramid.MAX_LEVEL_SIDE`` opens as multiscale layers read on
+demand from its memory map (``pyramid``): napari reads only the lines of the level on screen.
 Arrays stay in the stored (chronological/detector) column order, like MERSYN (ARCHITECTURE.md).
 
-GeoTIFF: every band placed in the world frame (``_layers`` module doc): north up, pixel centres
+GeoTIFF: every band placed in the world frame (``world`` module doc): north up, pixel centres
 right; a raster in another CRS or pixel size than the viewer's geocoded layers is reprojected
-onto their grid.
+onto their grid. A big one on the viewer's grid (our COGs) opens as multiscale layers on its
+own overviews, read window by window.
 """
 
 from __future__ import annotations
@@ -20,7 +23,9 @@ import numpy as np
 
 from ..errors import MerisOrthoError, N1FormatError
 from ..geometry.grid import OutputGrid
-from .product_layers import QUICKLOOK_BANDS, contrast_limits, stretch_rgb
+from ..products.n1.format import NUM_BANDS
+from ..pyramid import LazyArray, Selection, as_slice, level_factors
+from .product_layers import QUICKLOOK_BANDS, contrast_limits, stretch_channel, stretch_rgb
 from .status import BAND_AXIS
 from .world import geo_image_kwargs, place_on_frame, viewer_frame
 
@@ -152,26 +157,84 @@ def geotiff_layers(path: str | Path, frame: OutputGrid | None = None) -> list[La
             if ds.crs is None:
                 raise MerisOrthoError(f"{path}: GeoTIFF has no CRS (not geocoded)")
             _check_size(path, ds)
-            data = _physical(ds)
             source = OutputGrid.from_transform(ds.crs, tuple(ds.transform), (ds.height, ds.width))
             names = [d or f"band {i + 1}" for i, d in enumerate(ds.descriptions)]
             tags = ds.tags()
             nodata = ds.nodata
+            lazy = (frame is None or source.same_grid(frame)) and len(
+                level_factors(ds.height, ds.width)) > 1
+            bands: list[Any] = geotiff_levels(path, ds) if lazy else []
+            data = None if lazy else _physical(ds)
     except RasterioIOError as exc:
         raise MerisOrthoError(f"{path}: cannot read GeoTIFF ({exc})") from None
-    is_mask = data.dtype.kind in "iu" and data.dtype.itemsize == 1
-    placed, grid = place_on_frame(data, source, frame, nearest=is_mask)
+    grid = source
+    if data is not None:
+        is_mask = data.dtype.kind in "iu" and data.dtype.itemsize == 1
+        placed, grid = place_on_frame(data, source, frame, nearest=is_mask)
+        bands = list(placed)
     layers = []
     for k, band_name in enumerate(names):
-        band = placed[k]
+        band = bands[k]
         meta = {"path": str(path), "tags": tags, "nodata": nodata, "band": k + 1,
                 "source_crs": source.crs, "reprojected": grid is not source}
         name = path.stem if len(names) == 1 else f"{path.stem} {band_name}"
         kwargs = geo_image_kwargs(grid, name=name, metadata=meta)
-        kwargs["contrast_limits"] = _contrast_limits(band, nodata)
+        coarsest = np.asarray(band[-1]) if lazy else band  # contrast of the coarsest level
+        kwargs["contrast_limits"] = _contrast_limits(coarsest, nodata)
         kwargs["colormap"] = "gray"
+        if lazy:
+            kwargs["multiscale"] = True
         layers.append((band, kwargs, "image"))
     return layers
+
+
+def geotiff_levels(path: Path, ds: Any) -> list[list[LazyArray]]:
+    """Per band the levels of a big GeoTIFF, read on demand (``pyramid``): full resolution and
+    the file's own overviews (a COG's; 2, 4, ... to ``MAX_LEVEL_SIDE`` decimated from the full
+    resolution when it has none); bands with a scale as physical values (``_physical``)."""
+    overviews = ds.overviews(1)
+    factors = [1, *overviews] if overviews else level_factors(ds.height, ds.width)
+    physical = not (all(s == 1.0 for s in ds.scales) and all(o == 0.0 for o in ds.offsets))
+    dtype = np.float32 if physical else np.dtype(ds.dtypes[0])
+    out = []
+    for k in range(ds.count):
+        scale = (ds.scales[k], ds.offsets[k]) if physical else None
+        read = _GeoTiffWindows(path, k + 1, [1, *overviews], scale)
+        band = LazyArray(read, (ds.height, ds.width), dtype)
+        out.append([band[::f, ::f] for f in factors])
+    return out
+
+
+class _GeoTiffWindows:
+    """``read`` of a GeoTIFF band (``LazyArray``): a selection whose step is an overview's
+    factor reads that overview's window, any other reads the full-resolution window; with
+    ``scale`` (the band's GDAL scale and offset) physical values (``_to_physical``)."""
+
+    def __init__(self, path: Path, band: int, factors: list[int],
+                 scale: tuple[float, float] | None) -> None:
+        self.path, self.band, self.factors, self.scale = path, band, factors, scale
+
+    def __call__(self, sel: Selection) -> np.ndarray:
+        import rasterio
+        from rasterio.windows import Window
+
+        rows, cols = (range(s, s + 1) if isinstance(s, int) else s for s in sel)
+        f = rows.step if rows.step == cols.step else 1
+        if f not in self.factors or rows.start % f or cols.start % f:
+            f = 1
+        level = self.factors.index(f) - 1
+        opened = rasterio.open(self.path, overview_level=level) if level >= 0 else (
+            rasterio.open(self.path))
+        with opened as ds:
+            window = Window(cols.start // f, rows.start // f,
+                            (cols[-1] - cols.start) // f + 1, (rows[-1] - rows.start) // f + 1)
+            data = ds.read(self.band, window=window)[None]
+            if self.scale is not None:  # an overview does not carry the band's scale
+                mask = ds.read_masks(self.band, window=window)[None] == 0
+                data = _to_physical(data, mask, [self.scale[0]], [self.scale[1]])
+        step = rows.step // f, cols.step // f
+        out = data[0, ::step[0], ::step[1]]
+        return out[tuple(0 if isinstance(s, int) else slice(None) for s in sel)]
 
 
 def _physical(ds: Any) -> np.ndarray:
@@ -180,10 +243,15 @@ def _physical(ds: Any) -> np.ndarray:
     data = ds.read()
     if all(s == 1.0 for s in ds.scales) and all(o == 0.0 for o in ds.offsets):
         return data
-    mask = ds.read_masks() == 0
-    out = data.astype(np.float32) * np.asarray(ds.scales, np.float32)[:, None, None]
-    out += np.asarray(ds.offsets, np.float32)[:, None, None]
-    out[mask] = 0
+    return _to_physical(data, ds.read_masks() == 0, ds.scales, ds.offsets)
+
+
+def _to_physical(data: np.ndarray, nodata: np.ndarray, scales: Any, offsets: Any
+                 ) -> np.ndarray:
+    """(bands, rows, cols) counts x scale + offset as float32, ``nodata`` pixels 0."""
+    out = data.astype(np.float32) * np.asarray(scales, np.float32)[:, None, None]
+    out += np.asarray(offsets, np.float32)[:, None, None]
+    out[nodata] = 0
     return out
 
 
@@ -232,17 +300,26 @@ def n1_layers(path: str | Path, frame: OutputGrid | None = None) -> list[LayerDa
     place = _placement(product, frame, meta)
     band_axis = {"affine": _with_band_axis(place["affine"]), "units": ("pixel", *place["units"]),
                  "axis_labels": (BAND_AXIS, *place["axis_labels"])}
-    flags = np.asarray(product.flags)
+    radiance = radiance_levels(product)
+    rgb = quicklook_levels(product)
+    flags = flag_levels(product)
+    multiscale = {"multiscale": len(radiance) > 1}
     return [
-        (radiance_stack(product), {"name": f"radiance{suffix}", "metadata": meta,
-                                   "colormap": "gray", **band_axis,
-                                   "contrast_limits": _contrast_limits(product.radiance(7), None)},
-         "image"),
-        (quicklook_rgb(product), {"name": f"RGB 7-5-2{suffix}", "rgb": True, "metadata": meta,
-                                  **place}, "image"),
-        (flags, {"name": f"flags{suffix}", "metadata": meta, "opacity": 0.4, "visible": False,
-                 "features": flag_features(flags), **place}, "labels"),
+        (_one_or_all(radiance), {"name": f"radiance{suffix}", "metadata": meta,
+                                 "colormap": "gray", **band_axis, **multiscale,
+                                 "contrast_limits": _contrast_limits(
+                                     np.asarray(radiance[-1][6]), None)}, "image"),
+        (_one_or_all(rgb), {"name": f"RGB 7-5-2{suffix}", "rgb": True, "metadata": meta,
+                            **place, **multiscale}, "image"),
+        (_one_or_all(flags), {"name": f"flags{suffix}", "metadata": meta, "opacity": 0.4,
+                              "visible": False, "features": flag_features(flags[0]), **place,
+                              **multiscale}, "labels"),
     ]
+
+
+def _one_or_all(levels: list[Any]) -> Any:
+    """A layer's data: its only level, or the list of levels (multiscale)."""
+    return levels[0] if len(levels) == 1 else levels
 
 
 def flag_names(value: int) -> str:
@@ -255,7 +332,11 @@ def flag_names(value: int) -> str:
 
 def flag_features(flags: np.ndarray) -> dict[str, list[Any]]:
     """Features of the flags labels layer: every flag value present and its bit names."""
-    present = np.flatnonzero(np.bincount(np.asarray(flags, np.uint8).ravel(), minlength=256))
+    counts = np.zeros(256, np.int64)
+    for start in range(0, flags.shape[0], 256):  # a block of lines at a time: little memory
+        counts += np.bincount(np.asarray(flags[start:start + 256], np.uint8).ravel(),
+                              minlength=256)
+    present = np.flatnonzero(counts)
     values = sorted({int(v) for v in present} | {0})
     return {"index": values, "flags": [flag_names(v) for v in values]}
 
@@ -303,18 +384,79 @@ def n1_metadata(product: MerisProduct) -> dict[str, Any]:
     }
 
 
-def radiance_stack(product: MerisProduct) -> Any:
-    """The 15 radiance bands as a lazy (15, H, W) float32 dask array."""
-    import dask
-    import dask.array as da
+def radiance_levels(product: MerisProduct) -> list[Any]:
+    """The 15 radiance bands (15, H, W) float32 (``radiance_stack``) and its decimated levels
+    (``pyramid``); one level for a small product or a ``.SEN3`` (``_product_factors``)."""
+    stack = radiance_stack(product)
+    return stack.levels() if len(_product_factors(product)) > 1 else [stack]
 
-    shape = (product.height, product.width)
-    bands = [da.from_delayed(dask.delayed(product.radiance)(b), shape, dtype=np.float32)
-             for b in range(1, 16)]
-    return da.stack(bands)
+
+def radiance_stack(product: MerisProduct) -> LazyArray:
+    """The 15 radiance bands as a lazy (15, H, W) float32 array: a selection reads only its
+    lines of the selected bands (``MerisProduct.radiance``)."""
+
+    def read(sel: Selection) -> np.ndarray:
+        band, rows, cols = sel
+        bands = [band] if isinstance(band, int) else list(band)
+        lines, columns = _lines_columns(rows, cols)
+        out = np.stack([product.radiance(b + 1, lines)[columns] for b in bands])
+        return out[0] if isinstance(band, int) else out
+
+    return LazyArray(read, (NUM_BANDS, product.height, product.width), np.float32)
+
+
+def _lines_columns(rows: int | range, cols: int | range) -> tuple[slice, Any]:
+    """The product lines to read and the columns to keep of a selection."""
+    lines = slice(rows, rows + 1) if isinstance(rows, int) else as_slice(rows)
+    columns: Any = cols if isinstance(cols, int) else as_slice(cols)
+    if isinstance(rows, int):
+        return lines, (0, columns)
+    return lines, (slice(None), columns)
+
+
+def quicklook_levels(product: MerisProduct,
+                     bands: tuple[int, int, int] = QUICKLOOK_BANDS) -> list[Any]:
+    """The RGB quick-look (``quicklook_rgb``) of a small product; of a big one a lazy (H, W, 3)
+    uint8 array and its decimated levels, each channel stretched by the 1-99 % limits of the
+    coarsest level (``stretch_channel``)."""
+    factors = _product_factors(product)
+    if len(factors) == 1:
+        return [quicklook_rgb(product, bands)]
+    f = factors[-1]
+    limits = [contrast_limits(product.radiance(b, slice(None, None, f))[:, ::f])
+              for b in bands]
+
+    def read(sel: Selection) -> np.ndarray:
+        rows, cols, channel = sel
+        channels = [channel] if isinstance(channel, int) else list(channel)
+        lines, columns = _lines_columns(rows, cols)
+        out = [stretch_channel(product.radiance(bands[c], lines)[columns], limits[c])
+               for c in channels]
+        return out[0] if isinstance(channel, int) else np.stack(out, axis=-1)
+
+    rgb = LazyArray(read, (product.height, product.width, 3), np.uint8)
+    return rgb.levels(spatial=(0, 1))
 
 
 def quicklook_rgb(product: MerisProduct,
                   bands: tuple[int, int, int] = QUICKLOOK_BANDS) -> np.ndarray:
     """An RGB quick-look (H, W, 3) uint8 from three radiance bands, 1-99 % stretch each."""
     return stretch_rgb([product.radiance(b) for b in bands])
+
+
+def flag_levels(product: MerisProduct) -> list[np.ndarray]:
+    """The flags (H, W) uint8 and their decimated views (an N1's are views of its memory map:
+    a level reads only the lines on screen)."""
+    flags = np.asarray(product.flags)
+    return [flags[::f, ::f] for f in _product_factors(product)]
+
+
+def _product_factors(product: MerisProduct) -> list[int]:
+    """The decimation factors of a product's levels: an N1's (``level_factors``: its memory map
+    reads only the lines of a level); one level for a ``.SEN3``, whose netCDF bands are read
+    whole at every access (as before: the quick-look computed once)."""
+    from ..products.n1.reader import MerisL1bProduct
+
+    if not isinstance(product, MerisL1bProduct):
+        return [1]
+    return level_factors(product.height, product.width)

@@ -27,6 +27,7 @@ from qtpy.QtCore import QEvent, QObject
 from .._atomic import atomic_path
 from ..errors import MerisOrthoError, OptionsError
 from ..geometry.grid import OutputGrid
+from ..pyramid import full_resolution
 from .layout import StatusLabel, compact_combo
 from .settings import remember
 from .world import layer_frame, layer_scale, layer_translate, reproject_onto, world_axes
@@ -360,7 +361,8 @@ class FlickerWidget(Container):
         is reprojected onto layer A's grid when they differ."""
         a, b = self._pair()
         frame_a, frame_b = layer_frame(a), layer_frame(b)
-        image_a, image_b = np.asarray(a.data, np.float32), np.asarray(b.data, np.float32)
+        image_a, image_b = (np.asarray(full_resolution(layer.data), np.float32)
+                            for layer in (a, b))
         if frame_a is not None and frame_b is not None and frame_a != frame_b:
             image_b = reproject_onto(image_b, frame_b, frame_a)
         elif image_a.shape != image_b.shape:

@@ -7,9 +7,10 @@ and an optional output file. The work (``ortho_run``) runs in a napari thread wo
 progress bar in the widget and in the activity dock, and a cancel button; closing the viewer
 cancels it. Everything heavy (reading, orthorectification, layer data, contrast limits, RGB
 stretch, geometry, the napari layer objects) runs in the job (``build_layers``); the Qt thread
-only inserts the ready layers, one per event-loop turn, in the world frame (``world``); a rerun
-replaces the layers of the same names. A finished run keeps nothing alive but its layers.
-The settings are remembered (``settings``).
+only inserts the ready layers (rasters as pyramids), one per event-loop turn and without
+making each the active layer, in the world frame (``world``); a rerun replaces the layers of the
+same names, removed one per turn in one napari batch (one garbage collection). A finished run
+keeps nothing alive but its layers. The settings are remembered (``settings``).
 """
 
 from __future__ import annotations
@@ -36,7 +37,7 @@ from magicgui.widgets import (
 
 from ..errors import MerisOrthoError
 from ..options import PARALLAX_CHOICES, Elevation, Parallax, Sampling, SearchMethod, choices
-from .layout import StatusLabel, canvas_updates
+from .layout import StatusLabel, append_inactive, canvas_updates
 from .legend import show_legends
 from .ortho_run import (
     ALGORITHMS,
@@ -230,6 +231,7 @@ class OrthorectifyWidget(Container):
         self._queue: list[tuple[Any, Any]] = []
         self._queued, self._summary = 0, ""
         self._new_layers: list[Any] = []
+        self._batch_open = False  # napari's batch of layer removals (``_removals``)
         self.last_run: OrthoRun | None = None
         remembered = {"elevation": self.elevation, "geolocation": self.geolocation,
                       "algorithm": self.algorithm, "parallax": self.parallax,
@@ -431,10 +433,14 @@ class OrthorectifyWidget(Container):
         run, layers = value
         self.last_run = run
         names = {layer.name for layer in layers}
-        # napari collects garbage at every removal (0.3-0.5 s): one removal per turn too
-        self._queue = [*((self._remove_layer, old) for old in self.viewer.layers
-                         if old.name in names),
-                       *((self.viewer.layers.append, layer) for layer in layers)]
+        replaced = [old for old in self.viewer.layers if old.name in names]
+        # napari collects garbage after every removal (0.1-0.5 s): the removals go in one
+        # batch of napari's, one per turn, and the batch ends (one collection) in a turn alone
+        removals: list[tuple[Any, Any]] = [(self._remove_layer, old) for old in replaced]
+        if removals:
+            removals = [(self._removals, True), *removals, (self._removals, False)]
+        self._queue = [*removals, *((self._append, layer) for layer in layers),
+                       *((self._activate, layer) for layer in layers[-1:])]
         self._queued = len(self._queue)
         self._new_layers = layers
         self._summary = run.summary()
@@ -444,14 +450,34 @@ class OrthorectifyWidget(Container):
     def _canvas_updates(self, enabled: bool) -> None:
         canvas_updates(self.viewer, enabled)
 
+    def _append(self, layer: Any) -> None:
+        append_inactive(self.viewer, layer)
+
+    def _activate(self, layer: Any) -> None:
+        if layer in self.viewer.layers:
+            self.viewer.layers.selection.active = layer
+
+    def _removals(self, start: Any) -> None:
+        """Start or end napari's batch of layer changes (``LayerList.batched_update``): within
+        it a removal does not collect garbage nor rebuild the scene graph; its end does both.
+        The selection is emptied first: removing a selected layer restyles the layer buttons."""
+        if bool(start) != self._batch_open:
+            self._batch_open = bool(start)
+            if start:
+                self.viewer.layers.selection.clear()
+            events = self.viewer.layers.events
+            (events.begin_batch if start else events.end_batch)()
+
     def _remove_layer(self, layer: Any) -> None:
         if layer in self.viewer.layers:
             self.viewer.layers.remove(layer)
 
     def _schedule_step(self) -> None:
+        """The next step on a 1 ms timer: Qt delivers a 0 ms single shot as a posted event,
+        which can run right after the previous step, before the timers and paints due."""
         from qtpy.QtCore import QTimer
 
-        QTimer.singleShot(0, self._step)
+        QTimer.singleShot(1, self._step)
 
     def _step(self) -> None:
         """One queued layer change per event-loop turn, so that the viewer repaints and Cancel
@@ -524,5 +550,6 @@ class OrthorectifyWidget(Container):
             self._end()
 
     def _end(self) -> None:
+        self._removals(False)  # a batch left open by Cancel
         self._canvas_updates(True)
         self.run_button.enabled, self.cancel_button.enabled = True, False

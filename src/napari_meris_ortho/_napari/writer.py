@@ -12,6 +12,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import OutputError
+from ..pyramid import full_resolution
 from .world import layer_frame
 
 
@@ -31,7 +32,7 @@ def write_geotiff_layer(path: str, data: Any, meta: dict[str, Any]) -> list[str]
     if grid is None:
         raise OutputError(f"layer {name!r} has no georeference (metadata 'geo'): save it with "
                           "napari's own TIFF writer, or orthorectify it first")
-    arr = np.asarray(data)
+    arr = np.asarray(full_resolution(data))  # a multiscale layer: its full resolution
     bands = list(np.moveaxis(arr, -1, 0)) if meta.get("rgb") else (
         [arr] if arr.ndim == 2 else list(arr))
     info = meta.get("metadata") or {}

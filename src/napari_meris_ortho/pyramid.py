@@ -1,0 +1,134 @@
+"""Multiscale layer data for the napari front end (issue 24, item 2; no Qt, no napari import):
+napari loads the level that fits the canvas and reads only the window on screen.
+
+A ``LazyArray`` is a full-resolution raster read on demand: indexing with integers and slices
+composes without reading, ``np.asarray`` reads the selection through the raster's ``read``
+function (an N1 band reads only the product lines of the selection from its memory map, a COG
+the window of the overview whose factor matches the selection's step). Its decimated levels
+are strided views of it, factors 1, 2, 4, ... until the longer side is at most
+``MAX_LEVEL_SIDE`` (``level_factors``); in-memory results get levels averaged like the COG's
+overviews (``memory_levels``, ``engine.resample.overview_level``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import numpy as np
+
+#: longer side (pixels) of the coarsest level; a raster this small is one level
+MAX_LEVEL_SIDE = 1024
+
+#: a selection: per axis of the full-resolution raster an index or a range of indices
+Selection = tuple[int | range, ...]
+
+
+def level_factors(rows: int, cols: int) -> list[int]:
+    """Decimation factors 1, 2, 4, ... until the level's longer side (``ceil(n / f)``, as the
+    COG's overviews) is at most ``MAX_LEVEL_SIDE``."""
+    factors = [1]
+    while max(-(-rows // factors[-1]), -(-cols // factors[-1])) > MAX_LEVEL_SIDE:
+        factors.append(2 * factors[-1])
+    return factors
+
+
+def as_slice(r: range) -> slice:
+    """The slice of a range of positive step (an empty range: an empty slice)."""
+    return slice(r.start, r.start + len(r) * r.step, r.step)
+
+
+class LazyArray:
+    """A raster of ``shape`` read on demand by ``read(selection)`` (module doc).
+
+    ``read`` gets one entry per full-resolution axis, an ``int`` or a ``range`` of positive
+    step, and returns the array of the ranges' axes (in order), never larger than asked.
+    """
+
+    def __init__(self, read: Callable[[Selection], np.ndarray], shape: Sequence[int],
+                 dtype: Any, selection: Selection | None = None) -> None:
+        self._read = read
+        self.dtype = np.dtype(dtype)
+        self._sel: Selection = (selection if selection is not None
+                                else tuple(range(int(n)) for n in shape))
+
+    @property
+    def shape(self) -> tuple[int, ...]:
+        return tuple(len(s) for s in self._sel if isinstance(s, range))
+
+    @property
+    def ndim(self) -> int:
+        return len(self.shape)
+
+    @property
+    def size(self) -> int:
+        return int(np.prod(self.shape))
+
+    def __len__(self) -> int:
+        return self.shape[0]
+
+    def __repr__(self) -> str:
+        return f"<LazyArray {self.shape} {self.dtype}>"
+
+    def __getitem__(self, key: Any) -> Any:
+        """Integers and slices of positive step compose lazily; anything else reads first."""
+        keys = key if isinstance(key, tuple) else (key,)
+        free = [axis for axis, s in enumerate(self._sel) if isinstance(s, range)]
+        if any(k is Ellipsis for k in keys):
+            at = keys.index(Ellipsis)
+            keys = (*keys[:at], *(slice(None),) * (len(free) - len(keys) + 1), *keys[at + 1:])
+        basic = all(isinstance(k, slice) and (k.step is None or k.step > 0)
+                    or isinstance(k, int | np.integer) and not isinstance(k, bool)
+                    for k in keys)
+        if not basic or len(keys) > len(free):
+            return np.asarray(self)[key]
+        sel = list(self._sel)
+        for axis, k in zip(free, keys, strict=False):
+            r = sel[axis]
+            assert isinstance(r, range)
+            sel[axis] = r[k] if isinstance(k, slice) else r[int(k)]
+        view = LazyArray(self._read, (), self.dtype, tuple(sel))
+        return view if view.ndim else np.asarray(view)[()]
+
+    def __array__(self, dtype: Any = None, copy: bool | None = None) -> np.ndarray:
+        if self.size == 0:
+            out = np.empty(self.shape, self.dtype)
+        else:
+            out = np.asarray(self._read(self._sel), self.dtype).reshape(self.shape)
+        return out if dtype is None else out.astype(dtype)
+
+    def levels(self, spatial: tuple[int, int] = (-2, -1)) -> list[LazyArray]:
+        """Level 0 and its decimated views (``level_factors`` of the ``spatial`` axes)."""
+        rows, cols = (self.shape[a] for a in spatial)
+        out = [self]
+        for f in level_factors(rows, cols)[1:]:
+            key = [slice(None)] * self.ndim
+            for a in spatial:
+                key[a] = slice(None, None, f)
+            out.append(self[tuple(key)])
+        return out
+
+
+def memory_levels(data: np.ndarray, nodata: float | None = 0.0, resampling: str = "average",
+                  rgb: bool = False) -> list[np.ndarray]:
+    """An in-memory raster (H, W) or RGB (H, W, 3) and its overview levels, each from the
+    previous (``engine.resample.overview_level``: GDAL ``AVERAGE`` ignoring ``nodata``, or
+    "nearest"), down to ``MAX_LEVEL_SIDE``; one level for a small raster."""
+    from .engine.resample import overview_level
+
+    levels = [data]
+    rows, cols = data.shape[:2]
+    for _ in level_factors(rows, cols)[1:]:
+        last = levels[-1]
+        if rgb:
+            levels.append(np.stack([overview_level(last[..., c], nodata, resampling)
+                                    for c in range(last.shape[-1])], axis=-1))
+        else:
+            levels.append(overview_level(last, nodata, resampling))
+    return levels
+
+
+def full_resolution(data: Any) -> Any:
+    """Level 0 of a layer's data (napari's multiscale data and a list of levels are sequences,
+    arrays are not), else the data itself."""
+    return data[0] if isinstance(data, Sequence) else data

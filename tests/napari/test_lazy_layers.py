@@ -1,0 +1,147 @@
+"""Lazy multiscale layers (issue 24, item 2): an N1 or a COG opens as pyramids read on demand;
+napari shows the level that fits the canvas and reads only that.
+
+Before, the reader read the whole product (four full float32 bands for the contrast limits and
+the RGB quick-look: 2.5-3.2 s for fr-alps) and napari uploaded full-resolution textures.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import tracemalloc
+
+import numpy as np
+import pytest
+import rasterio
+
+from napari_meris_ortho._napari.product_layers import contrast_limits, stretch_channel
+from napari_meris_ortho._napari.reader import read_layers
+from napari_meris_ortho.products.n1 import read_product, tie_columns, tie_lines, write_product
+
+#: a full-width FR product (2241 columns), 1400 lines: levels 2241, 1121 and 561 columns wide
+H, W = 1400, 2241
+
+
+@pytest.fixture(scope="module")
+def big_n1(tmp_path_factory):
+    path = tmp_path_factory.mktemp("big") / "MER_FR__1PBIG.N1"
+    nt, nc = tie_lines(H, 64), tie_columns(W, 64)
+    i, k = np.mgrid[0:nt, 0:nc].astype(np.float64)
+    tie_points = {"latitude": 46.0 - 0.16 * i + 0.03 * k, "longitude": 8.0 - 0.06 * i - 0.21 * k,
+                  "dem_alt": 100.0 * k, "view_zenith": np.linspace(0, 40.7, nc) + 0 * i,
+                  "view_azimuth": 99.6 + 0 * i}
+    rows, cols = np.mgrid[0:H, 0:W]
+    counts = [(500 + (rows * 3 + cols * (b + 1)) % 4000).astype(np.uint16) for b in range(15)]
+    flags = np.where(cols < 100, 16, 0).astype(np.uint8)
+    write_product(path, product_type="MER_FR__1P", tie_points=tie_points, counts=counts,
+                  flags=flags, detector_index=(cols % 740).astype(np.int16),
+                  first_line_time=dt.datetime(2003, 9, 21, 9, 23, 41))
+    return path
+
+
+def test_opening_reads_a_fraction_of_one_band(big_n1):
+    """The reader reads the coarsest level only: it allocates less than one full float32 band
+    (12.5 MB); before it read four full bands (band 7 for the contrast limits, 7, 5 and 2 for
+    the quick-look) and stretched them."""
+    read_product(big_n1)  # the headers' own allocations are not the reader's
+    tracemalloc.start()
+    try:
+        layers = read_layers(str(big_n1))
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    assert peak < H * W * 4, f"peak {peak / 2**20:.1f} MB"
+    shapes = [[level.shape for level in data] for data, _, _ in layers]
+    assert shapes == [[(15, H, W), (15, 700, 1121), (15, 350, 561)],
+                      [(H, W, 3), (700, 1121, 3), (350, 561, 3)],
+                      [(H, W), (700, 1121), (350, 561)]]
+
+
+def test_levels_hold_the_product_values(big_n1):
+    """Every level is the product decimated (every 2nd, 4th line and column): radiances, the
+    quick-look stretched by the coarsest level's 1-99 % limits, the flags."""
+    product = read_product(big_n1)
+    (radiance, kw, _), (rgb, _, _), (flags, _, _) = read_layers(str(big_n1))
+    r7 = product.radiance(7)
+    np.testing.assert_array_equal(np.asarray(radiance[0][6, 100:140, 2000:2100]),
+                                  r7[100:140, 2000:2100])
+    np.testing.assert_array_equal(np.asarray(radiance[2][6]), r7[::4, ::4])
+    np.testing.assert_array_equal(np.asarray(radiance[1][:, 5, 7]),
+                                  [product.radiance(b)[10, 14] for b in range(1, 16)])
+    # contrast limits of band 7 from the coarsest level: within 1 % of the full band's
+    full = contrast_limits(r7, 0.0)
+    np.testing.assert_allclose(kw["contrast_limits"], full, rtol=0.01)
+    for c, b in enumerate((7, 5, 2)):
+        limits = contrast_limits(product.radiance(b)[::4, ::4])
+        np.testing.assert_array_equal(np.asarray(rgb[1][..., c]),
+                                      stretch_channel(product.radiance(b)[::2, ::2], limits))
+    np.testing.assert_array_equal(np.asarray(flags[1]), product.flags[::2, ::2])
+
+
+def test_viewer_shows_a_decimated_level_of_the_n1(make_napari_viewer, big_n1):
+    viewer = make_napari_viewer(show=True)
+    layers = viewer.open(str(big_n1), plugin="napari-meris-ortho")
+    viewer.screenshot(canvas_only=True)  # a draw: napari picks the level for the canvas
+    rgb = next(layer for layer in layers if layer.name.startswith("RGB"))
+    assert all(layer.multiscale for layer in layers)
+    assert rgb.data_level > 0
+    shown = rgb._slice.image.raw  # the tile napari sends to the canvas
+    assert shown.shape[0] * shown.shape[1] <= H * W / 4
+    np.testing.assert_array_equal(shown, np.asarray(rgb.data[rgb.data_level])[
+        tuple(slice(lo, hi + 1) for lo, hi in rgb.corner_pixels.T)])
+
+
+def test_cog_opens_on_its_own_overviews(make_napari_viewer, tmp_path):
+    """A COG as ``meris-ortho map`` writes it (uint16 counts x scale, overviews 2, 4, 8): one
+    level per overview, each read from the file's overview, in radiances."""
+    from napari_meris_ortho.engine.resample import overview_level
+    from napari_meris_ortho.geometry.grid import OutputGrid
+    from napari_meris_ortho.output.geotiff import write_cog
+
+    h, w = 1300, 2500
+    grid = OutputGrid("EPSG:32632", 400_000.0, 5_100_000.0, 300.0, 300.0, w, h)
+    rows, cols = np.mgrid[0:h, 0:w]
+    counts = ((rows * 7 + cols * 3) % 5000 + 1).astype(np.uint16)
+    counts[:50] = 0  # background
+    path = write_cog(tmp_path / "map.tif", [counts], grid, count=1, scales=[0.01],
+                     offsets=[0.0], halve=overview_level)
+    viewer = make_napari_viewer(show=True)
+    (layer,) = viewer.open(str(path), plugin="napari-meris-ortho")
+    viewer.screenshot(canvas_only=True)
+    assert layer.multiscale and len(layer.data) == 4
+    assert layer.data_level > 0
+    np.testing.assert_allclose(np.asarray(layer.data[0][200:210, 300:320]),
+                               counts[200:210, 300:320] * np.float32(0.01), rtol=1e-6)
+    for k in range(3):
+        with rasterio.open(path, overview_level=k) as ds:
+            overview = ds.read(1) * np.float32(0.01)
+            overview[ds.read_masks(1) == 0] = 0
+        np.testing.assert_array_equal(np.asarray(layer.data[k + 1]), overview)
+    assert np.asarray(layer.data[1][:20]).max() == 0  # background stays 0, not nodata x scale
+
+
+def test_multiscale_layer_saves_its_full_resolution(make_napari_viewer, tmp_path):
+    """File > Save Selected Layers on a multiscale layer writes level 0 (the plugin's writer;
+    np.asarray of napari's multiscale data would not even be an image)."""
+    from napari_meris_ortho._napari.writer import write_geotiff_layer
+
+    viewer = make_napari_viewer()
+    (layer,) = viewer.open(str(_cog(tmp_path)), plugin="napari-meris-ortho")
+    assert layer.multiscale
+    data, meta, _ = layer.as_layer_data_tuple()
+    (out,) = write_geotiff_layer(str(tmp_path / "saved.tif"), data, meta)
+    with rasterio.open(out) as ds:
+        assert ds.shape == (1300, 2500)
+        np.testing.assert_array_equal(ds.read(1), np.asarray(layer.data[0]))
+
+
+def _cog(tmp_path):
+    from napari_meris_ortho.engine.resample import overview_level
+    from napari_meris_ortho.geometry.grid import OutputGrid
+    from napari_meris_ortho.output.geotiff import write_cog
+
+    grid = OutputGrid("EPSG:32632", 400_000.0, 5_100_000.0, 300.0, 300.0, 2500, 1300)
+    rows, cols = np.mgrid[0:1300, 0:2500]
+    counts = ((rows * 7 + cols * 3) % 5000 + 1).astype(np.uint16)
+    return write_cog(tmp_path / "cog.tif", [counts], grid, count=1, scales=[0.01],
+                     offsets=[0.0], halve=overview_level)
