@@ -293,18 +293,54 @@ def test_pixel_geolocation_falls_back_where_the_dem_ends(steep, tmp_path):
 
 
 def test_hidden_ground_with_a_stack_of_dems(steep):
-    """Two DEMs: the lines of sight are marched over the stack (``dem_heights``, the DEMs in
-    order) instead of the one window: fr-steep 97.8 % of the hidden ground reported, every
-    reported point truly hidden, the seen ground mapped as with one DEM."""
+    """Two DEMs (the scene's DEM given twice): the lines of sight are marched over the first
+    DEM's window in memory as with one DEM (a cell without data there would hand the ray to the
+    stack's march): the same points reported hidden as with the DEM alone (before: the stack
+    marched by samples, 97.8 % of the hidden ground, 64 points apart on fr-alps, 80 s there
+    instead of 1 s), the seen ground mapped as with one DEM."""
     from napari_meris_ortho.engine.pixelgeo import OCCLUDED
 
     dem = steep.scene.dem_paths["geotiff"]
+    one = orthorectify(steep.sen3, grid=steep.grid, dems=[dem], geolocation="pixel",
+                       bands=[7], diagnostics=True)
     r = orthorectify(steep.sen3, grid=steep.grid, dems=[dem, dem], geolocation="pixel",
                      bands=[7], diagnostics=True)
     hidden = steep.inside & ~steep.seen
     reported = r.diagnostics["iterations"] == OCCLUDED
+    assert np.array_equal(reported, one.diagnostics["iterations"] == OCCLUDED)
     assert r.stats.facet_search["occluded"] == reported.sum()
-    assert (reported & hidden).sum() >= 0.99 * reported.sum()
-    assert (reported & hidden).sum() >= 0.95 * hidden.sum()
-    lost = steep.seen & ~r.valid
+    assert (reported & hidden).sum() >= 0.99 * hidden.sum()
+    lost = steep.seen & ~r.valid & ~reported
     assert lost.sum() <= 1 and np.all(steep.edge[lost] < 0.05)
+
+
+def test_hidden_ground_with_a_dem_above_the_geoid(steep, tmp_path):
+    """The scene's DEM written as heights above the EGM96 geoid (posts - N, read as
+    ``PATH:egm96``): the window is made ellipsoidal once (posts + N) and marched cell by cell
+    like an ellipsoidal DEM: the same points reported hidden as with the ellipsoidal DEM but
+    where the two sources' heights differ by their float32 rounding (before: sampled by the
+    stack's march, 10 s on fr-alps instead of 1 s)."""
+    import rasterio
+
+    from napari_meris_ortho.dem.geoid import geoid_undulation
+    from napari_meris_ortho.engine.pixelgeo import OCCLUDED
+
+    dem = steep.scene.dem_paths["geotiff"]
+    geoidal = tmp_path / "egm96.tif"
+    with rasterio.open(dem) as src:
+        h = src.read(1)
+        rows, cols = np.mgrid[0:src.height, 0:src.width]
+        lon, lat = rasterio.transform.xy(src.transform, rows.ravel(), cols.ravel())
+        n = geoid_undulation(np.asarray(lon), np.asarray(lat)).reshape(h.shape)
+        with rasterio.open(geoidal, "w", **src.profile) as dst:
+            dst.write((h - n).astype(np.float32), 1)
+    assert 40.0 < float(np.mean(n)) < 55.0  # the Alps: N of about 47 m
+    one = orthorectify(steep.sen3, grid=steep.grid, dems=[dem], geolocation="pixel",
+                       bands=[7], diagnostics=True)
+    r = orthorectify(steep.sen3, grid=steep.grid, dems=[f"{geoidal}:egm96"],
+                     geolocation="pixel", bands=[7], diagnostics=True)
+    assert np.nanmax(np.abs(r.diagnostics["elevation"] - one.diagnostics["elevation"])) < 0.01
+    reported = r.diagnostics["iterations"] == OCCLUDED
+    expected = one.diagnostics["iterations"] == OCCLUDED
+    assert reported.sum() > 5000
+    assert np.count_nonzero(reported != expected) <= 3

@@ -21,7 +21,7 @@ Both stop once the ray is above the highest post of the DEMs.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -29,8 +29,8 @@ import numpy as np
 from ..engine import sightline
 from ..engine.pixeldem import look_vectors
 from ..engine.pixelgeo import OCCLUDED
-from ..geometry.earth import MAX_TERRAIN_M, MEAN_EARTH_RADIUS
-from .heights import dem_heights
+from ..geometry.earth import MAX_TERRAIN_M, MEAN_EARTH_RADIUS, MIN_TERRAIN_M
+from .heights import _undulation, dem_heights
 
 if TYPE_CHECKING:
     from ..dem.base import LatticeWindow
@@ -49,6 +49,9 @@ FINE = 4
 #: first march's step (m) when no DEM gives its post spacing (a lattice read lazily): an
 #: eighth of a 30" post
 DEFAULT_STEP_M = 115.0
+#: bound (m) of the geoid undulation |N| (EGM96: -107 .. +86 m): the ceiling of heights above
+#: the geoid of a projected DEM (its posts' N not computed)
+GEOID_BOUND_M = 110.0
 #: metres per degree of latitude on the mean sphere
 _DEGREE_M = math.radians(1.0) * MEAN_EARTH_RADIUS
 
@@ -66,22 +69,33 @@ class Sightlines:
     window: LatticeWindow | None = None
     tmax: tuple[np.ndarray, ...] = ()
     post: float = 0.0
+    gaps: bool = False
 
     @classmethod
     def of(cls, stack: DemStack, lat: float) -> Sightlines:
         """The ceiling and step of ``stack`` (``STEP_OF_POST`` of its finest post spacing at
-        latitude ``lat``), its window when ``engine.sightline`` can march it."""
+        latitude ``lat``), the window ``engine.sightline`` marches: the first lattice of the
+        stack when it is geographic, north-up and in memory, its heights made ellipsoidal
+        once (posts + geoid N, ``_ellipsoidal``); with DEMs or lattices after it, a cell
+        without data there ends its march (the stack marches on)."""
         top, post = -math.inf, math.inf
         windows = []
         for dem in stack.sources:
             for part, datum in dem.parts():
                 window = part.lattice_window()
-                windows.append((window, datum))
+                if window is not None and not window.data.size:
+                    continue  # no post within the run's bounds (an SRTM30 tile beside them)
+                if window is not None and window.transform is None:
+                    window = _ellipsoidal(window, datum)
+                windows.append(window)
                 if window is None:
                     top = MAX_TERRAIN_M
                     continue
-                if window.data.size and np.isfinite(window.data).any():
-                    top = max(top, float(np.nanmax(window.data)))
+                if np.isfinite(window.data).any():
+                    high = float(np.nanmax(window.data))
+                    if window.datum not in (None, "ellipsoid"):  # (projected: N not known)
+                        high += GEOID_BOUND_M
+                    top = max(top, high)
                 a, e = abs(window.inv[0]), abs(window.inv[4])  # posts per unit of x, of y
                 if window.transform is None:  # degrees
                     post = min(post, _DEGREE_M / e, _DEGREE_M * math.cos(math.radians(lat)) / a)
@@ -89,18 +103,19 @@ class Sightlines:
                     post = min(post, 1.0 / a, 1.0 / e)
         out = cls(stack, top if math.isfinite(top) else MAX_TERRAIN_M,
                   STEP_OF_POST * post if math.isfinite(post) else DEFAULT_STEP_M)
-        if len(windows) == 1:
-            window, datum = windows[0]
-            if (window is not None and window.transform is None and datum in (None, "ellipsoid")
-                    and window.inv[1] == 0.0 and window.inv[3] == 0.0 and window.data.size):
-                # the shortest post (m) anywhere in the window: its latitude furthest from 0
-                rows = window.lattice[0] + np.array([0.0, window.data.shape[0]])
-                lats = (rows - window.inv[5]) / window.inv[4]
-                cos = math.cos(math.radians(min(float(np.max(np.abs(lats))), 89.0)))
-                shortest = min(_DEGREE_M / abs(window.inv[4]), _DEGREE_M * cos / abs(window.inv[0]))
-                out.window = window
-                out.tmax = tuple(sightline.tile_maxima(window.data, t) for t in sightline.TILES)
-                out.post = 0.99 * shortest
+        window = windows[0] if windows else None
+        if (window is not None and window.transform is None and window.datum == "ellipsoid"
+                and window.inv[1] == 0.0 and window.inv[3] == 0.0):
+            # the shortest post (m) anywhere in the window: its latitude furthest from 0
+            rows = window.lattice[0] + np.array([0.0, window.data.shape[0]])
+            lats = (rows - window.inv[5]) / window.inv[4]
+            cos = math.cos(math.radians(min(float(np.max(np.abs(lats))), 89.0)))
+            shortest = min(_DEGREE_M / abs(window.inv[4]), _DEGREE_M * cos / abs(window.inv[0]))
+            out.window = window
+            out.gaps = len(windows) > 1
+            out.tmax = tuple(sightline.tile_maxima(window.data, t, out.gaps)
+                             for t in sightline.TILES)
+            out.post = 0.99 * shortest
         return out
 
     def hidden(self, lon: np.ndarray, lat: np.ndarray, h: np.ndarray, line: np.ndarray,
@@ -119,7 +134,7 @@ class Sightlines:
         if self.window is not None:
             w = self.window
             res = sightline.march(*ray, w.data, w.inv, w.lattice, w.wrap_centre, self.tmax,
-                                  self.post, self.ceiling, TOLERANCE_M)
+                                  self.post, self.ceiling, TOLERANCE_M, self.gaps)
             out = res == sightline.HIDDEN
             todo = np.flatnonzero(res == sightline.UNDECIDED)
         if todo.size:
@@ -128,6 +143,24 @@ class Sightlines:
             out[maybe] = _march(self.stack, tuple(a[maybe] for a in ray), self.ceiling,
                                 self.step / FINE, TOLERANCE_M)
         return out
+
+
+def _ellipsoidal(window: LatticeWindow, datum: str | None) -> LatticeWindow:
+    """A geographic window with ellipsoidal heights: its posts + the geoid N of ``datum`` at
+    each post (``heights._undulation``; the run adds N at the point: between posts the two
+    differ by the curvature of N over a post, micrometres), posts without data NaN; itself
+    when its heights are ellipsoidal already."""
+    if datum in (None, "ellipsoid"):
+        return replace(window, datum="ellipsoid")
+    rows = window.lattice[0] + np.arange(window.data.shape[0], dtype=np.float64)
+    cols = window.lattice[1] + np.arange(window.data.shape[1], dtype=np.float64)
+    lat = (rows + 0.5 - window.inv[5]) / window.inv[4]  # (north-up: inv[1] = inv[3] = 0)
+    lon = (cols + 0.5 - window.inv[2]) / window.inv[0]
+    glon, glat = (np.ascontiguousarray(a).reshape(-1) for a in np.meshgrid(lon, lat))
+    n = _undulation(datum, glon, glat, np.ones(glon.size, bool)).reshape(window.data.shape)
+    valid = (window.data >= MIN_TERRAIN_M) & (window.data <= MAX_TERRAIN_M)
+    data = np.where(valid, window.data + n, np.nan).astype(np.float32)
+    return replace(window, data=data, datum="ellipsoid")
 
 
 def _march(stack: DemStack, ray: tuple[np.ndarray, ...], ceiling: float, step: float,
