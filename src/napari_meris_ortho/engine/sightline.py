@@ -50,7 +50,7 @@ def tile_maxima(data: np.ndarray, tile: int, gaps: bool = False) -> np.ndarray:
 
 @njit(cache=True, nogil=True)
 def _march_range(lo, hi, lon, lat, h, e, n, data, inv, lattice, wrap_centre, t0, t1, t2,
-                 post, ceiling, tol, gaps, out):  # pragma: no cover
+                 post, ceiling, tol, gaps, track, out):  # pragma: no cover
     """Points [lo, hi) of ``march``."""
     n_win_r, n_win_c = data.shape
     r_off, c_off, n_rows, n_cols = lattice[0], lattice[1], lattice[2], lattice[3]
@@ -61,14 +61,17 @@ def _march_range(lo, hi, lon, lat, h, e, n, data, inv, lattice, wrap_centre, t0,
         tz = math.hypot(e[k], n[k])
         if not tz > 0.0 or math.isnan(h[k]):
             continue
-        x0 = lon[k]
-        if abs(wrap_centre - x0) > 180.0:
-            x0 = x0 + 360.0 * np.rint((wrap_centre - x0) / 360.0)
-        # fractional post (row, col) along the ray: linear in the ground distance d
-        cc0 = a * x0 + c - 0.5
-        rr0 = e_ * lat[k] + f - 0.5
-        sc = a * math.degrees(e[k] / tz / (radius * math.cos(math.radians(lat[k]))))
-        sr = e_ * math.degrees(n[k] / tz / radius)
+        if track.shape[0]:  # a projected lattice: the track given
+            rr0, cc0, sr, sc = track[k, 0], track[k, 1], track[k, 2], track[k, 3]
+        else:
+            x0 = lon[k]
+            if abs(wrap_centre - x0) > 180.0:
+                x0 = x0 + 360.0 * np.rint((wrap_centre - x0) / 360.0)
+            # fractional post (row, col) along the ray: linear in the ground distance d
+            cc0 = a * x0 + c - 0.5
+            rr0 = e_ * lat[k] + f - 0.5
+            sc = a * math.degrees(e[k] / tz / (radius * math.cos(math.radians(lat[k]))))
+            sr = e_ * math.degrees(n[k] / tz / radius)
         d = 0.0
         while True:
             ray = h[k] + d / tz + d * d / (2.0 * radius)
@@ -132,16 +135,19 @@ def _march_range(lo, hi, lon, lat, h, e, n, data, inv, lattice, wrap_centre, t0,
 def march(lon: np.ndarray, lat: np.ndarray, h: np.ndarray, e: np.ndarray, n: np.ndarray,
           data: np.ndarray, inv: np.ndarray, lattice: np.ndarray, wrap_centre: float,
           tmax: tuple[np.ndarray, ...], post: float, ceiling: float, tol: float,
-          gaps: bool = False) -> np.ndarray:
+          gaps: bool = False, track: np.ndarray | None = None) -> np.ndarray:
     """Per point (flat float64 ``lon``, ``lat``, ``h``, look vector ``e``, ``n``): SEEN, HIDDEN
     (terrain more than ``tol`` m above its ray) or UNDECIDED (the ray reached posts beyond the
     window ``data``/``inv``/``lattice``/``wrap_centre``, as ``terrain.window_heights``
     takes it, before the ``ceiling``); ``tmax``: ``tile_maxima`` of each of ``TILES``;
     ``post``: no more than the shortest post spacing (m) in the window; ``gaps``: a cell with
     a post without data ends the march UNDECIDED (the window is the first DEM of a stack; its
-    ``tmax`` of ``tile_maxima(..., gaps=True)``), else its ray goes on (no terrain there)."""
+    ``tmax`` of ``tile_maxima(..., gaps=True)``), else its ray goes on (no terrain there);
+    ``track``: (n, 4) fractional post row, column of each point and their rates per metre
+    towards the sensor (a projected lattice, ``ortho.occlusion``), else from lon, lat."""
     out = np.empty(lon.size, np.int8)
     args = (lon, lat, h, e, n, data, inv, lattice, float(wrap_centre), *tmax, float(post),
-            float(ceiling), float(tol), bool(gaps), out)
+            float(ceiling), float(tol), bool(gaps),
+            np.zeros((0, 4)) if track is None else np.ascontiguousarray(track, np.float64), out)
     split_range(lambda lo, hi: _march_range(lo, hi, *args), lon.size, min_size=1 << 12)
     return out

@@ -52,6 +52,8 @@ DEFAULT_STEP_M = 115.0
 #: bound (m) of the geoid undulation |N| (EGM96: -107 .. +86 m): the ceiling of heights above
 #: the geoid of a projected DEM (its posts' N not computed)
 GEOID_BOUND_M = 110.0
+#: chord (m) of the line of sight whose projection gives a projected DEM's track
+TRACK_M = 1000.0
 #: metres per degree of latitude on the mean sphere
 _DEGREE_M = math.radians(1.0) * MEAN_EARTH_RADIUS
 
@@ -87,6 +89,8 @@ class Sightlines:
                     continue  # no post within the run's bounds (an SRTM30 tile beside them)
                 if window is not None and window.transform is None:
                     window = _ellipsoidal(window, datum)
+                elif window is not None and datum in (None, "ellipsoid"):
+                    window = replace(window, datum="ellipsoid")
                 windows.append(window)
                 if window is None:
                     top = MAX_TERRAIN_M
@@ -104,13 +108,17 @@ class Sightlines:
         out = cls(stack, top if math.isfinite(top) else MAX_TERRAIN_M,
                   STEP_OF_POST * post if math.isfinite(post) else DEFAULT_STEP_M)
         window = windows[0] if windows else None
-        if (window is not None and window.transform is None and window.datum == "ellipsoid"
-                and window.inv[1] == 0.0 and window.inv[3] == 0.0):
-            # the shortest post (m) anywhere in the window: its latitude furthest from 0
-            rows = window.lattice[0] + np.array([0.0, window.data.shape[0]])
-            lats = (rows - window.inv[5]) / window.inv[4]
-            cos = math.cos(math.radians(min(float(np.max(np.abs(lats))), 89.0)))
-            shortest = min(_DEGREE_M / abs(window.inv[4]), _DEGREE_M * cos / abs(window.inv[0]))
+        if (window is not None and window.datum == "ellipsoid" and window.inv[1] == 0.0
+                and window.inv[3] == 0.0):
+            if window.transform is None:
+                # the shortest post (m) anywhere in the window: its latitude furthest from 0
+                rows = window.lattice[0] + np.array([0.0, window.data.shape[0]])
+                lats = (rows - window.inv[5]) / window.inv[4]
+                cos = math.cos(math.radians(min(float(np.max(np.abs(lats))), 89.0)))
+                shortest = min(_DEGREE_M / abs(window.inv[4]),
+                               _DEGREE_M * cos / abs(window.inv[0]))
+            else:  # projected: its units (metres; ``hidden`` bounds it by the track's scale)
+                shortest = min(1.0 / abs(window.inv[0]), 1.0 / abs(window.inv[4]))
             out.window = window
             out.gaps = len(windows) > 1
             out.tmax = tuple(sightline.tile_maxima(window.data, t, out.gaps)
@@ -133,8 +141,14 @@ class Sightlines:
         todo = np.arange(e.size)
         if self.window is not None:
             w = self.window
+            post, track = self.post, None
+            if w.transform is not None:
+                track = _projected_track(w, *ray)
+                fastest = float(np.nanmax(np.abs(track[:, 2:]), initial=0.0))
+                if fastest > 0.0:  # a jump of `post` metres: at most one post on the lattice
+                    post = min(post, 0.99 / fastest)
             res = sightline.march(*ray, w.data, w.inv, w.lattice, w.wrap_centre, self.tmax,
-                                  self.post, self.ceiling, TOLERANCE_M, self.gaps)
+                                  post, self.ceiling, TOLERANCE_M, self.gaps, track)
             out = res == sightline.HIDDEN
             todo = np.flatnonzero(res == sightline.UNDECIDED)
         if todo.size:
@@ -143,6 +157,23 @@ class Sightlines:
             out[maybe] = _march(self.stack, tuple(a[maybe] for a in ray), self.ceiling,
                                 self.step / FINE, TOLERANCE_M)
         return out
+
+
+def _projected_track(window: LatticeWindow, lon: np.ndarray, lat: np.ndarray, h: np.ndarray,
+                     e: np.ndarray, n: np.ndarray) -> np.ndarray:
+    """(n, 4): fractional post row, column of each point on a projected north-up lattice and
+    their rates per metre of ground towards the sensor (the chord of ``TRACK_M`` along the
+    look vector, lon/lat linear in the distance as ``_march`` steps)."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        tz = np.hypot(e, n)
+        deg = TRACK_M * math.degrees(1.0 / MEAN_EARTH_RADIUS)
+        x0, y0 = window.transform(lon, lat)  # type: ignore[misc]
+        x1, y1 = window.transform(lon + deg * e / tz / np.cos(np.radians(lat)),  # type: ignore[misc]
+                                  lat + deg * n / tz)
+        rx, ry = (np.asarray(x1) - x0) / TRACK_M, (np.asarray(y1) - y0) / TRACK_M
+    a, c, e_, f = window.inv[0], window.inv[2], window.inv[4], window.inv[5]
+    return np.column_stack([e_ * np.asarray(y0) + f - 0.5, a * np.asarray(x0) + c - 0.5,
+                            e_ * ry, a * rx])
 
 
 def _ellipsoidal(window: LatticeWindow, datum: str | None) -> LatticeWindow:
