@@ -9,10 +9,12 @@ eq. 6a uses it); at a ground distance d its height above the ellipsoid is
 h + d / tan vz + d^2 / (2 R) (the Earth's surface drops below the tangent plane; R the mean
 radius). T is hidden where the terrain rises more than ``TOLERANCE_M`` above the ray: ground
 just below a crest, whose ray grazes it, stays seen. The terrain is the DEM stack of the run,
-the same heights as the output points got: a stack of one geographic ellipsoidal lattice read
-into memory is marched by ``engine.sightline`` (cell by cell, the maximum of terrain minus ray
-in each cell exact, tiles' maxima to jump); other stacks, and rays leaving that window, by two
-marches of ``ortho.heights.dem_heights`` (the DEMs tried in order; where none has data the ray
+the same heights as the output points got: the stack's first lattice read into memory
+(geographic, EGM96 heights made ellipsoidal once; or projected with ellipsoidal heights, along
+each point's projected track) is marched by ``engine.sightline`` (cell by cell, the maximum of
+terrain minus ray in each cell exact, tiles' maxima to jump); other DEMs, and rays leaving that
+window or reaching a cell without data there when DEMs follow, by two marches of
+``ortho.heights.dem_heights`` (the DEMs tried in order; where none has data the ray
 goes on): every eighth of a DEM post with ``MARGIN_M`` of slack finds the candidates, every
 32nd of a post decides them (fr-steep: 97.8 % of the hidden ground found, none seen lost).
 Both stop once the ray is above the highest post of the DEMs.
