@@ -183,23 +183,39 @@ def _in_box(tlon: float, tlat: float, i: int, j: int, lo_u: float, hi_u: float, 
 
 
 @njit(cache=True)
+def _valid_column(i: int, j: int, lo: int, hi: int, lon: np.ndarray, lat: np.ndarray) -> int:
+    """The column of line ``i`` nearest to ``j`` within [lo, hi] whose terrain point is given
+    (a no-data pixel of the geolocation is NaN), -1 when none is."""
+    for k in range(2 * (hi - lo) + 1):
+        m = j + ((k + 1) // 2 if k % 2 else -(k // 2))  # j, j + 1, j - 1, j + 2...
+        if lo <= m <= hi and not (math.isnan(lon[i, m]) or math.isnan(lat[i, m])):
+            return m
+    return -1
+
+
+@njit(cache=True)
 def _bracket(tlon: float, tlat: float, i: int, lon: np.ndarray, lat: np.ndarray) -> int:
     """Column j of product line ``i`` whose terrain points j, j + 1 bracket the point along the
     line (bisection: terrain points follow the line of sight's sweep in order, the first
     intersection moves away from the sensor; hidden ground makes jumps, never folds), clamped
-    to the first and last cells."""
+    to the first and last cells. No-data pixels (NaN) are passed over: each probe takes the
+    nearest given pixel between the bounds, so they cost only the cells touching them."""
     nc = lon.shape[1]
-    c = math.cos(math.radians(tlat))
-    dx = wrap180(lon[i, nc - 1] - lon[i, 0]) * c
-    dy = lat[i, nc - 1] - lat[i, 0]
-    lo = 0
-    hi = nc - 1
-    if (wrap180(lon[i, lo] - tlon) * c * dx + (lat[i, lo] - tlat) * dy) >= 0.0:
+    lo = _valid_column(i, 0, 0, nc - 1, lon, lat)
+    if lo < 0:
         return 0
+    hi = _valid_column(i, nc - 1, lo, nc - 1, lon, lat)
+    c = math.cos(math.radians(tlat))
+    dx = wrap180(lon[i, hi] - lon[i, lo]) * c
+    dy = lat[i, hi] - lat[i, lo]
+    if (wrap180(lon[i, lo] - tlon) * c * dx + (lat[i, lo] - tlat) * dy) >= 0.0:
+        return 0 if lo == 0 else lo - 1
     if (wrap180(lon[i, hi] - tlon) * c * dx + (lat[i, hi] - tlat) * dy) <= 0.0:
-        return nc - 2
+        return min(hi, nc - 2)
     while hi - lo > 1:
-        mid = (lo + hi) // 2
+        mid = _valid_column(i, (lo + hi) // 2, lo + 1, hi - 1, lon, lat)
+        if mid < 0:  # only no data between the bounds: the point is in one of those cells
+            break
         if (wrap180(lon[i, mid] - tlon) * c * dx + (lat[i, mid] - tlat) * dy) <= 0.0:
             lo = mid
         else:

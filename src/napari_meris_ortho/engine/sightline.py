@@ -28,11 +28,13 @@ TILES = (32, 8, 2)
 SEEN, HIDDEN, UNDECIDED = 0, 1, 2
 
 
-def tile_maxima(data: np.ndarray, tile: int) -> np.ndarray:
+def tile_maxima(data: np.ndarray, tile: int, gaps: bool = False) -> np.ndarray:
     """The highest post (float64, -inf: none) of every ``tile`` x ``tile`` tile of the window
-    and its 8 neighbours: the bound of the terrain of any cell within tile - 1 posts of it."""
+    and its 8 neighbours: the bound of the terrain of any cell within tile - 1 posts of it.
+    ``gaps``: a post without data counts as +inf (the next DEM of a stack has heights there:
+    the march must not jump over it)."""
     valid = (data >= MIN_TERRAIN_M) & (data <= MAX_TERRAIN_M)
-    posts = np.where(valid, data, -np.inf).astype(np.float64)
+    posts = np.where(valid, data, np.inf if gaps else -np.inf).astype(np.float64)
     nr, nc = -(-posts.shape[0] // tile), -(-posts.shape[1] // tile)
     padded = np.full((nr * tile, nc * tile), -np.inf)
     padded[:posts.shape[0], :posts.shape[1]] = posts
@@ -48,7 +50,7 @@ def tile_maxima(data: np.ndarray, tile: int) -> np.ndarray:
 
 @njit(cache=True, nogil=True)
 def _march_range(lo, hi, lon, lat, h, e, n, data, inv, lattice, wrap_centre, t0, t1, t2,
-                 post, ceiling, tol, out):  # pragma: no cover
+                 post, ceiling, tol, gaps, track, out):  # pragma: no cover
     """Points [lo, hi) of ``march``."""
     n_win_r, n_win_c = data.shape
     r_off, c_off, n_rows, n_cols = lattice[0], lattice[1], lattice[2], lattice[3]
@@ -59,14 +61,17 @@ def _march_range(lo, hi, lon, lat, h, e, n, data, inv, lattice, wrap_centre, t0,
         tz = math.hypot(e[k], n[k])
         if not tz > 0.0 or math.isnan(h[k]):
             continue
-        x0 = lon[k]
-        if abs(wrap_centre - x0) > 180.0:
-            x0 = x0 + 360.0 * np.rint((wrap_centre - x0) / 360.0)
-        # fractional post (row, col) along the ray: linear in the ground distance d
-        cc0 = a * x0 + c - 0.5
-        rr0 = e_ * lat[k] + f - 0.5
-        sc = a * math.degrees(e[k] / tz / (radius * math.cos(math.radians(lat[k]))))
-        sr = e_ * math.degrees(n[k] / tz / radius)
+        if track.shape[0]:  # a projected lattice: the track given
+            rr0, cc0, sr, sc = track[k, 0], track[k, 1], track[k, 2], track[k, 3]
+        else:
+            x0 = lon[k]
+            if abs(wrap_centre - x0) > 180.0:
+                x0 = x0 + 360.0 * np.rint((wrap_centre - x0) / 360.0)
+            # fractional post (row, col) along the ray: linear in the ground distance d
+            cc0 = a * x0 + c - 0.5
+            rr0 = e_ * lat[k] + f - 0.5
+            sc = a * math.degrees(e[k] / tz / (radius * math.cos(math.radians(lat[k]))))
+            sr = e_ * math.degrees(n[k] / tz / radius)
         d = 0.0
         while True:
             ray = h[k] + d / tz + d * d / (2.0 * radius)
@@ -101,10 +106,14 @@ def _march_range(lo, hi, lon, lat, h, e, n, data, inv, lattice, wrap_centre, t0,
                 span = min(span, (ci - cc) / sc)
             v00, v01 = data[r_lo, c_lo], data[r_lo, c_lo + 1]
             v10, v11 = data[r_lo + 1, c_lo], data[r_lo + 1, c_lo + 1]
-            if (v00 >= MIN_TERRAIN_M and v00 <= MAX_TERRAIN_M and v01 >= MIN_TERRAIN_M
-                    and v01 <= MAX_TERRAIN_M and v10 >= MIN_TERRAIN_M and v10 <= MAX_TERRAIN_M
-                    and v11 >= MIN_TERRAIN_M and v11 <= MAX_TERRAIN_M
-                    and max(max(v00, v01), max(v10, v11)) + tol >= ray):
+            valid = (v00 >= MIN_TERRAIN_M and v00 <= MAX_TERRAIN_M and v01 >= MIN_TERRAIN_M
+                     and v01 <= MAX_TERRAIN_M and v10 >= MIN_TERRAIN_M
+                     and v10 <= MAX_TERRAIN_M and v11 >= MIN_TERRAIN_M
+                     and v11 <= MAX_TERRAIN_M)
+            if not valid and gaps:
+                out[k] = UNDECIDED  # no data here: the next DEM of the stack has the terrain
+                break
+            if valid and max(max(v00, v01), max(v10, v11)) + tol >= ray:
                 # terrain - ray along the cell: bilinear of a line minus the ray, a quadratic
                 # q0 + q1 s + q2 s^2; its maximum at the ends or the vertex
                 u, v = rr - ri, cc - ci
@@ -125,14 +134,20 @@ def _march_range(lo, hi, lon, lat, h, e, n, data, inv, lattice, wrap_centre, t0,
 
 def march(lon: np.ndarray, lat: np.ndarray, h: np.ndarray, e: np.ndarray, n: np.ndarray,
           data: np.ndarray, inv: np.ndarray, lattice: np.ndarray, wrap_centre: float,
-          tmax: tuple[np.ndarray, ...], post: float, ceiling: float, tol: float) -> np.ndarray:
+          tmax: tuple[np.ndarray, ...], post: float, ceiling: float, tol: float,
+          gaps: bool = False, track: np.ndarray | None = None) -> np.ndarray:
     """Per point (flat float64 ``lon``, ``lat``, ``h``, look vector ``e``, ``n``): SEEN, HIDDEN
     (terrain more than ``tol`` m above its ray) or UNDECIDED (the ray reached posts beyond the
     window ``data``/``inv``/``lattice``/``wrap_centre``, as ``terrain.window_heights``
     takes it, before the ``ceiling``); ``tmax``: ``tile_maxima`` of each of ``TILES``;
-    ``post``: no more than the shortest post spacing (m) in the window."""
+    ``post``: no more than the shortest post spacing (m) in the window; ``gaps``: a cell with
+    a post without data ends the march UNDECIDED (the window is the first DEM of a stack; its
+    ``tmax`` of ``tile_maxima(..., gaps=True)``), else its ray goes on (no terrain there);
+    ``track``: (n, 4) fractional post row, column of each point and their rates per metre
+    towards the sensor (a projected lattice, ``ortho.occlusion``), else from lon, lat."""
     out = np.empty(lon.size, np.int8)
     args = (lon, lat, h, e, n, data, inv, lattice, float(wrap_centre), *tmax, float(post),
-            float(ceiling), float(tol), out)
+            float(ceiling), float(tol), bool(gaps),
+            np.zeros((0, 4)) if track is None else np.ascontiguousarray(track, np.float64), out)
     split_range(lambda lo, hi: _march_range(lo, hi, *args), lon.size, min_size=1 << 12)
     return out

@@ -9,10 +9,12 @@ eq. 6a uses it); at a ground distance d its height above the ellipsoid is
 h + d / tan vz + d^2 / (2 R) (the Earth's surface drops below the tangent plane; R the mean
 radius). T is hidden where the terrain rises more than ``TOLERANCE_M`` above the ray: ground
 just below a crest, whose ray grazes it, stays seen. The terrain is the DEM stack of the run,
-the same heights as the output points got: a stack of one geographic ellipsoidal lattice read
-into memory is marched by ``engine.sightline`` (cell by cell, the maximum of terrain minus ray
-in each cell exact, tiles' maxima to jump); other stacks, and rays leaving that window, by two
-marches of ``ortho.heights.dem_heights`` (the DEMs tried in order; where none has data the ray
+the same heights as the output points got: the stack's first lattice read into memory
+(geographic, EGM96 heights made ellipsoidal once; or projected with ellipsoidal heights, along
+each point's projected track) is marched by ``engine.sightline`` (cell by cell, the maximum of
+terrain minus ray in each cell exact, tiles' maxima to jump); other DEMs, and rays leaving that
+window or reaching a cell without data there when DEMs follow, by two marches of
+``ortho.heights.dem_heights`` (the DEMs tried in order; where none has data the ray
 goes on): every eighth of a DEM post with ``MARGIN_M`` of slack finds the candidates, every
 32nd of a post decides them (fr-steep: 97.8 % of the hidden ground found, none seen lost).
 Both stop once the ray is above the highest post of the DEMs.
@@ -21,7 +23,7 @@ Both stop once the ray is above the highest post of the DEMs.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -29,8 +31,8 @@ import numpy as np
 from ..engine import sightline
 from ..engine.pixeldem import look_vectors
 from ..engine.pixelgeo import OCCLUDED
-from ..geometry.earth import MAX_TERRAIN_M, MEAN_EARTH_RADIUS
-from .heights import dem_heights
+from ..geometry.earth import MAX_TERRAIN_M, MEAN_EARTH_RADIUS, MIN_TERRAIN_M
+from .heights import _undulation, dem_heights
 
 if TYPE_CHECKING:
     from ..dem.base import LatticeWindow
@@ -49,6 +51,11 @@ FINE = 4
 #: first march's step (m) when no DEM gives its post spacing (a lattice read lazily): an
 #: eighth of a 30" post
 DEFAULT_STEP_M = 115.0
+#: bound (m) of the geoid undulation |N| (EGM96: -107 .. +86 m): the ceiling of heights above
+#: the geoid of a projected DEM (its posts' N not computed)
+GEOID_BOUND_M = 110.0
+#: chord (m) of the line of sight whose projection gives a projected DEM's track
+TRACK_M = 1000.0
 #: metres per degree of latitude on the mean sphere
 _DEGREE_M = math.radians(1.0) * MEAN_EARTH_RADIUS
 
@@ -66,22 +73,35 @@ class Sightlines:
     window: LatticeWindow | None = None
     tmax: tuple[np.ndarray, ...] = ()
     post: float = 0.0
+    gaps: bool = False
 
     @classmethod
     def of(cls, stack: DemStack, lat: float) -> Sightlines:
         """The ceiling and step of ``stack`` (``STEP_OF_POST`` of its finest post spacing at
-        latitude ``lat``), its window when ``engine.sightline`` can march it."""
+        latitude ``lat``), the window ``engine.sightline`` marches: the first lattice of the
+        stack when it is geographic, north-up and in memory, its heights made ellipsoidal
+        once (posts + geoid N, ``_ellipsoidal``); with DEMs or lattices after it, a cell
+        without data there ends its march (the stack marches on)."""
         top, post = -math.inf, math.inf
         windows = []
         for dem in stack.sources:
             for part, datum in dem.parts():
                 window = part.lattice_window()
-                windows.append((window, datum))
+                if window is not None and not window.data.size:
+                    continue  # no post within the run's bounds (an SRTM30 tile beside them)
+                if window is not None and window.transform is None:
+                    window = _ellipsoidal(window, datum)
+                elif window is not None and datum in (None, "ellipsoid"):
+                    window = replace(window, datum="ellipsoid")
+                windows.append(window)
                 if window is None:
                     top = MAX_TERRAIN_M
                     continue
-                if window.data.size and np.isfinite(window.data).any():
-                    top = max(top, float(np.nanmax(window.data)))
+                if np.isfinite(window.data).any():
+                    high = float(np.nanmax(window.data))
+                    if window.datum not in (None, "ellipsoid"):  # (projected: N not known)
+                        high += GEOID_BOUND_M
+                    top = max(top, high)
                 a, e = abs(window.inv[0]), abs(window.inv[4])  # posts per unit of x, of y
                 if window.transform is None:  # degrees
                     post = min(post, _DEGREE_M / e, _DEGREE_M * math.cos(math.radians(lat)) / a)
@@ -89,18 +109,23 @@ class Sightlines:
                     post = min(post, 1.0 / a, 1.0 / e)
         out = cls(stack, top if math.isfinite(top) else MAX_TERRAIN_M,
                   STEP_OF_POST * post if math.isfinite(post) else DEFAULT_STEP_M)
-        if len(windows) == 1:
-            window, datum = windows[0]
-            if (window is not None and window.transform is None and datum in (None, "ellipsoid")
-                    and window.inv[1] == 0.0 and window.inv[3] == 0.0 and window.data.size):
+        window = windows[0] if windows else None
+        if (window is not None and window.datum == "ellipsoid" and window.inv[1] == 0.0
+                and window.inv[3] == 0.0):
+            if window.transform is None:
                 # the shortest post (m) anywhere in the window: its latitude furthest from 0
                 rows = window.lattice[0] + np.array([0.0, window.data.shape[0]])
                 lats = (rows - window.inv[5]) / window.inv[4]
                 cos = math.cos(math.radians(min(float(np.max(np.abs(lats))), 89.0)))
-                shortest = min(_DEGREE_M / abs(window.inv[4]), _DEGREE_M * cos / abs(window.inv[0]))
-                out.window = window
-                out.tmax = tuple(sightline.tile_maxima(window.data, t) for t in sightline.TILES)
-                out.post = 0.99 * shortest
+                shortest = min(_DEGREE_M / abs(window.inv[4]),
+                               _DEGREE_M * cos / abs(window.inv[0]))
+            else:  # projected: its units (metres; ``hidden`` bounds it by the track's scale)
+                shortest = min(1.0 / abs(window.inv[0]), 1.0 / abs(window.inv[4]))
+            out.window = window
+            out.gaps = len(windows) > 1
+            out.tmax = tuple(sightline.tile_maxima(window.data, t, out.gaps)
+                             for t in sightline.TILES)
+            out.post = 0.99 * shortest
         return out
 
     def hidden(self, lon: np.ndarray, lat: np.ndarray, h: np.ndarray, line: np.ndarray,
@@ -118,8 +143,14 @@ class Sightlines:
         todo = np.arange(e.size)
         if self.window is not None:
             w = self.window
+            post, track = self.post, None
+            if w.transform is not None:
+                track = _projected_track(w, *ray)
+                fastest = float(np.nanmax(np.abs(track[:, 2:]), initial=0.0))
+                if fastest > 0.0:  # a jump of `post` metres: at most one post on the lattice
+                    post = min(post, 0.99 / fastest)
             res = sightline.march(*ray, w.data, w.inv, w.lattice, w.wrap_centre, self.tmax,
-                                  self.post, self.ceiling, TOLERANCE_M)
+                                  post, self.ceiling, TOLERANCE_M, self.gaps, track)
             out = res == sightline.HIDDEN
             todo = np.flatnonzero(res == sightline.UNDECIDED)
         if todo.size:
@@ -128,6 +159,41 @@ class Sightlines:
             out[maybe] = _march(self.stack, tuple(a[maybe] for a in ray), self.ceiling,
                                 self.step / FINE, TOLERANCE_M)
         return out
+
+
+def _projected_track(window: LatticeWindow, lon: np.ndarray, lat: np.ndarray, h: np.ndarray,
+                     e: np.ndarray, n: np.ndarray) -> np.ndarray:
+    """(n, 4): fractional post row, column of each point on a projected north-up lattice and
+    their rates per metre of ground towards the sensor (the chord of ``TRACK_M`` along the
+    look vector, lon/lat linear in the distance as ``_march`` steps)."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        tz = np.hypot(e, n)
+        deg = TRACK_M * math.degrees(1.0 / MEAN_EARTH_RADIUS)
+        x0, y0 = window.transform(lon, lat)  # type: ignore[misc]
+        x1, y1 = window.transform(lon + deg * e / tz / np.cos(np.radians(lat)),  # type: ignore[misc]
+                                  lat + deg * n / tz)
+        rx, ry = (np.asarray(x1) - x0) / TRACK_M, (np.asarray(y1) - y0) / TRACK_M
+    a, c, e_, f = window.inv[0], window.inv[2], window.inv[4], window.inv[5]
+    return np.column_stack([e_ * np.asarray(y0) + f - 0.5, a * np.asarray(x0) + c - 0.5,
+                            e_ * ry, a * rx])
+
+
+def _ellipsoidal(window: LatticeWindow, datum: str | None) -> LatticeWindow:
+    """A geographic window with ellipsoidal heights: its posts + the geoid N of ``datum`` at
+    each post (``heights._undulation``; the run adds N at the point: between posts the two
+    differ by the curvature of N over a post, micrometres), posts without data NaN; itself
+    when its heights are ellipsoidal already."""
+    if datum in (None, "ellipsoid"):
+        return replace(window, datum="ellipsoid")
+    rows = window.lattice[0] + np.arange(window.data.shape[0], dtype=np.float64)
+    cols = window.lattice[1] + np.arange(window.data.shape[1], dtype=np.float64)
+    lat = (rows + 0.5 - window.inv[5]) / window.inv[4]  # (north-up: inv[1] = inv[3] = 0)
+    lon = (cols + 0.5 - window.inv[2]) / window.inv[0]
+    glon, glat = (np.ascontiguousarray(a).reshape(-1) for a in np.meshgrid(lon, lat))
+    n = _undulation(datum, glon, glat, np.ones(glon.size, bool)).reshape(window.data.shape)
+    valid = (window.data >= MIN_TERRAIN_M) & (window.data <= MAX_TERRAIN_M)
+    data = np.where(valid, window.data + n, np.nan).astype(np.float32)
+    return replace(window, data=data, datum="ellipsoid")
 
 
 def _march(stack: DemStack, ray: tuple[np.ndarray, ...], ceiling: float, step: float,
