@@ -112,12 +112,12 @@ def test_egm2008_heights_use_the_egm2008_grid_when_present(proj_dir, tmp_path, c
 def test_the_compiled_lookup_uses_each_grid_spacing(proj_dir):
     """``ortho.heights`` (the compiled bilinear) gives ``geoid_undulation``'s numbers on a
     0.5-degree EGM2008 grid as on the 15' EGM96 one."""
-    from napari_meris_ortho.ortho.heights import _undulation
+    from napari_meris_ortho.ortho.heights import geoid_at
 
     _write_grid(proj_dir / "us_nga_egm08_25.tif", -20.0, step=0.5)
     rng = np.random.default_rng(4)
     lon, lat = rng.uniform(-10, 30, 500), rng.uniform(30, 70, 500)
-    out = _undulation(EGM2008, lon, lat, np.ones(500, bool))
+    out = geoid_at(EGM2008, lon, lat, np.ones(500, bool))
     np.testing.assert_allclose(out, geoid.geoid_undulation(lon, lat, EGM2008), atol=1e-9)
     np.testing.assert_allclose(out, _field(-20.0, lon, lat), atol=1e-4)
 

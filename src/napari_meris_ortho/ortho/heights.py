@@ -56,14 +56,14 @@ class _CompiledLookup:
         undulation = np.empty(0)
         if window.datum not in (None, "ellipsoid"):
             if window.datum not in self.geoid:
-                self.geoid[window.datum] = _undulation(window.datum, lon, lat, todo)
+                self.geoid[window.datum] = geoid_at(window.datum, lon, lat, todo)
             undulation = self.geoid[window.datum]
         return int(terrain.window_heights(
             window.data, window.inv, window.lattice, window.wrap_centre, self.code, x, y,
             todo, undulation, index, h, src, miss))
 
 
-def _undulation(datum: str, lon: np.ndarray, lat: np.ndarray, todo: np.ndarray) -> np.ndarray:
+def geoid_at(datum: str, lon: np.ndarray, lat: np.ndarray, todo: np.ndarray) -> np.ndarray:
     """Geoid undulation N of ``datum`` at the ``todo`` points (flat arrays): EGM96 or EGM2008
     by the compiled bilinear between the grid nodes under them (``dem.geoid.nodes_between``,
     ``engine.terrain.geoid_bilinear``: ``dem.geoid.geoid_undulation``'s numbers)."""

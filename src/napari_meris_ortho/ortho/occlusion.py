@@ -32,7 +32,7 @@ from ..engine import sightline
 from ..engine.pixeldem import look_vectors
 from ..engine.pixelgeo import OCCLUDED
 from ..geometry.earth import MAX_TERRAIN_M, MEAN_EARTH_RADIUS, MIN_TERRAIN_M
-from .heights import _undulation, dem_heights
+from .heights import dem_heights, geoid_at
 
 if TYPE_CHECKING:
     from ..dem.base import LatticeWindow
@@ -180,7 +180,7 @@ def _projected_track(window: LatticeWindow, lon: np.ndarray, lat: np.ndarray, h:
 
 def _ellipsoidal(window: LatticeWindow, datum: str | None) -> LatticeWindow:
     """A geographic window with ellipsoidal heights: its posts + the geoid N of ``datum`` at
-    each post (``heights._undulation``; the run adds N at the point: between posts the two
+    each post (``heights.geoid_at``; the run adds N at the point: between posts the two
     differ by the curvature of N over a post, micrometres), posts without data NaN; itself
     when its heights are ellipsoidal already."""
     if datum in (None, "ellipsoid"):
@@ -190,7 +190,7 @@ def _ellipsoidal(window: LatticeWindow, datum: str | None) -> LatticeWindow:
     lat = (rows + 0.5 - window.inv[5]) / window.inv[4]  # (north-up: inv[1] = inv[3] = 0)
     lon = (cols + 0.5 - window.inv[2]) / window.inv[0]
     glon, glat = (np.ascontiguousarray(a).reshape(-1) for a in np.meshgrid(lon, lat))
-    n = _undulation(datum, glon, glat, np.ones(glon.size, bool)).reshape(window.data.shape)
+    n = geoid_at(datum, glon, glat, np.ones(glon.size, bool)).reshape(window.data.shape)
     valid = (window.data >= MIN_TERRAIN_M) & (window.data <= MAX_TERRAIN_M)
     data = np.where(valid, window.data + n, np.nan).astype(np.float32)
     return replace(window, data=data, datum="ellipsoid")
