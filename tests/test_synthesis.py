@@ -684,3 +684,10 @@ def test_tile_chunks_are_the_bytes_zarr_writes(tmp_path) -> None:
     assert sorted(ours) == sorted(theirs)
     assert len(ours) == 6 and not any(k.startswith("count/") for k in ours)
     assert all(ours[k] == theirs[k] for k in ours)
+    read = st.read_tile(stores["ours"], names, window)  # edge chunks, one layer deleted
+    assert all(np.array_equal(read[n], arrays[n]) and read[n].dtype == arrays[n].dtype
+               for n in names)
+    corner = st.read_tile(stores["zarr"], names, (0, 1024, 0, 1024))  # never written: 0
+    assert all(corner[n].shape == (1024, 1024) and not corner[n].any() for n in names)
+    assert np.array_equal(st.read_tile(stores["zarr"], ["overview_2/ndvi"], (512, 650, 512, 550))
+                          ["overview_2/ndvi"], arrays["ndvi"][::2, ::2])

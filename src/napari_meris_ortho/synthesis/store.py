@@ -312,19 +312,50 @@ def _level_path(name: str, factor: int) -> str:
 
 def read_tile(store: Any, names: Sequence[str], window: Window) -> dict[str, np.ndarray]:
     """The stored values (band layers as stored: counts in compact stores) of arrays ``names``
-    over ``window`` of the full grid, every array read concurrently."""
+    over ``window`` of the full grid (starting on a chunk corner), every chunk read
+    concurrently: fetched from the store and decompressed on zarr's thread pool
+    (``_chunk_encoder``'s zstd; a missing chunk holds the fill value 0), or by zarr's
+    ``getitem`` for arrays of other codecs."""
     import zarr.api.asynchronous as za
+    from zarr.core.buffer import default_buffer_prototype
 
     r0, r1, c0, c1 = window
+    prototype = default_buffer_prototype()
+
+    async def chunk(array: Any, codec: Any, out: np.ndarray, i: int, j: int) -> None:
+        rows, cols = (int(c) for c in array.chunks)
+        key = f"{array.store_path.path}/{array.metadata.encode_chunk_key((i // rows, j // cols))}"
+        data = await store.get(key, prototype)
+        if data is None:  # never written: fill value
+            return
+        dtype = out.dtype.newbyteorder("<")
+        raw = await asyncio.to_thread(codec.decode, data.to_bytes())
+        block = np.frombuffer(raw, dtype).reshape(rows, cols)
+        part = out[i - r0:i - r0 + rows, j - c0:j - c0 + cols]
+        part[...] = block[:part.shape[0], :part.shape[1]]
 
     async def read(name: str) -> np.ndarray:
         array = await za.open_array(store=store, path=name, mode="r")
-        return np.asarray(await array.getitem((slice(r0, r1), slice(c0, c1))))
+        codec = _chunk_encoder(array)
+        if codec is None:
+            return np.asarray(await array.getitem((slice(r0, r1), slice(c0, c1))))
+        out = np.zeros((r1 - r0, c1 - c0), _native_dtype(array))
+        rows, cols = (int(c) for c in array.chunks)
+        await asyncio.gather(*(chunk(array, codec, out, i, j) for i in range(r0, r1, rows)
+                               for j in range(c0, c1, cols)))
+        return out
 
     async def gather() -> list[np.ndarray]:
         return list(await asyncio.gather(*(read(n) for n in names)))
 
     return dict(zip(names, _sync(gather()), strict=True))
+
+
+def _native_dtype(array: Any) -> np.dtype[Any]:
+    """The numpy dtype of a zarr array (zarr 3.1: a ``ZDType`` wrapping it)."""
+    dtype = array.dtype
+    native = getattr(dtype, "to_native_dtype", None)
+    return np.dtype(native() if callable(native) else dtype)
 
 
 def changed_chunks(new: np.ndarray, old: np.ndarray, chunk: int
