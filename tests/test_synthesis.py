@@ -635,3 +635,59 @@ def test_version_3_store_is_updated_in_its_own_layout(products, tmp_path, monkey
     new = layers(tmp_path / "v4")
     for key, value in layers(old).items():
         assert value.tobytes() == new[key].tobytes(), key
+
+
+def test_tile_chunks_are_the_bytes_zarr_writes(tmp_path) -> None:
+    """write_tile encodes chunks itself (padding past the edge, zstd, no chunk for fill values
+    only): every key of the store holds the bytes zarr's own setitem gives, on an edge tile
+    whose array ends inside its chunks, at full resolution and on an overview."""
+    import zarr
+
+    shape, tile, names = (1300, 1100), 1024, ["band_07", "ndvi", "count", "product"]
+    rng = np.random.default_rng(7)
+    window = (1024, 1300, 1024, 1100)
+    arrays = {n: rng.integers(1, 4000, (276, 76)).astype(st.layer_dtype(n) if n != "band_07"
+                                                           else np.uint16) for n in names}
+    arrays["count"][:] = 0  # a layer of fill values only: its old chunk goes away
+    stored = {n: np.ones_like(a) for n, a in arrays.items()}
+    stores = {}
+    for how in ("ours", "zarr"):
+        repo = st.create_repository(tmp_path / how)
+        session = repo.writable_session(st.BRANCH)
+        st.create_layout(session.store, {}, shape, tile, names, [2], st.CHUNK)
+        for n in names:  # the old values, written by zarr
+            for f in (1, 2):
+                a = zarr.open_array(session.store, path=st._level_path(n, f), mode="r+")
+                a[window[0] // f:, window[2] // f:] = stored[n][::f, ::f]
+        if how == "ours":
+            written = st.write_tile(session.store, window, arrays, stored, [2])
+            assert written == 8
+        else:
+            for n in names:
+                for f in (1, 2):
+                    a = zarr.open_array(session.store, path=st._level_path(n, f), mode="r+")
+                    a[window[0] // f:, window[2] // f:] = arrays[n][::f, ::f]
+        stores[how] = session.store
+
+    def content(store) -> dict[str, bytes]:
+        from zarr.core.buffer import default_buffer_prototype
+        from zarr.core.sync import sync
+
+        async def read() -> dict[str, bytes]:
+            keys = [k async for k in store.list() if "/c/" in k]
+            values = [await store.get(k, default_buffer_prototype()) for k in keys]
+            return {k: v.to_bytes() for k, v in zip(keys, values, strict=True)}
+
+        return sync(read())
+
+    ours, theirs = content(stores["ours"]), content(stores["zarr"])
+    assert sorted(ours) == sorted(theirs)
+    assert len(ours) == 6 and not any(k.startswith("count/") for k in ours)
+    assert all(ours[k] == theirs[k] for k in ours)
+    read = st.read_tile(stores["ours"], names, window)  # edge chunks, one layer deleted
+    assert all(np.array_equal(read[n], arrays[n]) and read[n].dtype == arrays[n].dtype
+               for n in names)
+    corner = st.read_tile(stores["zarr"], names, (0, 1024, 0, 1024))  # never written: 0
+    assert all(corner[n].shape == (1024, 1024) and not corner[n].any() for n in names)
+    assert np.array_equal(st.read_tile(stores["zarr"], ["overview_2/ndvi"], (512, 650, 512, 550))
+                          ["overview_2/ndvi"], arrays["ndvi"][::2, ::2])

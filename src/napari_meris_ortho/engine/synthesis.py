@@ -221,7 +221,9 @@ def combine_maximum_ndvi(bands: np.ndarray, ndvi: np.ndarray, count: np.ndarray,
 
 def combine(acc: TileState, new: TileState, rank: np.ndarray) -> None:
     """Merge state ``new`` into ``acc`` (same shape; in place). Associative and commutative;
-    ``rank[k]``: tie-break rank of product ``k`` (distinct ranks)."""
+    ``rank[k]``: tie-break rank of product ``k`` (distinct ranks). The bands may also be
+    uint16 counts of one positive scale per band (both states alike): the rules only compare
+    and copy them, and counts order as their radiances do."""
     rank = np.ascontiguousarray(rank, dtype=np.int64)
     if acc.ndvi is None or new.ndvi is None:
         combine_minimum_radiance(acc.bands, acc.count, acc.winner, new.bands, new.count,

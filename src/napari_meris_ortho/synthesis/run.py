@@ -92,7 +92,11 @@ def _resolve(arg: Any) -> Any:
 
 
 class InProcess:
-    """Runs the tasks one after the other in this process, in submission order."""
+    """Runs the tasks one after the other in this process, in submission order; a tile's
+    writes go out on a writer thread (``TileWriter``) while the next tile is computed."""
+
+    def __init__(self) -> None:
+        self.writer = TileWriter()
 
     def submit(self, fn: Callable[..., Any], *args: Any, **_: Any) -> _Lazy:
         return _Lazy(fn, args)
@@ -138,11 +142,40 @@ class Dask:
             self.client.cancel(list(futures))
 
 
+class TileWriter:
+    """One thread that writes the merged tiles of the in-process runner: the chunks of tile
+    N are compressed (zstd releases the GIL) and written into its fork while tile N + 1 is
+    orthorectified and merged. At most one write is pending: ``submit`` first waits for the
+    previous one (one merged tile in memory besides the one being computed)."""
+
+    def __init__(self) -> None:
+        from concurrent.futures import ThreadPoolExecutor
+
+        self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="synthesis-writer")
+        self._last: Any = None
+
+    def submit(self, fn: Callable[[], int]) -> Any:
+        """Run ``fn`` (a tile's writes, returning the chunks written) on the thread; the
+        future gives its result or raises its error."""
+        if self._last is not None:
+            self._last.exception()  # wait; the error, if any, is raised by its owner
+        self._last = self._pool.submit(fn)
+        return self._last
+
+    def close(self) -> None:
+        """Wait for the pending write (a failed run's fork is dropped, not committed)."""
+        self._pool.shutdown(wait=True)
+
+
 @contextlib.contextmanager
 def engine(workers: int, scheduler: str | None) -> Iterator[InProcess | Dask]:
     """The runner: this process, an embedded LocalCluster or an existing scheduler."""
     if scheduler is None and workers == 0:
-        yield InProcess()
+        runner = InProcess()
+        try:
+            yield runner
+        finally:
+            runner.writer.close()
         return
     import distributed
 
@@ -204,8 +237,8 @@ def _needed(bands: Sequence[int], algorithm: str) -> tuple[int, ...]:
 class Piece:
     """One product's contribution to one tile (``state`` covers ``window``; None: nothing).
     In a compact store (``Spec.compact``) the state's bands are the store's uint16 counts
-    (``store.encode_band`` of radiances already quantized to them: exact), decoded by
-    ``tile_task`` just before the merge."""
+    (``store.encode_band`` of radiances already quantized to them: exact), merged as counts
+    by ``tile_task`` (``_state_of``)."""
 
     index: int
     window: Window
@@ -226,6 +259,13 @@ class TileDone:
     #: chunks written (every layer and overview level)
     chunks: int = 0
     pieces: list[Piece] = field(default_factory=list)  # without their states
+    #: the writes still under way on the in-process ``TileWriter`` (None: done)
+    writing: Any = None
+
+    def wait(self) -> None:
+        """Wait for the tile's writes (in-process writer thread); their error is raised."""
+        if self.writing is not None:
+            self.chunks, self.writing = self.writing.result(), None
 
 
 _PRODUCTS: OrderedDict[str, Any] = OrderedDict()
@@ -342,9 +382,10 @@ def _no_data_out(result: Any, spec: Spec, valid: np.ndarray) -> None:
 
 
 def tile_task(fork: Any, spec: Spec, window: Window, pieces: list[Piece], rank: np.ndarray,
-              exclude: frozenset[int]) -> TileDone:
+              exclude: frozenset[int], writer: TileWriter | None = None) -> TileDone:
     """Merge the pieces into the stored tile ``window`` (a whole chunk) and write it into
-    ``fork``. Pieces of products in ``exclude`` or that failed are left out."""
+    ``fork`` (on ``writer``'s thread if given: ``TileDone.wait``). Pieces of products in
+    ``exclude`` or that failed are left out."""
     from ..engine.synthesis import combine
 
     st.quiet_icechunk()
@@ -362,9 +403,13 @@ def tile_task(fork: Any, spec: Spec, window: Window, pieces: list[Piece], rank: 
             continue
         r0, r1, c0, c1 = (p.window[0] - window[0], p.window[1] - window[0],
                           p.window[2] - window[2], p.window[3] - window[2])
-        combine(state.window(r0, r1, c0, c1), _radiances(p.state, spec), rank)
-    done.chunks = st.write_tile(fork.store, window, _arrays_of(state, spec), stored,
-                                spec.overviews)
+        combine(state.window(r0, r1, c0, c1), p.state, rank)
+    arrays = _arrays_of(state, spec)
+    if writer is None:
+        done.chunks = st.write_tile(fork.store, window, arrays, stored, spec.overviews)
+    else:
+        done.writing = writer.submit(lambda: st.write_tile(fork.store, window, arrays, stored,
+                                                           spec.overviews))
     ids, counts = np.unique(state.winner, return_counts=True)
     new = {p.index for p in usable}
     done.winners = {int(i): int(n) for i, n in zip(ids, counts, strict=True) if int(i) in new}
@@ -373,34 +418,25 @@ def tile_task(fork: Any, spec: Spec, window: Window, pieces: list[Piece], rank: 
 
 
 def _state_of(arrays: dict[str, np.ndarray], spec: Spec) -> TileState:
-    """The merge state of a stored tile (``read_tile``; compact band counts decoded)."""
+    """The merge state of a stored tile (``read_tile``). Compact band layers stay counts: the
+    pieces are counts of the same per-band scale, and ``decode_band`` is strictly increasing
+    on [0, MAX_COUNT] (distinct counts differ by at least 1/65535 of the value, far above the
+    float32 rounding), so both merge rules (smallest positive radiance, its ties; the NDVI
+    codes) pick the same pixels on counts as on radiances, and the counts need no decoding
+    nor encoding again."""
     shape = arrays["count"].shape
-    bands = np.empty((len(spec.bands), *shape), np.float32)
+    dtype = np.uint16 if spec.compact else np.float32
+    bands = np.empty((len(spec.bands), *shape), dtype)
     for k, b in enumerate(spec.bands):
-        values = arrays[st.band_layer(b)]
-        if spec.compact:
-            st.decode_band(values, st.BAND_SCALES[b], out=bands[k])
-        else:
-            bands[k] = values
+        bands[k] = arrays[st.band_layer(b)]
     return TileState(bands, arrays["count"].astype(np.uint16),
                      arrays["product"].astype(np.int32),
                      arrays["ndvi"].astype(np.uint16) if "ndvi" in arrays else None)
 
 
-def _radiances(state: TileState, spec: Spec) -> TileState:
-    """A piece's state with float32 radiances (compact store: its counts decoded)."""
-    if not spec.compact:
-        return state
-    bands = np.empty(state.bands.shape, np.float32)
-    for k, b in enumerate(spec.bands):
-        st.decode_band(state.bands[k], st.BAND_SCALES[b], out=bands[k])
-    return TileState(bands, state.count, state.winner, state.ndvi)
-
-
 def _arrays_of(state: TileState, spec: Spec) -> dict[str, np.ndarray]:
-    """The layers of a merged tile as stored (compact band layers: counts)."""
-    out = {st.band_layer(b): (st.encode_band(state.bands[k], st.BAND_SCALES[b]) if spec.compact
-                              else state.bands[k]) for k, b in enumerate(spec.bands)}
+    """The layers of a merged tile as stored (compact band layers: the counts merged)."""
+    out = {st.band_layer(b): state.bands[k] for k, b in enumerate(spec.bands)}
     if state.ndvi is not None:
         out["ndvi"] = state.ndvi
     out["count"] = state.count
@@ -622,8 +658,10 @@ class Synthesis:
                                     priority=-t,
                                     key=f"segment-{run}-{index}-{piece[0]}-{piece[2]}")
                       for index, path, piece, extent in tasks if index not in exclude]
+            extra = (runner.writer,) if isinstance(runner, InProcess) else ()
             tile = runner.submit(tile_task, session.fork(), spec, window, pieces, rank, exclude,
-                                 key=f"tile-{run}-{window[0]}-{window[2]}", priority=-t)
+                                 *extra, key=f"tile-{run}-{window[0]}-{window[2]}",
+                                 priority=-t)
             inputs[id(tile)] = pieces
             futures += [*pieces, tile]
         done = 0
@@ -640,6 +678,8 @@ class Synthesis:
                         raise DemError(errors[0])
                 if self.progress is not None:
                     self.progress(done, total)
+            for tile in written:
+                tile.wait()
         except BaseException:
             runner.cancel(futures)
             raise
