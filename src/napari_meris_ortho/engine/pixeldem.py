@@ -26,16 +26,14 @@ from numba import njit
 from .location import facet_of, parallax_factors
 from .pixelgeo import (
     _FAR,
-    _LINE_REACH,
     OCCLUDED,
     SEED_STEP,
     _grids,
     _newton_step,
-    cell_search,
+    pixel_antecedent,
     pixel_point,
     pixel_value,
     primary_grid_pixel,
-    seen_antecedent,
 )
 from .predcorr import _columns, _predict, primary_nodes
 from .threads import split_range
@@ -166,12 +164,12 @@ def _dem_rows(lo, hi, tlon_a, tlat_a, height, ptr, start, stop, cl, cp, step, lo
                 continue
             h = float(height[i, j])
             if math.isnan(h):  # no DEM height: the product's own terrain points
-                ci, cj, u, v, it = cell_search(tlon, tlat, gl, lon, lat, _LINE_REACH)
-                if ci < 0:
-                    continue
-                l2, p2, seen = seen_antecedent(tlon, tlat, ci, cj, u, v, lon, lat)
-                if not seen:
+                l2, p2, it = pixel_antecedent(tlon, tlat, gl, gp, step, lon, lat, tol,
+                                              max_iter)
+                if it == OCCLUDED:
                     iters[i, j] = OCCLUDED
+                    continue
+                if it < 0:
                     continue
                 h = pixel_value(l2, p2, alt)
                 e = n = math.nan

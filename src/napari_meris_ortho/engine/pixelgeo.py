@@ -368,6 +368,38 @@ def _node_antecedent(tlon, tlat, gl, gp, lon, lat, line_reach, node_out):
     return l2, p2, _FOUND if near else _OUTSIDE
 
 
+@njit(cache=True, nogil=True)
+def pixel_antecedent(tlon: float, tlat: float, gl: float, gp: float, step: float,
+                     lon: np.ndarray, lat: np.ndarray, tol: float, max_iter: int
+                     ) -> tuple[float, float, int]:
+    """Antecedent (line, col, iterations) on the pixel model of the terrain point (tlon, tlat)
+    predicted at (gl, gp): its cell found by ``cell_search`` (a Newton correction from the
+    prediction where no cell within reach holds it; the lines within a primary ``step`` where
+    the correction is lost in folds), then checked by ``seen_antecedent``. Iterations -1: no
+    cell holds it; ``OCCLUDED``: ground hidden by the relief."""
+    nl, npx = lon.shape
+    ci = -1
+    cj = 0
+    u = v = 0.0
+    it = 0
+    reach = step + _LINE_REACH  # predicted within a primary step of the product
+    near = -reach <= gl <= nl + reach and -reach <= gp <= npx + reach
+    if near:
+        ci, cj, u, v, it = cell_search(tlon, tlat, gl, lon, lat)
+    if ci < 0:  # beyond reach of the prediction: a correction, then its cell
+        l2, p2, it, ok = correct(tlon, tlat, gl, gp, lon, lat, tol, max_iter)
+        if ok and -0.5 <= l2 < nl - 0.5 and -0.5 <= p2 < npx - 0.5:
+            ci, cj, u, v, it = cell_search(tlon, tlat, l2, lon, lat)
+        elif not ok and near:  # lost in folds: the lines within a primary step
+            ci, cj, u, v, it = cell_search(tlon, tlat, gl, lon, lat, int(step) + _LINE_REACH)
+        if ci < 0:
+            return math.nan, math.nan, -1
+    l2, p2, seen = seen_antecedent(tlon, tlat, ci, cj, u, v, lon, lat)
+    if not seen:
+        return l2, p2, OCCLUDED
+    return l2, p2, it
+
+
 @njit(cache=True, parallel=True)
 def find_pixel_antecedents(tlon_a, tlat_a, ptr, start, stop, cl, cp, step, lon, lat, alt,
                            tol, max_iter, diagnostics):
@@ -393,25 +425,11 @@ def find_pixel_antecedents(tlon_a, tlat_a, ptr, start, stop, cl, cp, step, lon, 
             gl, gp = _predict(cl, cp, no_rates, step, i, j, 0.0)
             if math.isnan(gl) or gl < -_FAR or gl > nl + _FAR or gp < -_FAR or gp > npx + _FAR:
                 continue
-            ci = -1
-            reach = step + _LINE_REACH  # predicted within a primary step of the product
-            near = -reach <= gl <= nl + reach and -reach <= gp <= npx + reach
-            if near:
-                ci, cj, u, v, it = cell_search(tlon, tlat, gl, lon, lat)
-            if ci < 0:  # beyond reach of the prediction: a correction, then its cell
-                l2, p2, it, ok = correct(tlon, tlat, gl, gp, lon, lat, tol, max_iter)
-                if ok and -0.5 <= l2 < nl - 0.5 and -0.5 <= p2 < npx - 0.5:
-                    ci, cj, u, v, it = cell_search(tlon, tlat, l2, lon, lat)
-                elif not ok and near:  # lost in folds: the lines within a primary step
-                    ci, cj, u, v, it = cell_search(tlon, tlat, gl, lon, lat,
-                                                   int(step) + _LINE_REACH)
-                if ci < 0:
-                    continue
-            l2, p2, seen = seen_antecedent(tlon, tlat, ci, cj, u, v, lon, lat)
-            if not seen:
+            l2, p2, it = pixel_antecedent(tlon, tlat, gl, gp, step, lon, lat, tol, max_iter)
+            if it == OCCLUDED:
                 iters[i, j] = OCCLUDED
                 continue
-            if not (-0.5 <= l2 < nl - 0.5 and -0.5 <= p2 < npx - 0.5):
+            if it < 0 or not (-0.5 <= l2 < nl - 0.5 and -0.5 <= p2 < npx - 0.5):
                 continue
             out_l[i, j] = l2
             out_p[i, j] = p2
