@@ -116,36 +116,6 @@ def test_masked_geolocation_costs_only_the_cells_touching_it(geolocated, tmp_pat
     assert np.array_equal(r.bands[7][kept], ref.bands[7][kept])
 
 
-def _visible(scene, lon, lat, h, line, col, step=5.0):
-    """Ground points the sensor sees: no terrain more than 1 m above the line of sight from the
-    point towards the satellite (view angles of the tie points at the true antecedent; the
-    truth DEM every 5 m: at 20 m, crests grazed by 1-6 m between samples were missed)."""
-    from scipy.ndimage import map_coordinates
-
-    from napari_meris_ortho.products.n1 import read_product
-
-    tp = read_product(scene.product_path).tie_points
-    at = np.stack([line / 64.0, col / 64.0])
-    tz = np.tan(np.radians(map_coordinates(tp["view_zenith"], at, order=1, mode="nearest")))
-    va = np.radians(map_coordinates(tp["view_azimuth"], at, order=1, mode="nearest"))
-    hidden = np.zeros(lon.shape, bool)
-    r = 6371000.0
-    top = float(scene.dem.max())
-    live = np.arange(lon.size)
-    for d in np.arange(step, 12000.0, step):
-        ray = h[live] + d / tz[live] + d * d / (2 * r)
-        keep = ray < top
-        live, ray = live[keep], ray[keep]
-        if not live.size:
-            break
-        x = lon[live] + np.degrees(d * np.sin(va[live]) / (r * np.cos(np.radians(lat[live]))))
-        y = lat[live] + np.degrees(d * np.cos(va[live]) / r)
-        up = scene.dem_height(x, y) > ray + 1.0
-        hidden[live[up]] = True
-        live = live[~up]
-    return ~hidden
-
-
 @pytest.fixture(scope="module")
 def steep(tmp_path_factory):
     """Scene fr-steep (9 km relief at up to 41 deg view zenith), its SEN3, the tie-point + DEM
@@ -167,7 +137,8 @@ def steep(tmp_path_factory):
     inside = ((tl >= -0.5) & (tl < g.lines - 0.5) & (tc >= -0.5) & (tc < g.columns - 0.5)
               & np.isfinite(h))
     seen = np.zeros(inside.shape, bool)
-    seen[inside] = _visible(scene, lon[inside], lat[inside], h[inside], tl[inside], tc[inside])
+    seen[inside] = scene.seen_from_sensor(lon[inside], lat[inside], h[inside], tl[inside],
+                                          tc[inside])
     edge = np.minimum.reduce([tl + 0.5, g.lines - 0.5 - tl, tc + 0.5, g.columns - 0.5 - tc])
     pixel = orthorectify(sen3, grid=ref.grid, geolocation="pixel", bands=[7], diagnostics=True)
     return SimpleNamespace(scene=scene, sen3=sen3, grid=ref.grid, lon=lon, lat=lat, h=h, tl=tl,
