@@ -4,7 +4,7 @@ band slider of a product's radiance stack naming the MERIS band shown.
 
 napari builds the status text from the selected layer's ``get_status``;
 ``show_map_coordinates(viewer)`` wraps it for every layer of the viewer that lives in the world
-(``world.world_frame``: rasters, products, footprint/facet shapes and parallax vectors), now and
+(``world.world_crs``: rasters, products, footprint/facet shapes and parallax vectors), now and
 when added, so that the coordinates are right whatever layer is selected (after a run, a
 vectors layer). napari's slider shows the step index (0-14); the axis label of a radiance stack
 names the band at the dims point instead ("MERIS band 7 (665 nm)", world band axis = 1..15).
@@ -12,12 +12,13 @@ names the band at the dims point instead ("MERIS band 7 (665 nm)", world band ax
 
 from __future__ import annotations
 
+import functools
 import weakref
 from typing import Any
 
 import numpy as np
 
-from .world import GEO_KEY, world_frame
+from .world import GEO_KEY, world_crs
 
 _WATCHED: weakref.WeakSet[Any] = weakref.WeakSet()
 _WRAPPED = "_meris_ortho_status"
@@ -25,11 +26,18 @@ _WRAPPED = "_meris_ortho_status"
 
 def crs_label(crs: Any) -> str:
     """'EPSG:32632' when the CRS has an EPSG code, else its name."""
+    return _crs_facts(str(crs))[0]
+
+
+@functools.lru_cache(maxsize=64)
+def _crs_facts(crs: str) -> tuple[str, bool]:
+    """(label, geographic) of a CRS given as text, parsed once: a layer's status is wrapped
+    at its insertion, and a CRS lookup costs 10-40 ms (pyproj database)."""
     from pyproj import CRS
 
-    crs = CRS.from_user_input(crs)
-    epsg = crs.to_epsg()
-    return f"EPSG:{epsg}" if epsg else str(crs.name)
+    parsed = CRS.from_user_input(crs)
+    epsg = parsed.to_epsg()
+    return (f"EPSG:{epsg}" if epsg else str(parsed.name)), bool(parsed.is_geographic)
 
 
 def map_position(world_row: float, world_col: float, geographic: bool, label: str) -> str:
@@ -42,12 +50,15 @@ def map_position(world_row: float, world_col: float, geographic: bool, label: st
     return f"E {x:.0f} m, N {y:.0f} m ({label})"
 
 
-def _wrap(layer: Any) -> None:
-    """Replace ``layer.get_status`` by one reporting map coordinates (world layers only)."""
-    grid = world_frame(layer)
-    if grid is None or getattr(layer, _WRAPPED, False):
+def wrap_status(layer: Any) -> None:
+    """Replace ``layer.get_status`` by one reporting map coordinates (world layers only).
+    Cheap and thread-free: a run wraps its layers in its worker, before their insertion."""
+    if getattr(layer, _WRAPPED, False):
         return
-    label, geographic = crs_label(grid.crs), bool(grid.is_geographic)
+    crs = world_crs(layer)
+    if crs is None:
+        return
+    label, geographic = _crs_facts(str(crs))
     original = layer.get_status
 
     def get_status(position: Any = None, **kwargs: Any) -> dict[str, str]:
@@ -72,8 +83,8 @@ def show_map_coordinates(viewer: Any) -> None:
         return
     _WATCHED.add(viewer)
     for layer in viewer.layers:
-        _wrap(layer)
-    viewer.layers.events.inserted.connect(lambda event: _wrap(event.value))
+        wrap_status(layer)
+    viewer.layers.events.inserted.connect(lambda event: wrap_status(event.value))
     ref = weakref.ref(viewer)
 
     def bands(_event: Any = None) -> None:
@@ -107,4 +118,4 @@ def label_bands(viewer: Any) -> None:
 
 
 __all__ = ["BAND_AXIS", "GEO_KEY", "crs_label", "label_bands", "map_position",
-           "show_map_coordinates"]
+           "show_map_coordinates", "wrap_status"]

@@ -92,6 +92,14 @@ def world_frame(layer: Any) -> OutputGrid | None:
         if world else None
 
 
+def world_crs(layer: Any) -> Any:
+    """The CRS of the world a layer lives in (``world_frame``'s, without building the grid);
+    None for a foreign layer."""
+    meta = getattr(layer, "metadata", {})
+    geo = meta.get(GEO_KEY) or meta.get(WORLD_KEY)
+    return geo["crs"] if geo else None
+
+
 def viewer_frame(layers: Iterable[Any]) -> OutputGrid | None:
     """The world frame of a viewer: the world grid of its first (bottom-most) layer in one."""
     for layer in layers:
