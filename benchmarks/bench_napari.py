@@ -14,8 +14,12 @@ One run prints, in a real napari viewer (run it under Xvfb: ``xvfb-run -a``):
    (``gc.collect()``, napari's deferred deletions processed), also once glibc's ``malloc_trim``
    has returned the free heap (what is kept for reuse is not held by anything).
 
-A benchmark, not a test: ``xvfb-run -a python benchmarks/bench_napari.py [--json FILE]``; for
-the figures before a change, the same command with ``PYTHONPATH`` on the older source tree.
+With ``--sen3``: the scene's ``.SEN3`` product instead (``simulate.geocorrected``, written
+next to the scene once), opened only (no runs), and the reader's peak allocation
+(``tracemalloc`` around ``read_layers``, outside the timed opens).
+
+A benchmark, not a test: ``xvfb-run -a python benchmarks/bench_napari.py [--sen3] [--json F]``;
+for the figures before a change, the same command with ``PYTHONPATH`` on the older source tree.
 The machine is shared: read the figures as such.
 """
 
@@ -85,7 +89,25 @@ def _spin(app: Any, until: Any, timeout: float = 600.0) -> None:
     check.stop()
 
 
-def bench(scene_name: str) -> dict[str, Any]:
+def _reader_peak_mb(path: str) -> float:
+    """Peak traced allocation (MB) of the plugin's reader on ``path`` (the product opened
+    once before, so that its headers' allocations are not counted)."""
+    import tracemalloc
+
+    from napari_meris_ortho._napari.reader import read_layers
+    from napari_meris_ortho.products.open import read_product
+
+    read_product(path)
+    tracemalloc.start()
+    try:
+        read_layers(path)
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    return peak / 2**20
+
+
+def bench(scene_name: str, sen3: bool = False) -> dict[str, Any]:
     import tempfile
 
     os.environ.setdefault("MERIS_ORTHO_NO_WARMUP", "1")  # no compiler thread competing
@@ -99,21 +121,31 @@ def bench(scene_name: str) -> dict[str, Any]:
     from napari_meris_ortho.simulate.scene import generate_scene
 
     scene = generate_scene(scene_name)
+    product = str(scene.product_path)
+    if sen3:
+        from napari_meris_ortho.simulate.geocorrected import write_geocorrected
+
+        product = str(write_geocorrected(scene, fsg=False)["sen3"])
     viewer = napari.Viewer(show=True)
     app = QApplication.instance()
     _spin(app, lambda: False, 1.0)  # the window is up
     out: dict[str, Any] = {"source": os.path.dirname(napari_meris_ortho.__file__),
-                           "scene": scene_name, "rss_start_mb": _rss_mb()}
+                           "scene": scene_name, "product": os.path.basename(product),
+                           "rss_start_mb": _rss_mb()}
 
     for key in ("", "warm_"):
         with LoopTurns() as turns:
             t0 = time.perf_counter()
-            viewer.open(str(scene.product_path), plugin="napari-meris-ortho")
+            viewer.open(product, plugin="napari-meris-ortho")
             viewer.screenshot(canvas_only=True)  # the first frame drawn
             out[f"{key}open_to_first_pixels_s"] = time.perf_counter() - t0
         out[f"{key}open_longest_stall_s"] = turns.longest_gap
         viewer.layers.clear()
         _spin(app, lambda: False, 0.3)
+    if sen3:
+        out["reader_peak_mb"] = _reader_peak_mb(product)
+        viewer.close()
+        return out
 
     _, widget = viewer.window.add_plugin_dock_widget("napari-meris-ortho", "Orthorectify")
     widget.products.value = [scene.product_path]
@@ -147,13 +179,26 @@ def bench(scene_name: str) -> dict[str, Any]:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--scene", default="fr-alps")
+    parser.add_argument("--sen3", action="store_true",
+                        help="open the scene's .SEN3 product instead of its N1 (no runs)")
     parser.add_argument("--json", help="write the figures to this file")
     args = parser.parse_args()
-    out = bench(args.scene)
+    out = bench(args.scene, args.sen3)
     print(f"source: {out['source']}")
-    print(f"open {args.scene} N1 to first pixels: {out['open_to_first_pixels_s']:.2f} s "
+    kind = "SEN3" if args.sen3 else "N1"
+    print(f"open {args.scene} {kind} to first pixels: {out['open_to_first_pixels_s']:.2f} s "
           f"(longest stall {out['open_longest_stall_s']:.2f} s), again "
           f"{out['warm_open_to_first_pixels_s']:.2f} s")
+    if args.sen3:
+        print(f"reader peak allocation (tracemalloc): {out['reader_peak_mb']:.1f} MB")
+    else:
+        _print_runs(out)
+    if args.json:
+        with open(args.json, "w") as fh:
+            json.dump(out, fh, indent=1)
+
+
+def _print_runs(out: dict[str, Any]) -> None:
     for k, run in enumerate(out["runs"]):
         print(f"run {k + 1}: {run['run_s']:.2f} s, longest UI stall "
               f"{run['longest_stall_s']:.2f} s, {run['layers']} layers")
@@ -161,9 +206,6 @@ def main() -> None:
           f"{out['rss_after_first_run_mb']:.0f} MB after the first, "
           f"{out['rss_after_runs_removed_mb']:.0f} MB after {RUNS} runs, layers removed "
           f"({out['rss_after_malloc_trim_mb']:.0f} MB after malloc_trim)")
-    if args.json:
-        with open(args.json, "w") as fh:
-            json.dump(out, fh, indent=1)
 
 
 if __name__ == "__main__":

@@ -4,7 +4,10 @@ geocoded GeoTIFFs and synthesis stores (directories; ``synthesis_layers``).
 N1: the 15 radiance bands as one multichannel image (band axis first), an RGB quick-look
 from bands 7, 5, 2, the flags as a labels layer; tie points and headers in the layer metadata.
 A product wider or longer than ``pyramid.MAX_LEVEL_SIDE`` opens as multiscale layers read on
-demand from its memory map (``pyramid``): napari reads only the lines of the level on screen.
+demand (``pyramid``): napari reads only the lines of the level on screen from an N1's memory
+map; a ``.SEN3``'s bands are read whole when first shown (chunked, compressed netCDF: a part
+costs the whole decompression) and the last few kept (``WholeBands``), its flags when first
+shown; opening reads the three quick-look bands and nothing else.
 Arrays stay in the stored (chronological/detector) column order, like MERSYN (ARCHITECTURE.md).
 
 GeoTIFF: every band placed in the world frame (``world`` module doc): north up, pixel centres
@@ -15,6 +18,7 @@ own overviews, read window by window.
 
 from __future__ import annotations
 
+from collections import OrderedDict
 from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -300,8 +304,9 @@ def n1_layers(path: str | Path, frame: OutputGrid | None = None) -> list[LayerDa
     place = _placement(product, frame, meta)
     band_axis = {"affine": _with_band_axis(place["affine"]), "units": ("pixel", *place["units"]),
                  "axis_labels": (BAND_AXIS, *place["axis_labels"])}
-    radiance = radiance_levels(product)
-    rgb = quicklook_levels(product)
+    read = radiance_reader(product)  # one band cache for the stack and the quick-look
+    radiance = radiance_levels(product, read)
+    rgb = quicklook_levels(product, read=read)
     flags = flag_levels(product)
     multiscale = {"multiscale": len(radiance) > 1}
     return [
@@ -330,8 +335,11 @@ def flag_names(value: int) -> str:
     return "|".join(names) if names else "none"
 
 
-def flag_features(flags: np.ndarray) -> dict[str, list[Any]]:
-    """Features of the flags labels layer: every flag value present and its bit names."""
+def flag_features(flags: np.ndarray | LazyArray) -> dict[str, list[Any]]:
+    """Features of the flags labels layer: every flag value present and its bit names; of
+    flags not read yet (a big ``.SEN3``'s, ``flag_levels``) every byte value's."""
+    if isinstance(flags, LazyArray):
+        return {"index": list(range(256)), "flags": [flag_names(v) for v in range(256)]}
     counts = np.zeros(256, np.int64)
     for start in range(0, flags.shape[0], 256):  # a block of lines at a time: little memory
         counts += np.bincount(np.asarray(flags[start:start + 256], np.uint8).ravel(),
@@ -384,25 +392,94 @@ def n1_metadata(product: MerisProduct) -> dict[str, Any]:
     }
 
 
-def radiance_levels(product: MerisProduct) -> list[Any]:
+#: radiance bands a product read whole (a ``.SEN3``) keeps read (``WholeBands``): the three of
+#: the RGB quick-look and the last three the band slider showed
+CACHED_BANDS = 6
+
+#: radiance(band, rows, cols) of a selection (an index or a range per axis)
+RadianceReader = Callable[[int, int | range, int | range], np.ndarray]
+
+
+class WholeBands:
+    """The bands of a product read whole (a ``.SEN3``: its netCDF variables are chunked and
+    compressed, so a band's lines, or a strided read, cost the whole band's decompression):
+    the uint16 ``counts`` of the last ``size`` bands used (least recently used dropped), the
+    radiances of a selection computed from them as ``MerisProduct`` defines them (counts x
+    ``scaling.radiance``, NaN where the counts are ``no_data_count``), elementwise: the values
+    of ``product.radiance(b)`` at the selection."""
+
+    def __init__(self, product: MerisProduct, size: int = CACHED_BANDS) -> None:
+        import threading
+
+        self.product, self.size = product, size
+        self._counts: OrderedDict[int, np.ndarray] = OrderedDict()
+        self._lock = threading.Lock()  # napari may read in worker threads
+        #: bands read so far (each read once while it stays in the cache)
+        self.reads: list[int] = []
+
+    def counts(self, band: int) -> np.ndarray:
+        """The stored counts of ``band`` (1..15), read whole when not kept."""
+        with self._lock:
+            if band in self._counts:
+                self._counts.move_to_end(band)
+                return self._counts[band]
+            counts = self.product.counts(band)
+            self.reads.append(band)
+            self._counts[band] = counts
+            while len(self._counts) > self.size:
+                self._counts.popitem(last=False)
+            return counts
+
+    def radiance(self, band: int, rows: int | range, cols: int | range) -> np.ndarray:
+        counts = np.asarray(self.counts(band)[_index(rows), _index(cols)])
+        out = counts.astype(np.float32) * np.float32(self.product.scaling.radiance[band - 1])
+        no_data = self.product.no_data_count(band)
+        return out if no_data is None else np.where(counts == no_data, np.float32(np.nan), out)
+
+
+def _index(r: int | range) -> int | slice:
+    return r if isinstance(r, int) else as_slice(r)
+
+
+def radiance_reader(product: MerisProduct) -> RadianceReader:
+    """How the layers read radiances: an N1 only the selection's lines (its memory map); any
+    other product (a ``.SEN3``) a band whole when first needed, kept in a ``WholeBands``."""
+    if not _reads_lines(product):
+        return WholeBands(product).radiance
+
+    def read(band: int, rows: int | range, cols: int | range) -> np.ndarray:
+        lines, columns = _lines_columns(rows, cols)
+        return product.radiance(band, lines)[columns]
+
+    return read
+
+
+def _reads_lines(product: MerisProduct) -> bool:
+    """True for an N1 (its bands are memory-mapped: a selection reads only its lines)."""
+    from ..products.n1.reader import MerisL1bProduct
+
+    return isinstance(product, MerisL1bProduct)
+
+
+def radiance_levels(product: MerisProduct, read: RadianceReader | None = None) -> list[Any]:
     """The 15 radiance bands (15, H, W) float32 (``radiance_stack``) and its decimated levels
-    (``pyramid``); one level for a small product or a ``.SEN3`` (``_product_factors``)."""
-    stack = radiance_stack(product)
+    (``pyramid``; one level for a small product)."""
+    stack = radiance_stack(product, read)
     return stack.levels() if len(_product_factors(product)) > 1 else [stack]
 
 
-def radiance_stack(product: MerisProduct) -> LazyArray:
-    """The 15 radiance bands as a lazy (15, H, W) float32 array: a selection reads only its
-    lines of the selected bands (``MerisProduct.radiance``)."""
+def radiance_stack(product: MerisProduct, read: RadianceReader | None = None) -> LazyArray:
+    """The 15 radiance bands as a lazy (15, H, W) float32 array: a selection reads only the
+    selected bands (``radiance_reader``: of an N1 only its lines)."""
+    radiance = read or radiance_reader(product)
 
-    def read(sel: Selection) -> np.ndarray:
+    def read_stack(sel: Selection) -> np.ndarray:
         band, rows, cols = sel
         bands = [band] if isinstance(band, int) else list(band)
-        lines, columns = _lines_columns(rows, cols)
-        out = np.stack([product.radiance(b + 1, lines)[columns] for b in bands])
+        out = np.stack([radiance(b + 1, rows, cols) for b in bands])
         return out[0] if isinstance(band, int) else out
 
-    return LazyArray(read, (NUM_BANDS, product.height, product.width), np.float32)
+    return LazyArray(read_stack, (NUM_BANDS, product.height, product.width), np.float32)
 
 
 def _lines_columns(rows: int | range, cols: int | range) -> tuple[slice, Any]:
@@ -415,48 +492,47 @@ def _lines_columns(rows: int | range, cols: int | range) -> tuple[slice, Any]:
 
 
 def quicklook_levels(product: MerisProduct,
-                     bands: tuple[int, int, int] = QUICKLOOK_BANDS) -> list[Any]:
-    """The RGB quick-look (``quicklook_rgb``) of a small product; of a big one a lazy (H, W, 3)
+                     bands: tuple[int, int, int] = QUICKLOOK_BANDS,
+                     read: RadianceReader | None = None) -> list[Any]:
+    """The RGB quick-look (H, W, 3) uint8 of a small product (1-99 % stretch of each band,
+    ``stretch_rgb``); of a big one a lazy (H, W, 3)
     uint8 array and its decimated levels, each channel stretched by the 1-99 % limits of the
     coarsest level (``stretch_channel``)."""
     factors = _product_factors(product)
+    radiance = read or radiance_reader(product)
     if len(factors) == 1:
-        return [quicklook_rgb(product, bands)]
+        everything = range(product.height), range(product.width)
+        return [stretch_rgb([radiance(b, *everything) for b in bands])]
     f = factors[-1]
-    limits = [contrast_limits(product.radiance(b, slice(None, None, f))[:, ::f])
-              for b in bands]
+    limits = [contrast_limits(radiance(b, range(0, product.height, f),
+                                       range(0, product.width, f))) for b in bands]
 
-    def read(sel: Selection) -> np.ndarray:
+    def read_rgb(sel: Selection) -> np.ndarray:
         rows, cols, channel = sel
         channels = [channel] if isinstance(channel, int) else list(channel)
-        lines, columns = _lines_columns(rows, cols)
-        out = [stretch_channel(product.radiance(bands[c], lines)[columns], limits[c])
-               for c in channels]
+        out = [stretch_channel(radiance(bands[c], rows, cols), limits[c]) for c in channels]
         return out[0] if isinstance(channel, int) else np.stack(out, axis=-1)
 
-    rgb = LazyArray(read, (product.height, product.width, 3), np.uint8)
+    rgb = LazyArray(read_rgb, (product.height, product.width, 3), np.uint8)
     return rgb.levels(spatial=(0, 1))
 
 
-def quicklook_rgb(product: MerisProduct,
-                  bands: tuple[int, int, int] = QUICKLOOK_BANDS) -> np.ndarray:
-    """An RGB quick-look (H, W, 3) uint8 from three radiance bands, 1-99 % stretch each."""
-    return stretch_rgb([product.radiance(b) for b in bands])
+def flag_levels(product: MerisProduct) -> list[Any]:
+    """The flags (H, W) uint8 and their decimated views: an N1's are views of its memory map
+    (a level reads only the lines on screen); a big ``.SEN3``'s are read when first shown
+    (``quality_flags`` decoded whole, kept by the product)."""
+    factors = _product_factors(product)
+    if _reads_lines(product) or len(factors) == 1:
+        flags = np.asarray(product.flags)
+        return [flags[::f, ::f] for f in factors]
 
+    def read(sel: Selection) -> np.ndarray:
+        rows, cols = sel
+        return np.asarray(product.flags[_index(rows), _index(cols)])
 
-def flag_levels(product: MerisProduct) -> list[np.ndarray]:
-    """The flags (H, W) uint8 and their decimated views (an N1's are views of its memory map:
-    a level reads only the lines on screen)."""
-    flags = np.asarray(product.flags)
-    return [flags[::f, ::f] for f in _product_factors(product)]
+    return LazyArray(read, (product.height, product.width), np.uint8).levels()
 
 
 def _product_factors(product: MerisProduct) -> list[int]:
-    """The decimation factors of a product's levels: an N1's (``level_factors``: its memory map
-    reads only the lines of a level); one level for a ``.SEN3``, whose netCDF bands are read
-    whole at every access (as before: the quick-look computed once)."""
-    from ..products.n1.reader import MerisL1bProduct
-
-    if not isinstance(product, MerisL1bProduct):
-        return [1]
+    """The decimation factors of a product's levels (``level_factors``)."""
     return level_factors(product.height, product.width)
