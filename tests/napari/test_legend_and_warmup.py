@@ -46,3 +46,29 @@ def test_warm_up_dem_states_its_datum(tmp_path, caplog):
     with caplog.at_level(logging.WARNING):
         open_dem(dem).close()
     assert not [r for r in caplog.records if "vertical datum" in r.getMessage()], caplog.text
+
+
+def test_legend_glyphs_are_rendered_before_a_run(make_napari_viewer, qtbot):
+    """The widget has the canvas render the legend's characters beforehand, a few per turn and
+    invisibly: the first legend of a session no longer renders them (0.2-0.6 s under software
+    GL) in the frame that shows the run's layers. The overlay is left hidden and empty."""
+    from napari_meris_ortho._napari.legend import GLYPHS
+
+    viewer = make_napari_viewer(show=True)
+    overlay = viewer.canvas.overlays.text
+    seen: list[tuple[str, float]] = []
+
+    def record(_event=None):
+        color = overlay.color
+        seen.append((overlay.text, 1.0 if color is None else float(np.asarray(color)[3])))
+
+    overlay.events.text.connect(record)
+    viewer.window.add_plugin_dock_widget("napari-meris-ortho", "Orthorectify")
+    qtbot.waitUntil(lambda: bool(seen) and seen[-1][0] == "", timeout=10_000)
+    assert not overlay.visible and overlay.text == ""
+    shown = "".join(text for text, _ in seen)
+    assert set(GLYPHS) <= set(shown)
+    assert all(alpha == 0.0 for text, alpha in seen if text)  # never visible text
+    visual = viewer.window._qt_viewer.canvas._viewer_overlay_to_visual[overlay][0]
+    font = visual.node._font_manager.get_font(visual.node.face)
+    assert set(GLYPHS) - {" "} <= set(font._glyphs)

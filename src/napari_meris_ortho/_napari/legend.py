@@ -46,6 +46,46 @@ def update_legend(viewer: Any) -> None:
         _SHOWING.discard(viewer)
 
 
+#: the characters of a legend line (``legend_line``: "parallax ×10 · 2003-09-21 09:23: colour =
+#: height, purple 412 m → yellow 2391 m")
+GLYPHS = "0123456789 abcdefghijklmnopqrstuvwxyz:=,.-×·→"
+#: glyphs rendered per turn of the event loop (about 5-15 ms each under software GL)
+GLYPHS_PER_TURN = 4
+
+
+def prepare_glyphs(viewer: Any, step_ms: int = 60) -> None:
+    """Have the canvas render the legend's glyphs beforehand, a few per event-loop turn and
+    invisibly (transparent text), so that the first legend of a run does not render them all
+    in the frame that shows the run (vispy renders each new character of the text overlay into
+    its atlas at its first draw: 0.2-0.6 s for a legend line under software GL). Stops at
+    once when a legend is shown; no-op when the overlay is in use or nothing is drawn."""
+    from qtpy.QtCore import QTimer
+
+    overlay = viewer.canvas.overlays.text
+    if overlay.visible or viewer in _SHOWING:
+        return
+    ref = weakref.ref(viewer)
+    chunks = [GLYPHS[k:k + GLYPHS_PER_TURN] for k in range(0, len(GLYPHS), GLYPHS_PER_TURN)]
+    state = {"text": None}
+
+    def step() -> None:
+        alive = ref()
+        if alive is None or alive in _SHOWING:
+            return
+        text = alive.canvas.overlays.text
+        if state["text"] is not None and text.text != state["text"]:
+            return  # someone else uses the overlay
+        if not chunks:
+            text.text, text.visible, text.color = "", False, "white"
+            return
+        state["text"] = chunks.pop(0)
+        text.color, text.font_size = (0.0, 0.0, 0.0, 0.0), 10  # before the text: never seen
+        text.text, text.visible = state["text"], True
+        QTimer.singleShot(step_ms, step)
+
+    QTimer.singleShot(step_ms, step)
+
+
 def show_legends(viewer: Any) -> None:
     """Keep the parallax legend on the canvas as parallax layers come, go, show and hide."""
     if viewer is None or viewer in _WATCHED:

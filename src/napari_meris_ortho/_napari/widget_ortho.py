@@ -38,7 +38,7 @@ from magicgui.widgets import (
 from ..errors import MerisOrthoError
 from ..options import PARALLAX_CHOICES, Elevation, Parallax, Sampling, SearchMethod, choices
 from .layout import StatusLabel, append_inactive, canvas_updates
-from .legend import show_legends
+from .legend import prepare_glyphs, show_legends
 from .ortho_run import (
     ALGORITHMS,
     CRS_EPSG,
@@ -64,6 +64,8 @@ if TYPE_CHECKING:
 DEM_FILE, DEM_DIR = "GeoTIFF / SRTM30 tile", "GETASSE30 directory"
 #: seconds to wait for a cancelled job when the viewer closes
 CLOSE_TIMEOUT_S = 60.0
+#: milliseconds between showing two of a run's layers: the paint drawing one comes first
+SHOW_STEP_MS = 40
 
 __all__ = ["CRS_EPSG", "CRS_GEOGRAPHIC", "CRS_UTM", "Cancelled", "RunSettings", "OrthoRun",
            "OrthorectifyWidget", "output_crs", "parse_bands", "run_layers", "run_orthorectify"]
@@ -234,7 +236,7 @@ class OrthorectifyWidget(Container):
         #: layer changes (remove an old layer, append a new one) left to make, one per turn
         self._queue: list[tuple[Any, Any]] = []
         self._queued, self._summary = 0, ""
-        self._new_layers: list[Any] = []
+        self._hidden: list[Any] = []  # a run's layers waiting to be shown (``_done``)
         self._batch_open = False  # napari's batch of layer removals (``_removals``)
         self.last_run: OrthoRun | None = None
         remembered = {"elevation": self.elevation, "geolocation": self.geolocation,
@@ -264,6 +266,7 @@ class OrthorectifyWidget(Container):
         self.native.destroyed.connect(self._shutdown)
         show_map_coordinates(viewer)
         show_legends(viewer)
+        prepare_glyphs(viewer)
         _import_engine()
         warm_up_in_background()  # numba compiles while the user fills the form
 
@@ -442,10 +445,18 @@ class OrthorectifyWidget(Container):
         removals: list[tuple[Any, Any]] = [(self._remove_layer, old) for old in replaced]
         if removals:
             removals = [(self._removals, True), *removals, (self._removals, False)]
+        # the first frames show the new layers one at a time: vispy builds a new visual's
+        # shaders at its first draw (software GL under Xvfb: 0.05-0.15 s each), so one frame
+        # with all of them is the longest stall of a run
+        shown = [layer for layer in layers if layer.visible]
+        for layer in shown:
+            layer.visible = False
         self._queue = [*removals, *((self._append, layer) for layer in layers),
-                       *((self._activate, layer) for layer in layers[-1:])]
+                       *((self._activate, layer) for layer in layers[-1:]),
+                       (self._frame_result, shown), (self._canvas_updates, True),
+                       *((self._show, layer) for layer in shown)]
         self._queued = len(self._queue)
-        self._new_layers = layers
+        self._hidden = shown
         self._summary = run.summary()
         self._canvas_updates(False)
         self._schedule_step()
@@ -455,6 +466,19 @@ class OrthorectifyWidget(Container):
 
     def _append(self, layer: Any) -> None:
         append_inactive(self.viewer, layer)
+
+    def _show(self, layer: Any) -> None:
+        """Show one of the run's layers (hidden until all were in; ``_done``)."""
+        if layer in self._hidden:
+            self._hidden.remove(layer)
+        layer.visible = True
+
+    def _show_hidden(self) -> None:
+        """Show at once the run's layers still waiting for their turn (Cancel, an error)."""
+        hidden, self._hidden = self._hidden, []
+        for layer in hidden:
+            if layer in self.viewer.layers:
+                layer.visible = True
 
     def _activate(self, layer: Any) -> None:
         if layer in self.viewer.layers:
@@ -475,12 +499,12 @@ class OrthorectifyWidget(Container):
         if layer in self.viewer.layers:
             self.viewer.layers.remove(layer)
 
-    def _schedule_step(self) -> None:
+    def _schedule_step(self, delay_ms: int = 1) -> None:
         """The next step on a 1 ms timer: Qt delivers a 0 ms single shot as a posted event,
         which can run right after the previous step, before the timers and paints due."""
         from qtpy.QtCore import QTimer
 
-        QTimer.singleShot(1, self._step)
+        QTimer.singleShot(delay_ms, self._step)
 
     def _step(self) -> None:
         """One queued layer change per event-loop turn, so that the viewer repaints and Cancel
@@ -502,18 +526,18 @@ class OrthorectifyWidget(Container):
             self._end()
             raise
         if self._queue:
-            self._schedule_step()
+            # a shown layer is drawn in the paint that follows: the next change waits for
+            # it (a paint and a change within one turn would add up to one stall)
+            self._schedule_step(SHOW_STEP_MS if change == self._show else 1)
             return
         self.progress_bar.value = self.progress_bar.max
         self.status.value = self._summary
-        self._frame_result()
         self._end()
 
-    def _frame_result(self) -> None:
-        """Point the camera at the run's visible layers (the result, not the whole viewer)."""
-        shown = [layer for layer in self._new_layers
-                 if layer.visible and layer in self.viewer.layers]
-        self._new_layers = []
+    def _frame_result(self, layers: list[Any]) -> None:
+        """Point the camera at the run's visible ``layers`` (the result, not the whole
+        viewer), before the canvas draws them."""
+        shown = [layer for layer in layers if layer in self.viewer.layers]
         if not shown:
             return
         if max(layer.ndim for layer in shown) == self.viewer.dims.ndim:
@@ -553,4 +577,5 @@ class OrthorectifyWidget(Container):
     def _end(self) -> None:
         self._removals(False)  # a batch left open by Cancel
         self._canvas_updates(True)
+        self._show_hidden()
         self.run_button.enabled, self.cancel_button.enabled = True, False
