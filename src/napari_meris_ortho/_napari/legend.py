@@ -66,7 +66,7 @@ def prepare_glyphs(viewer: Any, step_ms: int = 60) -> None:
         return
     ref = weakref.ref(viewer)
     chunks = [GLYPHS[k:k + GLYPHS_PER_TURN] for k in range(0, len(GLYPHS), GLYPHS_PER_TURN)]
-    state = {"text": None}
+    state: dict[str, str | None] = {"text": None}
 
     def step() -> None:
         alive = ref()
