@@ -114,3 +114,24 @@ def test_sample_from_the_menu_loads_in_the_background(make_napari_viewer, qtbot,
     assert not any(name.startswith("MERIS sample") for name in names)  # placeholder gone
     assert took[0] < 1.0  # main: the whole simulation and both mappings (11 s)
     assert float(np.diff(stamps).max()) < MAX_GAP_S
+
+
+def test_sample_rasters_bigger_than_a_level_are_pyramids(monkeypatch):
+    """A sample's rasters go in as pyramids like a run's (``ortho_run.multiscale_layer``): with
+    levels of at most 256 pixels, fr-small's rasters get levels, full resolution first and
+    unchanged; geometry layers stay as they are."""
+    from napari_meris_ortho import pyramid
+    from napari_meris_ortho._napari.sample_data import build_sample, sample_layers
+
+    sample = build_sample("fr-small", None)
+    flat = {kw["name"]: (data, kind) for data, kw, kind in sample_layers(sample)}
+    monkeypatch.setattr(pyramid, "MAX_LEVEL_SIDE", 256)
+    layers = sample_layers(sample)
+    rasters = [(data, kw) for data, kw, kind in layers if kind in ("image", "labels")]
+    assert len(rasters) >= 5
+    for data, kw in rasters:
+        assert kw.get("multiscale"), kw["name"]
+        assert len(data) >= 2 and max(data[-1].shape[:2]) <= 256
+        np.testing.assert_array_equal(np.asarray(data[0]), np.asarray(flat[kw["name"]][0]))
+    geometry = [kw for _, kw, kind in layers if kind in ("shapes", "vectors")]
+    assert len(geometry) == 3 and not any(kw.get("multiscale") for kw in geometry)

@@ -22,7 +22,8 @@ import numpy as np
 from ..geometry.grid import OutputGrid
 from ..progress import ProgressCallback
 from .geometry_layers import geometry_layers
-from .layout import canvas_updates
+from .layout import append_inactive, canvas_updates
+from .ortho_run import multiscale_layer
 from .product_layers import band_layers, contrast_limits
 from .world import geo_image_kwargs, reproject_onto
 
@@ -122,7 +123,7 @@ def sample_layers(sample: SampleScene) -> list[LayerData]:
     layers += geometry_layers(sample.tie_points, frame, "", sample.diagnostics,
                               valid=sample.valid, exaggeration=10.0,
                               step=max(8, max(frame.width, frame.height) // 60))
-    return layers
+    return [multiscale_layer(layer) for layer in layers]  # big rasters as pyramids, as a run's
 
 
 def _napari_progress(name: str) -> tuple[Any, ProgressCallback]:
@@ -246,9 +247,9 @@ class SampleLoader:
         from qtpy.QtCore import QTimer
 
         try:
-            if self.layers:
-                self.viewer.layers.append(self.layers.pop(0))
-                QTimer.singleShot(0, self._step)
+            if self.layers:  # inactive: the layer controls do not switch at every turn
+                append_inactive(self.viewer, self.layers.pop(0))
+                QTimer.singleShot(1, self._step)  # timers and paints due run in between
                 return
             for layer in self._placeholders():
                 self.viewer.layers.remove(layer)
