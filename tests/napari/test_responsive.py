@@ -168,3 +168,32 @@ def test_a_run_shows_its_layers_one_per_frame(make_napari_viewer, qtbot, tiny_n1
     assert shown_at_draw and shown_at_draw[-1] == len(visible)
     steps = np.diff([0, *shown_at_draw])
     assert steps.max() == 1, f"new layers per frame: {shown_at_draw}"
+
+
+def test_removing_layers_hands_the_heap_back(make_napari_viewer, qtbot):
+    """Once layers leave the viewer the widget has glibc return the freed heap to the system
+    (``memory.trim_after_removals``), in a thread of its own a second after the last removal:
+    resident memory goes back without the user doing anything."""
+    import psutil
+
+    from napari_meris_ortho._napari import memory
+
+    viewer = make_napari_viewer()
+    OrthorectifyWidget(viewer)
+    # many small blocks (the Python objects of removed layers are such): freed, they stay in
+    # the heap until trimmed
+    blocks = [bytearray(2000) for _ in range(150_000)]
+    viewer.add_image(np.zeros((8, 8), np.float32), name="x", metadata={"blocks": blocks})
+    del blocks
+    before_removal = psutil.Process().memory_info().rss
+    viewer.layers.clear()
+    import gc
+
+    gc.collect()
+    freed = psutil.Process().memory_info().rss
+    qtbot.waitUntil(lambda: "timer" in memory._pending, timeout=5_000)
+    memory._pending["timer"].join(10)
+    qtbot.wait(50)
+    trimmed = psutil.Process().memory_info().rss
+    assert before_removal - trimmed > 200 * 2**20, (before_removal, freed, trimmed)
+    assert freed - trimmed > 100 * 2**20  # the trim, not the removal, gave it back

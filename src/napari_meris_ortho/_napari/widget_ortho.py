@@ -39,6 +39,7 @@ from ..errors import MerisOrthoError
 from ..options import PARALLAX_CHOICES, Elevation, Parallax, Sampling, SearchMethod, choices
 from .layout import StatusLabel, append_inactive, canvas_updates
 from .legend import prepare_glyphs, show_legends
+from .memory import trim_after_removals
 from .ortho_run import (
     ALGORITHMS,
     CRS_EPSG,
@@ -267,6 +268,7 @@ class OrthorectifyWidget(Container):
         show_map_coordinates(viewer)
         show_legends(viewer)
         prepare_glyphs(viewer)
+        trim_after_removals(viewer)
         _import_engine()
         warm_up_in_background()  # numba compiles while the user fills the form
 
