@@ -694,7 +694,7 @@ def test_tile_chunks_are_the_bytes_zarr_writes(tmp_path) -> None:
 
 
 def test_winner_counts_equal_the_sorted_count() -> None:
-    """A tile's winners are counted in one pass (``np.bincount``), as ``np.unique`` counts
+    """A tile's winners are counted in one pass (``count_winners``), as ``np.unique`` counts
     them: the new products that hold pixels, with their pixel counts, none for the others."""
     from napari_meris_ortho.synthesis.run import winner_counts
 

@@ -416,9 +416,11 @@ def tile_task(fork: Any, spec: Spec, window: Window, pieces: list[Piece], rank: 
 
 
 def winner_counts(winner: np.ndarray, indices: set[int]) -> dict[int, int]:
-    """Pixels of ``winner`` (product indices >= 0) held by each of ``indices`` that holds
-    any: one counting pass over the small index range (``np.bincount``), no sort."""
-    counts = np.bincount(winner.ravel(), minlength=max(indices, default=0) + 1)
+    """Pixels of the 2-D ``winner`` layer held by each of ``indices`` that holds any: one
+    counting pass over the index range (``engine.synthesis.count_winners``), no sort."""
+    from ..engine.synthesis import count_winners
+
+    counts = count_winners(winner, max(indices, default=0) + 1)
     return {i: int(counts[i]) for i in sorted(indices) if counts[i]}
 
 
