@@ -691,3 +691,21 @@ def test_tile_chunks_are_the_bytes_zarr_writes(tmp_path) -> None:
     assert all(corner[n].shape == (1024, 1024) and not corner[n].any() for n in names)
     assert np.array_equal(st.read_tile(stores["zarr"], ["overview_2/ndvi"], (512, 650, 512, 550))
                           ["overview_2/ndvi"], arrays["ndvi"][::2, ::2])
+
+
+def test_winner_counts_equal_the_sorted_count() -> None:
+    """A tile's winners are counted in one pass (``count_winners``), as ``np.unique`` counts
+    them: the new products that hold pixels, with their pixel counts, none for the others."""
+    from napari_meris_ortho.synthesis.run import winner_counts
+
+    rng = np.random.default_rng(25)
+    winner = rng.integers(0, 7, (1024, 1024)).astype(np.int32)
+    winner[:, 512:] = 0  # background
+    winner[winner == 4] = 2  # index 4 holds nothing
+    ids, counts = np.unique(winner, return_counts=True)
+    want = {int(i): int(n) for i, n in zip(ids, counts, strict=True) if int(i) in {2, 4, 5, 9}}
+    got = winner_counts(winner, {2, 4, 5, 9})
+    assert got == want
+    assert set(got) == {2, 5} and sum(got.values()) == int(np.isin(winner, [2, 5]).sum())
+    assert got[2] > 2 * got[5] > 0  # index 2 also holds the old index 4's pixels
+    assert winner_counts(winner[:, 512:], {1, 3}) == {}

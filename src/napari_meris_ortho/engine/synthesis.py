@@ -231,3 +231,17 @@ def combine(acc: TileState, new: TileState, rank: np.ndarray) -> None:
     else:
         combine_maximum_ndvi(acc.bands, acc.ndvi, acc.count, acc.winner, new.bands, new.ndvi,
                              new.count, new.winner, rank)
+
+
+@njit(cache=True)
+def count_winners(winner: np.ndarray, n: int) -> np.ndarray:
+    """Pixels of each product index 0 .. n - 1 in the 2-D ``winner`` layer (indices outside
+    are not counted): one pass, no sort, no widened copy (``np.bincount`` casts to int64)."""
+    counts = np.zeros(n, np.int64)
+    rows, cols = winner.shape
+    for i in range(rows):
+        for j in range(cols):
+            w = winner[i, j]
+            if 0 <= w < n:
+                counts[w] += 1
+    return counts

@@ -410,11 +410,18 @@ def tile_task(fork: Any, spec: Spec, window: Window, pieces: list[Piece], rank: 
     else:
         done.writing = writer.submit(lambda: st.write_tile(fork.store, window, arrays, stored,
                                                            spec.overviews))
-    ids, counts = np.unique(state.winner, return_counts=True)
-    new = {p.index for p in usable}
-    done.winners = {int(i): int(n) for i, n in zip(ids, counts, strict=True) if int(i) in new}
+    done.winners = winner_counts(state.winner, {p.index for p in usable})
     done.fork = fork
     return done
+
+
+def winner_counts(winner: np.ndarray, indices: set[int]) -> dict[int, int]:
+    """Pixels of the 2-D ``winner`` layer held by each of ``indices`` that holds any: one
+    counting pass over the index range (``engine.synthesis.count_winners``), no sort."""
+    from ..engine.synthesis import count_winners
+
+    counts = count_winners(winner, max(indices, default=0) + 1)
+    return {i: int(counts[i]) for i in sorted(indices) if counts[i]}
 
 
 def _state_of(arrays: dict[str, np.ndarray], spec: Spec) -> TileState:
