@@ -14,7 +14,7 @@ import os
 import uuid
 import warnings
 from collections import OrderedDict
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -381,36 +381,54 @@ def _no_data_out(result: Any, spec: Spec, valid: np.ndarray) -> None:
         valid &= (result.bands[NDVI_RED_BAND] > 0) & (result.bands[NDVI_NIR_BAND] > 0)
 
 
-def tile_task(fork: Any, spec: Spec, window: Window, pieces: list[Piece], rank: np.ndarray,
-              exclude: frozenset[int], writer: TileWriter | None = None) -> TileDone:
-    """Merge the pieces into the stored tile ``window`` (a whole chunk) and write it into
-    ``fork`` (on ``writer``'s thread if given: ``TileDone.wait``). Pieces of products in
-    ``exclude`` or that failed are left out."""
+def tile_job(fork: Any, spec: Spec, window: Window, jobs: Sequence[Job], rank: np.ndarray,
+             exclude: frozenset[int], writer: TileWriter | None = None) -> TileDone:
+    """One output tile, whole: every product's piece of it orthorectified here
+    (``segment_task``, one after the other) and merged as it comes, then written (``tile_task``).
+    One task per tile: no piece travels between workers or waits for its merge, a worker holds
+    one piece at a time, and tiles stream (each is written as soon as its products are done)."""
+    pieces = (segment_task(spec, index, path, piece, extent)
+              for index, path, piece, extent in jobs if index not in exclude)
+    return tile_task(fork, spec, window, pieces, rank, exclude, writer)
+
+
+def tile_task(fork: Any, spec: Spec, window: Window, pieces: Iterable[Piece],
+              rank: np.ndarray, exclude: frozenset[int],
+              writer: TileWriter | None = None) -> TileDone:
+    """Merge the pieces, as they come, into the stored tile ``window`` (a whole chunk) and write
+    it into ``fork`` (on ``writer``'s thread if given: ``TileDone.wait``). Pieces of products in
+    ``exclude`` or that failed are left out. The merge rule is associative and commutative
+    (``engine.synthesis.combine``, ties by ``rank``): any order of the pieces gives the same."""
     from ..engine.synthesis import combine
 
     st.quiet_icechunk()
-    usable = [p for p in pieces if p.state is not None and p.error is None
-              and p.dem_error is None and p.index not in exclude]
-    done = TileDone(None, window, pieces=[Piece(p.index, p.window, None, p.processed,
-                                                p.validated, p.error, p.dem_error)
-                                          for p in pieces])
-    if not usable:
-        return done
-    stored = st.read_tile(fork.store, spec.names, window)  # as stored: counts (compact)
-    state = _state_of(stored, spec)
-    for p in sorted(usable, key=lambda p: int(rank[p.index])):  # any order gives the same
-        if p.state is None:
+    done = TileDone(None, window)
+    state: TileState | None = None
+    stored: dict[str, np.ndarray] = {}
+    merged: set[int] = set()
+    for p in pieces:
+        done.pieces.append(Piece(p.index, p.window, None, p.processed, p.validated, p.error,
+                                 p.dem_error))
+        if p.state is None or p.error is not None or p.dem_error is not None \
+                or p.index in exclude:
             continue
+        if state is None:  # the stored tile, read once a piece has something to merge
+            stored = st.read_tile(fork.store, spec.names, window)  # counts (compact)
+            state = _state_of(stored, spec)
         r0, r1, c0, c1 = (p.window[0] - window[0], p.window[1] - window[0],
                           p.window[2] - window[2], p.window[3] - window[2])
         combine(state.window(r0, r1, c0, c1), p.state, rank)
+        merged.add(p.index)
+        p.state = None  # merged: its memory goes
+    if state is None:
+        return done
     arrays = _arrays_of(state, spec)
     if writer is None:
         done.chunks = st.write_tile(fork.store, window, arrays, stored, spec.overviews)
     else:
         done.writing = writer.submit(lambda: st.write_tile(fork.store, window, arrays, stored,
                                                            spec.overviews))
-    done.winners = winner_counts(state.winner, {p.index for p in usable})
+    done.winners = winner_counts(state.winner, merged)
     done.fork = fork
     return done
 
@@ -657,32 +675,26 @@ class Synthesis:
                  exclude: frozenset[int]) -> list[TileDone]:
         """Submit every task (tile by tile), report progress, return the written tiles."""
         futures: list[Any] = []
-        inputs: dict[int, list[Any]] = {}  # tile future -> its pieces
-        total = sum(len(v) + 1 for v in jobs.values())
         run = uuid.uuid4().hex[:8]
-        for t, (window, tasks) in enumerate(jobs.items()):
-            pieces = [runner.submit(segment_task, spec, index, path, piece, extent,
-                                    priority=-t,
-                                    key=f"segment-{run}-{index}-{piece[0]}-{piece[2]}")
-                      for index, path, piece, extent in tasks if index not in exclude]
-            extra = (runner.writer,) if isinstance(runner, InProcess) else ()
-            tile = runner.submit(tile_task, session.fork(), spec, window, pieces, rank, exclude,
-                                 *extra, key=f"tile-{run}-{window[0]}-{window[2]}",
-                                 priority=-t)
-            inputs[id(tile)] = pieces
-            futures += [*pieces, tile]
-        done = 0
+        extra = (runner.writer,) if isinstance(runner, InProcess) else ()
+        # the tiles with the most pieces first: on N workers the longest tasks start first
+        order = sorted(jobs.items(), key=lambda item: -len(item[1]))
+        for window, tasks in order:
+            futures.append(runner.submit(tile_job, session.fork(), spec, window, tasks, rank,
+                                         exclude, *extra,
+                                         key=f"tile-{run}-{window[0]}-{window[2]}",
+                                         priority=len(tasks)))
+        total, done = len(futures), 0
         written: list[TileDone] = []
         try:
             for future in runner.completed(futures):
                 done += 1
-                if id(future) in inputs:
-                    runner.release(inputs.pop(id(future)))  # merged: free the workers' memory
-                    tile = runner.result(future)
-                    written.append(tile)
-                    errors = [p.dem_error for p in tile.pieces if p.dem_error is not None]
-                    if errors:  # not the product's fault: stop the run (exit 2)
-                        raise DemError(errors[0])
+                tile = runner.result(future)
+                runner.release([future])
+                written.append(tile)
+                errors = [p.dem_error for p in tile.pieces if p.dem_error is not None]
+                if errors:  # not the product's fault: stop the run (exit 2)
+                    raise DemError(errors[0])
                 if self.progress is not None:
                     self.progress(done, total)
             for tile in written:
