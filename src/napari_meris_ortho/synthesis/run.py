@@ -1,5 +1,6 @@
-"""One ``synthesize`` run: plan the (product, tile) tasks, run them in this process or on dask
-workers, merge the Icechunk forks and commit (see :mod:`napari_meris_ortho.synthesis`).
+"""One ``synthesize`` run: plan one task per output tile (``tile_job``: the (product, tile)
+pieces orthorectified and merged in it), run them in this process or on dask workers, merge the
+Icechunk forks and commit (see :mod:`napari_meris_ortho.synthesis`).
 
 Task functions are module-level (dask ships them by reference); the products they open and the
 grids they build are cached per worker process, so a product is opened once per worker, not once
