@@ -49,11 +49,11 @@ def update_legend(viewer: Any) -> None:
 #: the characters of a legend line (``legend_line``: "parallax ×10 · 2003-09-21 09:23: colour =
 #: height, purple 412 m → yellow 2391 m")
 GLYPHS = "0123456789 abcdefghijklmnopqrstuvwxyz:=,.-×·→"
-#: glyphs rendered per turn of the event loop (about 5-15 ms each under software GL)
-GLYPHS_PER_TURN = 4
+#: glyphs rendered per turn of the event loop (about 10-30 ms each under software GL)
+GLYPHS_PER_TURN = 2
 
 
-def prepare_glyphs(viewer: Any, step_ms: int = 60) -> None:
+def prepare_glyphs(viewer: Any, step_ms: int = 40) -> None:
     """Have the canvas render the legend's glyphs beforehand, a few per event-loop turn and
     invisibly (transparent text), so that the first legend of a run does not render them all
     in the frame that shows the run (vispy renders each new character of the text overlay into
