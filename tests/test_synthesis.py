@@ -456,16 +456,17 @@ def test_product_table_and_cog_export_carry_band_and_scaling_metadata(products,
 
 
 def test_progress_per_task_and_cancel_leave_the_store_untouched(products, tmp_path) -> None:
-    """``progress(done, total)`` after each tile task; an exception raised by it (napari's
-    Cancel) stops the run: no commit, a new store is not left behind."""
+    """``progress(done, total)`` after each product's piece of a tile and each merged tile (in
+    process); an exception raised by it (napari's Cancel) stops the run: no commit, a new store
+    is not left behind."""
     calls: list[tuple[int, int]] = []
     out = tmp_path / "s"
     synthesize([products["cloudy1"]], out, grid=GRID, bands=(13,), tile=256,
                elevation="tiepoints", progress=lambda d, t: calls.append((d, t)))
     total = calls[-1][1]
     assert [d for d, _ in calls] == list(range(1, total + 1))
-    # one task per tile the product touches (of 3 x 2), its piece orthorectified in it
-    assert 3 <= total <= 6
+    # a piece and a merge for each tile the product touches (of 3 x 2)
+    assert total % 2 == 0 and 2 <= total <= 12
     before = layers(out)
 
     class Cancelled(Exception):

@@ -39,7 +39,7 @@ from ..errors import MerisOrthoError
 from ..options import PARALLAX_CHOICES, Elevation, Parallax, Sampling, SearchMethod, choices
 from .layout import StatusLabel, append_inactive, canvas_updates
 from .legend import prepare_glyphs, show_legends
-from .memory import trim_after_removals
+from .memory import freeze_long_lived, thaw, trim_after_removals
 from .ortho_run import (
     ALGORITHMS,
     CRS_EPSG,
@@ -270,6 +270,7 @@ class OrthorectifyWidget(Container):
         prepare_glyphs(viewer)
         trim_after_removals(viewer)
         _import_engine()
+        freeze_long_lived(viewer)  # the engine's modules included
         warm_up_in_background()  # numba compiles while the user fills the form
 
     # ---------------------------------------------------------------- DEM list
@@ -419,6 +420,7 @@ class OrthorectifyWidget(Container):
         if not hasattr(self, "_cancel"):  # being garbage-collected
             return
         self._closed = True
+        thaw()  # the viewer's objects can be collected again
         self._cancel.set()
         if self._job is not None and self._job.thread.is_alive():
             self._job.thread.join(CLOSE_TIMEOUT_S)

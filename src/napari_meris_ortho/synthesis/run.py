@@ -383,14 +383,23 @@ def _no_data_out(result: Any, spec: Spec, valid: np.ndarray) -> None:
 
 
 def tile_job(fork: Any, spec: Spec, window: Window, jobs: Sequence[Job], rank: np.ndarray,
-             exclude: frozenset[int], writer: TileWriter | None = None) -> TileDone:
+             exclude: frozenset[int], writer: TileWriter | None = None,
+             on_piece: Callable[[], None] | None = None) -> TileDone:
     """One output tile, whole: every product's piece of it orthorectified here
     (``segment_task``, one after the other) and merged as it comes, then written (``tile_task``).
     One task per tile: no piece travels between workers or waits for its merge, a worker holds
-    one piece at a time, and tiles stream (each is written as soon as its products are done)."""
-    pieces = (segment_task(spec, index, path, piece, extent)
-              for index, path, piece, extent in jobs if index not in exclude)
-    return tile_task(fork, spec, window, pieces, rank, exclude, writer)
+    one piece at a time, and tiles stream (each is written as soon as its products are done).
+    ``on_piece``: called after each piece (in process: the run's progress, and its Cancel)."""
+
+    def pieces() -> Iterator[Piece]:
+        for index, path, piece, extent in jobs:
+            if index in exclude:
+                continue
+            yield segment_task(spec, index, path, piece, extent)
+            if on_piece is not None:
+                on_piece()
+
+    return tile_task(fork, spec, window, pieces(), rank, exclude, writer)
 
 
 def tile_task(fork: Any, spec: Spec, window: Window, pieces: Iterable[Piece],
@@ -677,7 +686,20 @@ class Synthesis:
         """Submit every task (tile by tile), report progress, return the written tiles."""
         futures: list[Any] = []
         run = uuid.uuid4().hex[:8]
-        extra = (runner.writer,) if isinstance(runner, InProcess) else ()
+        steps = {window: sum(1 for job in tasks if job[0] not in exclude) + 1
+                 for window, tasks in jobs.items()}  # its pieces and its merge
+        total, count = sum(steps.values()), [0]
+
+        def advance(n: int) -> None:
+            """Progress: one step per piece and per merged tile (pieces are reported as they
+            come in process, with their tile on dask)."""
+            count[0] += n
+            if self.progress is not None:
+                self.progress(count[0], total)
+
+        in_process = isinstance(runner, InProcess)
+        extra: tuple[Any, ...] = ((runner.writer, lambda: advance(1))
+                                  if isinstance(runner, InProcess) else ())
         # the tiles with the most pieces first: on N workers the longest tasks start first
         order = sorted(jobs.items(), key=lambda item: -len(item[1]))
         for window, tasks in order:
@@ -685,19 +707,16 @@ class Synthesis:
                                          exclude, *extra,
                                          key=f"tile-{run}-{window[0]}-{window[2]}",
                                          priority=len(tasks)))
-        total, done = len(futures), 0
         written: list[TileDone] = []
         try:
             for future in runner.completed(futures):
-                done += 1
                 tile = runner.result(future)
                 runner.release([future])
                 written.append(tile)
                 errors = [p.dem_error for p in tile.pieces if p.dem_error is not None]
                 if errors:  # not the product's fault: stop the run (exit 2)
                     raise DemError(errors[0])
-                if self.progress is not None:
-                    self.progress(done, total)
+                advance(1 if in_process else steps[tile.window])
             for tile in written:
                 tile.wait()
         except BaseException:
