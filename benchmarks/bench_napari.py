@@ -12,7 +12,9 @@ One run prints, in a real napari viewer (run it under Xvfb: ``xvfb-run -a``):
    numba kernels into the process, the later ones are warm;
 3. resident memory after the first run, and after ``RUNS`` runs with every layer removed
    (``gc.collect()``, napari's deferred deletions processed), also once glibc's ``malloc_trim``
-   has returned the free heap (what is kept for reuse is not held by anything).
+   has returned the free heap (what is kept for reuse is not held by anything);
+4. ``RERUNS`` more runs whose layers replace the previous run's (the user pressing Run again:
+   napari removes the old layers and collects garbage), their longest stalls.
 
 With ``--sen3``: the scene's ``.SEN3`` product instead (``simulate.geocorrected``, written
 next to the scene once), opened only (no runs), and the reader's peak allocation
@@ -37,6 +39,8 @@ import psutil
 
 #: Orthorectify runs in a row (issue 24: memory of four runs)
 RUNS = 4
+#: then runs whose layers replace the previous run's (same names: napari removes them)
+RERUNS = 2
 
 
 def _rss_mb() -> float:
@@ -170,9 +174,21 @@ def bench(scene_name: str, sen3: bool = False) -> dict[str, Any]:
         _spin(app, lambda: False, 0.3)  # napari's deferred deletions
     out["runs"] = runs
     _spin(app, lambda: False, 1.5)  # the plugin trims the heap 1 s after the last removal
-    out["rss_before_runs_mb"] = rss_before
     out["rss_after_runs_removed_mb"] = _rss_mb()
     out["rss_after_malloc_trim_mb"] = _trimmed_rss_mb()
+    # reruns: each run's layers replace the previous run's (napari removes them, then collects)
+    reruns = []
+    for _ in range(RERUNS + 1):
+        with LoopTurns() as turns:
+            t0 = time.perf_counter()
+            assert widget.start() is not None, widget.status.value
+            _spin(app, lambda: not widget.running)
+            seconds = time.perf_counter() - t0
+            _spin(app, lambda: False, 0.5)
+        reruns.append({"run_s": seconds, "longest_stall_s": turns.longest_gap,
+                       "layers": len(viewer.layers)})
+    out["reruns"] = reruns[1:]  # the first one replaces nothing
+    out["rss_before_runs_mb"] = rss_before
     viewer.close()
     return out
 
@@ -203,6 +219,9 @@ def _print_runs(out: dict[str, Any]) -> None:
     for k, run in enumerate(out["runs"]):
         print(f"run {k + 1}: {run['run_s']:.2f} s, longest UI stall "
               f"{run['longest_stall_s']:.2f} s, {run['layers']} layers")
+    for k, run in enumerate(out.get("reruns", [])):
+        print(f"rerun {k + 1} (replacing the last run's layers): {run['run_s']:.2f} s, "
+              f"longest UI stall {run['longest_stall_s']:.2f} s, {run['layers']} layers")
     print(f"memory: {out['rss_before_runs_mb']:.0f} MB before the runs, "
           f"{out['rss_after_first_run_mb']:.0f} MB after the first, "
           f"{out['rss_after_runs_removed_mb']:.0f} MB after {RUNS} runs, layers removed "

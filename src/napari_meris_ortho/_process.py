@@ -61,6 +61,18 @@ def _keep_freed_memory() -> None:
         libc.mallopt(_M_TRIM_THRESHOLD, 2 ** 31 - 1)
 
 
+def malloc_trim() -> bool:
+    """Return the C heap's free memory to the system (glibc ``malloc_trim(0)``); False off
+    glibc. The opposite of ``_keep_freed_memory``, for a long-lived process (the viewer) once
+    what it freed will not be needed again soon."""
+    try:
+        trim = ctypes.CDLL(None).malloc_trim
+    except (OSError, AttributeError):
+        return False
+    trim(0)
+    return True
+
+
 @contextlib.contextmanager
 def few_collections(last: bool) -> Iterator[None]:
     """Python's cyclic garbage collector run rarely (imports and numba's cache loading make

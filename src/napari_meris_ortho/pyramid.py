@@ -12,6 +12,8 @@ overviews (``memory_levels``, ``engine.resample.overview_level``).
 
 from __future__ import annotations
 
+import threading
+from collections import OrderedDict
 from collections.abc import Callable, Sequence
 from typing import Any
 
@@ -132,3 +134,48 @@ def full_resolution(data: Any) -> Any:
     """Level 0 of a layer's data (napari's multiscale data and a list of levels are sequences,
     arrays are not), else the data itself."""
     return data[0] if isinstance(data, Sequence) else data
+
+
+#: radiance bands a product read whole (a ``.SEN3``) keeps read (``WholeBands``): the three of
+#: the RGB quick-look and the last three the band slider showed
+CACHED_BANDS = 6
+
+class WholeBands:
+    """The bands of a product read whole (a ``.SEN3``: its netCDF variables are chunked and
+    compressed, so a band's lines, or a strided read, cost the whole band's decompression):
+    the uint16 ``counts`` of the last ``size`` bands used (least recently used dropped), the
+    radiances of a selection computed from them as ``MerisProduct`` defines them (counts x
+    ``scaling.radiance``, NaN where the counts are ``no_data_count``), elementwise: the values
+    of ``product.radiance(b)`` at the selection (a ``MerisProduct``: ``counts``, ``scaling``,
+    ``no_data_count``)."""
+
+    def __init__(self, product: Any, size: int = CACHED_BANDS) -> None:
+        self.product, self.size = product, size
+        self._counts: OrderedDict[int, np.ndarray] = OrderedDict()
+        self._lock = threading.Lock()  # napari may read in worker threads
+        #: bands read so far (each read once while it stays in the cache)
+        self.reads: list[int] = []
+
+    def counts(self, band: int) -> np.ndarray:
+        """The stored counts of ``band`` (1..15), read whole when not kept."""
+        with self._lock:
+            if band in self._counts:
+                self._counts.move_to_end(band)
+                return self._counts[band]
+            counts = self.product.counts(band)
+            self.reads.append(band)
+            self._counts[band] = counts
+            while len(self._counts) > self.size:
+                self._counts.popitem(last=False)
+            return counts
+
+    def radiance(self, band: int, rows: int | range, cols: int | range) -> np.ndarray:
+        counts = np.asarray(self.counts(band)[as_index(rows), as_index(cols)])
+        out = counts.astype(np.float32) * np.float32(self.product.scaling.radiance[band - 1])
+        no_data = self.product.no_data_count(band)
+        return out if no_data is None else np.where(counts == no_data, np.float32(np.nan), out)
+
+
+def as_index(r: int | range) -> int | slice:
+    """An index as it is, a range as its slice (``as_slice``)."""
+    return r if isinstance(r, int) else as_slice(r)

@@ -1,6 +1,6 @@
 """A ``.SEN3`` opens like an N1 (issue 24, item 2): multiscale layers read on demand, the
 quick-look stretched from the coarsest level, a band read whole when first shown and the last
-few kept (``reader.WholeBands``), the flags read when first shown.
+few kept (``pyramid.WholeBands``), the flags read when first shown.
 
 Before, a ``.SEN3`` opened as one level, read eagerly: four full float32 bands (band 7 for the
 contrast limits, 7, 5 and 2 for the quick-look), its quality flags decoded whole, and every
@@ -134,7 +134,7 @@ def test_opening_a_sen3_reads_the_quicklook_bands_only(pair):
 def test_whole_bands_keeps_the_last_bands_read(pair):
     """Scrolling the 15 bands keeps the last ``CACHED_BANDS`` (memory bounded), reads each band
     once while it is kept, and gives the product's radiances of any selection."""
-    from napari_meris_ortho._napari.reader import CACHED_BANDS, WholeBands
+    from napari_meris_ortho.pyramid import CACHED_BANDS, WholeBands
 
     product = read_product(pair[1])
     bands = WholeBands(product)

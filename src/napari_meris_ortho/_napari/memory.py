@@ -12,12 +12,12 @@ never waits for it). A no-op where the C library has no ``malloc_trim`` (not gli
 
 from __future__ import annotations
 
-import ctypes
-import ctypes.util
 import gc
 import threading
 import weakref
 from typing import Any
+
+from .._process import malloc_trim
 
 #: seconds after the last removal (napari's deferred deletions done) before trimming
 TRIM_DELAY_S = 1.0
@@ -25,20 +25,6 @@ TRIM_DELAY_S = 1.0
 _WATCHED: weakref.WeakSet[Any] = weakref.WeakSet()
 _lock = threading.Lock()
 _pending: dict[str, threading.Timer] = {}
-
-
-def malloc_trim() -> bool:
-    """Return the C heap's free memory to the system (glibc ``malloc_trim(0)``); False where
-    there is no such function."""
-    name = ctypes.util.find_library("c")
-    try:
-        trim = ctypes.CDLL(name).malloc_trim if name else None
-    except (OSError, AttributeError):
-        trim = None
-    if trim is None:
-        return False
-    trim(0)
-    return True
 
 
 def schedule_trim(delay_s: float = TRIM_DELAY_S) -> threading.Timer:

@@ -18,7 +18,6 @@ own overviews, read window by window.
 
 from __future__ import annotations
 
-from collections import OrderedDict
 from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -28,7 +27,7 @@ import numpy as np
 from ..errors import MerisOrthoError, N1FormatError
 from ..geometry.grid import OutputGrid
 from ..products.n1.format import NUM_BANDS
-from ..pyramid import LazyArray, Selection, as_slice, level_factors
+from ..pyramid import LazyArray, Selection, WholeBands, as_index, as_slice, level_factors
 from .product_layers import QUICKLOOK_BANDS, contrast_limits, stretch_channel, stretch_rgb
 from .status import BAND_AXIS
 from .world import geo_image_kwargs, place_on_frame, viewer_frame
@@ -392,53 +391,8 @@ def n1_metadata(product: MerisProduct) -> dict[str, Any]:
     }
 
 
-#: radiance bands a product read whole (a ``.SEN3``) keeps read (``WholeBands``): the three of
-#: the RGB quick-look and the last three the band slider showed
-CACHED_BANDS = 6
-
 #: radiance(band, rows, cols) of a selection (an index or a range per axis)
 RadianceReader = Callable[[int, int | range, int | range], np.ndarray]
-
-
-class WholeBands:
-    """The bands of a product read whole (a ``.SEN3``: its netCDF variables are chunked and
-    compressed, so a band's lines, or a strided read, cost the whole band's decompression):
-    the uint16 ``counts`` of the last ``size`` bands used (least recently used dropped), the
-    radiances of a selection computed from them as ``MerisProduct`` defines them (counts x
-    ``scaling.radiance``, NaN where the counts are ``no_data_count``), elementwise: the values
-    of ``product.radiance(b)`` at the selection."""
-
-    def __init__(self, product: MerisProduct, size: int = CACHED_BANDS) -> None:
-        import threading
-
-        self.product, self.size = product, size
-        self._counts: OrderedDict[int, np.ndarray] = OrderedDict()
-        self._lock = threading.Lock()  # napari may read in worker threads
-        #: bands read so far (each read once while it stays in the cache)
-        self.reads: list[int] = []
-
-    def counts(self, band: int) -> np.ndarray:
-        """The stored counts of ``band`` (1..15), read whole when not kept."""
-        with self._lock:
-            if band in self._counts:
-                self._counts.move_to_end(band)
-                return self._counts[band]
-            counts = self.product.counts(band)
-            self.reads.append(band)
-            self._counts[band] = counts
-            while len(self._counts) > self.size:
-                self._counts.popitem(last=False)
-            return counts
-
-    def radiance(self, band: int, rows: int | range, cols: int | range) -> np.ndarray:
-        counts = np.asarray(self.counts(band)[_index(rows), _index(cols)])
-        out = counts.astype(np.float32) * np.float32(self.product.scaling.radiance[band - 1])
-        no_data = self.product.no_data_count(band)
-        return out if no_data is None else np.where(counts == no_data, np.float32(np.nan), out)
-
-
-def _index(r: int | range) -> int | slice:
-    return r if isinstance(r, int) else as_slice(r)
 
 
 def radiance_reader(product: MerisProduct) -> RadianceReader:
@@ -528,7 +482,7 @@ def flag_levels(product: MerisProduct) -> list[Any]:
 
     def read(sel: Selection) -> np.ndarray:
         rows, cols = sel
-        return np.asarray(product.flags[_index(rows), _index(cols)])
+        return np.asarray(product.flags[as_index(rows), as_index(cols)])
 
     return LazyArray(read, (product.height, product.width), np.uint8).levels()
 

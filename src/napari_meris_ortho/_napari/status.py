@@ -12,12 +12,12 @@ names the band at the dims point instead ("MERIS band 7 (665 nm)", world band ax
 
 from __future__ import annotations
 
-import functools
 import weakref
 from typing import Any
 
 import numpy as np
 
+from ..geometry.grid import crs_facts
 from .world import GEO_KEY, world_crs
 
 _WATCHED: weakref.WeakSet[Any] = weakref.WeakSet()
@@ -26,18 +26,7 @@ _WRAPPED = "_meris_ortho_status"
 
 def crs_label(crs: Any) -> str:
     """'EPSG:32632' when the CRS has an EPSG code, else its name."""
-    return _crs_facts(str(crs))[0]
-
-
-@functools.lru_cache(maxsize=64)
-def _crs_facts(crs: str) -> tuple[str, bool]:
-    """(label, geographic) of a CRS given as text, parsed once: a layer's status is wrapped
-    at its insertion, and a CRS lookup costs 10-40 ms (pyproj database)."""
-    from pyproj import CRS
-
-    parsed = CRS.from_user_input(crs)
-    epsg = parsed.to_epsg()
-    return (f"EPSG:{epsg}" if epsg else str(parsed.name)), bool(parsed.is_geographic)
+    return crs_facts(str(crs))[0]
 
 
 def map_position(world_row: float, world_col: float, geographic: bool, label: str) -> str:
@@ -58,7 +47,7 @@ def wrap_status(layer: Any) -> None:
     crs = world_crs(layer)
     if crs is None:
         return
-    label, geographic = _crs_facts(str(crs))
+    label, geographic = crs_facts(str(crs))
     original = layer.get_status
 
     def get_status(position: Any = None, **kwargs: Any) -> dict[str, str]:

@@ -28,6 +28,7 @@ fig. 19). Pixel size: MERSYN's nominal FR/RR size, 260 m / 1040 m in a metric CR
 
 from __future__ import annotations
 
+import functools
 import math
 import os
 from collections.abc import Sequence
@@ -61,6 +62,15 @@ def parse_crs(crs: Any) -> pyproj.CRS:
         return pyproj.CRS.from_user_input(crs)
     except (pyproj.exceptions.CRSError, TypeError, ValueError) as exc:
         raise OptionsError(f"unknown CRS {crs!r}: pyproj cannot interpret it") from exc
+
+
+@functools.lru_cache(maxsize=64)
+def crs_facts(crs: str) -> tuple[str, bool]:
+    """(label, geographic) of a CRS given as text, parsed once per CRS (a pyproj database
+    lookup costs 10-40 ms): label 'EPSG:32632' when it has an EPSG code, else its name."""
+    parsed = parse_crs(crs)
+    epsg = parsed.to_epsg()
+    return (f"EPSG:{epsg}" if epsg else str(parsed.name)), bool(parsed.is_geographic)
 
 
 #: semi-major axes (m) and inverse flattenings of the Earth ellipsoids and spheres a grid may use
