@@ -222,3 +222,19 @@ def test_long_lived_objects_are_frozen_until_a_held_layer_goes(make_napari_viewe
     assert gc.get_freeze_count() > 50_000
     widget._shutdown()
     assert gc.get_freeze_count() == 0
+
+
+def test_freeze_undone_when_a_held_layer_goes_from_the_docked_widget(make_napari_viewer):
+    """As napari docks it (the widget gets the plugin's public-only proxy of the viewer), a
+    layer held when the widget opened still undoes the freeze when it leaves."""
+    import gc
+
+    from napari_meris_ortho._napari import memory
+
+    memory.thaw()
+    viewer = make_napari_viewer()
+    held = viewer.add_image(np.zeros((8, 8), np.float32), name="held")
+    viewer.window.add_plugin_dock_widget("napari-meris-ortho", "Orthorectify")
+    assert gc.get_freeze_count() > 50_000
+    viewer.layers.remove(held)
+    assert gc.get_freeze_count() == 0

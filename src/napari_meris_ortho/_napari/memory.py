@@ -62,7 +62,10 @@ def freeze_long_lived(viewer: Any) -> None:
     gc.collect()
     gc.freeze()
     _frozen["on"] = True
-    held = weakref.WeakSet(viewer.layers)
+    # the layers themselves, not the plugin's public-only proxies of them (made at each access)
+    layers = getattr(viewer, "__wrapped__", viewer).layers
+    layers = getattr(layers, "__wrapped__", layers)
+    held = weakref.WeakSet(layers)
 
     def removed(event: Any = None) -> None:
         layer = getattr(event, "value", None)
@@ -71,7 +74,7 @@ def freeze_long_lived(viewer: Any) -> None:
             thaw()
 
     if len(held):
-        viewer.layers.events.removed.connect(removed)
+        layers.events.removed.connect(removed)
 
 
 def thaw() -> None:
