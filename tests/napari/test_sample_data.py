@@ -105,10 +105,18 @@ def test_sample_from_the_menu_loads_in_the_background(make_napari_viewer, qtbot,
         viewer.open_sample("napari-meris-ortho", "fr-small")
         took.append(time.perf_counter() - t0)
 
+    shown_at_draw: list[int] = []
+    viewer.window._qt_viewer.canvas._scene_canvas.events.draw.connect(
+        lambda _e=None: shown_at_draw.append(sum(layer.visible for layer in viewer.layers)))
     QTimer.singleShot(0, open_sample)
     qtbot.waitUntil(lambda: "footprint" in viewer.layers and not sample_data.loading(),
                     timeout=120_000)
     timer.stop()
+    # the sample's visible layers appear one per frame (vispy builds each one's shaders at
+    # its first draw), after the placeholder has gone
+    steps = np.diff(shown_at_draw)
+    assert shown_at_draw[-1] == sum(layer.visible for layer in viewer.layers) >= 4
+    assert steps.max() == 1, shown_at_draw
     names = [layer.name for layer in viewer.layers]
     assert "reference b7" in names and "orthorectified b7" in names
     assert not any(name.startswith("MERIS sample") for name in names)  # placeholder gone

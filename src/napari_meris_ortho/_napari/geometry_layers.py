@@ -12,8 +12,8 @@ import numpy as np
 
 from ..engine.boundary import segment_boundary
 from ..geometry.earth import MEAN_EARTH_RADIUS
-from ..geometry.grid import OutputGrid
-from .world import WORLD_KEY, crs_wkt, geo_metadata, lonlat_to_crs, to_world, world_axes
+from ..geometry.grid import OutputGrid, crs_wkt, lonlat_to_crs
+from .world import WORLD_KEY, geo_metadata, to_world, world_axes
 
 
 def footprint_polygons(tp_lat: np.ndarray, tp_lon: np.ndarray, crs: Any,

@@ -64,6 +64,12 @@ def compact_combo(combo: Any) -> Any:
     return combo
 
 
+#: milliseconds between showing two newly added layers, one per frame (a run's, a sample's):
+#: vispy builds a new visual's shaders at its first draw, so a frame drawing all of them at once
+#: was the longest stall; the paint that draws one comes before the next is shown
+SHOW_STEP_MS = 40
+
+
 def canvas_updates(viewer: Any, enabled: bool) -> None:
     """Stop (and restart) the canvas repainting while a run's or a sample's layers go in one per
     event-loop turn: a draw between two insertions crashed Mesa's software GL under Xvfb

@@ -20,13 +20,13 @@ from typing import Any
 import numpy as np
 
 from ..errors import MerisOrthoError, OptionsError
-from ..geometry.grid import OutputGrid
+from ..geometry.grid import OutputGrid, same_crs
 from ..options import Elevation, MergeRule, OrthoOptions, choices, parse_band_list
 from ..progress import ProgressCallback
 from ..pyramid import level_factors, memory_levels
 from .geometry_layers import geometry_layers
 from .product_layers import band_layers, diagnostic_layers
-from .world import footprint_utm, geo_image_kwargs, move_to_frame, same_crs
+from .world import footprint_utm, geo_image_kwargs, move_to_frame
 
 #: "mapping" orthorectifies every product on its own; the merge rules build a synthesis
 MAPPING = "mapping"

@@ -22,7 +22,7 @@ import numpy as np
 from ..geometry.grid import OutputGrid
 from ..progress import ProgressCallback
 from .geometry_layers import geometry_layers
-from .layout import append_inactive, canvas_updates
+from .layout import SHOW_STEP_MS, append_inactive, canvas_updates
 from .ortho_run import multiscale_layer
 from .product_layers import band_layers, contrast_limits
 from .world import geo_image_kwargs, reproject_onto
@@ -192,6 +192,7 @@ class SampleLoader:
         self.layers: list[Any] | None = None
         self.error: BaseException | None = None
         self.label = f"MERIS sample {name} (generating...)"
+        self._hidden: list[Any] = []  # the visible layers, shown one per frame at the end
         self._bar = progress(total=100, desc=f"MERIS sample {name}")
         self._timer = QTimer()
         self._timer.timeout.connect(self._poll)
@@ -232,6 +233,10 @@ class SampleLoader:
             self._rename(f"MERIS sample {self.name} failed: {self.error}")
             _LOADERS.discard(self)
             raise self.error
+        # shown one per frame once all are in (``layout.SHOW_STEP_MS``), as a run's layers
+        self._hidden = [layer for layer in self.layers or [] if layer.visible]
+        for layer in self._hidden:
+            layer.visible = False
         canvas_updates(self.viewer, False)
         self._step()
 
@@ -257,10 +262,27 @@ class SampleLoader:
             self.layers = None
             self._finish()
             raise
+        canvas_updates(self.viewer, True)
+        self._show_next()
+
+    def _show_next(self) -> None:
+        """Show the next of the sample's visible layers, then come back after its frame."""
+        from qtpy.QtCore import QTimer
+
+        if self._hidden:
+            layer = self._hidden.pop(0)
+            if layer in self.viewer.layers:
+                layer.visible = True
+            QTimer.singleShot(SHOW_STEP_MS, self._show_next)
+            return
         self._finish()
 
     def _finish(self) -> None:
         canvas_updates(self.viewer, True)
+        hidden, self._hidden = self._hidden, []
+        for layer in hidden:  # an error part-way: what is in shows at once
+            if layer in self.viewer.layers:
+                layer.visible = True
         _LOADERS.discard(self)
 
 

@@ -37,7 +37,7 @@ from magicgui.widgets import (
 
 from ..errors import MerisOrthoError
 from ..options import PARALLAX_CHOICES, Elevation, Parallax, Sampling, SearchMethod, choices
-from .layout import StatusLabel, append_inactive, canvas_updates
+from .layout import SHOW_STEP_MS, StatusLabel, append_inactive, canvas_updates
 from .legend import prepare_glyphs, show_legends
 from .memory import freeze_long_lived, thaw, trim_after_removals
 from .ortho_run import (
@@ -65,8 +65,6 @@ if TYPE_CHECKING:
 DEM_FILE, DEM_DIR = "GeoTIFF / SRTM30 tile", "GETASSE30 directory"
 #: seconds to wait for a cancelled job when the viewer closes
 CLOSE_TIMEOUT_S = 60.0
-#: milliseconds between showing two of a run's layers: the paint drawing one comes first
-SHOW_STEP_MS = 40
 
 __all__ = ["CRS_EPSG", "CRS_GEOGRAPHIC", "CRS_UTM", "Cancelled", "RunSettings", "OrthoRun",
            "OrthorectifyWidget", "output_crs", "parse_bands", "run_layers", "run_orthorectify"]

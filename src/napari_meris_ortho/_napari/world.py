@@ -33,21 +33,11 @@ from typing import Any
 
 import numpy as np
 
-from ..geometry.grid import OutputGrid, parse_crs
+from ..geometry.grid import OutputGrid, crs_wkt, lonlat_to_crs
 
 GEO_KEY = "geo"
 #: the world grid a layer without a raster grid of its own was placed in (module doc)
 WORLD_KEY = "world"
-
-
-def crs_wkt(crs: Any) -> str:
-    """WKT of any CRS input (EPSG int, 'EPSG:32632', pyproj/rasterio CRS, WKT)."""
-    return str(parse_crs(crs).to_wkt())
-
-
-def same_crs(a: Any, b: Any) -> bool:
-    """True when two CRS inputs describe the same coordinate system."""
-    return bool(parse_crs(a) == parse_crs(b))
 
 
 def to_world(x: np.ndarray, y: np.ndarray) -> np.ndarray:
@@ -59,15 +49,6 @@ def from_world(world: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """napari world (row, col) -> CRS (x, y)."""
     world = np.asarray(world, dtype=np.float64)
     return world[..., 1], -world[..., 0]
-
-
-def lonlat_to_crs(lon: np.ndarray, lat: np.ndarray, crs: Any) -> tuple[np.ndarray, np.ndarray]:
-    """Project WGS84 lon/lat (degrees) into ``crs`` (always x = easting/lon, y = northing/lat)."""
-    from pyproj import Transformer
-
-    transformer = Transformer.from_crs("EPSG:4326", parse_crs(crs), always_xy=True)
-    x, y = transformer.transform(np.asarray(lon, np.float64), np.asarray(lat, np.float64))
-    return np.asarray(x, np.float64), np.asarray(y, np.float64)
 
 
 # --------------------------------------------------------------------------------------------

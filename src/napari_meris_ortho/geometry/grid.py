@@ -64,6 +64,23 @@ def parse_crs(crs: Any) -> pyproj.CRS:
         raise OptionsError(f"unknown CRS {crs!r}: pyproj cannot interpret it") from exc
 
 
+def crs_wkt(crs: Any) -> str:
+    """WKT of any CRS input (EPSG int, 'EPSG:32632', pyproj/rasterio CRS, WKT)."""
+    return str(parse_crs(crs).to_wkt())
+
+
+def same_crs(a: Any, b: Any) -> bool:
+    """True when two CRS inputs describe the same coordinate system."""
+    return bool(parse_crs(a) == parse_crs(b))
+
+
+def lonlat_to_crs(lon: np.ndarray, lat: np.ndarray, crs: Any) -> tuple[np.ndarray, np.ndarray]:
+    """Project WGS84 lon/lat (degrees) into ``crs`` (always x = easting/lon, y = northing/lat)."""
+    transformer = pyproj.Transformer.from_crs("EPSG:4326", parse_crs(crs), always_xy=True)
+    x, y = transformer.transform(np.asarray(lon, np.float64), np.asarray(lat, np.float64))
+    return np.asarray(x, np.float64), np.asarray(y, np.float64)
+
+
 @functools.lru_cache(maxsize=64)
 def crs_facts(crs: str) -> tuple[str, bool]:
     """(label, geographic) of a CRS given as text, parsed once per CRS (a pyproj database
