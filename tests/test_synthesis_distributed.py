@@ -76,6 +76,28 @@ def test_workers_give_the_bytes_of_one_process_in_any_order(products, cluster, t
             assert value.tobytes() == layers(single)[key].tobytes(), key
 
 
+def test_one_task_per_tile_and_nothing_moves_between_workers(products, cluster,
+                                                             tmp_path) -> None:
+    """Issue 25 item 3: a tile's pieces are orthorectified in the tile's own task and merged as
+    they come, so the cluster runs one task per tile touched and no data travels between
+    workers (before: a (product, tile) task per piece, each piece shipped to its tile task)."""
+    from distributed import Client, get_task_stream
+
+    from napari_meris_ortho.synthesis.tiling import tiles
+
+    with Client(cluster.scheduler_address) as client, get_task_stream(client) as stream:
+        result = synthesize(products, tmp_path / "s", scheduler=cluster.scheduler_address,
+                            **COMMON)
+    assert len(result.merged) == 4
+    records = [r for r in stream.data if str(r["key"]).startswith(("tile-", "segment-"))]
+    keys = {str(r["key"]) for r in records}
+    grid_tiles = len(list(tiles((0, GRID.height, 0, GRID.width), 256)))
+    assert keys and all(k.startswith("tile-") for k in keys)
+    assert 2 <= len(keys) <= grid_tiles
+    moved = [ss for r in records for ss in r["startstops"] if ss["action"] == "transfer"]
+    assert not moved, moved
+
+
 @pytest.mark.slow
 def test_embedded_local_cluster(products, tmp_path) -> None:
     """``workers=2`` starts its own LocalCluster (worker processes) and closes it."""
