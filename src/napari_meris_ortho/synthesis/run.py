@@ -74,22 +74,9 @@ class _Lazy:
 
     def compute(self) -> Any:
         if not self.done:
-            self.value = self.fn(*(_resolve(a) for a in self.args))
-            self.done = True
-            for a in self.args:  # the inputs are consumed: free them
-                for lazy in a if isinstance(a, list) else [a]:
-                    if isinstance(lazy, _Lazy):
-                        lazy.value = None
-            self.args = ()
+            self.value = self.fn(*self.args)
+            self.done, self.args = True, ()
         return self.value
-
-
-def _resolve(arg: Any) -> Any:
-    if isinstance(arg, _Lazy):
-        return arg.compute()
-    if isinstance(arg, list):
-        return [_resolve(a) for a in arg]
-    return arg
 
 
 class InProcess:
@@ -399,16 +386,16 @@ def tile_job(fork: Any, spec: Spec, window: Window, jobs: Sequence[Job], rank: n
             if on_piece is not None:
                 on_piece()
 
-    return tile_task(fork, spec, window, pieces(), rank, exclude, writer)
+    return tile_task(fork, spec, window, pieces(), rank, writer)
 
 
 def tile_task(fork: Any, spec: Spec, window: Window, pieces: Iterable[Piece],
-              rank: np.ndarray, exclude: frozenset[int],
-              writer: TileWriter | None = None) -> TileDone:
+              rank: np.ndarray, writer: TileWriter | None = None) -> TileDone:
     """Merge the pieces, as they come, into the stored tile ``window`` (a whole chunk) and write
-    it into ``fork`` (on ``writer``'s thread if given: ``TileDone.wait``). Pieces of products in
-    ``exclude`` or that failed are left out. The merge rule is associative and commutative
-    (``engine.synthesis.combine``, ties by ``rank``): any order of the pieces gives the same."""
+    it into ``fork`` (on ``writer``'s thread if given: ``TileDone.wait``). Pieces that failed
+    are left out (those of excluded products are not made: ``tile_job``). The merge rule is
+    associative and commutative (``engine.synthesis.combine``, ties by ``rank``): any order of
+    the pieces gives the same."""
     from ..engine.synthesis import combine
 
     st.quiet_icechunk()
@@ -419,8 +406,7 @@ def tile_task(fork: Any, spec: Spec, window: Window, pieces: Iterable[Piece],
     for p in pieces:
         done.pieces.append(Piece(p.index, p.window, None, p.processed, p.validated, p.error,
                                  p.dem_error))
-        if p.state is None or p.error is not None or p.dem_error is not None \
-                or p.index in exclude:
+        if p.state is None or p.error is not None or p.dem_error is not None:
             continue
         if state is None:  # the stored tile, read once a piece has something to merge
             stored = st.read_tile(fork.store, spec.names, window)  # counts (compact)
@@ -697,7 +683,7 @@ class Synthesis:
             if self.progress is not None:
                 self.progress(count[0], total)
 
-        in_process = isinstance(runner, InProcess)
+        # in process: the writer thread, and progress (and Cancel) after every piece
         extra: tuple[Any, ...] = ((runner.writer, lambda: advance(1))
                                   if isinstance(runner, InProcess) else ())
         # the tiles with the most pieces first: on N workers the longest tasks start first
@@ -716,7 +702,7 @@ class Synthesis:
                 errors = [p.dem_error for p in tile.pieces if p.dem_error is not None]
                 if errors:  # not the product's fault: stop the run (exit 2)
                     raise DemError(errors[0])
-                advance(1 if in_process else steps[tile.window])
+                advance(1 if extra else steps[tile.window])  # pieces counted already
             for tile in written:
                 tile.wait()
         except BaseException:
