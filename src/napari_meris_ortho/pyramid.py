@@ -19,6 +19,8 @@ from typing import Any
 
 import numpy as np
 
+from .products.protocol import radiance_of_counts
+
 #: longer side (pixels) of the coarsest level; a raster this small is one level
 MAX_LEVEL_SIDE = 1024
 
@@ -144,8 +146,8 @@ class WholeBands:
     """The bands of a product read whole (a ``.SEN3``: its netCDF variables are chunked and
     compressed, so a band's lines, or a strided read, cost the whole band's decompression):
     the uint16 ``counts`` of the last ``size`` bands used (least recently used dropped), the
-    radiances of a selection computed from them as ``MerisProduct`` defines them (counts x
-    ``scaling.radiance``, NaN where the counts are ``no_data_count``), elementwise: the values
+    radiances of a selection computed from them as ``MerisProduct`` defines them
+    (``products.protocol.radiance_of_counts``), elementwise: the values
     of ``product.radiance(b)`` at the selection (a ``MerisProduct``: ``counts``, ``scaling``,
     ``no_data_count``)."""
 
@@ -170,10 +172,9 @@ class WholeBands:
             return counts
 
     def radiance(self, band: int, rows: int | range, cols: int | range) -> np.ndarray:
-        counts = np.asarray(self.counts(band)[as_index(rows), as_index(cols)])
-        out = counts.astype(np.float32) * np.float32(self.product.scaling.radiance[band - 1])
-        no_data = self.product.no_data_count(band)
-        return out if no_data is None else np.where(counts == no_data, np.float32(np.nan), out)
+        return radiance_of_counts(self.counts(band)[as_index(rows), as_index(cols)],
+                                  self.product.scaling.radiance[band - 1],
+                                  self.product.no_data_count(band))
 
 
 def as_index(r: int | range) -> int | slice:

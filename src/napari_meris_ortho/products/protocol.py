@@ -21,6 +21,16 @@ from ..geometry.tiepoints import ProductGeometry, TiePoints
 from .n1.format import Resolution, ScalingFactors
 
 
+def radiance_of_counts(counts: np.ndarray, scale: float, no_data: int | None) -> np.ndarray:
+    """Radiance of stored counts as defined above: counts x ``scale`` (float32), NaN where the
+    counts equal ``no_data`` (None: none). Any shape, a 0-d selection included."""
+    out = np.asarray(counts).astype(np.float32)
+    out *= np.float32(scale)
+    if no_data is not None:
+        out[np.asarray(counts) == no_data] = np.nan
+    return out
+
+
 @runtime_checkable
 class MerisProduct(ProductGeometry, Protocol):
     """A MERIS Level 1 product as the mapping, the synthesis and the viewer read it."""

@@ -37,6 +37,7 @@ from ..n1.format import (
     tie_columns,
     tie_lines,
 )
+from ..protocol import radiance_of_counts
 from .layout import (
     DETECTORS,
     DOBSON_KG_M2,
@@ -212,9 +213,8 @@ class MerisSen3Product:
         counts = self.counts(band)
         if lines is not None:
             counts = counts[lines]
-        out = counts.astype(np.float32) * np.float32(self.scaling.radiance[band - 1])
-        out[counts == self.no_data_count(band)] = np.nan
-        return out
+        return radiance_of_counts(counts, self.scaling.radiance[band - 1],
+                                  self.no_data_count(band))
 
     # -- flags ----------------------------------------------------------------------------
 
