@@ -24,11 +24,6 @@ _WATCHED: weakref.WeakSet[Any] = weakref.WeakSet()
 _WRAPPED = "_meris_ortho_status"
 
 
-def crs_label(crs: Any) -> str:
-    """'EPSG:32632' when the CRS has an EPSG code, else its name."""
-    return crs_facts(str(crs))[0]
-
-
 def map_position(world_row: float, world_col: float, geographic: bool, label: str) -> str:
     """World (row, col) as map coordinates: 'E 412345 m, N 5087123 m (EPSG:32632)' or
     '46.12345° N, 7.54321° E (EPSG:4326)'."""
@@ -106,5 +101,5 @@ def label_bands(viewer: Any) -> None:
             layer.axis_labels = (text, *labels[1:])
 
 
-__all__ = ["BAND_AXIS", "GEO_KEY", "crs_label", "label_bands", "map_position",
+__all__ = ["BAND_AXIS", "GEO_KEY", "label_bands", "map_position",
            "show_map_coordinates", "wrap_status"]

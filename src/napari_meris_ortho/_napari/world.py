@@ -62,22 +62,23 @@ def layer_frame(layer: Any) -> OutputGrid | None:
     return OutputGrid.from_transform(geo["crs"], geo["transform"], geo["shape"])
 
 
+def _world_geo(layer: Any) -> dict[str, Any] | None:
+    """The grid record of the world a layer lives in: its own (``metadata["geo"]``) or the one
+    it was placed in (``metadata["world"]``, product and geometry layers); None if neither."""
+    meta = getattr(layer, "metadata", {})
+    return meta.get(GEO_KEY) or meta.get(WORLD_KEY) or None
+
+
 def world_frame(layer: Any) -> OutputGrid | None:
-    """The world grid a layer lives in: its own grid (``metadata["geo"]``) or the grid it was
-    placed in (``metadata["world"]``, product and geometry layers); None for a foreign layer."""
-    frame = layer_frame(layer)
-    if frame is not None:
-        return frame
-    world = getattr(layer, "metadata", {}).get(WORLD_KEY)
-    return OutputGrid.from_transform(world["crs"], world["transform"], world["shape"]) \
-        if world else None
+    """The world grid a layer lives in (``_world_geo``); None for a foreign layer."""
+    geo = _world_geo(layer)
+    return OutputGrid.from_transform(geo["crs"], geo["transform"], geo["shape"]) if geo else None
 
 
 def world_crs(layer: Any) -> Any:
     """The CRS of the world a layer lives in (``world_frame``'s, without building the grid);
     None for a foreign layer."""
-    meta = getattr(layer, "metadata", {})
-    geo = meta.get(GEO_KEY) or meta.get(WORLD_KEY)
+    geo = _world_geo(layer)
     return geo["crs"] if geo else None
 
 
