@@ -70,6 +70,22 @@ def compact_combo(combo: Any) -> Any:
 SHOW_STEP_MS = 40
 
 
+def hide_for_now(layers: list[Any]) -> list[Any]:
+    """Hide the visible ones of ``layers`` (to be shown one per frame, ``SHOW_STEP_MS``);
+    returns them."""
+    shown = [layer for layer in layers if layer.visible]
+    for layer in shown:
+        layer.visible = False
+    return shown
+
+
+def show_in(viewer: Any, layers: list[Any]) -> None:
+    """Show those of ``layers`` that are in the viewer."""
+    for layer in layers:
+        if layer in viewer.layers:
+            layer.visible = True
+
+
 def canvas_updates(viewer: Any, enabled: bool) -> None:
     """Stop (and restart) the canvas repainting while a run's or a sample's layers go in one per
     event-loop turn: a draw between two insertions crashed Mesa's software GL under Xvfb

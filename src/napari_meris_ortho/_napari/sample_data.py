@@ -22,7 +22,7 @@ import numpy as np
 from ..geometry.grid import OutputGrid
 from ..progress import ProgressCallback
 from .geometry_layers import geometry_layers
-from .layout import SHOW_STEP_MS, append_inactive, canvas_updates
+from .layout import SHOW_STEP_MS, append_inactive, canvas_updates, hide_for_now, show_in
 from .ortho_run import multiscale_layer
 from .product_layers import band_layers, contrast_limits
 from .world import geo_image_kwargs, reproject_onto
@@ -234,9 +234,7 @@ class SampleLoader:
             _LOADERS.discard(self)
             raise self.error
         # shown one per frame once all are in (``layout.SHOW_STEP_MS``), as a run's layers
-        self._hidden = [layer for layer in self.layers or [] if layer.visible]
-        for layer in self._hidden:
-            layer.visible = False
+        self._hidden = hide_for_now(self.layers or [])
         canvas_updates(self.viewer, False)
         self._step()
 
@@ -270,9 +268,7 @@ class SampleLoader:
         from qtpy.QtCore import QTimer
 
         if self._hidden:
-            layer = self._hidden.pop(0)
-            if layer in self.viewer.layers:
-                layer.visible = True
+            show_in(self.viewer, [self._hidden.pop(0)])
             QTimer.singleShot(SHOW_STEP_MS, self._show_next)
             return
         self._finish()
@@ -280,9 +276,7 @@ class SampleLoader:
     def _finish(self) -> None:
         canvas_updates(self.viewer, True)
         hidden, self._hidden = self._hidden, []
-        for layer in hidden:  # an error part-way: what is in shows at once
-            if layer in self.viewer.layers:
-                layer.visible = True
+        show_in(self.viewer, hidden)  # an error part-way: what is in shows at once
         _LOADERS.discard(self)
 
 

@@ -37,7 +37,14 @@ from magicgui.widgets import (
 
 from ..errors import MerisOrthoError
 from ..options import PARALLAX_CHOICES, Elevation, Parallax, Sampling, SearchMethod, choices
-from .layout import SHOW_STEP_MS, StatusLabel, append_inactive, canvas_updates
+from .layout import (
+    SHOW_STEP_MS,
+    StatusLabel,
+    append_inactive,
+    canvas_updates,
+    hide_for_now,
+    show_in,
+)
 from .legend import prepare_glyphs, show_legends
 from .memory import freeze_long_lived, thaw, trim_after_removals
 from .ortho_run import (
@@ -450,9 +457,7 @@ class OrthorectifyWidget(Container):
         # the first frames show the new layers one at a time: vispy builds a new visual's
         # shaders at its first draw (software GL under Xvfb: 0.05-0.15 s each), so one frame
         # with all of them is the longest stall of a run
-        shown = [layer for layer in layers if layer.visible]
-        for layer in shown:
-            layer.visible = False
+        shown = hide_for_now(layers)
         self._queue = [*removals, *((self._append, layer) for layer in layers),
                        *((self._activate, layer) for layer in layers[-1:]),
                        (self._frame_result, shown), (self._canvas_updates, True),
@@ -473,14 +478,12 @@ class OrthorectifyWidget(Container):
         """Show one of the run's layers (hidden until all were in; ``_done``)."""
         if layer in self._hidden:
             self._hidden.remove(layer)
-        layer.visible = True
+        show_in(self.viewer, [layer])
 
     def _show_hidden(self) -> None:
         """Show at once the run's layers still waiting for their turn (Cancel, an error)."""
         hidden, self._hidden = self._hidden, []
-        for layer in hidden:
-            if layer in self.viewer.layers:
-                layer.visible = True
+        show_in(self.viewer, hidden)
 
     def _activate(self, layer: Any) -> None:
         if layer in self.viewer.layers:
