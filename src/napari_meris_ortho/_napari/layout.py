@@ -93,7 +93,7 @@ def canvas_updates(viewer: Any, enabled: bool) -> None:
     layer list) keeps responding. No-op without a Qt window."""
     import contextlib
 
-    window = getattr(viewer, "window", None)
+    window = getattr(getattr(viewer, "__wrapped__", viewer), "window", None)  # not the proxy
     qt_viewer = getattr(window, "_qt_viewer", None)
     native = getattr(getattr(qt_viewer, "canvas", None), "native", None)
     if native is None:
