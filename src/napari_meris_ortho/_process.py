@@ -27,6 +27,7 @@ import ctypes
 import gc
 import os
 import sys
+import threading
 from collections.abc import Iterator
 from typing import Any
 
@@ -71,6 +72,27 @@ def malloc_trim() -> bool:
         return False
     trim(0)
     return True
+
+
+#: seconds after the last request (napari's deferred deletions done) before trimming
+TRIM_DELAY_S = 1.0
+_trim_lock = threading.Lock()
+_pending: dict[str, threading.Timer] = {}
+
+
+def schedule_trim(delay_s: float = TRIM_DELAY_S) -> threading.Timer:
+    """``malloc_trim`` in a background thread ``delay_s`` after the last call (debounced; ctypes
+    releases the GIL, so the caller never waits for it)."""
+    with _trim_lock:
+        old = _pending.pop("timer", None)
+        if old is not None:
+            old.cancel()
+        timer = threading.Timer(delay_s, malloc_trim)
+        timer.daemon = True
+        timer.name = "meris-ortho-trim"
+        _pending["timer"] = timer
+        timer.start()
+        return timer
 
 
 @contextlib.contextmanager

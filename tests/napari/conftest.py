@@ -34,6 +34,16 @@ def tiny_tie_points() -> dict[str, np.ndarray]:
     }
 
 
+@pytest.fixture(autouse=True)
+def _nothing_left_frozen():
+    """Each test ends with every object within the garbage collector's reach (a read or the
+    widget freezes the objects alive then: ``_napari.memory``)."""
+    yield
+    from napari_meris_ortho._napari import memory
+
+    memory.thaw()
+
+
 @pytest.fixture(scope="session")
 def tiny_n1(tmp_path_factory):
     """Path of the tiny product; its radiances are smooth ramps plus a checkerboard."""

@@ -140,8 +140,10 @@ def _current_frame() -> OutputGrid | None:
         return None
     if viewer is None:
         return None
+    from .memory import freeze_at_first_read
     from .status import show_map_coordinates
 
+    freeze_at_first_read(viewer)
     show_map_coordinates(viewer)
     return viewer_frame(viewer.layers)
 
