@@ -27,8 +27,9 @@ def pyramid(store: SynthesisStore, name: str) -> list[Any]:
     import zarr
 
     session_store = store.session.store
-    levels = [zarr.open_array(session_store, path=name, mode="r")]
-    levels += [zarr.open_array(session_store, path=f"overview_{f}/{name}", mode="r")
+    levels = [zarr.open_array(session_store, path=name, mode="r", zarr_format=3)]
+    levels += [zarr.open_array(session_store, path=f"overview_{f}/{name}", mode="r",
+                               zarr_format=3)
                for f in store.overviews]
     scale = st.stored_scale(levels[0])
     if scale is None:

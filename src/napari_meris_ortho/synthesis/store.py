@@ -232,7 +232,7 @@ def read_attributes(store: Any) -> dict[str, Any] | None:
     import zarr
 
     try:
-        attrs = dict(zarr.open_group(store, mode="r").attrs)
+        attrs = dict(zarr.open_group(store, mode="r", zarr_format=3).attrs)
     except (FileNotFoundError, KeyError, ValueError):
         return None
     return attrs if attrs.get("format") == FORMAT else None
@@ -274,7 +274,7 @@ def create_layout(store: Any, attrs: dict[str, Any], shape: tuple[int, int], til
 def set_attributes(store: Any, attrs: dict[str, Any]) -> None:
     import zarr
 
-    zarr.open_group(store, mode="r+").attrs.update(attrs)
+    zarr.open_group(store, mode="r+", zarr_format=3).attrs.update(attrs)
 
 
 def open_layer(store: Any, name: str, level: int = 1) -> Any:
@@ -282,7 +282,7 @@ def open_layer(store: Any, name: str, level: int = 1) -> Any:
     import zarr
 
     prefix = "" if level == 1 else f"overview_{level}/"
-    return zarr.open_array(store, path=prefix + name, mode="r")
+    return zarr.open_array(store, path=prefix + name, mode="r", zarr_format=3)
 
 
 def read_window(store: Any, names: Sequence[str], window: Window, level: int = 1
@@ -335,7 +335,7 @@ def read_tile(store: Any, names: Sequence[str], window: Window) -> dict[str, np.
         part[...] = block[:part.shape[0], :part.shape[1]]
 
     async def read(name: str) -> np.ndarray:
-        array = await za.open_array(store=store, path=name, mode="r")
+        array = await za.open_array(store=store, path=name, mode="r", zarr_format=3)
         codec = _chunk_encoder(array)
         if codec is None:
             return np.asarray(await array.getitem((slice(r0, r1), slice(c0, c1))))
@@ -419,7 +419,8 @@ def write_tile(store: Any, window: Window, arrays: dict[str, np.ndarray],
         await store.set(key, prototype.buffer.from_bytes(data))
 
     async def write(name: str, factor: int) -> int:
-        array = await za.open_array(store=store, path=_level_path(name, factor), mode="r+")
+        array = await za.open_array(store=store, path=_level_path(name, factor), mode="r+",
+                                    zarr_format=3)
         new = arrays[name][::factor, ::factor]
         old = stored[name][::factor, ::factor]
         top, left = r0 // factor, c0 // factor  # tile corners are multiples of every factor
