@@ -637,6 +637,32 @@ def test_an_update_reads_only_zarr_v3_keys(products, tmp_path, monkeypatch) -> N
     assert layers(out)["count"].max() >= 1
 
 
+def test_a_store_directory_made_meanwhile_by_another_run_is_no_error(tmp_path, monkeypatch
+                                                                     ) -> None:
+    """Two runs start the same new store: the one that looked before the other made the
+    directory must still go on to the lock (which decides), not fail on "output exists and is a
+    directory" (seen once in ``test_two_concurrent_runs_on_one_store``). Modelled here by a
+    look that says "missing" while the directory is there; the messages of a file in the way
+    and of a missing parent stay."""
+    from pathlib import Path
+
+    from napari_meris_ortho.errors import OutputError
+    from napari_meris_ortho.synthesis.api import _make_dir
+
+    out = tmp_path / "syn"
+    assert _make_dir(out) is True and out.is_dir()
+    real_exists = Path.exists
+    monkeypatch.setattr(Path, "exists",
+                        lambda self, *a, **k: False if self == out else real_exists(self, *a, **k))
+    assert _make_dir(out) is False
+    monkeypatch.undo()
+    (tmp_path / "file").write_text("x")
+    with pytest.raises(OutputError, match="exists and is not a directory"):
+        _make_dir(tmp_path / "file")
+    with pytest.raises(OutputError, match="does not exist"):
+        _make_dir(tmp_path / "missing" / "syn")
+
+
 def test_version_3_store_is_updated_in_its_own_layout(products, tmp_path, monkeypatch) -> None:
     """A store of version 3 (one chunk per tile, overviews by the tile / factor) keeps its
     layout and version when updated, and holds the layers a version-4 store gets."""

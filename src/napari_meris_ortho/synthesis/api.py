@@ -115,17 +115,16 @@ def _undo(out_dir: Path, created: bool, was_empty: bool) -> None:
 
 
 def _make_dir(out_dir: Path) -> bool:
-    """Create the store directory if missing; True when this run created it."""
-    if out_dir.exists():
-        if not out_dir.is_dir():
-            raise OutputError(f"{out_dir}: exists and is not a directory")
-        return False
-    check_writable_dir(out_dir)
+    """Create the store directory if missing; True when this run created it. No check before
+    ``mkdir``: another run may create the directory at any moment (then the lock decides)."""
     try:
         out_dir.mkdir()
-    except FileExistsError:  # another run created it meanwhile: the lock decides
+    except FileExistsError:
+        if not out_dir.is_dir():
+            raise OutputError(f"{out_dir}: exists and is not a directory") from None
         return False
     except OSError as exc:
+        check_writable_dir(out_dir)  # the clear message: no such directory, not writable
         raise OutputError(f"{out_dir}: cannot create the synthesis store ({exc})") from exc
     return True
 
