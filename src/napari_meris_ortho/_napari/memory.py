@@ -16,7 +16,7 @@ import gc
 import weakref
 from typing import Any
 
-from .._process import TRIM_DELAY_S, malloc_trim, schedule_trim
+from .._process import schedule_trim
 
 _WATCHED: weakref.WeakSet[Any] = weakref.WeakSet()
 
@@ -78,5 +78,4 @@ def thaw() -> None:
 
 _first_read = [True]
 
-__all__ = ["TRIM_DELAY_S", "freeze_at_first_read", "freeze_long_lived", "malloc_trim",
-           "schedule_trim", "thaw", "trim_after_removals"]
+__all__ = ["freeze_at_first_read", "freeze_long_lived", "thaw", "trim_after_removals"]

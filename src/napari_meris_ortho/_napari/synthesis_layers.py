@@ -24,13 +24,8 @@ def is_store(path: str | Path) -> bool:
 
 def pyramid(store: SynthesisStore, name: str) -> list[Any]:
     """Lazy zarr arrays of layer ``name``: full resolution, then each overview level."""
-    import zarr
-
     session_store = store.session.store
-    levels = [zarr.open_array(session_store, path=name, mode="r", zarr_format=3)]
-    levels += [zarr.open_array(session_store, path=f"overview_{f}/{name}", mode="r",
-                               zarr_format=3)
-               for f in store.overviews]
+    levels = [st.open_layer(session_store, name, level) for level in (1, *store.overviews)]
     scale = st.stored_scale(levels[0])
     if scale is None:
         return levels
