@@ -170,6 +170,21 @@ def test_a_run_shows_its_layers_one_per_frame(make_napari_viewer, qtbot, tiny_n1
     assert steps.max() == 1, f"new layers per frame: {shown_at_draw}"
 
 
+def test_a_labels_layer_after_the_widget_builds_no_dash_pattern(make_napari_viewer):
+    """Every napari labels layer has a polygon overlay whose vispy line builds the dash patterns
+    (0.08 s, at the session's first labels layer: a run's "elevation source"). The widget has
+    vispy build them when it opens; a labels layer inserted later builds none."""
+    from vispy.visuals.line.dash_atlas import _make_pattern
+
+    _make_pattern.cache_clear()
+    viewer = make_napari_viewer(show=True)
+    OrthorectifyWidget(viewer)
+    built = _make_pattern.cache_info().misses
+    assert built >= 10
+    viewer.add_labels(np.zeros((16, 16), np.uint8), name="elevation source")
+    assert _make_pattern.cache_info().misses == built
+
+
 def test_removing_layers_hands_the_heap_back(make_napari_viewer, qtbot):
     """Once layers leave the viewer the widget has glibc return the freed heap to the system
     (``memory.trim_after_removals``), in a thread of its own a second after the last removal:

@@ -86,6 +86,18 @@ def show_in(viewer: Any, layers: list[Any]) -> None:
             layer.visible = True
 
 
+def prepare_dash_patterns() -> None:
+    """Have vispy build its line dash patterns now (it keeps them for the process): the polygon
+    overlay of every napari labels layer draws an antialiased line that builds them, 0.08 s in
+    the insertion of the session's first labels layer (a run's "elevation source"), measured."""
+    import contextlib
+
+    with contextlib.suppress(ImportError):  # a vispy without it: nothing to prepare
+        from vispy.visuals.line.dash_atlas import DashAtlas
+
+        DashAtlas()
+
+
 def canvas_updates(viewer: Any, enabled: bool) -> None:
     """Stop (and restart) the canvas repainting while a run's or a sample's layers go in one per
     event-loop turn: a draw between two insertions crashed Mesa's software GL under Xvfb

@@ -43,6 +43,7 @@ from .layout import (
     append_inactive,
     canvas_updates,
     hide_for_now,
+    prepare_dash_patterns,
     show_in,
 )
 from .legend import prepare_glyphs, show_legends
@@ -273,6 +274,7 @@ class OrthorectifyWidget(Container):
         show_map_coordinates(viewer)
         show_legends(viewer)
         prepare_glyphs(viewer)
+        prepare_dash_patterns()
         trim_after_removals(viewer)
         _import_engine()
         freeze_long_lived(viewer)  # the engine's modules included
