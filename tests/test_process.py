@@ -54,3 +54,49 @@ def test_the_hook_check_names_what_changed():
 
     with pytest.raises(RuntimeError, match=r"numba .* changed .*_index_path"):
         _process.check_numba_hooks(NotAKernel())
+
+
+_UNITS = """
+import json, sys, time
+import pint
+from napari_meris_ortho import _process
+if sys.argv[1] == "used":
+    pint.get_application_registry().metre  # someone used the lazy default first
+t = time.perf_counter()
+done = _process.unit_registry_from_disk()
+registry = pint.get_application_registry()
+metres = (3 * registry.kilometre).to(registry.metre).magnitude
+print(json.dumps({"done": done, "folder": str(registry.get().cache_folder),
+                  "metres": metres, "pixel": str(registry.pixel)}))
+"""
+
+
+def _units(mode: str, cache: str) -> dict:
+    env = {k: v for k, v in os.environ.items() if k != _process.SWITCH}
+    env["XDG_CACHE_HOME"] = cache
+    run = subprocess.run([sys.executable, "-c", _UNITS, mode], env=env, capture_output=True,
+                         text=True)
+    assert run.returncode == 0, run.stderr
+    return json.loads(run.stdout)
+
+
+def test_the_unit_registry_comes_from_pints_disk_cache(tmp_path):
+    """napari's units (pint's application registry) from pint's disk cache: written by the
+    first session, read by the next; same units. Never a registry already in use; a cache
+    folder that cannot be made or a broken cache leaves pint as it was."""
+    first = _units("fresh", str(tmp_path))
+    cached = sorted((tmp_path / "pint").glob("*.pickle"))
+    assert first["done"] and first["folder"] == str(tmp_path / "pint") and cached
+    written = {p: p.stat().st_mtime_ns for p in cached}
+    second = _units("fresh", str(tmp_path))
+    assert second["done"] and {p: p.stat().st_mtime_ns for p in cached} == written  # read only
+    assert first["metres"] == second["metres"] == 3000 and second["pixel"] == "pixel"
+    assert not _units("used", str(tmp_path))["done"]  # in use: kept
+    blocked = tmp_path / "file"
+    blocked.write_text("")  # the cache folder would be inside a regular file
+    as_before = _units("fresh", str(blocked))
+    assert not as_before["done"] and as_before["folder"] == "None" and as_before["metres"] == 3000
+    for p in cached:
+        p.write_bytes(b"\x80\x05 truncated")
+    broken = _units("fresh", str(tmp_path))
+    assert not broken["done"] and broken["metres"] == 3000

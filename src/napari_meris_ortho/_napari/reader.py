@@ -140,9 +140,11 @@ def _current_frame() -> OutputGrid | None:
         return None
     if viewer is None:
         return None
+    from .._process import unit_registry_from_disk
     from .memory import freeze_at_first_read
     from .status import show_map_coordinates
 
+    unit_registry_from_disk()  # before napari makes the first layer, and frozen with it
     freeze_at_first_read(viewer)
     show_map_coordinates(viewer)
     return viewer_frame(viewer.layers)

@@ -35,6 +35,7 @@ from magicgui.widgets import (
     SpinBox,
 )
 
+from .._process import unit_registry_from_disk
 from ..errors import MerisOrthoError
 from ..options import PARALLAX_CHOICES, Elevation, Parallax, Sampling, SearchMethod, choices
 from .layout import (
@@ -277,6 +278,7 @@ class OrthorectifyWidget(Container):
         prepare_dash_patterns()
         trim_after_removals(viewer)
         _import_engine()
+        unit_registry_from_disk()  # napari's units, before its first layer
         freeze_long_lived(viewer)  # the engine's modules included
         warm_up_in_background()  # numba compiles while the user fills the form
 
