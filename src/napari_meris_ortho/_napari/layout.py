@@ -11,6 +11,7 @@ combo boxes ask for ``COMBO_CHARS`` characters and elide the rest.
 
 from __future__ import annotations
 
+import contextlib
 from typing import Any
 
 from magicgui.widgets import Label
@@ -64,15 +65,13 @@ def compact_combo(combo: Any) -> Any:
     return combo
 
 
-#: milliseconds between showing two newly added layers, one per frame (a run's, a sample's):
-#: vispy builds a new visual's shaders at its first draw, so a frame drawing all of them at once
-#: was the longest stall; the paint that draws one comes before the next is shown
+#: ms between showing two new layers (a run's, a sample's), one per frame: vispy builds a new
+#: visual's shaders at its first draw, so a frame drawing them all was the longest stall
 SHOW_STEP_MS = 40
 
 
 def hide_for_now(layers: list[Any]) -> list[Any]:
-    """Hide the visible ones of ``layers`` (to be shown one per frame, ``SHOW_STEP_MS``);
-    returns them."""
+    """Hide the visible ones of ``layers`` (shown one per frame later); returns them."""
     shown = [layer for layer in layers if layer.visible]
     for layer in shown:
         layer.visible = False
@@ -87,15 +86,25 @@ def show_in(viewer: Any, layers: list[Any]) -> None:
 
 
 def prepare_dash_patterns() -> None:
-    """Have vispy build its line dash patterns now (it keeps them for the process): the polygon
-    overlay of every napari labels layer draws an antialiased line that builds them, 0.08 s in
-    the insertion of the session's first labels layer (a run's "elevation source"), measured."""
-    import contextlib
-
+    """vispy's line dash patterns built now (it keeps them): every labels layer's polygon
+    overlay builds them, 0.08 s in the session's first labels layer insertion (measured)."""
     with contextlib.suppress(ImportError):  # a vispy without it: nothing to prepare
         from vispy.visuals.line.dash_atlas import DashAtlas
 
         DashAtlas()
+
+
+def _canvas(viewer: Any) -> Any:
+    """The canvas's Qt widget (None without a Qt window)."""
+    window = getattr(getattr(viewer, "__wrapped__", viewer), "window", None)  # not the proxy
+    return getattr(getattr(getattr(window, "_qt_viewer", None), "canvas", None), "native", None)
+
+
+def draw_now(viewer: Any) -> None:
+    """Draw the canvas at once, if it is shown."""
+    native = _canvas(viewer)
+    if native is not None and native.isVisible():
+        native.repaint()
 
 
 def canvas_updates(viewer: Any, enabled: bool) -> None:
@@ -103,11 +112,7 @@ def canvas_updates(viewer: Any, enabled: bool) -> None:
     event-loop turn: a draw between two insertions crashed Mesa's software GL under Xvfb
     (segmentation fault in glDrawArrays); the rest of the window (progress bar, Cancel, the
     layer list) keeps responding. No-op without a Qt window."""
-    import contextlib
-
-    window = getattr(getattr(viewer, "__wrapped__", viewer), "window", None)  # not the proxy
-    qt_viewer = getattr(window, "_qt_viewer", None)
-    native = getattr(getattr(qt_viewer, "canvas", None), "native", None)
+    native = _canvas(viewer)
     if native is None:
         return
     with contextlib.suppress(RuntimeError):  # the Qt object is already deleted
@@ -117,15 +122,10 @@ def canvas_updates(viewer: Any, enabled: bool) -> None:
 
 
 def append_inactive(viewer: Any, layer: Any) -> None:
-    """Append ``layer`` to the viewer without making it the active layer.
-
-    napari activates every inserted layer: the layer controls switch to it and the layer list
-    updates its selection, a third of an insertion's time (vispy visual and layer controls are
-    the rest); a run's layers go in one per event-loop turn, so that would be paid at every
-    turn. The caller activates one layer at the end (``viewer.layers.selection.active``).
-    ``_activate_on_insert`` is napari's own switch for this (``SelectableEventedList``); without
-    it (a future napari) the layer is simply activated.
-    """
+    """Append ``layer`` to the viewer without making it the active layer: activating (the
+    controls switch to it, the list updates its selection) is a third of an insertion's time,
+    paid at each turn of a run's insertions; the caller activates one layer at the end.
+    napari's own switch (``_activate_on_insert``); without it (a future napari), activated."""
     layers = getattr(viewer, "__wrapped__", viewer).layers  # the plugin's public-only proxy
     layers = getattr(layers, "__wrapped__", layers)
     previous = getattr(layers, "_activate_on_insert", True)

@@ -11,6 +11,8 @@ from __future__ import annotations
 import weakref
 from typing import Any
 
+from .layout import draw_now
+
 _WATCHED: weakref.WeakSet[Any] = weakref.WeakSet()
 #: viewers whose text overlay shows a legend of ours
 _SHOWING: weakref.WeakSet[Any] = weakref.WeakSet()
@@ -54,11 +56,13 @@ GLYPHS_PER_TURN = 2
 
 
 def prepare_glyphs(viewer: Any, step_ms: int = 40) -> None:
-    """Have the canvas render the legend's glyphs beforehand, a few per event-loop turn and
-    invisibly (transparent text), so that the first legend of a run does not render them all
-    in the frame that shows the run (vispy renders each new character of the text overlay into
-    its atlas at its first draw: 0.2-0.6 s for a legend line under software GL). Stops at
-    once when a legend is shown; no-op when the overlay is in use or nothing is drawn."""
+    """Have the canvas render the legend's glyphs beforehand, invisibly (transparent text), so
+    that the first legend of a run does not render them all in the frame that shows the run
+    (vispy renders each new character into its atlas at its first draw: 0.2-0.6 s for a legend
+    line under software GL). The overlay's first draw (its shaders and nine glyphs vispy always
+    renders: 0.15-0.2 s) is made at once, within the widget's opening, not in a turn of a run
+    started right after; then a few glyphs per turn. Stops when a legend is shown; no-op when
+    the overlay is in use or nothing is drawn."""
     from qtpy.QtCore import QTimer
 
     overlay = viewer.canvas.overlays.text
@@ -83,7 +87,8 @@ def prepare_glyphs(viewer: Any, step_ms: int = 40) -> None:
         text.text, text.visible = state["text"], True
         QTimer.singleShot(step_ms, step)
 
-    QTimer.singleShot(step_ms, step)
+    step()
+    draw_now(viewer)
 
 
 def show_legends(viewer: Any) -> None:
