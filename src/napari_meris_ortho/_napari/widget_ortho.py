@@ -16,6 +16,7 @@ keeps nothing alive but its layers. The settings are remembered (``settings``).
 from __future__ import annotations
 
 import contextlib
+import gc
 import threading
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -142,6 +143,7 @@ def build_layers(options: RunSettings, report: Any, check: Any, world: Any
         wrap_status(layer)  # here, not at its insertion on the Qt thread
         layers.append(layer)
     run.release()
+    gc.collect()  # here, not in one of the layers' insertion turns on the Qt thread
     return run, layers
 
 
