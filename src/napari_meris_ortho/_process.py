@@ -15,6 +15,10 @@ What it does, each measured on a fr-alps map (README, "Speed"):
 - Python's cyclic garbage collector run rarely, and not at all on the way out;
 - numba's CPU target started without importing scipy.linalg (0.13-0.2 s).
 
+In a napari session (the plugin's reader and widget; README, napari figures): the viewer's heap
+trimmed after layer removals (``schedule_trim``), and pint's unit registry loaded from pint's
+own disk cache while no one has used it yet (``unit_registry_from_disk``).
+
 numba offers no public interface for two things this package needs; both private hooks are
 here and only here (``numba_cache_index``, ``_refresh_cpu_target``), and ``check_numba_hooks``
 (run by the tests) fails loudly when a numba release changes them.
