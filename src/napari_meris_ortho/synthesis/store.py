@@ -281,8 +281,7 @@ def open_layer(store: Any, name: str, level: int = 1) -> Any:
     """The Zarr array of layer ``name`` (at overview ``level``), read only."""
     import zarr
 
-    prefix = "" if level == 1 else f"overview_{level}/"
-    return zarr.open_array(store, path=prefix + name, mode="r", zarr_format=3)
+    return zarr.open_array(store, path=_level_path(name, level), mode="r", zarr_format=3)
 
 
 def read_window(store: Any, names: Sequence[str], window: Window, level: int = 1
