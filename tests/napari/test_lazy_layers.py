@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 import rasterio
 
-from napari_meris_ortho._napari.product_layers import contrast_limits, stretch_channel
 from napari_meris_ortho._napari.reader import read_layers
+from napari_meris_ortho.display import contrast_limits, stretch_channel
 from napari_meris_ortho.products.n1 import read_product, tie_columns, tie_lines, write_product
 
 #: a full-width FR product (2241 columns), 1400 lines: levels 2241, 1121 and 561 columns wide

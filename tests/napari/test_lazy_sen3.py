@@ -15,8 +15,8 @@ import tracemalloc
 import numpy as np
 import pytest
 
-from napari_meris_ortho._napari.product_layers import contrast_limits, stretch_channel
 from napari_meris_ortho._napari.reader import read_layers
+from napari_meris_ortho.display import contrast_limits, stretch_channel
 from napari_meris_ortho.products.n1 import tie_columns, tie_lines, write_product
 from napari_meris_ortho.products.open import read_product
 from napari_meris_ortho.products.sen3 import write_sen3

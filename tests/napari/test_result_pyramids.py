@@ -57,3 +57,35 @@ def test_run_layers_are_pyramids_shown_at_canvas_size(make_napari_viewer, qtbot,
     last = viewer.layers[-1]
     assert activated == [last]
     assert viewer.layers.selection.active is last
+
+
+def test_band_limits_come_once_from_a_decimation_and_drive_the_quick_look():
+    """A run's band layers take their 1-99 % contrast limits from every f-th line and column
+    (at most ``LIMIT_SAMPLES`` pixels; a full-size band took 0.13 s per limit, twice for the
+    quick-look's bands) within 1 % of the full band's, and the RGB quick-look is stretched by
+    the very limits of its grey layers."""
+    from napari_meris_ortho._napari.product_layers import band_layers
+    from napari_meris_ortho.display import LIMIT_SAMPLES, contrast_limits, stretch_channel
+    from napari_meris_ortho.geometry.grid import OutputGrid
+
+    rng = np.random.default_rng(5)
+    rows, cols = 2400, 2300  # 5.5 Mpixel, background in a corner
+    y, x = np.mgrid[0:rows, 0:cols]
+    bands = {b: (40.0 + 10 * b + 30 * np.sin(x / (70.0 + b)) * np.cos(y / 90.0)
+                 + rng.normal(0, 3, (rows, cols))).astype(np.float32) for b in (2, 5, 7)}
+    valid = (x + y) > 600
+    for band in bands.values():
+        band[~valid] = 0
+    f = int(np.ceil(np.sqrt(rows * cols / LIMIT_SAMPLES)))
+    assert f == 3
+    frame = OutputGrid("EPSG:32632", 400_000.0, 5_100_000.0, 300.0, 300.0, cols, rows)
+    layers = band_layers(bands, frame, "ortho", valid=valid)
+    rgb = layers[0][0]
+    for c, b in enumerate((7, 5, 2)):
+        grey = next(kw for _, kw, _ in layers if kw["name"] == f"ortho b{b}")
+        limits = grey["contrast_limits"]
+        assert limits == contrast_limits(bands[b][::f, ::f], samples=rows * cols)
+        full = contrast_limits(bands[b], samples=rows * cols)
+        np.testing.assert_allclose(limits, full, rtol=0.01)
+        np.testing.assert_array_equal(rgb[..., c],
+                                      np.where(valid, stretch_channel(bands[b], limits), 0))

@@ -9,43 +9,11 @@ from typing import Any
 
 import numpy as np
 
+from ..display import contrast_limits, stretch_rgb
 from ..geometry.grid import OutputGrid
 from .world import geo_image_kwargs
 
 QUICKLOOK_BANDS = (7, 5, 2)
-
-
-def contrast_limits(values: np.ndarray, background: float | None = 0.0) -> tuple[float, float]:
-    """Contrast limits from the 1-99 percentiles of the valid pixels (background excluded)."""
-    v = np.asarray(values, np.float64)
-    good = np.isfinite(v)
-    if background is not None:
-        good &= v != background
-    if not good.any():
-        return (0.0, 1.0)
-    lo, hi = np.percentile(v[good], [1.0, 99.0])
-    return (float(lo), float(hi if hi > lo else lo + 1.0))
-
-
-def stretch_channel(values: np.ndarray, limits: tuple[float, float]) -> np.ndarray:
-    """One quick-look channel: ``values`` from ``limits`` (lo, hi) to 0..255 uint8, clipped;
-    no data (NaN) 0."""
-    lo, hi = limits
-    scaled = np.clip((np.asarray(values, np.float32) - lo) / (hi - lo) * 255.0, 0, 255)
-    return np.where(np.isfinite(scaled), scaled, 0).astype(np.uint8)
-
-
-def stretch_rgb(channels: Sequence[np.ndarray], valid: np.ndarray | None = None) -> np.ndarray:
-    """An RGB (H, W, 3) uint8 quick-look, 1-99 % stretch per channel, background and no data
-    (NaN: a product's fill values) black."""
-    out = []
-    for c in channels:
-        c = np.asarray(c, np.float32)
-        out.append(stretch_channel(c, contrast_limits(c)))
-    rgb = np.stack(out, axis=-1)
-    if valid is not None:
-        rgb[~np.asarray(valid, bool)] = 0
-    return rgb
 
 
 def band_layers(bands: dict[int, np.ndarray], frame: OutputGrid, prefix: str,
@@ -56,15 +24,17 @@ def band_layers(bands: dict[int, np.ndarray], frame: OutputGrid, prefix: str,
     ("<prefix> b7<suffix>", background 0)."""
     layers: list[tuple[Any, dict, str]] = []
     base = dict(meta or {})
+    limits = {b: contrast_limits(bands[b]) for b in bands}
     if all(b in bands for b in QUICKLOOK_BANDS):
-        rgb = stretch_rgb([bands[b] for b in QUICKLOOK_BANDS], valid)
+        rgb = stretch_rgb([bands[b] for b in QUICKLOOK_BANDS], valid,
+                          [limits[b] for b in QUICKLOOK_BANDS])
         layers.append((rgb, geo_image_kwargs(frame, name=f"{prefix} RGB 7-5-2{suffix}", rgb=True,
                                              metadata=dict(base, bands=QUICKLOOK_BANDS)),
                        "image"))
     for b in sorted(bands):
         data = np.asarray(bands[b])
         kwargs = geo_image_kwargs(frame, name=f"{prefix} b{b}{suffix}", colormap="gray",
-                                  contrast_limits=contrast_limits(data),
+                                  contrast_limits=limits[b],
                                   metadata=dict(base, band=b), visible=False)
         layers.append((data, kwargs, "image"))
     return layers

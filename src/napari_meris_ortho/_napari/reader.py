@@ -24,11 +24,12 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from ..display import contrast_limits, stretch_channel, stretch_rgb
 from ..errors import MerisOrthoError, N1FormatError
 from ..geometry.grid import OutputGrid
 from ..products.n1.format import NUM_BANDS
 from ..pyramid import LazyArray, Selection, WholeBands, as_index, as_slice, level_factors
-from .product_layers import QUICKLOOK_BANDS, contrast_limits, stretch_channel, stretch_rgb
+from .product_layers import QUICKLOOK_BANDS
 from .status import BAND_AXIS
 from .world import geo_image_kwargs, place_on_frame, viewer_frame
 

@@ -19,12 +19,13 @@ from typing import Any
 
 import numpy as np
 
+from ..display import contrast_limits
 from ..geometry.grid import OutputGrid
 from ..progress import ProgressCallback
 from .geometry_layers import geometry_layers
 from .layout import SHOW_STEP_MS, append_inactive, canvas_updates, hide_for_now, show_in
 from .ortho_run import multiscale_layer
-from .product_layers import band_layers, contrast_limits
+from .product_layers import band_layers
 from .world import geo_image_kwargs, reproject_onto
 
 SAMPLE_BANDS = (2, 5, 7)

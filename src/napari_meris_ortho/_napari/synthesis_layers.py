@@ -9,9 +9,9 @@ from typing import Any
 
 import numpy as np
 
+from ..display import contrast_limits
 from ..synthesis import store as st
 from ..synthesis.reading import SynthesisStore, open_synthesis
-from .product_layers import contrast_limits
 from .world import geo_image_kwargs
 
 LayerData = tuple[Any, dict[str, Any], str]
