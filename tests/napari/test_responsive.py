@@ -233,6 +233,49 @@ def test_a_run_collects_its_garbage_off_the_qt_thread(make_napari_viewer, tiny_n
         del run, layers
 
 
+def test_a_job_makes_one_full_collection_and_none_when_it_replaces_layers(make_napari_viewer,
+                                                                         tiny_n1):
+    """A full collection holds the GIL for as long as it walks (0.1-0.2 s with a session's
+    layers), so the Qt thread stalls whichever thread runs it. A rerun's job made two (Python's
+    own while making the layers, then the job's), and napari a third after removing the
+    replaced layers. Now the job pauses Python's while it makes the layers and collects once;
+    a job whose layers replace the viewer's collects not at all (napari's comes before the
+    insertions)."""
+    import gc
+    import threading
+
+    from napari_meris_ortho._napari.widget_ortho import build_layers
+
+    viewer = make_napari_viewer()
+    widget = OrthorectifyWidget(viewer)
+    widget.products.value = [tiny_n1]
+    widget.elevation.value = "tiepoints"
+    widget.geometry.value = True
+    full: list[str] = []
+
+    def count(phase, info):
+        if phase == "start" and info["generation"] == 2:
+            full.append(threading.current_thread().name)
+
+    threshold = gc.get_threshold()
+    gc.set_threshold(50, 1, 1)  # Python's full collections as often as they can come
+    gc.callbacks.append(count)
+    try:
+        _, layers = build_layers(widget.settings(), lambda done, total: None, lambda: None, None)
+        first = len(full)
+        names = frozenset(layer.name for layer in layers)
+        del layers
+        _, layers = build_layers(widget.settings(), lambda done, total: None, lambda: None, None,
+                                 names)
+        rerun = len(full) - first
+    finally:
+        gc.callbacks.remove(count)
+        gc.set_threshold(*threshold)
+    assert gc.isenabled()
+    assert first == 1, full
+    assert rerun == 0, full
+
+
 def test_a_runs_shapes_are_triangulated_by_napari_rust_backend(make_napari_viewer, tiny_n1):
     """The footprint and facets layers are napari Shapes, built in the job. With bermuda (napari's
     Rust triangulation, a dependency of ours) napari triangulates them in compiled code; without
