@@ -469,7 +469,9 @@ class OrthorectifyWidget(Container):
         run, layers = value
         self.last_run = run
         names = {layer.name for layer in layers}
-        replaced = [old for old in self.viewer.layers if old.name in names]
+        # top first: a removal that narrows the world slices again the layers left, and the
+        # parallax vectors (on top) redrew their thumbnail in Python (0.09 s)
+        replaced = [old for old in self.viewer.layers[::-1] if old.name in names]
         # napari collects garbage after every removal (0.1-0.5 s): the removals go in one
         # batch of napari's, one per turn, and the batch ends (one collection) in a turn alone
         removals: list[tuple[Any, Any]] = [(self._remove_layer, old) for old in replaced]
