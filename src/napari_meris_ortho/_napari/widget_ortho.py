@@ -144,7 +144,7 @@ def build_layers(options: RunSettings, report: Any, check: Any, world: Any,
 
     run = run_orthorectify(options, report)
     layers = []
-    paused = gc.isenabled()
+    enabled = gc.isenabled()
     gc.disable()
     try:
         for data, kwargs, kind in run_layers(run, world):
@@ -153,7 +153,7 @@ def build_layers(options: RunSettings, report: Any, check: Any, world: Any,
             wrap_status(layer)  # here, not at its insertion on the Qt thread
             layers.append(layer)
     finally:
-        if paused:
+        if enabled:
             gc.enable()
     run.release()
     if not any(layer.name in replacing for layer in layers):
