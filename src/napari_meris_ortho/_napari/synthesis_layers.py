@@ -53,7 +53,7 @@ def store_layers(path: str | Path, at: str | None = None) -> list[LayerData]:
             continue
         coarse = np.asarray(levels[-1][:])
         kwargs.update(colormap="gray", visible=name.startswith("band_"),
-                      contrast_limits=contrast_limits(coarse.astype(np.float64), 0.0))
+                      contrast_limits=contrast_limits(coarse, 0.0))
         layers.append((levels if len(levels) > 1 else levels[0], kwargs, "image"))
     return layers
 
