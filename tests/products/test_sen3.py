@@ -172,3 +172,26 @@ def test_foreign_directory(tmp_path):
         read_sen3(tmp_path)
     with pytest.raises(Sen3FormatError, match="not a directory"):
         read_sen3(tmp_path / "nothing.SEN3")
+
+
+@pytest.mark.parametrize(("dtype", "attrs", "expected"), [
+    # ESA's radiances: uint16, fill 65535, valid 0..65534 (the bounds at the type's own
+    # range are not compared; the fill is no data)
+    (np.uint16, {"_FillValue": np.uint16(65535), "valid_min": np.uint16(0),
+                 "valid_max": np.uint16(65534)}, [0, 0, 0, 0, 1]),
+    (np.uint16, {"valid_min": 10, "valid_max": 65535}, [1, 0, 0, 0, 0]),
+    (np.uint16, {"valid_range": [10, 40000]}, [1, 0, 0, 1, 1]),
+    (np.uint16, {}, [0, 0, 0, 0, 0]),
+    (np.uint16, {"_FillValue": 70000.0}, [0, 0, 0, 0, 0]),  # no uint16 value
+    (np.int16, {"_FillValue": np.int16(-1), "valid_min": np.int16(-32768)}, [0, 1, 0, 0, 0]),
+    (np.float32, {"valid_max": 100.0}, [0, 0, 0, 1, 1]),
+])
+def test_no_data_of_a_packed_variable(dtype, attrs, expected):
+    """CF no-data (fill, outside the valid range) of each storage type, bounds at the type's
+    own range included (``layout.no_data``)."""
+    from napari_meris_ortho.products.sen3.layout import no_data
+
+    values = {np.uint16: [0, 11, 5000, 50000, 65535], np.int16: [0, -1, 5000, 20000, 32767],
+              np.float32: [0.0, -1.0, 50.0, 150.0, np.nan]}[dtype]
+    np.testing.assert_array_equal(no_data(np.array(values, dtype), attrs),
+                                  np.array(expected, bool))

@@ -181,7 +181,9 @@ class MerisSen3Product:
         that is a uint16 value, else 65535 (which no valid value of a 16-bit band takes)."""
         attrs = self.variables[radiance_variable(band)]
         fill = attribute_number(attrs, "_FillValue", RADIANCE_FILL)
-        if self.dtypes[radiance_variable(band)] == np.uint16 and fill in range(65536):
+        # not ``fill in range(65536)``: a float is searched for there, value by value (4 ms)
+        if self.dtypes[radiance_variable(band)] == np.uint16 and fill.is_integer() \
+                and 0 <= fill <= 65535:
             return int(fill)
         return RADIANCE_FILL
 
@@ -200,9 +202,11 @@ class MerisSen3Product:
                                                                    "valid_range")):
             out = raw
         else:
-            bad = no_data(raw, attrs) | (raw < 0)
-            out = raw.astype(np.uint16)
-            out[bad] = nd
+            bad = no_data(raw, attrs)
+            if raw.dtype.kind == "i":
+                bad |= raw < 0
+            out = raw.astype(np.uint16, copy=False)
+            np.putmask(out, bad, nd)
         self._warn(f"{radiance_variable(band)} values (fill or outside the valid range)",
                    int(np.count_nonzero(out == nd)), out.size)
         return out
