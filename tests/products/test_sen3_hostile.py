@@ -241,3 +241,40 @@ def test_radiance_fill_pixels_are_counted_in_a_warning(copy, caplog):
     assert np.isnan(r).sum() == 101
     assert caplog.text.count("101 of 1812657 M07_radiance values") == 1
     assert "M05_radiance" not in caplog.text
+
+
+def test_an_archive_reads_its_band_members_ahead_in_threads(product_dir, tmp_path):
+    """Opening a zip archive inflates its 15 band members in reading threads, in order and at
+    most ``READ_AHEAD`` + 1 at a time (``Members.read_ahead``); the product read from the
+    archive equals the one read from its directory."""
+    import threading
+
+    from napari_meris_ortho.products.sen3.layout import radiance_file
+    from napari_meris_ortho.products.sen3.members import READ_AHEAD, Members
+
+    archive = _zip(product_dir, tmp_path / (product_dir.name + ".zip"))
+    members = Members(archive)
+    names = [radiance_file(b) for b in range(1, 16)]
+    threads, held, most = [], [0], [0]
+    read_bytes = members.read_bytes
+
+    def reading(name: str) -> bytes:
+        threads.append(threading.current_thread().name)
+        held[0] += 1
+        most[0] = max(most[0], held[0])
+        return read_bytes(name)
+
+    members.read_bytes = reading  # type: ignore[method-assign]
+    got = []
+    for data in members.read_ahead(names):
+        got.append(data)
+        held[0] -= 1
+    with zipfile.ZipFile(archive) as z:
+        assert got == [z.read(f"{product_dir.name}/{n}") for n in names]
+    assert len(threads) == 15 and all(t.startswith("sen3-read") for t in threads)
+    assert most[0] <= READ_AHEAD + 1
+    assert list(Members(product_dir).read_ahead(names)) == [None] * 15
+
+    zipped, plain = read_product(archive), read_product(product_dir)
+    assert zipped.scaling == plain.scaling and zipped.dtypes == plain.dtypes
+    np.testing.assert_array_equal(zipped.counts(9), plain.counts(9))

@@ -12,7 +12,7 @@ import threading
 import xml.etree.ElementTree as ET
 import zipfile
 import zlib
-from collections.abc import Iterator
+from collections.abc import Generator, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
@@ -22,6 +22,8 @@ from .layout import MANIFEST
 
 #: netCDF/HDF5 is not thread-safe: one read at a time (napari reads in worker threads)
 LOCK = threading.RLock()
+#: archived members read ahead by this many threads (``Members.read_ahead``)
+READ_AHEAD = 2
 
 
 def _zip_prefix(path: Path) -> str | None:
@@ -119,10 +121,29 @@ class Members:
             raise Sen3FormatError(self.where(name), f"cannot read (damaged or unsupported "
                                   f"archive member): {exc}") from None
 
+    def read_ahead(self, names: list[str], ahead: int = READ_AHEAD
+                   ) -> Generator[bytes | None, None, None]:
+        """The bytes of archived members ``names``, in order, each read (inflated) by one of
+        ``ahead`` threads while the caller uses the ones before: inflating releases the GIL
+        (fr-alps, 15 band members of 8 MB: 0.37 s one by one, 0.23-0.25 s with 2 threads). At
+        most ``ahead`` + 1 are held at once. None for each name of a directory product (its
+        files are opened where they are)."""
+        if self.prefix is None:
+            yield from (None for _ in names)
+            return
+        from concurrent.futures import ThreadPoolExecutor
+
+        with ThreadPoolExecutor(ahead, thread_name_prefix="sen3-read") as pool:
+            pending = [pool.submit(self.read_bytes, n) for n in names[:ahead]]
+            for k in range(len(names)):
+                if k + ahead < len(names):
+                    pending.append(pool.submit(self.read_bytes, names[k + ahead]))
+                yield pending.pop(0).result()
+
     @contextmanager
-    def dataset(self, name: str) -> Iterator[Any]:
-        """``netCDF4.Dataset`` of a member (under the module lock); Sen3FormatError when it is
-        not a netCDF file."""
+    def dataset(self, name: str, data: bytes | None = None) -> Iterator[Any]:
+        """``netCDF4.Dataset`` of a member (under the module lock), from ``data`` when given
+        (its bytes, ``read_ahead``); Sen3FormatError when it is not a netCDF file."""
         import netCDF4
 
         with LOCK:
@@ -130,7 +151,8 @@ class Members:
                 if self.prefix is None:
                     ds = netCDF4.Dataset(self.path / name)
                 else:
-                    ds = netCDF4.Dataset(name, memory=self.read_bytes(name))
+                    ds = netCDF4.Dataset(name, memory=self.read_bytes(name) if data is None
+                                         else data)
             except OSError as exc:
                 raise Sen3FormatError(self.where(name), f"not a netCDF file ({exc})") from None
             try:

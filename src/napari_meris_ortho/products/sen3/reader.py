@@ -15,7 +15,8 @@ from __future__ import annotations
 import logging
 import math
 import os
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping
+from contextlib import closing
 from dataclasses import replace
 from functools import cached_property
 from pathlib import Path
@@ -300,13 +301,14 @@ def read_sen3(path: str | os.PathLike[str]) -> MerisSen3Product:
 
 
 def _variables(members: Members, name: str, variables: list[str], shape: tuple[int, ...] | None,
-               *, optional: bool = False) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+               *, optional: bool = False, data: bytes | None = None
+               ) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
     """Raw values of ``variables`` (each checked against ``shape``, None: any; with
     ``optional`` a missing one is left out), their attributes and the file's global
-    attributes (key ``""``)."""
+    attributes (key ``""``); ``data``: an archived member's bytes when already read."""
     out: dict[str, np.ndarray] = {}
     attrs: dict[str, Any] = {}
-    with members.dataset(name) as ds:
+    with members.dataset(name, data) as ds:
         attrs[""] = {k: ds.getncattr(k) for k in ds.ncattrs()}
         for v in variables:
             if v not in ds.variables:
@@ -324,17 +326,16 @@ def _variables(members: Members, name: str, variables: list[str], shape: tuple[i
     return out, attrs
 
 
-def _variable_info(members: Members, name: str, variable: str
+def _variable_info(members: Members, name: str, variable: str, ds: Any
                    ) -> tuple[tuple[int, ...], dict[str, Any], np.dtype]:
-    """Shape, attributes (their CF packing checked) and stored dtype of one variable (no data
-    read)."""
-    with members.dataset(name) as ds:
-        if variable not in ds.variables:
-            raise Sen3FormatError(members.where(name), f"has no variable {variable!r}")
-        var = ds.variables[variable]
-        attrs = {k: var.getncattr(k) for k in var.ncattrs()}
-        _check_packing(members, name, variable, attrs)
-        return tuple(var.shape), attrs, np.dtype(var.dtype)
+    """Shape, attributes (their CF packing checked) and stored dtype of one variable of member
+    ``name``, open as ``ds`` (no data read)."""
+    if variable not in ds.variables:
+        raise Sen3FormatError(members.where(name), f"has no variable {variable!r}")
+    var = ds.variables[variable]
+    attrs = {k: var.getncattr(k) for k in var.ncattrs()}
+    _check_packing(members, name, variable, attrs)
+    return tuple(var.shape), attrs, np.dtype(var.dtype)
 
 
 def _check_packing(members: Members, name: str, variable: str, attrs: dict[str, Any]) -> None:
@@ -365,52 +366,31 @@ def _product_type(members: Members) -> str:
 
 def _read(members: Members) -> MerisSen3Product:
     product_type = _product_type(members)
-    shape, _, _ = _variable_info(members, radiance_file(1), radiance_variable(1))
-    if len(shape) != 2 or min(shape) < 2:
-        raise Sen3FormatError(members.where(radiance_file(1)), f"M01_radiance has shape "
-                              f"{shape}, a 2-D (rows, columns) image expected")
+    # the image members, each opened once (an archive's read ahead, ``Members.read_ahead``)
+    image_members = [*(radiance_file(b) for b in range(1, NUM_BANDS + 1)), GEO_FILE,
+                     QUALITY_FILE, INSTRUMENT_FILE]
+    with closing(members.read_ahead(image_members)) as contents:
+        shape, variables, dtypes = _band_variables(members, product_type, contents)
+        for name, names in ((GEO_FILE, ("latitude", "longitude", "altitude")),
+                            (QUALITY_FILE, ("quality_flags",)),
+                            (INSTRUMENT_FILE, ("detector_index",))):
+            data = next(contents)
+            with members.dataset(name, data) as ds:
+                for v in names:
+                    got, a, _ = _variable_info(members, name, v, ds)
+                    if got != shape:
+                        raise Sen3FormatError(members.where(name), f"variable {v!r} has shape "
+                                              f"{got}, the radiances have {shape}")
+                    variables[f"geo.{v}" if name == GEO_FILE else v] = a
+        # the instrument member (read last): its spectral variables from the same bytes
+        spectral, instrument = _variables(members, INSTRUMENT_FILE,
+                                          ["solar_flux", "lambda0", "FWHM"], None,
+                                          optional=True, data=data)
     height, width = shape
-    _check_size(members, product_type, height, width)
-    variables: dict[str, dict[str, Any]] = {}
-    dtypes: dict[str, np.dtype] = {}
-    for b in range(1, NUM_BANDS + 1):
-        got, a, dtype = _variable_info(members, radiance_file(b), radiance_variable(b))
-        if dtype.kind not in "iu" or dtype.itemsize > 2:
-            raise Sen3FormatError(members.where(radiance_file(b)), f"{radiance_variable(b)} is "
-                                  f"stored as {dtype}: MERIS Level 1 radiances are 16-bit "
-                                  "integers with a scale_factor (ESA's products: uint16); "
-                                  "other types are not supported")
-        dtypes[radiance_variable(b)] = dtype
-        if got != shape:
-            raise Sen3FormatError(members.where(radiance_file(b)), f"variable "
-                                  f"{radiance_variable(b)!r} has shape {got}, M01_radiance has "
-                                  f"{shape}")
-        if attribute_number(a, "add_offset", 0.0) != 0.0:
-            raise Sen3FormatError(members.where(radiance_file(b)), "radiances with a non-zero "
-                                  "add_offset are not supported")
-        scale = attribute_number(a, "scale_factor", 1.0)
-        if not (math.isfinite(scale) and scale > 0):
-            raise Sen3FormatError(members.where(radiance_file(b)), f"scale_factor {scale!r} of "
-                                  f"{radiance_variable(b)} is not a positive number")
-        variables[radiance_variable(b)] = a
-    for v in ("latitude", "longitude", "altitude"):
-        got, a, _ = _variable_info(members, GEO_FILE, v)
-        if got != shape:
-            raise Sen3FormatError(members.where(GEO_FILE), f"variable {v!r} has shape {got}, "
-                                  f"the radiances have {shape}")
-        variables[f"geo.{v}"] = a
-    for name, v in ((INSTRUMENT_FILE, "detector_index"), (QUALITY_FILE, "quality_flags")):
-        got, a, _ = _variable_info(members, name, v)
-        if got != shape:
-            raise Sen3FormatError(members.where(name), f"variable {v!r} has shape {got}, the "
-                                  f"radiances have {shape}")
-        variables[v] = a
     times, time_attrs = _variables(members, TIME_FILE, ["time_stamp"], (height,))
     line_times = _line_times(members, product_type, times["time_stamp"],
                              time_attrs["time_stamp"])
     tie_points, df, dj = _tie_points(members, height, width)
-    spectral, instrument = _variables(members, INSTRUMENT_FILE,
-                                      ["solar_flux", "lambda0", "FWHM"], None, optional=True)
     _check_detectors(members, product_type, spectral)
     wavelengths = _band_means(spectral.get("lambda0"), APPENDIX_A_WAVELENGTHS)
     bandwidths = _band_means(spectral.get("FWHM"), APPENDIX_A_BANDWIDTHS)
@@ -422,6 +402,47 @@ def _read(members: Members) -> MerisSen3Product:
         members, product_type, width, height, df, dj, tie_points,
         line_times, scaling, wavelengths, bandwidths,
         instrument[""], variables, dtypes)
+
+
+def _band_variables(members: Members, product_type: str, contents: Iterator[bytes | None]
+                    ) -> tuple[tuple[int, int], dict[str, dict[str, Any]], dict[str, np.dtype]]:
+    """The radiances' shape, attributes and stored types, each band checked (16-bit integers,
+    the shape of M01, no add_offset, a positive scale_factor); ``contents``: the band members'
+    bytes in band order (``Members.read_ahead``)."""
+    variables: dict[str, dict[str, Any]] = {}
+    dtypes: dict[str, np.dtype] = {}
+    shape: tuple[int, int] = (0, 0)
+    for b in range(1, NUM_BANDS + 1):
+        with members.dataset(radiance_file(b), next(contents)) as ds:
+            got, a, dtype = _variable_info(members, radiance_file(b), radiance_variable(b), ds)
+        if b == 1:
+            if len(got) != 2 or min(got) < 2:
+                raise Sen3FormatError(members.where(radiance_file(1)), f"M01_radiance has "
+                                      f"shape {got}, a 2-D (rows, columns) image expected")
+            shape = (int(got[0]), int(got[1]))
+            _check_size(members, product_type, *shape)
+        _check_band(members, b, got, shape, a, dtype)
+        dtypes[radiance_variable(b)] = dtype
+        variables[radiance_variable(b)] = a
+    return shape, variables, dtypes
+
+
+def _check_band(members: Members, b: int, got: tuple[int, ...], shape: tuple[int, int],
+                a: dict[str, Any], dtype: np.dtype) -> None:
+    where = members.where(radiance_file(b))
+    if dtype.kind not in "iu" or dtype.itemsize > 2:
+        raise Sen3FormatError(where, f"{radiance_variable(b)} is stored as {dtype}: MERIS Level "
+                              "1 radiances are 16-bit integers with a scale_factor (ESA's "
+                              "products: uint16); other types are not supported")
+    if got != shape:
+        raise Sen3FormatError(where, f"variable {radiance_variable(b)!r} has shape {got}, "
+                              f"M01_radiance has {shape}")
+    if attribute_number(a, "add_offset", 0.0) != 0.0:
+        raise Sen3FormatError(where, "radiances with a non-zero add_offset are not supported")
+    scale = attribute_number(a, "scale_factor", 1.0)
+    if not (math.isfinite(scale) and scale > 0):
+        raise Sen3FormatError(where, f"scale_factor {scale!r} of {radiance_variable(b)} is not "
+                              "a positive number")
 
 
 def _check_size(members: Members, product_type: str, height: int, width: int) -> None:
@@ -492,7 +513,8 @@ def _band_means(values: np.ndarray | None, default: tuple[float, ...]) -> tuple[
 def _tie_points(members: Members, height: int, width: int
                 ) -> tuple[dict[str, np.ndarray], int, int]:
     """Tie points in physical units with the N1 names, N1 column order; (tie points, DF, DJ)."""
-    shape, _, _ = _variable_info(members, TIE_GEOMETRY_FILE, "SZA")
+    with members.dataset(TIE_GEOMETRY_FILE) as ds:
+        shape, _, _ = _variable_info(members, TIE_GEOMETRY_FILE, "SZA", ds)
     geom, attrs = _variables(members, TIE_GEOMETRY_FILE, ["SZA", "SAA", "OZA", "OAA"], shape)
     where = members.where(TIE_GEOMETRY_FILE)
     try:
