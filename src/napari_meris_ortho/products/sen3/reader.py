@@ -429,6 +429,8 @@ def _band_variables(members: Members, product_type: str, contents: Iterator[byte
 
 def _check_band(members: Members, b: int, got: tuple[int, ...], shape: tuple[int, int],
                 a: dict[str, Any], dtype: np.dtype) -> None:
+    """Band ``b``'s variable as the format has it (shape ``got``, attributes ``a``, stored
+    ``dtype``), or Sen3FormatError naming its member."""
     where = members.where(radiance_file(b))
     if dtype.kind not in "iu" or dtype.itemsize > 2:
         raise Sen3FormatError(where, f"{radiance_variable(b)} is stored as {dtype}: MERIS Level "
