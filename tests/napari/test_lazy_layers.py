@@ -57,6 +57,28 @@ def test_opening_reads_a_fraction_of_one_band(big_n1):
                       [(H, W), (700, 1121), (350, 561)]]
 
 
+def test_an_n1_selection_converts_only_its_own_pixels(big_n1):
+    """A decimated level or a tile of an N1 band converts the selected columns of the selected
+    lines to radiance, not the whole lines: every 4th line and column allocates what it returns
+    (0.8 MB), a 512 x 512 tile too (1.0 MB); before, 6.3 MB and 9.2 MB at the peak (whole lines
+    as float32, twice, the first kept alive by the returned view)."""
+    from napari_meris_ortho._napari.reader import radiance_reader
+
+    product = read_product(big_n1)
+    read = radiance_reader(product)
+    for rows, cols in ((range(0, H, 4), range(0, W, 4)), (range(300, 812), range(900, 1412))):
+        read(7, rows, cols)  # the first read's own allocations (memory map, caches)
+        tracemalloc.start()
+        try:
+            out = read(7, rows, cols)
+            _, peak = tracemalloc.get_traced_memory()
+        finally:
+            tracemalloc.stop()
+        np.testing.assert_array_equal(out, product.radiance(7)[rows.start:rows.stop:rows.step,
+                                                               cols.start:cols.stop:cols.step])
+        assert peak < 1.5 * out.nbytes, f"{peak / 2**20:.1f} MB for {out.nbytes / 2**20:.1f} MB"
+
+
 def test_levels_hold_the_product_values(big_n1):
     """Every level is the product decimated (every 2nd, 4th line and column): radiances, the
     quick-look stretched by the coarsest level's 1-99 % limits, the flags."""

@@ -28,6 +28,7 @@ from ..display import contrast_limits, stretch_channel, stretch_rgb
 from ..errors import MerisOrthoError, N1FormatError
 from ..geometry.grid import OutputGrid
 from ..products.n1.format import NUM_BANDS
+from ..products.protocol import radiance_of_counts
 from ..pyramid import LazyArray, Selection, WholeBands, as_index, as_slice, level_factors
 from .product_layers import QUICKLOOK_BANDS
 from .status import BAND_AXIS
@@ -407,8 +408,11 @@ def radiance_reader(product: MerisProduct) -> RadianceReader:
         return WholeBands(product).radiance
 
     def read(band: int, rows: int | range, cols: int | range) -> np.ndarray:
+        # the selected columns of the selected lines, then their radiances: a decimated level
+        # or a tile converts only its own pixels, not whole lines
         lines, columns = _lines_columns(rows, cols)
-        return product.radiance(band, lines)[columns]
+        return radiance_of_counts(product.counts(band)[lines][columns],
+                                  product.scaling.radiance[band - 1], None)
 
     return read
 
