@@ -61,7 +61,7 @@ def test_an_n1_selection_converts_only_its_own_pixels(big_n1):
     """A decimated level or a tile of an N1 band converts the selected columns of the selected
     lines to radiance, not the whole lines: every 4th line and column allocates what it returns
     (0.8 MB), a 512 x 512 tile too (1.0 MB); before, 6.3 MB and 9.2 MB at the peak (whole lines
-    as float32, twice, the first kept alive by the returned view)."""
+    as float32 twice, one of them kept alive by the returned view)."""
     from napari_meris_ortho._napari.reader import radiance_reader
 
     product = read_product(big_n1)
