@@ -150,3 +150,30 @@ def test_info_describes_a_zipped_sen3(pair, tmp_path, capsys):
     size = (pair[1] / "M07_radiance.nc").stat().st_size
     line = next(x for x in out.splitlines() if "M07_radiance.nc" in x)
     assert line.split()[-2:] == [str(size), "bytes"]
+
+
+def test_a_mapping_reads_the_sen3_bands_ahead(pair):
+    """``precompute`` starts reading the product's bands (whole, on a background thread) while
+    it computes the antecedents, and the sampling takes them: the same radiances as bands read
+    when sampled. An N1 has nothing to read ahead (its bands are memory-mapped)."""
+    import threading
+
+    product = read_product(pair[1])
+    readers: list[str] = []
+    counts = product._counts
+
+    def reading(band: int) -> np.ndarray:
+        readers.append(threading.current_thread().name)
+        return counts(band)
+
+    product._counts = reading  # type: ignore[method-assign]
+    ante = precompute(product, bands=[7, 2], elevation="tiepoints")
+    assert sorted(product._ahead) == [2, 7]
+    ahead = ante.radiance()
+    assert product._ahead == {} and len(readers) == 2
+    assert all(name.startswith("sen3-bands") for name in readers)
+    again = ante.radiance()  # read when sampled, on this thread
+    assert readers[2:] == [threading.current_thread().name] * 2
+    for b in (7, 2):
+        np.testing.assert_array_equal(ahead[b], again[b])
+    assert not hasattr(read_product(pair[0]), "read_ahead")

@@ -170,6 +170,9 @@ def precompute(product: ProductLike, grid: OutputGrid | None = None,
         crs = parse_crs(crs)
         check_pixel_size(pixel_size)
     segment = open_segment(product, dems, opts)
+    read_ahead = getattr(segment.prod, "read_ahead", None)  # products that read bands whole
+    if read_ahead is not None:
+        read_ahead(opts.bands)  # while the antecedents are computed (a .SEN3: 0.05 s a band)
     try:
         return segment.precompute(grid, progress, crs=crs, pixel_size=pixel_size,
                                   allow_empty=allow_empty, max_pixels=max_pixels,

@@ -15,7 +15,8 @@ from __future__ import annotations
 import logging
 import math
 import os
-from collections.abc import Iterator, Mapping
+from collections.abc import Iterator, Mapping, Sequence
+from concurrent.futures import Future
 from contextlib import closing
 from dataclasses import replace
 from functools import cached_property
@@ -115,6 +116,8 @@ class MerisSen3Product:
         #: stored dtypes of the radiance variables, by variable name
         self.dtypes = dtypes
         self._warned: set[str] = set()
+        #: bands being read ahead (``read_ahead``), each taken once by ``counts``
+        self._ahead: dict[int, Future[np.ndarray]] = {}
         n = self.n_tie_lines
         self.tie_point_times = line_times[0] + self.line_interval_s * df * np.arange(n)
         self.mph = {"PRODUCT": self.product_name, "PROC_CENTER": str(attrs.get("institution", "")),
@@ -196,6 +199,25 @@ class MerisSen3Product:
             raise TypeError(f"band must be an integer 1..15, got {band!r}")
         if not 1 <= band <= NUM_BANDS:
             raise ValueError(f"band must be 1..15, got {band}")
+        ahead = self._ahead.pop(int(band), None)
+        return self._counts(int(band)) if ahead is None else ahead.result()
+
+    def read_ahead(self, bands: Sequence[int]) -> None:
+        """Start reading ``bands`` (1..15) whole, in order, on a background thread: netCDF-4
+        releases the GIL while it decompresses, so the reading overlaps the caller's work
+        (a mapping's prediction/correction); :meth:`counts` takes each band read ahead once
+        (a later call reads it again). Errors are raised by that :meth:`counts` call."""
+        from concurrent.futures import ThreadPoolExecutor
+
+        todo = [int(b) for b in bands if 1 <= int(b) <= NUM_BANDS and int(b) not in self._ahead]
+        if not todo:
+            return
+        pool = ThreadPoolExecutor(1, thread_name_prefix="sen3-bands")
+        for b in todo:
+            self._ahead[b] = pool.submit(self._counts, b)
+        pool.shutdown(wait=False)  # its thread ends with the last band
+
+    def _counts(self, band: int) -> np.ndarray:
         raw = self._raw(radiance_file(band), radiance_variable(band))
         attrs = self.variables[radiance_variable(band)]
         nd = self.no_data_count(band)
