@@ -172,9 +172,16 @@ class WholeBands:
             return counts
 
     def radiance(self, band: int, rows: int | range, cols: int | range) -> np.ndarray:
-        return radiance_of_counts(self.counts(band)[as_index(rows), as_index(cols)],
-                                  self.product.scaling.radiance[band - 1],
-                                  self.product.no_data_count(band))
+        return selection_radiance(self.product, self.counts(band), band, rows, cols)
+
+
+def selection_radiance(product: Any, counts: np.ndarray, band: int, rows: int | range,
+                       cols: int | range) -> np.ndarray:
+    """The radiances of a selection (an index or a range per axis) of ``band``'s stored
+    ``counts`` (whole, or an N1's memory map): the selection first, then only its pixels
+    converted (``products.protocol.radiance_of_counts``)."""
+    return radiance_of_counts(counts[as_index(rows), as_index(cols)],
+                              product.scaling.radiance[band - 1], product.no_data_count(band))
 
 
 def as_index(r: int | range) -> int | slice:

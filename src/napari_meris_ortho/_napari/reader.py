@@ -28,8 +28,14 @@ from ..display import contrast_limits, stretch_channel, stretch_rgb
 from ..errors import MerisOrthoError, N1FormatError
 from ..geometry.grid import OutputGrid
 from ..products.n1.format import NUM_BANDS
-from ..products.protocol import radiance_of_counts
-from ..pyramid import LazyArray, Selection, WholeBands, as_index, as_slice, level_factors
+from ..pyramid import (
+    LazyArray,
+    Selection,
+    WholeBands,
+    as_index,
+    level_factors,
+    selection_radiance,
+)
 from .product_layers import QUICKLOOK_BANDS
 from .status import BAND_AXIS
 from .world import geo_image_kwargs, place_on_frame, viewer_frame
@@ -408,11 +414,8 @@ def radiance_reader(product: MerisProduct) -> RadianceReader:
         return WholeBands(product).radiance
 
     def read(band: int, rows: int | range, cols: int | range) -> np.ndarray:
-        # the selected columns of the selected lines, then their radiances: a decimated level
-        # or a tile converts only its own pixels, not whole lines
-        lines, columns = _lines_columns(rows, cols)
-        return radiance_of_counts(product.counts(band)[lines][columns],
-                                  product.scaling.radiance[band - 1], None)
+        # a decimated level or a tile converts only its own pixels, not whole lines
+        return selection_radiance(product, product.counts(band), band, rows, cols)
 
     return read
 
@@ -443,15 +446,6 @@ def radiance_stack(product: MerisProduct, read: RadianceReader | None = None) ->
         return out[0] if isinstance(band, int) else out
 
     return LazyArray(read_stack, (NUM_BANDS, product.height, product.width), np.float32)
-
-
-def _lines_columns(rows: int | range, cols: int | range) -> tuple[slice, Any]:
-    """The product lines to read and the columns to keep of a selection."""
-    lines = slice(rows, rows + 1) if isinstance(rows, int) else as_slice(rows)
-    columns: Any = cols if isinstance(cols, int) else as_slice(cols)
-    if isinstance(rows, int):
-        return lines, (0, columns)
-    return lines, (slice(None), columns)
 
 
 def quicklook_levels(product: MerisProduct,
