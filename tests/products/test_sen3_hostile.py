@@ -278,3 +278,41 @@ def test_an_archive_reads_its_band_members_ahead_in_threads(product_dir, tmp_pat
     zipped, plain = read_product(archive), read_product(product_dir)
     assert zipped.scaling == plain.scaling and zipped.dtypes == plain.dtypes
     np.testing.assert_array_equal(zipped.counts(9), plain.counts(9))
+
+
+def _damage_deflate_streams(path: Path) -> int:
+    """XOR a few bytes inside every zlib stream (netCDF-4 deflate chunk) of ``path``, as a bad
+    disk or an interrupted copy would; the file's HDF5 metadata stays intact. Returns how many
+    streams were damaged."""
+    import zlib
+
+    data = bytearray(path.read_bytes())
+    starts, i = [], 0
+    while (i := data.find(b"\x78\x01", i)) >= 0:
+        try:
+            d = zlib.decompressobj()
+            if len(d.decompress(bytes(data[i:i + 65536]))) >= 64:
+                starts.append((i, len(data) - len(d.unused_data) - i if d.eof else 64))
+        except zlib.error:
+            pass
+        i += 2
+    for start, size in starts:
+        mid = start + max(size // 2, 8)
+        data[mid:mid + 8] = bytes(b ^ 0x5A for b in data[mid:mid + 8])
+    path.write_bytes(bytes(data))
+    return len(starts)
+
+
+@pytest.mark.parametrize("member", ["time_coordinates.nc", "tie_geometries.nc",
+                                    "tie_geo_coordinates.nc", "instrument_data.nc"])
+def test_a_damaged_annotation_member_is_one_error(copy, member, tmp_path, capsys):
+    """A directory product whose annotation member has a damaged data chunk (netCDF raises
+    RuntimeError "NetCDF: HDF error"): one Sen3FormatError naming the member, exit 2 from the
+    CLI, not a traceback (the band members were already handled so)."""
+    assert _damage_deflate_streams(copy / member) >= 1
+    with pytest.raises(Sen3FormatError, match=rf"{member}: cannot read"):
+        read_product(copy)
+    rc, err = _cli(["-q", "info", str(copy)], capsys)
+    assert rc == 2 and err.count("\n") == 1 and f"{member}: cannot read" in err
+    assert "Traceback" not in err
+

@@ -342,7 +342,10 @@ def _variables(members: Members, name: str, variables: list[str], shape: tuple[i
                 raise Sen3FormatError(members.where(name), f"variable {v!r} has shape "
                                       f"{tuple(var.shape)}, expected {shape}")
             var.set_auto_maskandscale(False)
-            out[v] = np.asarray(var[...])
+            try:
+                out[v] = np.asarray(var[...])
+            except (IndexError, RuntimeError) as exc:  # a damaged chunk: "NetCDF: HDF error"
+                raise Sen3FormatError(members.where(name), f"cannot read {v}: {exc}") from None
             attrs[v] = {k: var.getncattr(k) for k in var.ncattrs()}
             _check_packing(members, name, v, attrs[v])
     return out, attrs
