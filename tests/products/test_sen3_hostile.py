@@ -316,3 +316,20 @@ def test_a_damaged_annotation_member_is_one_error(copy, member, tmp_path, capsys
     assert rc == 2 and err.count("\n") == 1 and f"{member}: cannot read" in err
     assert "Traceback" not in err
 
+
+def test_signed_flag_masks_mean_the_same_bits(copy, product_dir):
+    """quality_flags whose flag_masks are stored as int32 (land = -2**31, as a NETCDF4_CLASSIC
+    rewrite has them) decode to the same L1b flags as ESA's uint32 masks; before, the first
+    flag read raised a raw OverflowError."""
+    from napari_meris_ortho.flags import FLAG_LAND_OCEAN
+
+    path = copy / "qualityFlags.nc"
+    with netCDF4.Dataset(path, "a") as ds:
+        v = ds.variables["quality_flags"]
+        masks = np.asarray(v.getncattr("flag_masks")).astype(np.int64)
+        v.setncattr("flag_masks", masks.astype(np.uint32).view(np.int32))
+    with netCDF4.Dataset(path) as ds:
+        assert np.asarray(ds.variables["quality_flags"].getncattr("flag_masks")).min() < 0
+    signed, unsigned = read_product(copy).flags, read_product(product_dir).flags
+    assert (unsigned & FLAG_LAND_OCEAN).any()
+    np.testing.assert_array_equal(signed, unsigned)

@@ -193,7 +193,9 @@ def flag_coding(attrs: Mapping[str, Any]) -> dict[str, int]:
     masks, meanings = attrs.get("flag_masks"), attrs.get("flag_meanings")
     if masks is not None and meanings is not None:
         names = str(meanings).split()
-        values = np.atleast_1d(np.asarray(masks)).astype(np.int64).tolist()
+        # masks stored as signed 32-bit integers (a rewrite as NETCDF4_CLASSIC): land is
+        # -2**31 there; the same 32 bits as ESA's uint32 masks
+        values = (np.atleast_1d(np.asarray(masks)).astype(np.int64) & 0xFFFFFFFF).tolist()
         if len(names) == len(values):
             return {n: int(v) for n, v in zip(names, values, strict=True)}
     return {name: 1 << bit for name, bit in QUALITY_FLAGS}
