@@ -138,6 +138,9 @@ def test_zip_archives_and_esas_other_names_open(product_dir, tmp_path):
     assert read_product(rr).product_type == "ME_1_RRG___"
     # (an FR name over this RR product's 925 detectors is refused: test_sen3_hostile)
     assert product_type_of("EN1_MDSI_MER_FRS_1P_20120406T085654.SEN3") == "ME_1_FRG___"
+    # the bare 8-character type (as ocssw matches it), not only ESA's padded ME_1_RRG___
+    assert product_type_of("ME_1_RRG") == "ME_1_RRG___"
+    assert product_type_of("OL_1_EFR___") is None
     plain = tmp_path / "product.zip"
     plain.write_bytes(b"PK\x05\x06" + b"\0" * 18)
     assert not is_product_path(plain)

@@ -65,7 +65,7 @@ L1B_OF_QUALITY: dict[str, int] = {
 
 #: product names: ESA's ``ENV_ME_1_FRG____``/``ENV_ME_1_RRG____`` and the
 #: ``EN1_MDSI_MER_FRS_1P_``/``EN1_MDSI_MER_RR__1P_`` names (NOTES.md)
-_NAMES = (re.compile(r"ME_1_(FR|RR)G_"), re.compile(r"MER_(FR|RR)[S_]_1P"))
+_NAMES = (re.compile(r"ME_1_(FR|RR)G"), re.compile(r"MER_(FR|RR)[S_]_1P"))
 
 
 def product_type_of(text: str) -> str | None:
