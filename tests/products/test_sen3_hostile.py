@@ -333,3 +333,43 @@ def test_signed_flag_masks_mean_the_same_bits(copy, product_dir):
     signed, unsigned = read_product(copy).flags, read_product(product_dir).flags
     assert (unsigned & FLAG_LAND_OCEAN).any()
     np.testing.assert_array_equal(signed, unsigned)
+
+
+def _without(path: Path, name: str) -> None:
+    """Rewrite ``path`` without variable ``name`` (everything else as stored)."""
+    tmp = path.with_suffix(".tmp")
+    with netCDF4.Dataset(path) as a, netCDF4.Dataset(tmp, "w") as b:
+        b.setncatts({k: a.getncattr(k) for k in a.ncattrs()})
+        for dim, d in a.dimensions.items():
+            b.createDimension(dim, len(d))
+        for vn, v in a.variables.items():
+            if vn == name:
+                continue
+            v.set_auto_maskandscale(False)
+            at = {k: v.getncattr(k) for k in v.ncattrs()}
+            nv = b.createVariable(vn, v.dtype, v.dimensions, fill_value=at.pop("_FillValue", None))
+            nv.set_auto_maskandscale(False)
+            nv.setncatts(at)
+            nv[...] = v[...]
+    tmp.replace(path)
+
+
+def test_a_tie_grid_without_altitude_takes_the_pixels_altitude(copy, caplog):
+    """tie_geo_coordinates.nc without ``altitude`` (no format description at hand says that
+    member holds it): the tie points' heights are geo_coordinates.nc's altitude at the tie
+    points (line 16 k, column 16 j in the file, then in N1 column order), with a warning;
+    before, the product was refused ("has no variable 'altitude'")."""
+    with netCDF4.Dataset(copy / "geo_coordinates.nc") as ds:
+        h, w = ds.variables["altitude"].shape
+    rows, cols = np.mgrid[0:h, 0:w]
+    heights = ((3 * rows + cols) % 2900).astype(np.int16)
+    _set(copy / "geo_coordinates.nc", "altitude", slice(None), heights)
+    _without(copy / "tie_geo_coordinates.nc", "altitude")
+    with caplog.at_level(logging.WARNING):
+        p = read_product(copy)
+    assert "has no tie-point altitude" in caplog.text
+    step = real.STEP
+    lines = np.minimum(np.arange(p.tie_points["dem_alt"].shape[0]) * step, h - 1)
+    expected = heights[np.ix_(lines, np.arange(0, w, step))][:, ::-1]
+    np.testing.assert_array_equal(p.tie_points["dem_alt"], expected)
+    assert p.tie_points["dem_alt"].max() > 1000.0

@@ -558,8 +558,16 @@ def _tie_points(members: Members, height: int, width: int
             where, f"tie-point grid of {shape[0]} x {shape[1]} every {df} lines x {dj} columns "
             f"does not cover {height} x {width} pixels (needs {tie_lines(height, df)} x "
             f"{n_cols})")
-    geo, geo_attrs = _variables(members, TIE_GEO_FILE, ["latitude", "longitude", "altitude"],
-                                shape)
+    geo, geo_attrs = _variables(members, TIE_GEO_FILE, ["latitude", "longitude"], shape)
+    # the tie-point altitude (SNAP's TP_altitude, "DEM corrected altitude"): optional, as no
+    # format description at hand names its member; else the pixels' own at the tie points
+    alt, alt_attrs = _variables(members, TIE_GEO_FILE, ["altitude"], shape, optional=True)
+    alt_file = TIE_GEO_FILE
+    if "altitude" not in alt:
+        alt, alt_attrs = _tie_altitude_of_pixels(members, shape, df, dj, (height, width))
+        alt_file = GEO_FILE
+    geo.update(alt)
+    geo_attrs.update({k: v for k, v in alt_attrs.items() if k})
     meteo, meteo_attrs = _variables(members, TIE_METEO_FILE, list(METEO), shape, optional=True
                                     ) if members.exists(TIE_METEO_FILE) else ({}, {})
 
@@ -583,7 +591,7 @@ def _tie_points(members: Members, height: int, width: int
     lat = decoded(geo, geo_attrs, "latitude", TIE_GEO_FILE)
     lon = decoded(geo, geo_attrs, "longitude", TIE_GEO_FILE)
     tp = {"latitude": lat, "longitude": np.where(lon > 180.0, lon - 360.0, lon),
-          "dem_alt": decoded(geo, geo_attrs, "altitude", TIE_GEO_FILE),
+          "dem_alt": decoded(geo, geo_attrs, "altitude", alt_file),
           "dem_rough": np.zeros(shape),
           "sun_zenith": decoded(geom, attrs, "SZA", TIE_GEOMETRY_FILE),
           "sun_azimuth": decoded(geom, attrs, "SAA", TIE_GEOMETRY_FILE) % 360.0,
@@ -594,6 +602,20 @@ def _tie_points(members: Members, height: int, width: int
         tp["dem_alt"], tp["view_zenith"], tp["view_azimuth"], lat)
     tp.update(_meteo(meteo, meteo_attrs, shape))
     return tp, df, dj
+
+
+def _tie_altitude_of_pixels(members: Members, shape: tuple[int, int], df: int, dj: int,
+                            image: tuple[int, int]
+                            ) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+    """``altitude`` of geo_coordinates.nc at the tie points (line ``k df``, column ``j dj`` in
+    the file's order; tie lines past the last image line take the last), for a product whose
+    tie_geo_coordinates.nc has none; logged."""
+    pixels, attrs = _variables(members, GEO_FILE, ["altitude"], image)
+    lines = np.minimum(np.arange(shape[0]) * df, image[0] - 1)
+    columns = np.arange(shape[1]) * dj
+    log.warning("%s: %s has no tie-point altitude: taken from %s at the tie points",
+                members.path.name, TIE_GEO_FILE, GEO_FILE)
+    return {"altitude": pixels["altitude"][np.ix_(lines, columns)]}, attrs
 
 
 def _meteo(raw: dict[str, np.ndarray], attrs: dict[str, Any], shape: tuple[int, ...]
