@@ -373,3 +373,17 @@ def test_a_tie_grid_without_altitude_takes_the_pixels_altitude(copy, caplog):
     expected = heights[np.ix_(lines, np.arange(0, w, step))][:, ::-1]
     np.testing.assert_array_equal(p.tie_points["dem_alt"], expected)
     assert p.tie_points["dem_alt"].max() > 1000.0
+
+
+def test_a_product_wrapped_in_folders_of_an_archive_opens(product_dir, tmp_path):
+    """A zip archive that wraps the .SEN3 folder in a folder of its own (a delivery package:
+    ``EN1_MDSI_.../<name>.SEN3/...``) opens as the product; before, only a manifest at the
+    archive's root or one folder down was looked for ("no xfdumanifest.xml in it")."""
+    archive = tmp_path / "EN1_MDSI_MER_RR__1P_20120406T085654.zip"
+    with zipfile.ZipFile(archive, "w", zipfile.ZIP_DEFLATED) as z:
+        z.writestr("EN1_MDSI_MER_RR__1P_20120406T085654/README.txt", "delivery note")
+        for f in sorted(product_dir.iterdir()):
+            z.write(f, f"EN1_MDSI_MER_RR__1P_20120406T085654/{product_dir.name}/{f.name}")
+    p, plain = read_product(archive), read_product(product_dir)
+    assert p.product_type == plain.product_type == "ME_1_RRG___"
+    np.testing.assert_array_equal(p.counts(7), plain.counts(7))

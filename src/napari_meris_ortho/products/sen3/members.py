@@ -36,8 +36,9 @@ def _zip_prefix(path: Path) -> str | None:
             names = z.namelist()
     except (OSError, zipfile.BadZipFile):
         return None
-    found = sorted((n for n in names if n.rsplit("/", 1)[-1] == MANIFEST and n.count("/") <= 1),
-                   key=len)
+    # at any depth (a delivery package may wrap the .SEN3 folder in folders of its own); the
+    # shallowest when there are several
+    found = sorted((n for n in names if n.rsplit("/", 1)[-1] == MANIFEST), key=len)
     return found[0][: -len(MANIFEST)] if found else None
 
 
