@@ -387,3 +387,37 @@ def test_a_product_wrapped_in_folders_of_an_archive_opens(product_dir, tmp_path)
     p, plain = read_product(archive), read_product(product_dir)
     assert p.product_type == plain.product_type == "ME_1_RRG___"
     np.testing.assert_array_equal(p.counts(7), plain.counts(7))
+
+
+def test_time_stamps_in_their_own_units_and_zero_stamps(copy, product_dir, caplog):
+    """time_stamp is read in its CF ``units`` (here milliseconds since 1970, the same instants):
+    the same line times as ESA's microseconds since 2000; a stamp of 0 or -1 (ocssw's "no
+    time") is interpolated and counted, not taken as 2000-01-01; units that are no CF time are
+    one error. Before, the units were ignored (times 30 years off) and 0 was a valid time."""
+    from napari_meris_ortho.products.sen3.layout import time_units
+
+    assert time_units("microseconds since 2000-01-01 00:00:00 ") == (1e-6, 0.0)
+    assert time_units("seconds since 1970-01-01T00:00:00Z") == (1.0, -946684800.0)
+    assert time_units("days since 2000-01-02") == (86400.0, 86400.0)
+    assert time_units("furlongs since 2000-01-01") is None and time_units("m") is None
+    want = read_product(product_dir).line_times
+    f = copy / "time_coordinates.nc"
+    with netCDF4.Dataset(f, "a") as ds:
+        v = ds.variables["time_stamp"]
+        v.set_auto_maskandscale(False)
+        v[:] = v[:] // 1000 + 946_684_800_000
+        v.setncattr("units", "milliseconds since 1970-01-01 00:00:00")
+    np.testing.assert_allclose(read_product(copy).line_times, want, rtol=0, atol=1e-6)
+
+    ours = copy.parent / "zero" / copy.name
+    shutil.copytree(product_dir, ours)
+    _set(ours / "time_coordinates.nc", "time_stamp", slice(0, 2), np.int64(0))
+    _set(ours / "time_coordinates.nc", "time_stamp", 9, np.int64(-1))
+    with caplog.at_level(logging.WARNING):
+        np.testing.assert_allclose(read_product(ours).line_times, want, rtol=0, atol=1e-6)
+    assert "3 of 1617 time_stamp values" in caplog.text
+    with netCDF4.Dataset(f, "a") as ds:
+        ds.variables["time_stamp"].setncattr("units", "milliseconds after the launch")
+    with pytest.raises(Sen3FormatError, match=r"time_coordinates.nc: time_stamp units "
+                                              r"'milliseconds after the launch' are not"):
+        read_product(copy)

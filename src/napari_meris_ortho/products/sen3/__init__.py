@@ -20,7 +20,8 @@ NASA's ``l1_safe`` read them):
                               and ``ac_subsampling_factor`` (columns per tie point)
 ``tie_meteo.nc``              ``horizontal_wind`` (.., wind_vectors) m s-1, ``sea_level_pressure``
                               hPa, ``total_ozone`` kg m-2, ``humidity`` % (optional, each)
-``time_coordinates.nc``       ``time_stamp`` (rows) int64 microseconds since 2000-01-01
+``time_coordinates.nc``       ``time_stamp`` (rows) int64 microseconds since 2000-01-01 (read
+                              in its own CF ``units``; 0 or less: no time)
 ===========================  ===========================================================
 
 Rooms: ``layout`` (names, column order, CF decoding, flag coding), ``members`` (a directory or a

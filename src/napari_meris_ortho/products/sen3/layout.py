@@ -187,6 +187,35 @@ def cf_decode(raw: np.ndarray, attrs: Mapping[str, Any], dtype: Any = np.float64
 # ------------------------------------------------------------------------------------------
 
 
+#: seconds per unit of a CF time ``units`` string
+_TIME_UNITS = {"microseconds": 1e-6, "milliseconds": 1e-3, "seconds": 1.0, "minutes": 60.0,
+               "hours": 3600.0, "days": 86_400.0}
+_TIME_SINCE = re.compile(r"^\s*(\w+)\s+since\s+(\d{4})-(\d{1,2})-(\d{1,2})"
+                         r"(?:[ T](\d{1,2}):(\d{2})(?::(\d{2}(?:\.\d*)?))?)?\s*(?:Z|UTC)?\s*$")
+#: ESA's ``time_stamp``: microseconds since 2000-01-01 (also when a file names no units)
+ESA_TIME_UNITS = "microseconds since 2000-01-01 00:00:00"
+
+
+def time_units(units: str) -> tuple[float, float] | None:
+    """(seconds per unit, the epoch in seconds since 2000-01-01) of a CF time ``units`` string
+    (CF 1.8 section 4.4, Gregorian calendar, UTC), e.g. ``"microseconds since 2000-01-01
+    00:00:00"`` -> (1e-6, 0.0); None when it is not one."""
+    import datetime as dt
+
+    m = _TIME_SINCE.match(str(units))
+    if m is None or m.group(1).lower() not in _TIME_UNITS:
+        return None
+    year, month, day = (int(g) for g in m.group(2, 3, 4))
+    hour, minute = int(m.group(5) or 0), int(m.group(6) or 0)
+    second = float(m.group(7) or 0.0)
+    try:
+        epoch = dt.datetime(year, month, day, hour, minute)
+    except ValueError:
+        return None
+    offset = (epoch - dt.datetime(2000, 1, 1)).total_seconds() + second
+    return _TIME_UNITS[m.group(1).lower()], offset
+
+
 def flag_coding(attrs: Mapping[str, Any]) -> dict[str, int]:
     """meaning -> mask of a flag variable from its own ``flag_masks``/``flag_meanings`` (CF 1.8
     section 3.5), or ESA's coding (:data:`QUALITY_FLAGS`) when it carries none."""

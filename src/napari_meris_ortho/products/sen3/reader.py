@@ -43,6 +43,7 @@ from ..protocol import radiance_of_counts
 from .layout import (
     DETECTORS,
     DOBSON_KG_M2,
+    ESA_TIME_UNITS,
     GEO_FILE,
     INSTRUMENT_FILE,
     MANIFEST,
@@ -65,6 +66,7 @@ from .layout import (
     radiance_variable,
     required_files,
     saturated_bands,
+    time_units,
 )
 from .members import Members, product_name_of
 
@@ -488,14 +490,24 @@ def _check_size(members: Members, product_type: str, height: int, width: int) ->
 
 def _line_times(members: Members, product_type: str, stamps: np.ndarray,
                 attrs: dict[str, Any]) -> np.ndarray:
-    """Seconds since 2000-01-01 of every row from ``time_stamp`` (microseconds). A stamp that is
-    fill or no MERIS time (days 1990 .. 2100, ``n1.checks.DAYS_RANGE``) is interpolated
-    between the valid ones (extrapolated at the ends with their median interval) and counted
-    in a warning; fewer than two valid stamps is one error (the map does not use the times)."""
+    """Seconds since 2000-01-01 of every row from ``time_stamp`` in its CF ``units`` (ESA's:
+    microseconds since 2000-01-01, also when it names none). A stamp that is fill, not
+    positive (ocssw's "no time") or no MERIS time (days 1990 .. 2100,
+    ``n1.checks.DAYS_RANGE``) is interpolated between the valid ones (extrapolated at the
+    ends with their median interval) and counted in a warning; fewer than two valid stamps,
+    or units that are no CF time, is one error (the map does not use the times)."""
+    units = str(attrs.get("units", ESA_TIME_UNITS))
+    scale = time_units(units)
+    if scale is None:
+        raise Sen3FormatError(members.where(TIME_FILE), f"time_stamp units {units!r} are not "
+                              "'<unit> since <date>' (CF)")
+    factor, epoch = scale
     low, high = DAYS_RANGE
     with np.errstate(invalid="ignore", over="ignore"):
-        seconds = stamps.astype(np.float64) * 1e-6
+        seconds = stamps.astype(np.float64) * factor + epoch
         bad = ~((seconds >= low * 86_400.0) & (seconds <= high * 86_400.0))
+        if epoch <= 0.0:  # an epoch before MERIS: every MERIS time is a positive count
+            bad |= ~(stamps > 0)
     bad |= no_data(stamps, attrs)
     if not bad.any():
         return seconds
