@@ -421,3 +421,49 @@ def test_time_stamps_in_their_own_units_and_zero_stamps(copy, product_dir, caplo
     with pytest.raises(Sen3FormatError, match=r"time_coordinates.nc: time_stamp units "
                                               r"'milliseconds after the launch' are not"):
         read_product(copy)
+
+
+def _reverse_columns(directory: Path) -> None:
+    """Every variable of every member with its columns (image or tie-point) reversed: the
+    product as a third-party rewrite in the N1 column order would hold it."""
+    for f in sorted(directory.glob("*.nc")):
+        with netCDF4.Dataset(f, "a") as ds:
+            for v in ds.variables.values():
+                axes = [i for i, d in enumerate(v.dimensions) if d in ("columns", "tie_columns")]
+                if axes:
+                    v.set_auto_maskandscale(False)
+                    v[...] = np.flip(v[...], axis=axes[0])
+
+
+def test_a_product_in_the_n1_column_order_is_read_as_it_is(copy, product_dir, caplog):
+    """ESA's .SEN3 columns run against the N1 order (the reader mirrors them). A file already
+    in the N1 order (a third-party rewrite) is recognised from its tie-point geometry (column
+    0 on the left of the flight direction) and read as it is, with a warning: the same arrays
+    as ESA's file; before, it was mirrored a second time (east and west swapped)."""
+    _reverse_columns(copy)
+    with caplog.at_level(logging.WARNING):
+        esa = read_product(product_dir)
+    assert "N1 column order" not in caplog.text
+    with caplog.at_level(logging.WARNING):
+        n1 = read_product(copy)
+    assert "N1 column order" in caplog.text
+    for key, value in esa.tie_points.items():
+        np.testing.assert_array_equal(n1.tie_points[key], value, err_msg=key)
+    np.testing.assert_array_equal(n1.counts(7), esa.counts(7))
+    np.testing.assert_array_equal(n1.flags, esa.flags)
+    np.testing.assert_array_equal(n1.pixel_longitude(), esa.pixel_longitude())
+    np.testing.assert_array_equal(n1.detector_index, esa.detector_index)
+
+
+def test_the_column_order_of_real_products():
+    """``esa_column_order`` on real tie points: the handbook's Appendix E.1 N1 product
+    (MER_FR__1PNUPA20030921_092217, tie lines 1 and 9, first and last column: longitude falls
+    from 20.5 to 12.4 deg along a line) is in the N1 order, its mirror in ESA's (the real-like
+    .SEN3 of ``sen3_real``, in ESA's order, reads with no warning:
+    ``test_a_product_in_the_n1_column_order_is_read_as_it_is``)."""
+    from napari_meris_ortho.products.sen3.layout import esa_column_order
+
+    lat = np.array([[50.742379, 51.937422], [49.435929, 50.615694]])
+    lon = np.array([[20.514153, 12.372044], [19.924214, 12.001195]])
+    assert not esa_column_order(lat, lon)
+    assert esa_column_order(lat[:, ::-1], lon[:, ::-1])

@@ -7,7 +7,8 @@ Facts of ESA's products (``ENV_ME_1_RRG____20120406T085654``, 1121 x 1617 pixels
 - **Columns run west to east on a descending pass** (longitude grows with the column), the mirror
   of the N1 "chronological" order. Every product this package returns exposes the N1 order
   (ARCHITECTURE.md "Conventions"), so a ``.SEN3`` and the N1 of one acquisition give the engine
-  the same arrays: :func:`mirror_columns` on read and on write (it is its own inverse).
+  the same arrays: :func:`mirror_columns` on read and on write (it is its own inverse); a file
+  already in the N1 order (:func:`esa_column_order` says so from its tie points) is read as is.
 - Values are CF-packed: each variable has its own ``scale_factor``, ``add_offset``,
   ``_FillValue`` and ``valid_min``/``valid_max`` (:func:`cf_decode`); radiances are uint16 with
   ``_FillValue`` 65535 (SNAP's no-data of M01 is 65535 x its scale, 620.94).
@@ -95,6 +96,26 @@ def mirror_columns(a: np.ndarray) -> np.ndarray:
     """The columns of an image or tie-point grid (rows, columns[, ...]) in the other order:
     ``.SEN3`` order (west to east on a descending pass) <-> N1 order; a C-contiguous copy."""
     return np.ascontiguousarray(np.asarray(a)[:, ::-1])
+
+
+def esa_column_order(latitude: np.ndarray, longitude: np.ndarray) -> bool:
+    """True when a tie-point grid's columns run as ESA's ``.SEN3`` columns do: column 0 on the
+    right of the flight direction (the west on a descending pass), the mirror of the N1 order,
+    whose column 0 is on the left. From the sign of the cross product, on the local east-north
+    plane, of the along-track (next line) and across-track (next column) steps (the median
+    sign over the grid; True when it says nothing: a single line or column)."""
+    lat, lon = np.asarray(latitude, np.float64), np.asarray(longitude, np.float64)
+    if lat.ndim != 2 or min(lat.shape) < 2:
+        return True
+    east = np.cos(np.deg2rad(lat))[:-1, :-1]  # metres east per degree of longitude, relative
+
+    def d_lon(axis: int) -> np.ndarray:  # across the antimeridian too
+        return (np.diff(lon, axis=axis) + 180.0) % 360.0 - 180.0
+
+    along_e, along_n = d_lon(0)[:, :-1] * east, np.diff(lat, axis=0)[:, :-1]
+    across_e, across_n = d_lon(1)[:-1, :] * east, np.diff(lat, axis=1)[:-1, :]
+    with np.errstate(invalid="ignore"):
+        return bool(np.nanmedian(np.sign(along_e * across_n - along_n * across_e)) >= 0.0)
 
 
 # ------------------------------------------------------------------------------------------

@@ -56,6 +56,7 @@ from .layout import (
     TIME_FILE,
     attribute_number,
     cf_decode,
+    esa_column_order,
     flag_coding,
     mirror_columns,
     no_data,
@@ -98,8 +99,11 @@ class MerisSen3Product:
                  dj: int, tie_points: Mapping[str, np.ndarray], line_times: np.ndarray,
                  scaling: ScalingFactors, wavelengths: tuple[float, ...],
                  bandwidths: tuple[float, ...], attrs: dict[str, Any],
-                 variables: dict[str, dict[str, Any]], dtypes: dict[str, np.dtype]) -> None:
+                 variables: dict[str, dict[str, Any]], dtypes: dict[str, np.dtype],
+                 mirrored: bool = True) -> None:
         self.members = members
+        #: the file's columns in ESA's order, mirrored on reading (``layout.esa_column_order``)
+        self.mirrored = mirrored
         self.path = members.path
         self.product_type = product_type
         self.resolution = SEN3_TYPES[product_type]
@@ -173,7 +177,7 @@ class MerisSen3Product:
             except (KeyError, IndexError, RuntimeError) as exc:
                 raise Sen3FormatError(self.members.where(name),
                                       f"cannot read {variable}: {exc}") from None
-        return mirror_columns(raw)
+        return mirror_columns(raw) if self.mirrored else raw
 
     def _warn(self, what: str, n: int, total: int) -> None:
         if n and what not in self._warned:
@@ -417,7 +421,7 @@ def _read(members: Members) -> MerisSen3Product:
     times, time_attrs = _variables(members, TIME_FILE, ["time_stamp"], (height,))
     line_times = _line_times(members, product_type, times["time_stamp"],
                              time_attrs["time_stamp"])
-    tie_points, df, dj = _tie_points(members, height, width)
+    tie_points, df, dj, mirrored = _tie_points(members, height, width)
     _check_detectors(members, product_type, spectral)
     wavelengths = _band_means(spectral.get("lambda0"), APPENDIX_A_WAVELENGTHS)
     bandwidths = _band_means(spectral.get("FWHM"), APPENDIX_A_BANDWIDTHS)
@@ -428,7 +432,7 @@ def _read(members: Members) -> MerisSen3Product:
     return MerisSen3Product(
         members, product_type, width, height, df, dj, tie_points,
         line_times, scaling, wavelengths, bandwidths,
-        instrument[""], variables, dtypes)
+        instrument[""], variables, dtypes, mirrored)
 
 
 def _band_variables(members: Members, product_type: str, contents: Iterator[bytes | None]
@@ -550,8 +554,9 @@ def _band_means(values: np.ndarray | None, default: tuple[float, ...]) -> tuple[
 
 
 def _tie_points(members: Members, height: int, width: int
-                ) -> tuple[dict[str, np.ndarray], int, int]:
-    """Tie points in physical units with the N1 names, N1 column order; (tie points, DF, DJ)."""
+                ) -> tuple[dict[str, np.ndarray], int, int, bool]:
+    """Tie points in physical units with the N1 names, N1 column order; (tie points, DF, DJ,
+    whether the file's columns were mirrored: ESA's order, ``layout.esa_column_order``)."""
     with members.dataset(TIE_GEOMETRY_FILE) as ds:
         shape, _, _ = _variable_info(members, TIE_GEOMETRY_FILE, "SZA", ds)
     geom, attrs = _variables(members, TIE_GEOMETRY_FILE, ["SZA", "SAA", "OZA", "OAA"], shape)
@@ -594,14 +599,19 @@ def _tie_points(members: Members, height: int, width: int
             if name == "altitude":  # usable: sea level where the tie-point height is missing
                 log.warning("%s: %d tie-point altitudes of %s are fill or outside [%g, %g] m: "
                             "taken as 0 m", members.path.name, int(bad.sum()), file, low, high)
-                return mirror_columns(np.where(bad, 0.0, values))
+                return np.where(bad, 0.0, values)
             raise Sen3FormatError(members.where(file), f"{int(bad.sum())} tie points of {name} "
                                   f"are fill values or outside their physical range "
                                   f"[{low:g}, {high:g}]")
-        return mirror_columns(values)
+        return values
 
     lat = decoded(geo, geo_attrs, "latitude", TIE_GEO_FILE)
     lon = decoded(geo, geo_attrs, "longitude", TIE_GEO_FILE)
+    mirrored = esa_column_order(lat, lon)
+    if not mirrored:
+        log.warning("%s: its columns run in the N1 column order (column 0 on the left of the "
+                    "flight direction), not ESA's: read as they are, not mirrored",
+                    members.path.name)
     tp = {"latitude": lat, "longitude": np.where(lon > 180.0, lon - 360.0, lon),
           "dem_alt": decoded(geo, geo_attrs, "altitude", alt_file),
           "dem_rough": np.zeros(shape),
@@ -609,11 +619,13 @@ def _tie_points(members: Members, height: int, width: int
           "sun_azimuth": decoded(geom, attrs, "SAA", TIE_GEOMETRY_FILE) % 360.0,
           "view_zenith": decoded(geom, attrs, "OZA", TIE_GEOMETRY_FILE),
           "view_azimuth": decoded(geom, attrs, "OAA", TIE_GEOMETRY_FILE) % 360.0}
+    tp.update(_meteo(meteo, meteo_attrs, shape))
+    if mirrored:  # ESA's columns in the N1 order
+        tp = {k: mirror_columns(v) for k, v in tp.items()}
     # the DEM corrections as operational N1 products store them (0 over sea), derived
     tp["lat_corr"], tp["lon_corr"] = stored_corrections(
-        tp["dem_alt"], tp["view_zenith"], tp["view_azimuth"], lat)
-    tp.update(_meteo(meteo, meteo_attrs, shape))
-    return tp, df, dj
+        tp["dem_alt"], tp["view_zenith"], tp["view_azimuth"], tp["latitude"])
+    return tp, df, dj, mirrored
 
 
 def _tie_altitude_of_pixels(members: Members, shape: tuple[int, int], df: int, dj: int,
@@ -651,7 +663,7 @@ def _meteo(raw: dict[str, np.ndarray], attrs: dict[str, Any], shape: tuple[int, 
         v = value(name)
         if v is not None:
             out[key] = v * factor
-    return {k: mirror_columns(v) for k, v in out.items()}
+    return out
 
 
 def manifest_summary(path: str | os.PathLike[str]) -> dict[str, str]:
