@@ -575,16 +575,18 @@ def _tie_points(members: Members, height: int, width: int
             where, f"tie-point grid of {shape[0]} x {shape[1]} every {df} lines x {dj} columns "
             f"does not cover {height} x {width} pixels (needs {tie_lines(height, df)} x "
             f"{n_cols})")
-    geo, geo_attrs = _variables(members, TIE_GEO_FILE, ["latitude", "longitude"], shape)
+    geo, geo_attrs = _variables(members, TIE_GEO_FILE, ["latitude", "longitude", "altitude"],
+                                shape, optional=True)
+    for v in ("latitude", "longitude"):
+        if v not in geo:
+            raise Sen3FormatError(members.where(TIE_GEO_FILE), f"has no variable {v!r}")
     # the tie-point altitude (SNAP's TP_altitude, "DEM corrected altitude"): optional, as no
     # format description at hand names its member; else the pixels' own at the tie points
-    alt, alt_attrs = _variables(members, TIE_GEO_FILE, ["altitude"], shape, optional=True)
     alt_file = TIE_GEO_FILE
-    if "altitude" not in alt:
+    if "altitude" not in geo:
         alt, alt_attrs = _tie_altitude_of_pixels(members, shape, df, dj, (height, width))
+        geo["altitude"], geo_attrs["altitude"] = alt["altitude"], alt_attrs["altitude"]
         alt_file = GEO_FILE
-    geo.update(alt)
-    geo_attrs.update({k: v for k, v in alt_attrs.items() if k})
     meteo, meteo_attrs = _variables(members, TIE_METEO_FILE, list(METEO), shape, optional=True
                                     ) if members.exists(TIE_METEO_FILE) else ({}, {})
 
