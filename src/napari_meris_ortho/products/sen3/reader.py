@@ -15,7 +15,7 @@ from __future__ import annotations
 import logging
 import math
 import os
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Collection, Iterator, Mapping, Sequence
 from concurrent.futures import Future
 from contextlib import closing
 from dataclasses import replace
@@ -172,11 +172,10 @@ class MerisSen3Product:
         with self.members.dataset(name) as ds:
             try:
                 var = ds.variables[variable]
-                var.set_auto_maskandscale(False)
-                raw = np.asarray(var[lines] if lines is not None else var[...])
-            except (KeyError, IndexError, RuntimeError) as exc:
+            except KeyError as exc:
                 raise Sen3FormatError(self.members.where(name),
                                       f"cannot read {variable}: {exc}") from None
+            raw = _stored(self.members, name, variable, var, lines)
         return mirror_columns(raw) if self.mirrored else raw
 
     def _warn(self, what: str, n: int, total: int) -> None:
@@ -328,30 +327,38 @@ def read_sen3(path: str | os.PathLike[str]) -> MerisSen3Product:
         raise Sen3FormatError(members.path, f"cannot read: {exc.strerror or exc}") from None
 
 
+def _stored(members: Members, name: str, variable: str, var: Any,
+            lines: slice | None = None) -> np.ndarray:
+    """Stored values of ``variable`` of member ``name`` open as ``var`` (or the given lines),
+    not CF-decoded; a damaged chunk ("NetCDF: HDF error") is one error naming the member."""
+    var.set_auto_maskandscale(False)
+    try:
+        return np.asarray(var[lines] if lines is not None else var[...])
+    except (IndexError, RuntimeError) as exc:
+        raise Sen3FormatError(members.where(name), f"cannot read {variable}: {exc}") from None
+
+
 def _variables(members: Members, name: str, variables: list[str], shape: tuple[int, ...] | None,
-               *, optional: bool = False, data: bytes | None = None
+               *, optional: bool | Collection[str] = False, data: bytes | None = None
                ) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
-    """Raw values of ``variables`` (each checked against ``shape``, None: any; with
-    ``optional`` a missing one is left out), their attributes and the file's global
-    attributes (key ``""``); ``data``: an archived member's bytes when already read."""
+    """Raw values of ``variables`` (each checked against ``shape``, None: any; a missing one
+    that is ``optional`` (True: any; else those named) is left out), their attributes and the
+    file's global attributes (key ``""``); ``data``: an archived member's bytes when already
+    read."""
     out: dict[str, np.ndarray] = {}
     attrs: dict[str, Any] = {}
     with members.dataset(name, data) as ds:
         attrs[""] = {k: ds.getncattr(k) for k in ds.ncattrs()}
         for v in variables:
             if v not in ds.variables:
-                if optional:
+                if optional is True or (optional and v in optional):
                     continue
                 raise Sen3FormatError(members.where(name), f"has no variable {v!r}")
             var = ds.variables[v]
             if shape is not None and tuple(var.shape[: len(shape)]) != shape:
                 raise Sen3FormatError(members.where(name), f"variable {v!r} has shape "
                                       f"{tuple(var.shape)}, expected {shape}")
-            var.set_auto_maskandscale(False)
-            try:
-                out[v] = np.asarray(var[...])
-            except (IndexError, RuntimeError) as exc:  # a damaged chunk: "NetCDF: HDF error"
-                raise Sen3FormatError(members.where(name), f"cannot read {v}: {exc}") from None
+            out[v] = _stored(members, name, v, var)
             attrs[v] = {k: var.getncattr(k) for k in var.ncattrs()}
             _check_packing(members, name, v, attrs[v])
     return out, attrs
@@ -576,16 +583,13 @@ def _tie_points(members: Members, height: int, width: int
             f"does not cover {height} x {width} pixels (needs {tie_lines(height, df)} x "
             f"{n_cols})")
     geo, geo_attrs = _variables(members, TIE_GEO_FILE, ["latitude", "longitude", "altitude"],
-                                shape, optional=True)
-    for v in ("latitude", "longitude"):
-        if v not in geo:
-            raise Sen3FormatError(members.where(TIE_GEO_FILE), f"has no variable {v!r}")
+                                shape, optional={"altitude"})
     # the tie-point altitude (SNAP's TP_altitude, "DEM corrected altitude"): optional, as no
     # format description at hand names its member; else the pixels' own at the tie points
     alt_file = TIE_GEO_FILE
     if "altitude" not in geo:
-        alt, alt_attrs = _tie_altitude_of_pixels(members, shape, df, dj, (height, width))
-        geo["altitude"], geo_attrs["altitude"] = alt["altitude"], alt_attrs["altitude"]
+        geo["altitude"], geo_attrs["altitude"] = _tie_altitude_of_pixels(
+            members, shape, df, dj, (height, width))
         alt_file = GEO_FILE
     meteo, meteo_attrs = _variables(members, TIE_METEO_FILE, list(METEO), shape, optional=True
                                     ) if members.exists(TIE_METEO_FILE) else ({}, {})
@@ -632,16 +636,16 @@ def _tie_points(members: Members, height: int, width: int
 
 def _tie_altitude_of_pixels(members: Members, shape: tuple[int, int], df: int, dj: int,
                             image: tuple[int, int]
-                            ) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
-    """``altitude`` of geo_coordinates.nc at the tie points (line ``k df``, column ``j dj`` in
-    the file's order; tie lines past the last image line take the last), for a product whose
-    tie_geo_coordinates.nc has none; logged."""
+                            ) -> tuple[np.ndarray, dict[str, Any]]:
+    """``altitude`` of geo_coordinates.nc (and its attributes) at the tie points (line ``k df``,
+    column ``j dj`` in the file's order; tie lines past the last image line take the last), for
+    a product whose tie_geo_coordinates.nc has none; logged."""
     pixels, attrs = _variables(members, GEO_FILE, ["altitude"], image)
     lines = np.minimum(np.arange(shape[0]) * df, image[0] - 1)
     columns = np.arange(shape[1]) * dj
     log.warning("%s: %s has no tie-point altitude: taken from %s at the tie points",
                 members.path.name, TIE_GEO_FILE, GEO_FILE)
-    return {"altitude": pixels["altitude"][np.ix_(lines, columns)]}, attrs
+    return pixels["altitude"][np.ix_(lines, columns)], attrs["altitude"]
 
 
 def _meteo(raw: dict[str, np.ndarray], attrs: dict[str, Any], shape: tuple[int, ...]
