@@ -40,38 +40,50 @@ def copy(product_dir, tmp_path):
     return dst
 
 
-def _rewrite(path: Path, name: str, dtype: str, fill, **attrs) -> None:
-    """Rewrite variable ``name`` of ``path`` as ``dtype`` holding the same physical values
-    (``attrs``: its new scale_factor/add_offset), ``fill`` where they are no data."""
+def _copy(path: Path, name: str, write=None) -> None:
+    """Rewrite ``path`` with its global attributes, dimensions and every variable but ``name``
+    as stored; ``write(dataset, variable)`` writes ``name`` anew (None: it is left out)."""
     tmp = path.with_suffix(".tmp")
     with netCDF4.Dataset(path) as a, netCDF4.Dataset(tmp, "w") as b:
         b.setncatts({k: a.getncattr(k) for k in a.ncattrs()})
         for dim, d in a.dimensions.items():
             b.createDimension(dim, len(d))
         for vn, v in a.variables.items():
-            v.set_auto_maskandscale(vn == name)  # the old packing decoded, the others as stored
-            at = {k: v.getncattr(k) for k in v.ncattrs()}
-            old_fill = at.pop("_FillValue", None)
-            if vn != name:
-                nv = b.createVariable(vn, v.dtype, v.dimensions, fill_value=old_fill)
-                nv.set_auto_maskandscale(False)
-                nv.setncatts(at)
-                nv[...] = v[...]
+            if vn == name:
+                if write is not None:
+                    write(b, v)
                 continue
-            phys = np.ma.filled(v[...].astype(np.float64), np.nan)
-            for k in ("scale_factor", "add_offset", "valid_min", "valid_max"):
-                at.pop(k, None)
-            at.update(attrs)
-            nv = b.createVariable(vn, dtype, v.dimensions, fill_value=fill)
+            v.set_auto_maskandscale(False)
+            at = {k: v.getncattr(k) for k in v.ncattrs()}
+            nv = b.createVariable(vn, v.dtype, v.dimensions, fill_value=at.pop("_FillValue", None))
             nv.set_auto_maskandscale(False)
             nv.setncatts(at)
-            packed = (phys - float(attrs.get("add_offset", 0.0))) / float(
-                attrs.get("scale_factor", 1.0))
-            if np.dtype(dtype).kind in "iu":
-                packed = np.round(packed)
-            packed[np.isnan(phys)] = fill
-            nv[...] = packed.astype(dtype)
+            nv[...] = v[...]
     tmp.replace(path)
+
+
+def _rewrite(path: Path, name: str, dtype: str, fill, **attrs) -> None:
+    """Rewrite variable ``name`` of ``path`` as ``dtype`` holding the same physical values
+    (``attrs``: its new scale_factor/add_offset), ``fill`` where they are no data."""
+    def repack(b, v) -> None:
+        v.set_auto_maskandscale(True)  # the old packing decoded
+        at = {k: v.getncattr(k) for k in v.ncattrs()}
+        at.pop("_FillValue", None)
+        phys = np.ma.filled(v[...].astype(np.float64), np.nan)
+        for k in ("scale_factor", "add_offset", "valid_min", "valid_max"):
+            at.pop(k, None)
+        at.update(attrs)
+        nv = b.createVariable(v.name, dtype, v.dimensions, fill_value=fill)
+        nv.set_auto_maskandscale(False)
+        nv.setncatts(at)
+        packed = (phys - float(attrs.get("add_offset", 0.0))) / float(
+            attrs.get("scale_factor", 1.0))
+        if np.dtype(dtype).kind in "iu":
+            packed = np.round(packed)
+        packed[np.isnan(phys)] = fill
+        nv[...] = packed.astype(dtype)
+
+    _copy(path, name, repack)
 
 
 def _set(path: Path, name: str, index, value) -> None:
@@ -337,21 +349,7 @@ def test_signed_flag_masks_mean_the_same_bits(copy, product_dir):
 
 def _without(path: Path, name: str) -> None:
     """Rewrite ``path`` without variable ``name`` (everything else as stored)."""
-    tmp = path.with_suffix(".tmp")
-    with netCDF4.Dataset(path) as a, netCDF4.Dataset(tmp, "w") as b:
-        b.setncatts({k: a.getncattr(k) for k in a.ncattrs()})
-        for dim, d in a.dimensions.items():
-            b.createDimension(dim, len(d))
-        for vn, v in a.variables.items():
-            if vn == name:
-                continue
-            v.set_auto_maskandscale(False)
-            at = {k: v.getncattr(k) for k in v.ncattrs()}
-            nv = b.createVariable(vn, v.dtype, v.dimensions, fill_value=at.pop("_FillValue", None))
-            nv.set_auto_maskandscale(False)
-            nv.setncatts(at)
-            nv[...] = v[...]
-    tmp.replace(path)
+    _copy(path, name)
 
 
 def test_a_tie_grid_without_altitude_takes_the_pixels_altitude(copy, caplog):
