@@ -169,6 +169,35 @@ def test_projected_lonlat_is_independent_of_row_chunks():
     np.testing.assert_array_equal(part_lat, full_lat[37:101])
 
 
+def test_polar_stereographic_steps_follow_the_bending():
+    """An RR grid in EPSG:3995 whose top edge passes 830 km from the North Pole (an Arctic
+    descending segment): the longitude bends hardest in the top rows, so the step is chosen band
+    by band (64 rows each): small near the pole, larger away from it, still within 0.01 px."""
+    g = OutputGrid.from_extent("EPSG:3995", (-1.6e6, -0.83e6), (0.9e6, -3.8e6), 1040.0)
+    steps = g.primary_steps()
+    assert steps.size == math.ceil(g.height / 64)
+    assert steps[0] == steps.min() and steps[-1] >= 2 * steps[0]
+    assert np.all(np.diff(steps) >= 0)  # the farther from the pole, the larger the step
+    stats = g.interpolation_stats
+    assert (stats["step"], stats["max_step"]) == (steps.min(), steps.max())
+    errors = [max_pixel_error(g, a, a + 70) for a in (0, g.height // 2 - 35, g.height - 70)]
+    assert max(errors) <= 0.01 and stats["max_error_px"] <= 0.005
+    full_lon, full_lat = g.lonlat(0, 300)  # rows across band edges: the same values
+    part_lon, part_lat = g.lonlat(37, 201)
+    np.testing.assert_array_equal(part_lon, full_lon[37:201])
+    np.testing.assert_array_equal(part_lat, full_lat[37:201])
+
+
+def test_grids_of_one_row_past_a_band():
+    """A last band of one row (height 64 k + 1) has no trial cell of its own: it takes the step
+    of the band before it and is exact there."""
+    g = OutputGrid.from_extent("EPSG:32633", (300000, 5100000), (560000, 5100000 - 129 * 260.0),
+                               260.0)
+    assert g.height == 129 and g.primary_steps().size == 3
+    assert g.primary_steps()[2] == g.primary_steps()[1]
+    assert max_pixel_error(g, 0, 129) <= 0.01
+
+
 def test_cells_off_the_projection_fall_back_to_exact():
     """An orthographic grid larger than the visible disk: corners off the globe are not
     interpolated; every finite pixel equals pyproj's position, pixels off the disk are NaN."""

@@ -12,13 +12,18 @@ Map-to-geographic conversion (``OutputGrid.lonlat``):
   between (the terrain-correction paper's output-to-input mapping, error about 0.01 px for 64 x 64
   windows). N is chosen from the error measured at the cell midpoints of a 64-pixel trial grid
   (the error of bilinear interpolation grows as N^2) so that the measured error stays below
-  ``tolerance / 4``; every cell whose measured midpoint error still exceeds ``tolerance / 2``
-  (or whose corners are outside the projection) is computed exactly with pyproj, pixel by pixel.
-  ``OutputGrid.interpolation_stats`` reports the step, the largest measured error and the number
-  of exact fallback pixels. Measured over an FR footprint (~3700 x 3300 px at 260 m) against
-  pyproj at every pixel: a 64-px primary grid errs by 0.024 px in UTM 31/33 and LAEA
-  (EPSG:3035); the chosen step (20 px) gives at most 0.0023 px; EPSG:32662 is exact (step 256).
-  The interpolation takes about a third of the time of one pyproj call per pixel.
+  ``tolerance / 4``, band by band: each band of 64 output rows (the trial grid's row of cells)
+  takes the step its own cells and their neighbours' allow, so that the few rows where the
+  projection bends hardest (a polar stereographic grid near the pole) do not set the step of the
+  whole grid. Every cell whose measured midpoint error still exceeds ``tolerance / 2`` (or whose
+  corners are outside the projection) is computed exactly with pyproj, pixel by pixel.
+  ``OutputGrid.interpolation_stats`` reports the smallest and largest step, the largest measured
+  error and the number of exact fallback pixels. Measured over an FR footprint (~3700 x 3300 px
+  at 260 m) against pyproj at every pixel: a 64-px primary grid errs by 0.024 px in UTM 31/33
+  and LAEA (EPSG:3035); the chosen step (20 px) gives at most 0.0023 px; EPSG:32662 is exact
+  (step 256). The interpolation takes about a third of the time of one pyproj call per pixel.
+  An 8001-line RR segment from 79 N in EPSG:3995 (9783 x 8728 px): one step for the grid was
+  4 px (11.3 s); by bands, 4-14 px (4.2 s), the same largest error (0.0026 px).
 
 Default grid (``default_grid``): the smallest rectangle holding the segment boundary (section 3.1,
 fig. 19). Pixel size: MERSYN's nominal FR/RR size, 260 m / 1040 m in a metric CRS and, for a
@@ -252,9 +257,10 @@ class OutputGrid:
         except pyproj.exceptions.ProjError as exc:
             raise OptionsError(f"CRS {self.crs.name!r}: no transformation to WGS84 ({exc})"
                                ) from None
-        self._step: int | None = None
+        self._steps: np.ndarray | None = None
         self.interpolation_stats: dict[str, float] = {
-            "step": 0, "trial_max_error_px": 0.0, "max_error_px": 0.0, "exact_pixels": 0}
+            "step": 0, "max_step": 0, "trial_max_error_px": 0.0, "max_error_px": 0.0,
+            "exact_pixels": 0}
 
     # ------------------------------------------------------------------ constructors
     @classmethod
@@ -422,13 +428,15 @@ class OutputGrid:
             lon, lat = np.where(bad, np.nan, lon), np.where(bad, np.nan, lat)
         return _wrap_lon(lon), lat
 
-    def _nodes(self, step: int, row_start: int, row_stop: int) -> tuple[np.ndarray, np.ndarray]:
-        """Primary-grid node rows bracketing [row_start, row_stop) and node columns (global)."""
+    def _band_nodes(self, band: int, step: int) -> tuple[np.ndarray, np.ndarray]:
+        """Primary-grid node rows and columns of band ``band`` (output rows [64 band, 64 band +
+        64)): every ``step`` rows from the band's first row, then the next band's first row (the
+        grid's last row in the last band); every ``step`` columns and the last column."""
+        first = band * _TRIAL_STEP
+        end = min(first + _TRIAL_STEP, self.height - 1)
+        rows = np.unique(np.r_[np.arange(first, max(end, first + 1), step), end])
         cols = np.unique(np.r_[np.arange(0, self.width, step), self.width - 1])
-        all_rows = np.unique(np.r_[np.arange(0, self.height, step), self.height - 1])
-        k0 = max(0, np.searchsorted(all_rows, row_start, side="right") - 1)
-        k1 = min(all_rows.size, np.searchsorted(all_rows, max(row_stop - 1, row_start)) + 1)
-        return all_rows[k0:k1], cols
+        return rows, cols
 
     def _cell_errors(self, rows: np.ndarray, cols: np.ndarray, lon: np.ndarray, lat: np.ndarray
                      ) -> np.ndarray:
@@ -464,31 +472,53 @@ class OutputGrid:
             err = np.maximum(err, np.where(np.isfinite(e), e, np.inf))
         return err
 
-    def primary_step(self) -> int:
-        """Primary-grid step N (pixels) chosen from the error measured on a 64-pixel trial grid."""
-        if self._step is None:
-            rows, cols = self._nodes(_TRIAL_STEP, 0, self.height)
-            x, y = self.xy(rows[:, None], cols[None, :])
+    def primary_steps(self) -> np.ndarray:
+        """Primary-grid step N (pixels) of each band of 64 output rows, from the error measured on
+        a 64-pixel trial grid over the band's cells and its neighbours' (module docstring)."""
+        if self._steps is None:
+            all_rows = np.unique(np.r_[np.arange(0, self.height, _TRIAL_STEP), self.height - 1])
+            cols = np.unique(np.r_[np.arange(0, self.width, _TRIAL_STEP), self.width - 1])
+            x, y = self.xy(all_rows[:, None], cols[None, :])
             x, y = np.broadcast_arrays(x, y)
             lon, lat = self._xy_to_lonlat(x, y)
-            err = self._cell_errors(rows, cols, lon, lat)
-            finite = err[np.isfinite(err)]
-            emax = float(finite.max()) if finite.size else 0.0
-            if emax <= 0.0:
-                step = _MAX_STEP
-            else:
-                step = int(_TRIAL_STEP * math.sqrt(0.25 * self.tolerance / emax))
-            self._step = int(min(max(step, _MIN_STEP), _MAX_STEP))
-            self.interpolation_stats["step"] = self._step
-            self.interpolation_stats["trial_max_error_px"] = emax
-        return self._step
+            err = self._cell_errors(all_rows, cols, lon, lat)
+            band_err = np.max(np.where(np.isfinite(err), err, 0.0), axis=1)
+            near = band_err.copy()  # the band's own cells and those of the bands beside it
+            near[1:] = np.maximum(near[1:], band_err[:-1])
+            near[:-1] = np.maximum(near[:-1], band_err[1:])
+            with np.errstate(divide="ignore"):
+                steps = _TRIAL_STEP * np.sqrt(0.25 * self.tolerance / near)
+            n_bands = (self.height + _TRIAL_STEP - 1) // _TRIAL_STEP
+            steps = np.clip(np.nan_to_num(steps, posinf=_MAX_STEP), _MIN_STEP, _MAX_STEP)
+            steps = steps.astype(np.int64)  # a last band of one row has no cell of its own
+            self._steps = np.r_[steps, np.full(max(n_bands - steps.size, 0), steps[-1])]
+            self.interpolation_stats["step"] = int(self._steps.min())
+            self.interpolation_stats["max_step"] = int(self._steps.max())
+            self.interpolation_stats["trial_max_error_px"] = float(band_err.max())
+        return self._steps
+
+    def primary_step(self) -> int:
+        """The smallest primary-grid step of the grid (``primary_steps``)."""
+        return int(self.primary_steps().min())
 
     def _lonlat_primary(self, row_start: int, row_stop: int) -> tuple[np.ndarray, np.ndarray]:
-        n_rows = row_stop - row_start
-        if n_rows == 0:
-            empty = np.empty((0, self.width))
-            return empty, empty.copy()
-        rows, cols = self._nodes(self.primary_step(), row_start, row_stop)
+        lon = np.empty((row_stop - row_start, self.width))
+        lat = np.empty((row_stop - row_start, self.width))
+        steps = self.primary_steps()
+        for band in range(row_start // _TRIAL_STEP, (row_stop - 1) // _TRIAL_STEP + 1):
+            r0 = max(row_start, band * _TRIAL_STEP)
+            r1 = min(row_stop, (band + 1) * _TRIAL_STEP)
+            if r1 > r0:
+                self._lonlat_band(band, int(steps[band]), r0, r1,
+                                  lon[r0 - row_start:r1 - row_start],
+                                  lat[r0 - row_start:r1 - row_start])
+        return lon, lat
+
+    def _lonlat_band(self, band: int, step: int, row_start: int, row_stop: int,
+                     lon: np.ndarray, lat: np.ndarray) -> None:
+        """Rows [row_start, row_stop) of band ``band`` into ``lon``/``lat``: bilinear between the
+        band's primary-grid nodes, exactly (pyproj per pixel) in cells measured too far off."""
+        rows, cols = self._band_nodes(band, step)
         x, y = self.xy(rows[:, None], cols[None, :])
         x, y = np.broadcast_arrays(x, y)
         nlon, nlat = self._xy_to_lonlat(x, y)
@@ -498,8 +528,6 @@ class OutputGrid:
         if ok.size:
             stats = self.interpolation_stats
             stats["max_error_px"] = max(stats["max_error_px"], float(ok.max()))
-        lon = np.empty((n_rows, self.width))
-        lat = np.empty((n_rows, self.width))
         _interpolate_primary(rows.astype(np.int64), cols.astype(np.int64), nlon, nlat,
                              bad, row_start, lon, lat)
         need = np.isnan(lon)
@@ -509,7 +537,6 @@ class OutputGrid:
             elon, elat = self._xy_to_lonlat(ex, ey)
             lon[ii, jj], lat[ii, jj] = elon, elat
             self.interpolation_stats["exact_pixels"] += int(ii.size)
-        return lon, lat
 
 
 def _unwrap_cells(lon: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
