@@ -217,7 +217,7 @@ def run_gdalwarp(scene, grid, tmp: Path) -> dict:
     vrt = geoloc_vrt(scene, tmp)
     out = tmp / "gdalwarp.tif"
     x0, y0, x1, y1 = grid.bounds
-    cmd = ["gdalwarp", "-q", "-overwrite", "-geoloc", "-t_srs", "EPSG:4326",
+    cmd = ["gdalwarp", "-q", "-overwrite", "-geoloc", "-t_srs", grid.crs.to_string(),
            "-te", repr(x0), repr(y0), repr(x1), repr(y1), "-ts", str(grid.width),
            str(grid.height), "-r", "near", "-dstnodata", "0", "-multi",
            "-wo", "NUM_THREADS=ALL_CPUS", "-of", "COG", "-co", "COMPRESS=ZSTD",

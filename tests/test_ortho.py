@@ -332,6 +332,28 @@ def test_accuracy_against_the_simulator_truth(fr_small):
     assert np.sqrt(np.mean(e_none ** 2)) > 1.0 and e_none.max() > 5.0
 
 
+def test_a_grid_far_larger_than_the_segment_searches_only_the_segment(fr_small):
+    """A fixed extent 5 x 5 times the segment's own UTM grid (a regional grid for time series):
+    the same antecedents inside (within the truth tolerance), nothing searched in the rows and
+    columns the segment does not reach (the primary-grid nodes searched in vain stay within a
+    few times those of the own grid; every node of the whole rows was searched before: 60 x)."""
+    s = fr_small
+    dem = s.dem_paths["geotiff"]
+    own = orthorectify(s.product_path, dems=[dem], crs="EPSG:32633", bands=[7],
+                       diagnostics=True)
+    g = own.grid
+    big = OutputGrid.from_extent(
+        "EPSG:32633", (g.x0 - 2 * g.width * g.dx, g.y0 + 2 * g.height * g.dy),
+        (g.x0 + 3 * g.width * g.dx, g.y0 - 3 * g.height * g.dy), g.dx)
+    r = orthorectify(s.product_path, dems=[dem], grid=big, bands=[7], diagnostics=True)
+    window = (slice(2 * g.height, 3 * g.height), slice(2 * g.width, 3 * g.width))
+    assert np.mean(r.valid[window] == own.valid) > 0.9999
+    assert r.valid.sum() - r.valid[window].sum() < 100  # terrain points past the own grid
+    e = _truth_error(s, r)
+    assert np.sqrt(np.mean(e ** 2)) <= 0.05 and e.max() <= 0.25
+    assert r.stats.facet_search["not found"] <= 3 * own.stats.facet_search["not found"]
+
+
 @pytest.mark.slow
 def test_accuracy_across_the_antimeridian():
     """rr-antimeridian, a box across 180 deg: no seam, DEM mode within 0.05 px RMS."""

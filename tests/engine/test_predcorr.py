@@ -241,3 +241,28 @@ def test_solve_into_rows_of_a_whole_grid_equals_new_arrays(scene):
     with pytest.raises(ValueError, match="C-contiguous"):
         solve(tp, grid, lon, lat, h, HEIGHT_GIVEN, spans,
               out=(rows[0], rows[1], rows[2].astype(np.int16)))
+
+
+@pytest.mark.parametrize("method", ["primary", "handbook"])
+def test_a_column_window_solves_as_the_whole_rows(scene, method):
+    """Columns [c0, c1) of the rows (c0 a multiple of the primary step, the spans counted from
+    it) give the whole rows' antecedents bit for bit: the same primary-grid nodes."""
+    tp, grid, lon, lat, (ptr, start, stop) = scene
+    h = _terrain(lon, lat).astype(np.float32)
+    ref = solve(tp, grid, lon, lat, h, HEIGHT_GIVEN, (ptr, start, stop), method=method)
+    c0 = int(start.min()) // 16 * 16 + 16 * 3  # a window narrower than the spans: cut them
+    c1 = int(stop.max()) - 40
+    s, e = np.clip(start, c0, c1), np.clip(stop, c0, c1)
+    cut = solve(tp, grid, lon[:, c0:c1], lat[:, c0:c1], h[:, c0:c1], HEIGHT_GIVEN,
+                (ptr, s - c0, e - c0), method=method, col_start=c0)
+    inside = np.zeros(lon.shape, bool)
+    for i in range(lon.shape[0]):
+        for k in range(ptr[i], ptr[i + 1]):
+            inside[i, s[k]:e[k]] = True
+    assert inside.sum() > 10_000
+    for key in ("line", "col", "iterations"):
+        np.testing.assert_array_equal(cut[key][inside[:, c0:c1]], ref[key][inside])
+    if method == "primary":
+        with pytest.raises(ValueError, match="multiple of the step"):
+            solve(tp, grid, lon[:, 5:], lat[:, 5:], h[:, 5:], HEIGHT_GIVEN,
+                  (ptr, start - 5, stop - 5), col_start=5)

@@ -188,6 +188,29 @@ def test_polar_stereographic_steps_follow_the_bending():
     np.testing.assert_array_equal(part_lat, full_lat[37:201])
 
 
+@pytest.mark.parametrize("crs", ["EPSG:3995", "EPSG:4326"])
+def test_a_column_window_holds_the_whole_rows_values(crs):
+    """lon/lat of columns [c0, c1) are those of the whole rows bit for bit (the same nodes and
+    cells), for windows anywhere, one column wide or ending on the last column."""
+    if crs == "EPSG:4326":
+        g = OutputGrid(crs, 10.0, 50.0, 0.01, 0.01, 500, 300)
+    else:
+        g = OutputGrid.from_extent(crs, (-1.6e6, -0.83e6), (0.9e6, -3.8e6), 1040.0)
+    rng = np.random.default_rng(5)
+    windows = [(0, 1), (g.width - 1, g.width), (0, g.width)]
+    windows += [tuple(sorted(rng.choice(g.width + 1, 2, replace=False))) for _ in range(12)]
+    for k, (c0, c1) in enumerate(windows):
+        r0 = int(rng.integers(0, g.height - 100))
+        r1 = min(r0 + 1 + 37 * k, g.height)
+        lon, lat = g.lonlat(r0, r1)
+        wlon, wlat = g.lonlat(r0, r1, col_start=int(c0), col_stop=int(c1))
+        assert wlon.shape == (r1 - r0, c1 - c0)
+        np.testing.assert_array_equal(wlon, lon[:, c0:c1])
+        np.testing.assert_array_equal(wlat, lat[:, c0:c1])
+    with pytest.raises(ValueError, match="column range"):
+        g.lonlat(0, 2, col_start=3, col_stop=2)
+
+
 def test_grids_of_one_row_past_a_band():
     """A last band of one row (height 64 k + 1) has no trial cell of its own: it takes the step
     of the band before it and is exact there."""

@@ -47,6 +47,8 @@ HEIGHT_NONE = 0
 HEIGHT_TIEPOINTS = 1
 HEIGHT_GIVEN = 2
 MAX_ITERATIONS = 10
+#: primary-grid node spacing (output pixels) of the prediction (section 3.2)
+PRIMARY_STEP = 16
 #: guesses further than this many product pixels outside the product are dropped at once
 _FAR = 256.0
 
@@ -449,14 +451,15 @@ def _solved_counts(values, iters, first, out):  # pragma: no cover
                 out[k] += 1
 
 
-def primary_nodes(grid: OutputGrid, row_start: int, shape: tuple[int, int], step: int
-                  ) -> tuple[np.ndarray, np.ndarray]:
+def primary_nodes(grid: OutputGrid, row_start: int, shape: tuple[int, int], step: int,
+                  col_start: int = 0) -> tuple[np.ndarray, np.ndarray]:
     """WGS84 lon/lat (2-D) of the primary-grid nodes of output rows [row_start, row_start +
-    shape[0]): every ``step`` pixels from the first row and column, at least 2 x 2 nodes, the
-    last ones past the grid edge when needed (the prediction interpolates between them)."""
+    shape[0]) and columns [col_start, col_start + shape[1]): every ``step`` pixels from the
+    first row and column, at least 2 x 2 nodes, the last ones past the grid edge when needed
+    (the prediction interpolates between them)."""
     nr, nc = shape
     rows = row_start + np.arange(0, max(nr - 1, 0) + step, step, dtype=np.float64)
-    cols = np.arange(0, max(nc - 1, 0) + step, step, dtype=np.float64)
+    cols = col_start + np.arange(0, max(nc - 1, 0) + step, step, dtype=np.float64)
     if rows.size < 2:
         rows = np.r_[rows, rows[-1] + step]
     if cols.size < 2:
@@ -467,10 +470,13 @@ def primary_nodes(grid: OutputGrid, row_start: int, shape: tuple[int, int], step
 def solve(tp, grid, lon: np.ndarray, lat: np.ndarray, height: np.ndarray | None, hmode: int,
           spans: tuple[np.ndarray, np.ndarray, np.ndarray], *, row_start: int = 0,
           tolerance: float = 0.01, max_iter: int = MAX_ITERATIONS, model: int = 0,
-          geo: int = 0, method: str = "primary", step: int = 16,
+          geo: int = 0, method: str = "primary", step: int = PRIMARY_STEP,
           diagnostics: bool = False,
-          out: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> dict:
-    """Antecedents of output rows [row_start, row_start + lon.shape[0]) of ``grid`` (section 3.2).
+          out: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+          col_start: int = 0) -> dict:
+    """Antecedents of output rows [row_start, row_start + lon.shape[0]) of ``grid`` (section 3.2)
+    and columns [col_start, col_start + lon.shape[1]) (a multiple of ``step``: the primary-grid
+    nodes of the whole rows; ``spans`` then count from ``col_start``).
 
     ``tp``: ``TiePointGrid``; ``lon``/``lat``: WGS84 degrees of the pixel centres of those rows;
     ``height``: per-point heights for ``hmode=HEIGHT_GIVEN`` (NaN: tie points); ``spans``: CSR
@@ -502,7 +508,9 @@ def solve(tp, grid, lon: np.ndarray, lat: np.ndarray, height: np.ndarray | None,
         return result
     if method != "primary":
         raise ValueError(f"unknown prediction/correction method {method!r}")
-    nlon, nlat = primary_nodes(grid, row_start, lon.shape, step)
+    if col_start % step:
+        raise ValueError(f"col_start {col_start} is not a multiple of the step {step}")
+    nlon, nlat = primary_nodes(grid, row_start, lon.shape, step, col_start)
     cl, cp, paths = primary_grid(nlon, nlat, lat_tp, lon_tp, coef, df, dj, geo)
     rates = (height_rates(cl, cp, coef, df, dj, model, geo) if hmode != HEIGHT_NONE
              else np.zeros((3, 1, 1)))

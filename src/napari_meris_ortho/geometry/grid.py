@@ -355,12 +355,14 @@ class OutputGrid:
         cols = np.asarray(cols, dtype=np.float64)
         return self.x0 + (cols + 0.5) * self.dx, self.y0 - (rows + 0.5) * self.dy
 
-    def lonlat_exact(self, row_start: int = 0, row_stop: int | None = None
+    def lonlat_exact(self, row_start: int = 0, row_stop: int | None = None, *,
+                     col_start: int = 0, col_stop: int | None = None
                      ) -> tuple[np.ndarray, np.ndarray]:
-        """WGS84 (lon, lat) of every pixel centre of rows [row_start, row_stop), one pyproj call
-        per pixel (reference for ``lonlat``)."""
+        """WGS84 (lon, lat) of every pixel centre of rows [row_start, row_stop) and columns
+        [col_start, col_stop), one pyproj call per pixel (reference for ``lonlat``)."""
         row_start, row_stop = self._row_range(row_start, row_stop)
-        cols = np.arange(self.width, dtype=np.float64)
+        col_start, col_stop = self._col_range(col_start, col_stop)
+        cols = np.arange(col_start, col_stop, dtype=np.float64)
         rows = np.arange(row_start, row_stop, dtype=np.float64)
         x, y = self.xy(rows[:, None], cols[None, :])
         shape = (rows.size, cols.size)
@@ -370,17 +372,21 @@ class OutputGrid:
         x, y = np.broadcast_arrays(x, y)
         return self._xy_to_lonlat(x, y)
 
-    def lonlat(self, row_start: int = 0, row_stop: int | None = None
+    def lonlat(self, row_start: int = 0, row_stop: int | None = None, *,
+               col_start: int = 0, col_stop: int | None = None
                ) -> tuple[np.ndarray, np.ndarray]:
-        """WGS84 (lon, lat) float64 arrays (rows, width) of the pixel centres of rows
-        [row_start, row_stop), exact to ``tolerance`` output pixel (module docstring).
+        """WGS84 (lon, lat) float64 arrays (rows, columns) of the pixel centres of rows
+        [row_start, row_stop) and columns [col_start, col_stop) (default: the whole rows),
+        exact to ``tolerance`` output pixel (module docstring). A column window holds the
+        values of the whole rows bit for bit (the same nodes, cells and fallbacks).
 
         Longitudes in [-180, 180); NaN where the CRS has no geographic position.
         """
         row_start, row_stop = self._row_range(row_start, row_stop)
+        col_start, col_stop = self._col_range(col_start, col_stop)
         if self.is_lonlat:
-            return self.lonlat_exact(row_start, row_stop)
-        return self._lonlat_primary(row_start, row_stop)
+            return self.lonlat_exact(row_start, row_stop, col_start=col_start, col_stop=col_stop)
+        return self._lonlat_primary(row_start, row_stop, col_start, col_stop)
 
     def lonlat_at(self, rows: np.ndarray, cols: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """WGS84 (lon, lat) of fractional (row, col) pixel positions, exact (one pyproj call per
@@ -415,6 +421,13 @@ class OutputGrid:
         if not 0 <= row_start <= row_stop <= self.height:
             raise ValueError(f"row range [{row_start}, {row_stop}) outside 0..{self.height}")
         return row_start, row_stop
+
+    def _col_range(self, col_start: int, col_stop: int | None) -> tuple[int, int]:
+        col_stop = self.width if col_stop is None else int(col_stop)
+        col_start = int(col_start)
+        if not 0 <= col_start <= col_stop <= self.width:
+            raise ValueError(f"column range [{col_start}, {col_stop}) outside 0..{self.width}")
+        return col_start, col_stop
 
     def _xy_to_lonlat(self, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         if self.is_lonlat:
@@ -501,24 +514,34 @@ class OutputGrid:
         """The smallest primary-grid step of the grid (``primary_steps``)."""
         return int(self.primary_steps().min())
 
-    def _lonlat_primary(self, row_start: int, row_stop: int) -> tuple[np.ndarray, np.ndarray]:
-        lon = np.empty((row_stop - row_start, self.width))
-        lat = np.empty((row_stop - row_start, self.width))
+    def _lonlat_primary(self, row_start: int, row_stop: int, col_start: int, col_stop: int
+                        ) -> tuple[np.ndarray, np.ndarray]:
+        lon = np.empty((row_stop - row_start, col_stop - col_start))
+        lat = np.empty((row_stop - row_start, col_stop - col_start))
+        if lon.size == 0:
+            return lon, lat
         steps = self.primary_steps()
         for band in range(row_start // _TRIAL_STEP, (row_stop - 1) // _TRIAL_STEP + 1):
             r0 = max(row_start, band * _TRIAL_STEP)
             r1 = min(row_stop, (band + 1) * _TRIAL_STEP)
             if r1 > r0:
-                self._lonlat_band(band, int(steps[band]), r0, r1,
+                self._lonlat_band(band, int(steps[band]), (r0, r1, col_start, col_stop),
                                   lon[r0 - row_start:r1 - row_start],
                                   lat[r0 - row_start:r1 - row_start])
         return lon, lat
 
-    def _lonlat_band(self, band: int, step: int, row_start: int, row_stop: int,
+    def _lonlat_band(self, band: int, step: int, window: tuple[int, int, int, int],
                      lon: np.ndarray, lat: np.ndarray) -> None:
-        """Rows [row_start, row_stop) of band ``band`` into ``lon``/``lat``: bilinear between the
-        band's primary-grid nodes, exactly (pyproj per pixel) in cells measured too far off."""
+        """Rows [r0, r1) and columns [c0, c1) (``window``) of band ``band`` into ``lon``/``lat``:
+        bilinear between the band's primary-grid nodes (those around the columns only),
+        exactly (pyproj per pixel) in cells measured too far off."""
+        row_start, _, col_start, col_stop = window
         rows, cols = self._band_nodes(band, step)
+        if cols.size > 2:  # the cells the whole rows would use for these columns
+            last = cols.size - 2
+            k0 = min(max(int(np.searchsorted(cols, col_start, side="right")) - 1, 0), last)
+            k1 = min(max(int(np.searchsorted(cols, col_stop - 1, side="right")) - 1, 0), last)
+            cols = cols[k0:k1 + 2]
         x, y = self.xy(rows[:, None], cols[None, :])
         x, y = np.broadcast_arrays(x, y)
         nlon, nlat = self._xy_to_lonlat(x, y)
@@ -529,11 +552,11 @@ class OutputGrid:
             stats = self.interpolation_stats
             stats["max_error_px"] = max(stats["max_error_px"], float(ok.max()))
         _interpolate_primary(rows.astype(np.int64), cols.astype(np.int64), nlon, nlat,
-                             bad, row_start, lon, lat)
+                             bad, (row_start, col_start), lon, lat)
         need = np.isnan(lon)
         if np.any(need):
             ii, jj = np.nonzero(need)
-            ex, ey = self.xy(ii + row_start, jj)
+            ex, ey = self.xy(ii + row_start, jj + col_start)
             elon, elat = self._xy_to_lonlat(ex, ey)
             lon[ii, jj], lat[ii, jj] = elon, elat
             self.interpolation_stats["exact_pixels"] += int(ii.size)
@@ -565,14 +588,15 @@ def _cell_index(x: np.ndarray, nodes: np.ndarray) -> tuple[np.ndarray, np.ndarra
 
 
 def _interpolate_primary(rows: np.ndarray, cols: np.ndarray, nlon: np.ndarray, nlat: np.ndarray,
-                         bad: np.ndarray, row_start: int, lon: np.ndarray, lat: np.ndarray
-                         ) -> None:
+                         bad: np.ndarray, origin: tuple[int, int], lon: np.ndarray,
+                         lat: np.ndarray) -> None:
     """Bilinear interpolation of lon/lat between primary-grid nodes (terrain-correction paper);
     NaN in cells marked bad (computed exactly by the caller). Longitudes are unwrapped relative
     to each cell's first node. One band of output rows per row of primary cells: along the
     columns on the two node rows, then between them."""
     n_rows, width = lon.shape
-    c, c1, fc = _cell_index(np.arange(width), cols)
+    row_start, col_start = origin  # of lon[0, 0] in the grid
+    c, c1, fc = _cell_index(np.arange(col_start, col_start + width), cols)
     r_of, r1_of, fr_of = _cell_index(np.arange(row_start, row_start + n_rows), rows)
     bad_cols = np.minimum(c, bad.shape[1] - 1)
     starts = np.flatnonzero(np.r_[True, r_of[1:] != r_of[:-1]])

@@ -365,13 +365,25 @@ def _ellipsoid_grid(pixel: tuple[np.ndarray, np.ndarray, np.ndarray], tp: TiePoi
                                    opts.parallax.code)
 
 
+def _columns(job: _Job, start: np.ndarray, stop: np.ndarray) -> tuple[int, int]:
+    """Columns [c0, c1) of a block of rows that hold its spans: from a multiple of the
+    primary-grid step (the nodes of the whole rows) for the tie-point model; the whole rows for
+    the pixel geolocation."""
+    if job.pixel is not None:
+        return 0, job.grid.width
+    step = predcorr.PRIMARY_STEP
+    return int(start.min()) // step * step, int(stop.max())
+
+
 def _solve(job: _Job, lon: np.ndarray, lat: np.ndarray, h: np.ndarray | None,
-           spans: tuple[np.ndarray, np.ndarray, np.ndarray], r0: int,
-           out: tuple[np.ndarray, np.ndarray, np.ndarray]) -> dict:
-    """Antecedents of one block of output rows: tie-point model (``predcorr``; primary search
-    straight into ``out``, the block's rows of the whole grid) or the product's pixel
-    geolocation (``pixelgeo``; with DEMs, on its ellipsoid points: ``pixeldem``)."""
+           spans: tuple[np.ndarray, np.ndarray, np.ndarray], origin: tuple[int, int],
+           out: tuple[np.ndarray, np.ndarray, np.ndarray] | None) -> dict:
+    """Antecedents of one block of output rows from grid pixel ``origin`` (row, column; the
+    spans count from that column): tie-point model (``predcorr``; primary search straight into
+    ``out`` when it is given, the block's rows of the whole grid) or the product's pixel
+    geolocation (``pixelgeo``; with DEMs, on its ellipsoid points: ``pixeldem``; whole rows)."""
     opts = job.options
+    r0, c0 = origin
     if job.pixel is not None and job.ellipsoid is not None:
         assert h is not None
         return pixeldem.solve_pixel_dem(job.pixel[0], job.pixel[1], job.ellipsoid,
@@ -387,7 +399,8 @@ def _solve(job: _Job, lon: np.ndarray, lat: np.ndarray, h: np.ndarray | None,
                           tolerance=opts.tolerance, model=opts.parallax.code,
                           geo=opts.geolocation.code, method=opts.method.value,
                           diagnostics=opts.diagnostics,
-                          out=out if opts.method is SearchMethod.PRIMARY else None)
+                          out=out if opts.method is SearchMethod.PRIMARY else None,
+                          col_start=c0)
 
 
 @dataclass
@@ -410,18 +423,19 @@ class _Blocks:
                     "elevation_source": np.full(shape, SOURCE_NONE, np.int8),
                     "shift_east_m": np.full(shape, np.nan, np.float32),
                     "shift_north_m": np.full(shape, np.nan, np.float32)}
-        # line, col, iterations: every row is written by ``add`` (blocks cover the grid)
-        return cls(np.empty(shape, np.float32), np.empty(shape, np.float32),
-                   np.empty(shape, np.int8), diag, np.zeros(n_dems + 1, np.int64))
+        # line, col, iterations: not searched (rows or columns without spans) until ``add``
+        return cls(np.full(shape, np.nan, np.float32), np.full(shape, np.nan, np.float32),
+                   np.full(shape, -1, np.int8), diag, np.zeros(n_dems + 1, np.int64))
 
-    def add(self, r0: int, r1: int, res: dict[str, Any], src: np.ndarray | None,
-            hmode: int) -> None:
-        """Store the solution of rows [r0, r1) (``src``: elevation source per point, None
-        when the heights are not the DEMs')."""
+    def add(self, window: tuple[int, int, int, int], res: dict[str, Any],
+            src: np.ndarray | None, hmode: int) -> None:
+        """Store the solution of rows [r0, r1) and columns [c0, c1) (``window``; ``src``:
+        elevation source per point, None when the heights are not the DEMs')."""
+        r0, r1, c0, c1 = window
         for whole, part in ((self.line, res["line"]), (self.col, res["col"]),
                             (self.iters, res["iterations"])):
-            if not np.may_share_memory(whole[r0:r1], part):  # (solved in place: nothing to do)
-                whole[r0:r1] = part
+            if not np.may_share_memory(whole[r0:r1, c0:c1], part):  # (solved in place)
+                whole[r0:r1, c0:c1] = part
         for k, v in res["search"].items():
             self.search[k] = self.search.get(k, 0) + v
         if src is not None:  # DEM k counted at k + 1; tie points (-1) at 0
@@ -434,10 +448,10 @@ class _Blocks:
         ok = res["iterations"] >= 0
         if "elevation" in res:
             for name in ("elevation", "shift_east_m", "shift_north_m"):
-                self.diag[name][r0:r1] = np.where(ok, res[name], np.nan)
+                self.diag[name][r0:r1, c0:c1] = np.where(ok, res[name], np.nan)
         code = (src if src is not None else np.full(ok.shape, SOURCE_TIEPOINTS
                 if hmode == predcorr.HEIGHT_TIEPOINTS else SOURCE_NONE, np.int8))
-        self.diag["elevation_source"][r0:r1] = np.where(ok, code, SOURCE_NONE)
+        self.diag["elevation_source"][r0:r1, c0:c1] = np.where(ok, code, SOURCE_NONE)
 
 
 def _run(job: _Job, progress: ProgressCallback | None) -> Antecedents:
@@ -457,12 +471,17 @@ def _run(job: _Job, progress: ProgressCallback | None) -> Antecedents:
             stack, 0.5 * (bounds[1] + bounds[3]) if bounds is not None else 0.0)
     for r0 in range(0, nr, _BLOCK_ROWS):
         r1 = min(r0 + _BLOCK_ROWS, nr)
-        t0 = time.perf_counter()
-        lon, lat = grid.lonlat(r0, r1)
-        t_lonlat += time.perf_counter() - t0
         p0, p1 = spans.ptr[r0 - spans.row_start], spans.ptr[r1 - spans.row_start]
+        if p1 == p0:  # no point of these rows to search (a grid larger than the segment)
+            if progress is not None:
+                progress(r1, total)
+            continue
+        c0, c1 = _columns(job, spans.start[p0:p1], spans.stop[p0:p1])
+        t0 = time.perf_counter()
+        lon, lat = grid.lonlat(r0, r1, col_start=c0, col_stop=c1)
+        t_lonlat += time.perf_counter() - t0
         ptr = spans.ptr[r0 - spans.row_start: r1 - spans.row_start + 1] - p0
-        start, stop = spans.start[p0:p1], spans.stop[p0:p1]
+        start, stop = spans.start[p0:p1] - c0, spans.stop[p0:p1] - c0
         h = src = None
         if hmode == predcorr.HEIGHT_GIVEN:
             t0 = time.perf_counter()
@@ -472,15 +491,17 @@ def _run(job: _Job, progress: ProgressCallback | None) -> Antecedents:
             h, src = dem_heights(stack, lon, lat, mask)
             t_dem += time.perf_counter() - t0
         t0 = time.perf_counter()
-        res = _solve(job, lon, lat, h, (ptr, start, stop), r0,
-                     (blocks.line[r0:r1], blocks.col[r0:r1], blocks.iters[r0:r1]))
+        whole = (c0, c1) == (0, grid.width)  # the block's rows of the grid: solved in place
+        res = _solve(job, lon, lat, h, (ptr, start, stop), (r0, c0),
+                     (blocks.line[r0:r1], blocks.col[r0:r1], blocks.iters[r0:r1])
+                     if whole else None)
         if march is not None:  # pixel geolocation with DEMs: hidden ground reported
             assert stack is not None and h is not None
             t0 = time.perf_counter()
             occlusion.report_hidden(march, job.tp.kernel_args(), lon, lat, h, res)
             t_dem += time.perf_counter() - t0
         t_engine += time.perf_counter() - t0
-        blocks.add(r0, r1, res, src, hmode)
+        blocks.add((r0, r1, c0, c1), res, src, hmode)
         if progress is not None:
             progress(r1, total)
     seconds = {"lonlat": t_lonlat, "dem": t_dem, "prediction_correction": t_engine,
