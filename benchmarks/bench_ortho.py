@@ -182,7 +182,7 @@ def run_map(product: Path, out: Path, dem: Path, *extra: str, env: dict | None =
     return row
 
 
-def geoloc_vrt(scene, tmp: Path) -> Path:
+def geoloc_vrt(scene, tmp: Path, bands: tuple[int, ...] = tuple(range(1, 16))) -> Path:
     """A VRT over the N1 (ESAT driver: stored column order) with a GEOLOCATION domain pointing
     at pyepr's longitude/latitude, mirrored back to the stored order."""
     import warnings
@@ -202,7 +202,7 @@ def geoloc_vrt(scene, tmp: Path) -> Path:
     bands = "".join(
         f'<VRTRasterBand dataType="UInt16" band="{b}"><NoDataValue>0</NoDataValue>'
         f"<SimpleSource><SourceFilename>{scene.product_path}</SourceFilename>"
-        f"<SourceBand>{b}</SourceBand></SimpleSource></VRTRasterBand>" for b in range(1, 16))
+        f"<SourceBand>{b}</SourceBand></SimpleSource></VRTRasterBand>" for b in bands)
     geo = {"SRS": "EPSG:4326", "X_DATASET": paths["lon"], "X_BAND": 1,
            "Y_DATASET": paths["lat"], "Y_BAND": 1, "PIXEL_OFFSET": 0, "LINE_OFFSET": 0,
            "PIXEL_STEP": 1, "LINE_STEP": 1, "GEOREFERENCING_CONVENTION": "PIXEL_CENTER"}
@@ -213,8 +213,8 @@ def geoloc_vrt(scene, tmp: Path) -> Path:
     return vrt
 
 
-def run_gdalwarp(scene, grid, tmp: Path) -> dict:
-    vrt = geoloc_vrt(scene, tmp)
+def run_gdalwarp(scene, grid, tmp: Path, bands: tuple[int, ...] = tuple(range(1, 16))) -> dict:
+    vrt = geoloc_vrt(scene, tmp, bands)
     out = tmp / "gdalwarp.tif"
     x0, y0, x1, y1 = grid.bounds
     cmd = ["gdalwarp", "-q", "-overwrite", "-geoloc", "-t_srs", grid.crs.to_string(),
