@@ -35,7 +35,7 @@ from .pixelgeo import (
     pixel_value,
     primary_grid_pixel,
 )
-from .predcorr import _columns, _predict, primary_nodes
+from .predcorr import PRIMARY_STEP, _columns, _predict, primary_nodes
 from .threads import split_range
 
 #: fixed-point passes of the parallax inversion (the latitude of the radii moves < 1e-9 deg
@@ -216,7 +216,7 @@ def solve_pixel_dem(lon_grid: np.ndarray, lat_grid: np.ndarray, ellipsoid: tuple
                     np.ndarray], altitude: np.ndarray, tp, model: int, grid, lon: np.ndarray,
                     lat: np.ndarray, height: np.ndarray,
                     spans: tuple[np.ndarray, np.ndarray, np.ndarray], *, row_start: int = 0,
-                    tolerance: float = 0.01, max_iter: int = 20, step: int = 16,
+                    tolerance: float = 0.01, max_iter: int = 20, step: int = PRIMARY_STEP,
                     diagnostics: bool = False) -> dict:
     """Antecedents of output rows [row_start, row_start + lon.shape[0]) of ``grid`` on the
     ellipsoid grid ``ellipsoid`` (``ellipsoid_grid`` of the per-pixel ``lon_grid``/``lat_grid``

@@ -28,7 +28,7 @@ from numba import njit, prange
 
 from .inverse import wrap180
 from .location import facet_of
-from .predcorr import _columns, _predict, primary_nodes
+from .predcorr import PRIMARY_STEP, _columns, _predict, primary_nodes
 
 #: subsampling (pixels) of the brute-force nearest-node search that seeds the cell search
 SEED_STEP = 8
@@ -472,7 +472,7 @@ def solve_pixel(lon_grid: np.ndarray, lat_grid: np.ndarray, grid, lon: np.ndarra
                 lat: np.ndarray, spans: tuple[np.ndarray, np.ndarray, np.ndarray], *,
                 row_start: int = 0, tolerance: float = 0.01,
                 max_iter: int = MAX_PIXEL_ITERATIONS,
-                step: int = 16, altitude: np.ndarray | None = None,
+                step: int = PRIMARY_STEP, altitude: np.ndarray | None = None,
                 diagnostics: bool = False) -> dict:
     """Antecedents of output rows [row_start, row_start + lon.shape[0]) of ``grid`` on the pixel
     model (the per-pixel ``lon_grid``/``lat_grid`` of the product), like ``predcorr.solve``.

@@ -365,7 +365,7 @@ def _ellipsoid_grid(pixel: tuple[np.ndarray, np.ndarray, np.ndarray], tp: TiePoi
                                    opts.parallax.code)
 
 
-def _columns(job: _Job, start: np.ndarray, stop: np.ndarray) -> tuple[int, int]:
+def _span_columns(job: _Job, start: np.ndarray, stop: np.ndarray) -> tuple[int, int]:
     """Columns [c0, c1) of a block of rows that hold its spans: from a multiple of the
     primary-grid step (the nodes of the whole rows) for the tie-point model; the whole rows for
     the pixel geolocation."""
@@ -476,7 +476,7 @@ def _run(job: _Job, progress: ProgressCallback | None) -> Antecedents:
             if progress is not None:
                 progress(r1, total)
             continue
-        c0, c1 = _columns(job, spans.start[p0:p1], spans.stop[p0:p1])
+        c0, c1 = _span_columns(job, spans.start[p0:p1], spans.stop[p0:p1])
         t0 = time.perf_counter()
         lon, lat = grid.lonlat(r0, r1, col_start=c0, col_stop=c1)
         t_lonlat += time.perf_counter() - t0
