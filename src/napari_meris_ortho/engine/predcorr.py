@@ -81,9 +81,12 @@ def primary_grid(lon: np.ndarray, lat: np.ndarray, lat_tp: np.ndarray, lon_tp: n
                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Exact zero-height inverse (section 3.4) at the primary-grid nodes (2-D lon/lat arrays).
 
-    Nodes held by a facet come from the handbook search (warm-started from the previous node);
-    nodes outside the tie-point grid from Newton on the extended edge facets (they are needed to
-    predict output points near the swath border). Returns (line, col, path counts[5]).
+    Nodes held by a facet come from the handbook search (warm-started from the previous node's
+    facet: the facet found is the same from any start); nodes outside the tie-point grid from
+    Newton on the extended edge facets (they are needed to predict output points near the swath
+    border), started from the edge tie point nearest to the node (``_edge_start``), so that a
+    node's antecedent depends on the node alone, not on the nodes computed before it (a window
+    of the nodes gives their values bit for bit). Returns (line, col, path counts[5]).
     """
     lon = np.ascontiguousarray(lon, dtype=np.float64)
     lat = np.ascontiguousarray(lat, dtype=np.float64)
@@ -104,8 +107,6 @@ def _primary_nodes(lon, lat, lat_tp, lon_tp, coef, df, dj, geo, line, col,
     f = np.int64(-1)
     j = np.int64(-1)
     model0 = np.int64(0)
-    last_l = (lat_tp.shape[0] - 1) * df * 0.5
-    last_p = (lat_tp.shape[1] - 1) * dj * 0.5
     for r in range(nr):
         for c in range(nc):
             if math.isnan(lon[r, c]) or math.isnan(lat[r, c]):
@@ -124,14 +125,41 @@ def _primary_nodes(lon, lat, lat_tp, lon_tp, coef, df, dj, geo, line, col,
                         line[r, c] = l2
                         col[r, c] = p2
             else:
-                l2, p2, it = _newton(lon[r, c], lat[r, c], last_l, last_p, 0.0, coef, df, dj,
+                l0, p0 = _edge_start(lon[r, c], lat[r, c], lat_tp, lon_tp, df, dj)
+                l2, p2, it = _newton(lon[r, c], lat[r, c], l0, p0, 0.0, coef, df, dj,
                                      model0, geo, 1e-6, np.int64(30))
                 if it < 30 and not math.isnan(l2):
                     line[r, c] = l2
                     col[r, c] = p2
-            if not math.isnan(line[r, c]):
-                last_l = line[r, c]
-                last_p = col[r, c]
+
+
+@njit(cache=True)
+def _edge_start(tlon, tlat, lat_tp, lon_tp, df, dj):  # pragma: no cover
+    """(line, col) of the tie point on the edge of the tie-point grid nearest to (tlon, tlat)
+    (squared degrees, longitudes scaled by cos(lat)): where Newton starts for a point outside
+    the grid."""
+    n, m = lat_tp.shape
+    scale = math.cos(math.radians(tlat))
+    best = math.inf
+    best_l = 0.0
+    best_p = 0.0
+    for k in range(2 * (n + m)):
+        if k < m:  # first tie line, last tie line, first tie column, last tie column
+            i, jj = 0, k
+        elif k < 2 * m:
+            i, jj = n - 1, k - m
+        elif k < 2 * m + n:
+            i, jj = k - 2 * m, 0
+        else:
+            i, jj = k - 2 * m - n, m - 1
+        dlat = lat_tp[i, jj] - tlat
+        dlon = wrap180(lon_tp[i, jj] - tlon) * scale
+        d = dlat * dlat + dlon * dlon
+        if d < best:
+            best = d
+            best_l = i * df
+            best_p = jj * dj
+    return best_l, best_p
 
 
 @njit(cache=True, inline="always")
@@ -476,7 +504,8 @@ def solve(tp, grid, lon: np.ndarray, lat: np.ndarray, height: np.ndarray | None,
           col_start: int = 0) -> dict:
     """Antecedents of output rows [row_start, row_start + lon.shape[0]) of ``grid`` (section 3.2)
     and columns [col_start, col_start + lon.shape[1]) (a multiple of ``step``: the primary-grid
-    nodes of the whole rows; ``spans`` then count from ``col_start``).
+    nodes of the whole rows, each depending on itself alone, so the whole rows' antecedents;
+    ``spans`` then count from ``col_start``).
 
     ``tp``: ``TiePointGrid``; ``lon``/``lat``: WGS84 degrees of the pixel centres of those rows;
     ``height``: per-point heights for ``hmode=HEIGHT_GIVEN`` (NaN: tie points); ``spans``: CSR
