@@ -416,18 +416,10 @@ class OutputGrid:
 
     # ------------------------------------------------------------------ internals
     def _row_range(self, row_start: int, row_stop: int | None) -> tuple[int, int]:
-        row_stop = self.height if row_stop is None else int(row_stop)
-        row_start = int(row_start)
-        if not 0 <= row_start <= row_stop <= self.height:
-            raise ValueError(f"row range [{row_start}, {row_stop}) outside 0..{self.height}")
-        return row_start, row_stop
+        return _index_range("row", row_start, row_stop, self.height)
 
     def _col_range(self, col_start: int, col_stop: int | None) -> tuple[int, int]:
-        col_stop = self.width if col_stop is None else int(col_stop)
-        col_start = int(col_start)
-        if not 0 <= col_start <= col_stop <= self.width:
-            raise ValueError(f"column range [{col_start}, {col_stop}) outside 0..{self.width}")
-        return col_start, col_stop
+        return _index_range("column", col_start, col_stop, self.width)
 
     def _xy_to_lonlat(self, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         if self.is_lonlat:
@@ -560,6 +552,15 @@ class OutputGrid:
             elon, elat = self._xy_to_lonlat(ex, ey)
             lon[ii, jj], lat[ii, jj] = elon, elat
             self.interpolation_stats["exact_pixels"] += int(ii.size)
+
+
+def _index_range(what: str, start: int, stop: int | None, size: int) -> tuple[int, int]:
+    """[start, stop) as ints (stop None: ``size``); ValueError unless 0 <= start <= stop <= size."""
+    stop = size if stop is None else int(stop)
+    start = int(start)
+    if not 0 <= start <= stop <= size:
+        raise ValueError(f"{what} range [{start}, {stop}) outside 0..{size}")
+    return start, stop
 
 
 def _unwrap_cells(lon: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
