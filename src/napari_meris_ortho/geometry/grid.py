@@ -502,10 +502,6 @@ class OutputGrid:
             self.interpolation_stats["trial_max_error_px"] = float(band_err.max())
         return self._steps
 
-    def primary_step(self) -> int:
-        """The smallest primary-grid step of the grid (``primary_steps``)."""
-        return int(self.primary_steps().min())
-
     def _lonlat_primary(self, row_start: int, row_stop: int, col_start: int, col_stop: int
                         ) -> tuple[np.ndarray, np.ndarray]:
         lon = np.empty((row_stop - row_start, col_stop - col_start))
