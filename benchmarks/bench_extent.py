@@ -36,7 +36,7 @@ ARCTIC = {"base": "rr-segment", "name": "rr-arctic",
           "terrain": {"plain_height": 200, "ranges": [], "seas": [], "lakes": []},
           "exports": {"getasse30": False, "getasse30_beam": False, "srtm30": False,
                       "geotiff_utm": False, "reference": False}}
-#: the bands mapped (a 15-band float grid of the Europe extent would not fit in memory here)
+#: the bands mapped (those of the other benchmarks' RGB; gdalwarp holds every band it warps)
 BANDS = (7, 5, 2)
 EUROPE = ("EPSG:3035", (2_500_000.0, 5_500_000.0), (6_500_000.0, 1_500_000.0), 300.0)
 

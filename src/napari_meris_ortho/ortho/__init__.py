@@ -22,10 +22,10 @@ from .antecedents import (
     OrthoResult,
     antecedent_line_window,
     band_metadata,
+    bytes_per_output_pixel,
 )
 from .core import (
     Segment,
-    bytes_per_output_pixel,
     lonlat_bounds,
     open_segment,
     orthorectify,

@@ -18,14 +18,17 @@ import numpy as np
 import pyproj
 from affine import Affine
 
-from ..geometry.grid import OutputGrid
-from ..options import Sampling
+from ..geometry.grid import OutputGrid, check_grid_size
+from ..options import OrthoOptions, Sampling
 from ..products.protocol import MerisProduct
 from ..progress import ProgressCallback
 from .stats import RunStats
 
 #: unit of the radiances of the output bands (counts x sf_rad, Scaling Factor GADS)
 RADIANCE_UNITS = "W m-2 sr-1 um-1"
+#: bands sampled together when they are streamed to a writer (``writing.write_map``: one pass
+#: over the antecedent index for several bands)
+GATHER_GROUP = 4
 
 
 @dataclass
@@ -116,6 +119,22 @@ def band_metadata(stats: RunStats, bands: Sequence[int]) -> list[dict[str, Any]]
     return out
 
 
+def bytes_per_output_pixel(opts: OrthoOptions, *, hold_bands: bool = True) -> int:
+    """Memory an output pixel costs: its antecedent line and column (float32), iterations and
+    nearest-pixel index (16 bytes); the diagnostics layers and their float32 copies for
+    writing; the bands. ``hold_bands`` (``orthorectify``, ``Antecedents.result``): every band
+    as float32 with its resampling buffer; else streamed to a writer (``writing.write_map``):
+    ``GATHER_GROUP`` uint16 bands gathered at a time, the previous group still in the writer."""
+    n = len(opts.bands)
+    bands = _held_band_bytes(n) if hold_bands else 2 * min(n, 2 * GATHER_GROUP)
+    return 16 + bands + (48 if opts.diagnostics else 0)
+
+
+def _held_band_bytes(n_bands: int) -> int:
+    """Bytes per output pixel of ``n_bands`` bands held as float32, with the resampling
+    buffer of each (``Antecedents.result``)."""
+    return 8 * n_bands
+
 
 def antecedent_line_window(line: np.ndarray, col: np.ndarray, n_lines: int, n_cols: int,
                            sampling: str = "nearest") -> tuple[int, int]:
@@ -153,6 +172,8 @@ class Antecedents:
     progress: ProgressCallback | None = None
     t_start: float = field(default_factory=time.perf_counter)
     _index: np.ndarray | None = field(default=None, repr=False)
+    #: the caller's limit of output pixels (``precompute``), for ``result``'s size check
+    max_pixels: int | None = None
 
     @property
     def valid(self) -> np.ndarray:
@@ -307,7 +328,12 @@ class Antecedents:
         return self.stats
 
     def result(self) -> OrthoResult:
-        """All bands and flags as an ``OrthoResult`` (what ``orthorectify`` returns)."""
+        """All bands and flags as an ``OrthoResult`` (what ``orthorectify`` returns); first the
+        grid's size against the memory they take (OptionsError, ``check_grid_size``)."""
+        flags_and_saturation = 3  # uint8 + uint16 per point
+        check_grid_size(self.grid.width, self.grid.height, (self.grid.dx, self.grid.dy),
+                        _held_band_bytes(len(self.bands)) + flags_and_saturation,
+                        self.max_pixels)
         radiance = self.radiance()
         flags = self.flags()
         if self.progress is not None:

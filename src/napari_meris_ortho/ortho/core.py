@@ -33,7 +33,12 @@ from ..options import Elevation, Geolocation, OrthoOptions, SearchMethod
 from ..products.protocol import MerisProduct
 from ..progress import ProgressCallback
 from . import occlusion
-from .antecedents import Antecedents, OrthoResult, antecedent_line_window
+from .antecedents import (
+    Antecedents,
+    OrthoResult,
+    antecedent_line_window,
+    bytes_per_output_pixel,
+)
 from .heights import dem_heights
 from .stats import SOURCE_NONE, SOURCE_TIEPOINTS, TIMINGS, RunStats, per_band, source_counts
 
@@ -147,12 +152,12 @@ def orthorectify(product: ProductLike, grid: OutputGrid | None = None,
     zero-height segment boundary gives an all-background result instead of an OptionsError
     (synthesis tiles: terrain points may still lie there, section 3.1); ``max_pixels``: largest
     output grid (default: what fits in 80 % of the available memory at
-    :func:`bytes_per_output_pixel`; a larger grid is an OptionsError before any allocation).
-    Equals ``precompute(...).result()``.
+    :func:`bytes_per_output_pixel`, every band held; a larger grid is an OptionsError before
+    any allocation). Equals ``precompute(..., hold_bands=True).result()``.
     """
     return precompute(product, grid, dems, options=options, progress=progress, crs=crs,
                       pixel_size=pixel_size, allow_empty=allow_empty, max_pixels=max_pixels,
-                      **modes).result()
+                      hold_bands=True, **modes).result()
 
 
 def precompute(product: ProductLike, grid: OutputGrid | None = None,
@@ -160,10 +165,13 @@ def precompute(product: ProductLike, grid: OutputGrid | None = None,
                options: OrthoOptions | None = None,
                progress: ProgressCallback | None = None, crs: Any = "EPSG:4326",
                pixel_size: float | None = None, allow_empty: bool = False,
-               max_pixels: int | None = None, **modes: Any) -> Antecedents:
+               max_pixels: int | None = None, hold_bands: bool = False,
+               **modes: Any) -> Antecedents:
     """The antecedent of every output point, once (arguments as ``orthorectify``); then
     ``Antecedents.counts/radiance/flags`` sample any band at them (as pyresample's
-    ``get_neighbour_info`` / ``get_sample_from_neighbour_info``)."""
+    ``get_neighbour_info`` / ``get_sample_from_neighbour_info``). The grid's size is checked
+    for bands streamed a few at a time (``writing.write_map``); ``hold_bands``: for every band
+    held in memory (``result()``, which checks it again before allocating)."""
     t_start = time.perf_counter()
     opts = OrthoOptions.of(options, n_dems=len(dems), **modes)
     if grid is None:
@@ -176,6 +184,7 @@ def precompute(product: ProductLike, grid: OutputGrid | None = None,
     try:
         return segment.precompute(grid, progress, crs=crs, pixel_size=pixel_size,
                                   allow_empty=allow_empty, max_pixels=max_pixels,
+                                  hold_bands=hold_bands,
                                   t_start=t_start)
     finally:
         segment.close()
@@ -236,11 +245,11 @@ class Segment:
     def precompute(self, grid: OutputGrid | None = None,
                    progress: ProgressCallback | None = None, *, crs: Any = "EPSG:4326",
                    pixel_size: float | None = None, allow_empty: bool = False,
-                   max_pixels: int | None = None, t_start: float | None = None
-                   ) -> Antecedents:
+                   max_pixels: int | None = None, t_start: float | None = None,
+                   hold_bands: bool = False) -> Antecedents:
         """The antecedents of ``grid`` (arguments as ``precompute``)."""
         t0 = time.perf_counter() if t_start is None else t_start
-        job = _prepare(self, grid, crs, pixel_size, t0, max_pixels)
+        job = _prepare(self, grid, crs, pixel_size, t0, max_pixels, hold_bands)
         if job.points_in_boundary == 0 and not allow_empty:
             raise OptionsError(
                 f"the output extent {job.grid.bounds} misses the product footprint")
@@ -296,6 +305,8 @@ class _Job:
     pixel: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
     #: their ellipsoid points (lon, lat) with DEMs (``engine.pixeldem``), else None
     ellipsoid: tuple[np.ndarray, np.ndarray] | None = None
+    #: the caller's limit of output pixels (None: from the available memory)
+    max_pixels: int | None = None
 
 
 def _height_mode(elevation: Elevation, has_dems: bool) -> int:
@@ -307,23 +318,17 @@ def _height_mode(elevation: Elevation, has_dems: bool) -> int:
     return predcorr.HEIGHT_TIEPOINTS
 
 
-def bytes_per_output_pixel(opts: OrthoOptions) -> int:
-    """Memory an output pixel costs in :func:`_run`: antecedent line/column (float32) and
-    iterations, each band and its resampling buffer (float32), the diagnostics layers and
-    their float32 copies for writing."""
-    return 16 + 8 * len(opts.bands) + (48 if opts.diagnostics else 0)
-
-
 def _prepare(seg: Segment, grid: OutputGrid | None, crs: Any, pixel_size: float | None,
-             t_start: float, max_pixels: int | None = None) -> _Job:
+             t_start: float, max_pixels: int | None = None,
+             hold_bands: bool = False) -> _Job:
     """Default grid (its size checked) and the spans of ``grid`` to search (3.1)."""
     prod, tp, boundary, stack, opts, pixel = (seg.prod, seg.tp, seg.boundary, seg.stack,
                                               seg.options, seg.pixel)
     res_m = _column_spacing_m(prod)
     if grid is None:
         grid = default_grid(boundary, res_m, crs, pixel_size=pixel_size)
-    check_grid_size(grid.width, grid.height, (grid.dx, grid.dy), bytes_per_output_pixel(opts),
-                    max_pixels)
+    check_grid_size(grid.width, grid.height, (grid.dx, grid.dy),
+                    bytes_per_output_pixel(opts, hold_bands=hold_bands), max_pixels)
     if stack is not None and not seg.dems_prepared:  # the DEM window under the grid, once
         bounds = lonlat_bounds(grid)
         if bounds is not None:
@@ -341,7 +346,7 @@ def _prepare(seg: Segment, grid: OutputGrid | None, crs: Any, pixel_size: float 
     else:
         hmode = _height_mode(opts.elevation, stack is not None)
     return _Job(prod, tp, grid, spans, stack, hmode, opts, margin, inner.count, list(seg.dems),
-                t_start, pixel, seg.ellipsoid)
+                t_start, pixel, seg.ellipsoid, max_pixels)
 
 
 def _pixel_grids(prod: MerisProduct) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -529,7 +534,7 @@ def _antecedents(job: _Job, blocks: _Blocks, seconds: dict[str, float],
     stats = _stats(job, search=blocks.search, hist=hist, processed=int(valid.sum()),
                    window=window, sources=blocks.sources, seconds=seconds)
     return Antecedents(prod, job.grid, line, col, iters, opts.sampling, list(opts.bands), stats,
-                       diag, progress, job.t_start)
+                       diag, progress, job.t_start, max_pixels=job.max_pixels)
 
 
 def _empty_antecedents(job: _Job) -> Antecedents:
@@ -549,7 +554,8 @@ def _empty_antecedents(job: _Job) -> Antecedents:
     stats = _stats(job, search={}, hist=hist, processed=0, window=(0, 0), sources=sources,
                    seconds=seconds)
     return Antecedents(job.prod, grid, nan, nan, iters, job.options.sampling,
-                       list(job.options.bands), stats, diag, None, job.t_start)
+                       list(job.options.bands), stats, diag, None, job.t_start,
+                       max_pixels=job.max_pixels)
 
 
 def _stats(job: _Job, *, search: dict[str, int], hist: np.ndarray, processed: int,

@@ -22,7 +22,7 @@ from ..errors import OptionsError
 from ..geometry.grid import OutputGrid
 from ..output.geotiff import COMPRESSIONS, meris_band_description, write_cog
 from ..progress import ProgressCallback
-from .antecedents import RADIANCE_UNITS, band_metadata
+from .antecedents import GATHER_GROUP, RADIANCE_UNITS, band_metadata
 from .stats import RunStats
 
 #: dataset tag explaining the band values and the per-band ``sf_rad`` tags
@@ -33,8 +33,6 @@ RADIANCE_NOTE = {
                "product (Scaling Factor GADS); no further scaling applies",
 }
 DTYPES = tuple(RADIANCE_NOTE)
-#: bands gathered together (one pass over the antecedent index for several bands)
-GATHER_GROUP = 4
 #: the diagnostics layers of ``OUT_diagnostics.tif``, in band order
 DIAGNOSTICS = ("line", "col", "elevation", "elevation_source", "iterations", "shift_east_m",
                "shift_north_m")

@@ -304,7 +304,8 @@ def segment_task(spec: Spec, index: int, path: str, window: Window,
 
     try:
         segment = _segment(spec, path, window if extent is None else extent)
-        result = segment.precompute(_grid(spec).window(*window), allow_empty=True).result()
+        result = segment.precompute(_grid(spec).window(*window), allow_empty=True,
+                                    hold_bands=True).result()
         _release_pages(segment.prod)
     except DemError as exc:
         return Piece(index, window, None, dem_error=message_of(exc))
