@@ -354,6 +354,45 @@ def test_a_grid_far_larger_than_the_segment_searches_only_the_segment(fr_small):
     assert r.stats.facet_search["not found"] <= 3 * own.stats.facet_search["not found"]
 
 
+@pytest.mark.parametrize("sampling", ["nearest", "bicubic"])
+def test_a_grid_far_larger_than_the_segment_samples_only_the_segment(fr_small, sampling):
+    """The bands, flags and saturation on a grid 5 x 5 times the segment's are sampled over the
+    extent of the antecedents only (its points, not the grid's, in the nearest index), and
+    equal, bit for bit, the resampling of every point of the grid, 0 around."""
+    from napari_meris_ortho.engine.resample import resample_bands
+    from napari_meris_ortho.ortho import precompute
+
+    s = fr_small
+    g = OutputGrid.from_extent("EPSG:32633", (440_000.0, 5_200_000.0),
+                               (560_000.0, 5_080_000.0), 300.0)
+    big = OutputGrid.from_extent(
+        "EPSG:32633", (g.x0 - 2 * g.width * g.dx, g.y0 + 2 * g.height * g.dy),
+        (g.x0 + 3 * g.width * g.dx, g.y0 - 3 * g.height * g.dy), g.dx)
+    bands = [2, 7, 13]
+    ante = precompute(s.product_path, big, elevation="tiepoints", sampling=sampling,
+                      bands=bands)
+    r0, r1, c0, c1 = ante._extent()
+    rows, cols = np.nonzero(np.isfinite(ante.line))
+    assert (r0, r1, c0, c1) == (rows.min(), rows.max() + 1, cols.min(), cols.max() + 1)
+    assert (r1 - r0) * (c1 - c0) < big.width * big.height / 10
+    prod = read_product(s.product_path)
+    every = resample_bands([prod.counts(b) for b in bands], ante.line, ante.col, sampling)
+    counts = ante.counts()
+    radiance = ante.radiance()
+    for k, b in enumerate(bands):
+        expected = np.clip(np.floor(every[k] + np.float32(0.5)), 0, 65535).astype(np.uint16)
+        assert np.array_equal(counts[k], expected) and expected.any()
+        sf = np.float32(prod.scaling.radiance[b - 1])
+        assert np.array_equal(radiance[b], every[k] * sf)
+    flags = resample_bands([prod.flags], ante.line, ante.col, "nearest")[0]
+    assert np.array_equal(ante.flags(), flags.astype(np.uint8))
+    outside = counts.copy()
+    outside[:, r0:r1, c0:c1] = 0
+    assert not outside.any()
+    if sampling == "nearest":
+        assert ante._nearest_index().size == (r1 - r0) * (c1 - c0)
+
+
 @pytest.mark.slow
 def test_accuracy_across_the_antimeridian():
     """rr-antimeridian, a box across 180 deg: no seam, DEM mode within 0.05 px RMS."""

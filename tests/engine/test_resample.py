@@ -160,3 +160,25 @@ def test_overview_level_of_floats_matches_a_nan_skipping_mean(shape):
     n = np.isfinite(blocks).sum(axis=0)
     ref = np.where(n > 0, np.nansum(blocks, axis=0) / np.maximum(n, 1), -1.0)
     np.testing.assert_allclose(overview_level(a, -1.0), ref.astype(np.float32), rtol=1e-6)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_finite_extent_is_the_bounding_box_of_the_finite_values(seed):
+    """``finite_extent`` (where the antecedents' samplers work) against numpy: random NaN
+    fields with finite blobs anywhere, one finite value, none, and infinities (not finite)."""
+    from napari_meris_ortho.engine.resample import finite_extent
+
+    rng = np.random.default_rng(seed)
+    a = np.full((int(rng.integers(1, 60)), int(rng.integers(1, 70))), np.nan, np.float32)
+    assert finite_extent(a) == (0, 0, 0, 0)
+    for _ in range(int(rng.integers(1, 4))):
+        r, c = int(rng.integers(a.shape[0])), int(rng.integers(a.shape[1]))
+        a[r:r + int(rng.integers(1, 9)), c:c + int(rng.integers(1, 9))] = rng.random()
+    a[rng.random(a.shape) < 0.05] = np.inf
+    rows, cols = np.nonzero(np.isfinite(a))
+    assert finite_extent(a) == (rows.min(), rows.max() + 1, cols.min(), cols.max() + 1)
+    one = np.full((5, 7), np.nan)
+    one[3, 6] = 1.0
+    assert finite_extent(one) == (3, 4, 6, 7)
+    with pytest.raises(ValueError, match="2-D"):
+        finite_extent(np.zeros(3))

@@ -127,6 +127,42 @@ def _nearest_range(lo, hi, line, col, offset, n_lines, n_cols, out):  # pragma: 
             out[i] = -1
 
 
+def finite_extent(values: np.ndarray) -> tuple[int, int, int, int]:
+    """Rows ``[r0, r1)`` and columns ``[c0, c1)`` of a 2-D array holding all its finite values
+    (antecedent lines: the points a resampling can give a value; the rest of an output grid is
+    background), (0, 0, 0, 0) when there is none. One pass that stops, in each row, at the
+    first finite value from either end."""
+    a = np.asarray(values)
+    if a.ndim != 2:
+        raise ValueError(f"values must be 2-D, got shape {a.shape}")
+    r0, r1, c0, c1 = _finite_extent(a)
+    return (int(r0), int(r1), int(c0), int(c1)) if r1 > r0 else (0, 0, 0, 0)
+
+
+@njit(cache=True, nogil=True)
+def _finite_extent(a):  # pragma: no cover
+    nr, nc = a.shape
+    r0, r1, c0, c1 = nr, 0, nc, 0
+    for r in range(nr):
+        first = -1
+        for c in range(nc):
+            if math.isfinite(a[r, c]):
+                first = c
+                break
+        if first < 0:
+            continue
+        last = first
+        for c in range(nc - 1, first, -1):
+            if math.isfinite(a[r, c]):
+                last = c
+                break
+        r0 = min(r0, r)
+        r1 = r + 1
+        c0 = min(c0, first)
+        c1 = max(c1, last + 1)
+    return r0, r1, c0, c1
+
+
 def inside_line_range(lines: np.ndarray, cols: np.ndarray, n_lines: int, n_cols: int
                       ) -> tuple[float, float] | None:
     """Smallest and largest line of the antecedents inside the product (-0.5 <= l < H - 0.5,

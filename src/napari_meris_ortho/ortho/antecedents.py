@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -172,6 +172,7 @@ class Antecedents:
     progress: ProgressCallback | None = None
     t_start: float = field(default_factory=time.perf_counter)
     _index: np.ndarray | None = field(default=None, repr=False)
+    _box: tuple[int, int, int, int] | None = field(default=None, repr=False)
     #: the caller's limit of output pixels (``precompute``), for ``result``'s size check
     max_pixels: int | None = None
 
@@ -189,14 +190,50 @@ class Antecedents:
         first, stop = self.window
         return slice(first, stop)
 
+    def _extent(self) -> tuple[int, int, int, int]:
+        """Rows [r0, r1) and columns [c0, c1) of the grid holding every point with an
+        antecedent (``engine.resample.finite_extent``, once): the samplers work there only, the
+        rest of the grid is background (a segment in a far larger grid costs its own size)."""
+        from ..engine.resample import finite_extent
+
+        if self._box is None:
+            self._box = finite_extent(self.line)
+        return self._box
+
+    def _points(self) -> tuple[np.ndarray, np.ndarray]:
+        """Antecedent (line, col) of the points of ``_extent`` (views)."""
+        r0, r1, c0, c1 = self._extent()
+        return self.line[r0:r1, c0:c1], self.col[r0:r1, c0:c1]
+
+    def _on_grid(self, n: int, dtype: Any, sample: Callable[[np.ndarray], None]) -> np.ndarray:
+        """(n, rows, cols) of ``dtype``, 0 = background: ``sample(part)`` fills ``part`` (n,
+        points of ``_extent`` in row order, C-contiguous); an extent of the whole grid is filled
+        in place, a smaller one is copied into a grid of zeros (the untouched pages of a large
+        one cost no memory)."""
+        nr, nc = self.grid.shape
+        r0, r1, c0, c1 = self._extent()
+        if r1 <= r0 or self.window[1] <= self.window[0] or n == 0:
+            return np.zeros((n, nr, nc), dtype)
+        if (r0, r1, c0, c1) == (0, nr, 0, nc):
+            out = np.empty((n, nr, nc), dtype)
+            sample(out.reshape(n, nr * nc))
+            return out
+        out = np.zeros((n, nr, nc), dtype)
+        part = np.empty((n, (r1 - r0) * (c1 - c0)), dtype)
+        sample(part)
+        out[:, r0:r1, c0:c1] = part.reshape(n, r1 - r0, c1 - c0)
+        return out
+
     def _nearest_index(self) -> np.ndarray:
-        """Flat pixel index (relative to the window) of each point's nearest pixel, once."""
+        """Flat pixel index (relative to the window) of the nearest pixel of each point of
+        ``_extent``, once."""
         from ..engine.resample import nearest_pixel
 
         if self._index is None:
             first, stop = self.window
-            self._index = nearest_pixel(self.line, self.col, stop - first,
-                                        int(self.prod.width), line_offset=first)
+            line, col = self._points()
+            self._index = nearest_pixel(line, col, stop - first, int(self.prod.width),
+                                        line_offset=first)
         return self._index
 
     def _timed(self, key: str, t0: float) -> None:
@@ -205,9 +242,9 @@ class Antecedents:
 
     def _gather(self, images: Sequence[Any], dtype: Any, out: np.ndarray,
                 scales: np.ndarray | None = None) -> None:
-        """The nearest pixel of every point from ``images`` (their window, as ``dtype``) into
-        ``out`` (images, points): as they are (``gather``), or times ``scales`` as float32
-        (``gather_scaled``)."""
+        """The nearest pixel of every point of ``_extent`` from ``images`` (their window, as
+        ``dtype``) into ``out`` (images, points): as they are (``gather``), or times ``scales``
+        as float32 (``gather_scaled``)."""
         from ..engine.resample import gather, gather_scaled
 
         stack = self._stack(images, dtype)
@@ -234,19 +271,20 @@ class Antecedents:
         return [self.prod.no_data_count(b) for b in bands]
 
     def _interpolated(self, bands: Sequence[int]) -> list[np.ndarray]:
-        """Bilinear/bicubic counts (float32) of ``bands`` at the antecedents; a sample that
-        touches a no-data pixel is no data (0), never a value mixed with a fill."""
+        """Bilinear/bicubic counts (float32) of ``bands`` at the points of ``_extent``; a
+        sample that touches a no-data pixel is no data (0), never a value mixed with a fill."""
         from ..engine.resample import resample_bands, touches
 
         stack = self._stack([self.prod.counts(b) for b in bands], np.uint16)
         t0 = time.perf_counter()
-        lines = self.line.astype(np.float64) - self.window[0]
-        out = resample_bands(list(stack), lines, self.col, self.sampling.value)
+        line, col = self._points()
+        lines = line.astype(np.float64) - self.window[0]
+        out = resample_bands(list(stack), lines, col, self.sampling.value)
         for k, fill in enumerate(self._no_data(bands)):
             if fill is not None:
                 mask = stack[k] == fill
                 if mask.any():
-                    out[k][touches(mask, lines, self.col, self.sampling.value)] = 0.0
+                    out[k][touches(mask, lines, col, self.sampling.value)] = 0.0
         self._timed("resample", t0)
         return out
 
@@ -265,47 +303,40 @@ class Antecedents:
         """uint16 counts (len(bands), rows, cols) at the antecedents, 0 = background; nearest:
         the product's counts; bilinear/bicubic: interpolated counts rounded half up."""
         bands = self.bands if bands is None else [int(b) for b in bands]
-        nr, nc = self.grid.shape
-        first, stop = self.window
-        if stop <= first or not bands:
-            return np.zeros((len(bands), nr, nc), np.uint16)
-        out = np.empty((len(bands), nr * nc), np.uint16)  # every point is written below
-        if self.sampling is Sampling.NEAREST:
-            self._gather([self.prod.counts(b) for b in bands], np.uint16, out)
-            self._clear(out, self._no_data(bands))
-            return out.reshape(len(bands), nr, nc)
-        for k, v in enumerate(self._interpolated(bands)):
-            out[k] = np.clip(np.floor(v.reshape(-1) + np.float32(0.5)), 0, 65535)
-        return out.reshape(len(bands), nr, nc)
+
+        def sample(part: np.ndarray) -> None:
+            if self.sampling is Sampling.NEAREST:
+                self._gather([self.prod.counts(b) for b in bands], np.uint16, part)
+                self._clear(part, self._no_data(bands))
+                return
+            for k, v in enumerate(self._interpolated(bands)):
+                part[k] = np.clip(np.floor(v.reshape(-1) + np.float32(0.5)), 0, 65535)
+
+        return self._on_grid(len(bands), np.uint16, sample)
 
     def radiance(self, bands: Sequence[int] | None = None) -> dict[int, np.ndarray]:
         """float32 radiances (counts x sf_rad, Scaling Factor GADS) of ``bands``, 0 = background;
         bilinear/bicubic: the interpolated counts, not rounded."""
         bands = self.bands if bands is None else [int(b) for b in bands]
         sf = self.prod.scaling.radiance
-        nr, nc = self.grid.shape
-        if self.window[1] <= self.window[0]:
-            return {b: np.zeros((nr, nc), np.float32) for b in bands}
-        if self.sampling is Sampling.NEAREST:  # counts x sf_rad in one pass, no uint16 copy
-            values = np.empty((len(bands), nr * nc), np.float32)
-            scales = np.array([sf[b - 1] for b in bands])
-            self._gather([self.prod.counts(b) for b in bands], np.uint16, values, scales=scales)
-            self._clear(values, self._no_data(bands), scales)
-            return {b: values[k].reshape(nr, nc) for k, b in enumerate(bands)}
-        out = {}
-        for b, v in zip(bands, self._interpolated(bands), strict=True):
-            v *= np.float32(sf[b - 1])
-            out[b] = v.reshape(nr, nc)
-        return out
+        scales = np.array([sf[b - 1] for b in bands])
+
+        def sample(part: np.ndarray) -> None:
+            if self.sampling is Sampling.NEAREST:  # counts x sf_rad in one pass, no uint16 copy
+                self._gather([self.prod.counts(b) for b in bands], np.uint16, part,
+                             scales=scales)
+                self._clear(part, self._no_data(bands), scales)
+                return
+            for k, v in enumerate(self._interpolated(bands)):
+                part[k] = v.reshape(-1) * np.float32(scales[k])
+
+        values = self._on_grid(len(bands), np.float32, sample)
+        return {b: values[k] for k, b in enumerate(bands)}
 
     def flags(self) -> np.ndarray:
         """L1b flags (uint8) of the nearest pixel, 0 = background (any sampling)."""
-        nr, nc = self.grid.shape
-        out = np.zeros((1, nr * nc), np.uint8)
-        first, stop = self.window
-        if stop > first:
-            self._gather([self.prod.flags], np.uint8, out)
-        return out.reshape(nr, nc)
+        return self._on_grid(1, np.uint8,
+                             lambda part: self._gather([self.prod.flags], np.uint8, part))[0]
 
     def saturated(self) -> np.ndarray | None:
         """Per-band saturation bits (uint16, bit b-1: band b) of the nearest pixel, 0 =
@@ -313,12 +344,7 @@ class Antecedents:
         sat = self.prod.saturated
         if sat is None:
             return None
-        nr, nc = self.grid.shape
-        out = np.zeros((1, nr * nc), np.uint16)
-        first, stop = self.window
-        if stop > first:
-            self._gather([sat], np.uint16, out)
-        return out.reshape(nr, nc)
+        return self._on_grid(1, np.uint16, lambda part: self._gather([sat], np.uint16, part))[0]
 
     def finish(self) -> RunStats:
         """Statistics with the engine and total times up to now (Appendix B log)."""
