@@ -4,8 +4,8 @@ stereographic map of an Arctic RR segment, against the product's own grid.
 
     .venv/bin/python benchmarks/bench_extent.py [--json FILE] [--repeat N]
 
-Cases (bands 7, 5, 2; DEM mode for meris-ortho; gdalwarp: ``-geoloc`` on pyepr's geolocation, no
-terrain correction, nearest neighbour, zstd COG, all cores):
+Cases (bands 7, 5, 2, or ``--bands``; DEM mode for meris-ortho; gdalwarp: ``-geoloc`` on
+pyepr's geolocation, no terrain correction, nearest neighbour, zstd COG, all cores):
 - fr-alps on its own UTM 33N grid (260 m);
 - fr-alps on a fixed LAEA Europe extent (EPSG:3035, 4000 x 4000 km at 300 m: 13334 x 13334 px,
   the segment covers 2 % of it);
@@ -81,19 +81,22 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--json", default=None, metavar="FILE")
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--no-gdalwarp", action="store_true")
+    ap.add_argument("--bands", default=",".join(map(str, BANDS)),
+                    help="bands mapped by both tools (default 7,5,2)")
     args = ap.parse_args(argv)
+    bands = tuple(int(b) for b in args.bands.split(","))
     results = []
     with tempfile.TemporaryDirectory() as tmp_dir:
         tmp = Path(tmp_dir)
         for label, scene, grid in cases():
             dem = scene.dem_paths["geotiff"]
-            extra = [*grid_args(grid), "--bands", ",".join(map(str, BANDS))]
+            extra = [*grid_args(grid), "--bands", ",".join(map(str, bands))]
             run_map(scene.product_path, tmp / "warm.tif", dem, *extra)  # kernels, page cache
             ours = median_row([run_map(scene.product_path, tmp / "ours.tif", dem, *extra)
                                for _ in range(args.repeat)])
             row = {"case": label, "grid": [grid.height, grid.width], "meris_ortho": ours}
             if not args.no_gdalwarp:
-                row["gdalwarp"] = median_row([run_gdalwarp(scene, grid, tmp, BANDS)
+                row["gdalwarp"] = median_row([run_gdalwarp(scene, grid, tmp, bands)
                                               for _ in range(args.repeat)])
             results.append(row)
             print(f"{label}: {grid.height} x {grid.width} px, meris-ortho map "

@@ -3,6 +3,7 @@ message, exit code 2, before any allocation, nothing left behind."""
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 
 from napari_meris_ortho.cli import main
@@ -28,8 +29,9 @@ def run(capsys, *argv) -> tuple[int, str]:
         (["--pixel-size", "1e-6"],
          ["output grid of", "exceeds the limit", "pixel size of at least"]),
         (["--ul", "-180", "90", "--lr", "180", "-90", "--pixel-size", "0.001"],
-         # 2 bands streamed to the file: 16 + 2 x 2 bytes a pixel (orthorectify: 32)
-         ["output grid of 360000 x 180000 pixels (6.48e+10 pixels, about 1.2 TiB)"]),
+         # 2 bands streamed to the file: 2 bytes a pixel, 16 + 2 x 2 more in the segment's
+         # area (orthorectify: 16 more a pixel, 16 in the area)
+         ["output grid of 360000 x 180000 pixels (6.48e+10 pixels, about 120.7 GiB)"]),
         (["--pixel-size", "0.001", "--max-pixels", "1000"],
          ["limit of 1e+03 pixels (--max-pixels)"]),
     ],
@@ -57,33 +59,46 @@ def test_max_pixels_raises_the_limit(product, tmp_path, capsys):
 
 def test_map_counts_the_bands_it_streams_and_orthorectify_those_it_holds(product, tmp_path,
                                                                         capsys):
-    """``map`` writes the bands a few at a time (``write_map``): its size guard counts the
-    antecedents and two groups of bands (16 + 2 x 8 bytes a pixel for 15 bands), not every band
-    as float32 (16 + 8 x 15), which refused grids it maps within the memory (a 15-band LAEA
-    Europe extent: 24 GB estimated, 5.9 GB peak). The API's in-memory result counts them all,
-    also when ``result()`` follows a streamed ``precompute``."""
+    """``map`` writes the bands a few at a time (``write_map``), and the antecedents and the
+    gathered bands cover the search area only (the rows and columns the segment reaches): its
+    size guard counts 2 bytes a pixel of the grid (the writer's overviews) and 16 + 2 x 8 of
+    the area for 15 bands, not every band as float32 over the grid (16 + 8 x 15), which refused
+    grids it maps within the memory (a 15-band LAEA Europe extent: 24 GB estimated, 1.4 GB
+    peak). The API's in-memory result counts them all, also when ``result()`` follows a
+    streamed ``precompute``."""
     from napari_meris_ortho.geometry.grid import OutputGrid
     from napari_meris_ortho.options import OrthoOptions
     from napari_meris_ortho.ortho import bytes_per_output_pixel, orthorectify, precompute
 
     every = OrthoOptions.of(None)
     assert len(every.bands) == 15
-    assert bytes_per_output_pixel(every, hold_bands=False) == 32
+    assert bytes_per_output_pixel(every, hold_bands=False) == 2 + 16 + 16
+    assert bytes_per_output_pixel(every, hold_bands=False, area_share=0.25) == 2 + 32 / 4
     assert bytes_per_output_pixel(every) == 136
     three = OrthoOptions.of(None, bands=[7, 5, 2], diagnostics=True)
-    assert bytes_per_output_pixel(three, hold_bands=False) == 16 + 6 + 48
+    assert bytes_per_output_pixel(three, hold_bands=False) == 2 + 48 + 16 + 6
+
+    grid = OutputGrid("EPSG:4326", 11.0, 47.0, 0.001, 0.001, 2000, 1000)
+    ante = precompute(product, grid, elevation="none", max_pixels=2_000_000)
+    r0, r1, c0, c1 = ante.area
+    area = (r1 - r0) * (c1 - c0)
+    assert 0.2 < area / 2e6 < 0.6
+    assert np.isnan(ante.line[:r0]).all() and np.isnan(ante.line[:, c1:]).all()
+
+    def mib(n: float) -> str:
+        return f"(2e+06 pixels, about {n / 2**20:.1f} MiB)"
 
     out = tmp_path / "out.tif"
-    code, err = run(capsys, "map", product, "-o", out, "--pixel-size", "0.001",
-                    "--ul", "11", "47", "--lr", "13", "46", "--max-pixels", "1000")
-    assert code == 2 and "(2e+06 pixels, about 61.0 MiB)" in err, err  # 2e6 x 32 bytes
-    grid = OutputGrid("EPSG:4326", 11.0, 47.0, 0.001, 0.001, 2000, 1000)
-    with pytest.raises(OptionsError, match=r"\(2e\+06 pixels, about 259\.4 MiB\)"):
-        orthorectify(product, grid, elevation="none", max_pixels=1000)  # 2e6 x 136 bytes
-    ante = precompute(product, grid, elevation="none", max_pixels=2_000_000)
+    code, err = run(capsys, "map", product, "-o", out, "--pixel-size", "0.001", "--elevation",
+                    "none", "--ul", "11", "47", "--lr", "13", "46", "--max-pixels", "1000")
+    assert code == 2 and mib(2e6 * 2 + area * 32) in err, err
+    with pytest.raises(OptionsError) as info:
+        orthorectify(product, grid, elevation="none", max_pixels=1000)
+    assert mib(2e6 * 120 + area * 16) in str(info.value)
     ante.max_pixels = 1000
-    with pytest.raises(OptionsError, match="about 234.6 MiB"):  # 2e6 x (8 x 15 + 3) bytes
+    with pytest.raises(OptionsError) as info:
         ante.result()
+    assert mib(2e6 * (8 * 15 + 3)) in str(info.value)
     assert list(tmp_path.iterdir()) == []
 
 

@@ -356,9 +356,10 @@ def test_a_grid_far_larger_than_the_segment_searches_only_the_segment(fr_small):
 
 @pytest.mark.parametrize("sampling", ["nearest", "bicubic"])
 def test_a_grid_far_larger_than_the_segment_samples_only_the_segment(fr_small, sampling):
-    """The bands, flags and saturation on a grid 5 x 5 times the segment's are sampled over the
-    extent of the antecedents only (its points, not the grid's, in the nearest index), and
-    equal, bit for bit, the resampling of every point of the grid, 0 around."""
+    """On a grid 5 x 5 times the segment's, the search keeps the antecedents of its area only,
+    and the bands, flags and saturation are sampled over the extent of the antecedents only
+    (its points, not the grid's, in the nearest index), equal, bit for bit, to the resampling
+    of every point of the grid, 0 around."""
     from napari_meris_ortho.engine.resample import resample_bands
     from napari_meris_ortho.ortho import precompute
 
@@ -375,6 +376,11 @@ def test_a_grid_far_larger_than_the_segment_samples_only_the_segment(fr_small, s
     rows, cols = np.nonzero(np.isfinite(ante.line))
     assert (r0, r1, c0, c1) == (rows.min(), rows.max() + 1, cols.min(), cols.max() + 1)
     assert (r1 - r0) * (c1 - c0) < big.width * big.height / 10
+    # the search kept only its area (rows, columns the segment reaches), inside: NaN around
+    a0, a1, b0, b1 = ante.area
+    assert ante.area_line.shape == (a1 - a0, b1 - b0) and a0 <= r0 < r1 <= a1
+    assert ante.area_line.size < big.width * big.height / 5 and b0 <= c0 < c1 <= b1
+    assert np.array_equal(ante.line[a0:a1, b0:b1], ante.area_line, equal_nan=True)
     prod = read_product(s.product_path)
     every = resample_bands([prod.counts(b) for b in bands], ante.line, ante.col, sampling)
     counts = ante.counts()

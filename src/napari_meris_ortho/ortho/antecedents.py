@@ -119,15 +119,21 @@ def band_metadata(stats: RunStats, bands: Sequence[int]) -> list[dict[str, Any]]
     return out
 
 
-def bytes_per_output_pixel(opts: OrthoOptions, *, hold_bands: bool = True) -> int:
-    """Memory an output pixel costs: its antecedent line and column (float32), iterations and
-    nearest-pixel index (16 bytes); the diagnostics layers and their float32 copies for
-    writing; the bands. ``hold_bands`` (``orthorectify``, ``Antecedents.result``): every band
-    as float32 with its resampling buffer; else streamed to a writer (``writing.write_map``):
-    ``GATHER_GROUP`` uint16 bands gathered at a time, the previous group still in the writer."""
+def bytes_per_output_pixel(opts: OrthoOptions, *, hold_bands: bool = True,
+                           area_share: float = 1.0) -> float:
+    """Memory an output pixel costs, on average over a grid whose search area (the rows and
+    columns the segment reaches, ``Antecedents.area``) is ``area_share`` of it.
+
+    Over the area: the antecedent line and column (float32), iterations and nearest-pixel
+    index (16 bytes); streamed to a writer (``writing.write_map``), the ``GATHER_GROUP`` uint16
+    bands gathered at a time and the previous group still in the writer (2 x min(bands, 8)).
+    Over the whole grid: ``hold_bands`` (``orthorectify``, ``Antecedents.result``), every band
+    as float32 with its resampling buffer (8 x bands), else the writer's overview levels of its
+    bands in flight (2); the diagnostics layers and their float32 copies for writing (48)."""
     n = len(opts.bands)
-    bands = _held_band_bytes(n) if hold_bands else 2 * min(n, 2 * GATHER_GROUP)
-    return 16 + bands + (48 if opts.diagnostics else 0)
+    area = 16 + (0 if hold_bands else 2 * min(n, 2 * GATHER_GROUP))
+    whole = (_held_band_bytes(n) if hold_bands else 2) + (48 if opts.diagnostics else 0)
+    return whole + area * float(area_share)
 
 
 def _held_band_bytes(n_bands: int) -> int:
@@ -153,18 +159,39 @@ def antecedent_line_window(line: np.ndarray, col: np.ndarray, n_lines: int, n_co
     return max(first, 0), min(stop, n_lines)
 
 
+#: ``Antecedents`` arrays and their background: antecedent line and column (NaN), iterations
+#: (-1: not searched or not solved)
+BACKGROUND = {"line": np.nan, "col": np.nan, "iterations": -1}
+
+
+def on_whole_grid(part: np.ndarray, shape: tuple[int, int], area: tuple[int, int, int, int],
+                  background: float) -> np.ndarray:
+    """``part``, rows [r0, r1) and columns [c0, c1) (``area``) of a grid of ``shape``, in the
+    whole grid with ``background`` around (``part`` itself when it is the whole grid)."""
+    if part.shape == tuple(shape):
+        return part
+    r0, r1, c0, c1 = area
+    whole = np.full(shape, background, part.dtype)
+    whole[r0:r1, c0:c1] = part
+    return whole
+
 
 @dataclass
 class Antecedents:
     """Antecedent (line, col) of every output point of ``grid`` (float32, NaN: background)
     and the product lines ``window`` = [first, stop) they read; ``counts``, ``radiance`` and
-    ``flags`` sample the product there (nearest: one fused gather of all bands)."""
+    ``flags`` sample the product there (nearest: one fused gather of all bands).
+
+    The search keeps only the ``area`` of the grid it reached (rows [r0, r1), columns [c0, c1):
+    ``area_line``, ``area_col``, ``area_iterations``); ``line``, ``col`` and ``iterations`` are
+    the whole grid's, built on first use (a segment in a far larger grid costs its own size)."""
 
     prod: MerisProduct
     grid: OutputGrid
-    line: np.ndarray
-    col: np.ndarray
-    iterations: np.ndarray
+    area: tuple[int, int, int, int]
+    area_line: np.ndarray
+    area_col: np.ndarray
+    area_iterations: np.ndarray
     sampling: Sampling
     bands: list[int]
     stats: RunStats
@@ -175,6 +202,30 @@ class Antecedents:
     _box: tuple[int, int, int, int] | None = field(default=None, repr=False)
     #: the caller's limit of output pixels (``precompute``), for ``result``'s size check
     max_pixels: int | None = None
+    #: the whole-grid ``line``, ``col``, ``iterations`` built so far (given: the diagnostics')
+    whole_grid: dict[str, np.ndarray] = field(default_factory=dict, repr=False)
+
+    @property
+    def line(self) -> np.ndarray:
+        """Antecedent line of every point of the grid (float32, NaN: background)."""
+        return self._on_whole_grid("line", self.area_line)
+
+    @property
+    def col(self) -> np.ndarray:
+        """Antecedent column of every point of the grid (float32, NaN: background)."""
+        return self._on_whole_grid("col", self.area_col)
+
+    @property
+    def iterations(self) -> np.ndarray:
+        """Prediction/correction iterations of every point (int8, -1: background)."""
+        return self._on_whole_grid("iterations", self.area_iterations)
+
+    def _on_whole_grid(self, name: str, part: np.ndarray) -> np.ndarray:
+        """``part`` (the ``area``) in the whole grid, ``BACKGROUND`` around; once."""
+        if name not in self.whole_grid:
+            self.whole_grid[name] = on_whole_grid(part, self.grid.shape, self.area,
+                                              BACKGROUND[name])
+        return self.whole_grid[name]
 
     @property
     def valid(self) -> np.ndarray:
@@ -197,13 +248,17 @@ class Antecedents:
         from ..engine.resample import finite_extent
 
         if self._box is None:
-            self._box = finite_extent(self.line)
+            r0, r1, c0, c1 = finite_extent(self.area_line)
+            a0, _, b0, _ = self.area
+            self._box = (a0 + r0, a0 + r1, b0 + c0, b0 + c1) if r1 > r0 else (0, 0, 0, 0)
         return self._box
 
     def _points(self) -> tuple[np.ndarray, np.ndarray]:
         """Antecedent (line, col) of the points of ``_extent`` (views)."""
         r0, r1, c0, c1 = self._extent()
-        return self.line[r0:r1, c0:c1], self.col[r0:r1, c0:c1]
+        a0, _, b0, _ = self.area
+        rows, cols = slice(r0 - a0, r1 - a0), slice(c0 - b0, c1 - b0)
+        return self.area_line[rows, cols], self.area_col[rows, cols]
 
     def _on_grid(self, n: int, dtype: Any, sample: Callable[[np.ndarray], None]) -> np.ndarray:
         """(n, rows, cols) of ``dtype``, 0 = background: ``sample(part)`` fills ``part`` (n,

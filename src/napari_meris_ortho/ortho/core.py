@@ -34,10 +34,12 @@ from ..products.protocol import MerisProduct
 from ..progress import ProgressCallback
 from . import occlusion
 from .antecedents import (
+    BACKGROUND,
     Antecedents,
     OrthoResult,
     antecedent_line_window,
     bytes_per_output_pixel,
+    on_whole_grid,
 )
 from .heights import dem_heights
 from .stats import SOURCE_NONE, SOURCE_TIEPOINTS, TIMINGS, RunStats, per_band, source_counts
@@ -307,6 +309,8 @@ class _Job:
     ellipsoid: tuple[np.ndarray, np.ndarray] | None = None
     #: the caller's limit of output pixels (None: from the available memory)
     max_pixels: int | None = None
+    #: rows [r0, r1) and columns [c0, c1) of the grid the search reaches (``_search_area``)
+    area: tuple[int, int, int, int] = (0, 0, 0, 0)
 
 
 def _height_mode(elevation: Elevation, has_dems: bool) -> int:
@@ -321,18 +325,13 @@ def _height_mode(elevation: Elevation, has_dems: bool) -> int:
 def _prepare(seg: Segment, grid: OutputGrid | None, crs: Any, pixel_size: float | None,
              t_start: float, max_pixels: int | None = None,
              hold_bands: bool = False) -> _Job:
-    """Default grid (its size checked) and the spans of ``grid`` to search (3.1)."""
+    """Default grid, the spans of ``grid`` to search (3.1) and the area they reach; then the
+    grid's size is checked (``bytes_per_output_pixel``), before any allocation of its size."""
     prod, tp, boundary, stack, opts, pixel = (seg.prod, seg.tp, seg.boundary, seg.stack,
                                               seg.options, seg.pixel)
     res_m = _column_spacing_m(prod)
     if grid is None:
         grid = default_grid(boundary, res_m, crs, pixel_size=pixel_size)
-    check_grid_size(grid.width, grid.height, (grid.dx, grid.dy),
-                    bytes_per_output_pixel(opts, hold_bands=hold_bands), max_pixels)
-    if stack is not None and not seg.dems_prepared:  # the DEM window under the grid, once
-        bounds = lonlat_bounds(grid)
-        if bounds is not None:
-            stack.prepare(*bounds)
     # MERSYN processes the points inside the segment boundary; the primary-grid path also tries
     # a margin: the outer half pixel of the product and terrain seen obliquely beyond it (the
     # pixel geolocation always: its terrain points may lie outside the zero-height boundary)
@@ -345,8 +344,19 @@ def _prepare(seg: Segment, grid: OutputGrid | None, crs: Any, pixel_size: float 
         hmode = predcorr.HEIGHT_NONE if seg.ellipsoid is None else predcorr.HEIGHT_GIVEN
     else:
         hmode = _height_mode(opts.elevation, stack is not None)
-    return _Job(prod, tp, grid, spans, stack, hmode, opts, margin, inner.count, list(seg.dems),
-                t_start, pixel, seg.ellipsoid, max_pixels)
+    job = _Job(prod, tp, grid, spans, stack, hmode, opts, margin, inner.count, list(seg.dems),
+               t_start, pixel, seg.ellipsoid, max_pixels)
+    job.area = _search_area(job)  # (the spans: a few per row, whatever the grid's size)
+    r0, r1, c0, c1 = job.area
+    share = (r1 - r0) * (c1 - c0) / max(grid.width * grid.height, 1)
+    check_grid_size(grid.width, grid.height, (grid.dx, grid.dy),
+                    bytes_per_output_pixel(opts, hold_bands=hold_bands, area_share=share),
+                    max_pixels)
+    if stack is not None and not seg.dems_prepared:  # the DEM window under the grid, once
+        bounds = lonlat_bounds(grid)
+        if bounds is not None:
+            stack.prepare(*bounds)
+    return job
 
 
 def _pixel_grids(prod: MerisProduct) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -408,11 +418,27 @@ def _solve(job: _Job, lon: np.ndarray, lat: np.ndarray, h: np.ndarray | None,
                           col_start=c0)
 
 
+def _search_area(job: _Job) -> tuple[int, int, int, int]:
+    """Rows [r0, r1) and columns [c0, c1) of the grid the search reaches: the blocks of
+    ``_BLOCK_ROWS`` rows holding spans, whole, and the columns ``_span_columns`` gives their
+    spans; (0, 0, 0, 0) when there is no span."""
+    spans = job.spans
+    rows = np.flatnonzero(np.diff(spans.ptr)) + spans.row_start
+    if rows.size == 0:
+        return 0, 0, 0, 0
+    r0 = int(rows[0]) // _BLOCK_ROWS * _BLOCK_ROWS
+    r1 = min(-(-(int(rows[-1]) + 1) // _BLOCK_ROWS) * _BLOCK_ROWS, job.grid.height)
+    c0, c1 = _span_columns(job, spans.start, spans.stop)
+    return r0, r1, c0, c1
+
+
 @dataclass
 class _Blocks:
-    """What the blocks of output rows accumulate: antecedents, iterations, diagnostics, the
-    facet-search counts and the points per elevation source."""
+    """What the blocks of output rows accumulate over the search ``area`` (rows [r0, r1),
+    columns [c0, c1) of the grid): antecedents, iterations, diagnostics, the facet-search
+    counts and the points per elevation source."""
 
+    area: tuple[int, int, int, int]
     line: np.ndarray
     col: np.ndarray
     iters: np.ndarray
@@ -421,7 +447,9 @@ class _Blocks:
     search: dict[str, int] = field(default_factory=dict)
 
     @classmethod
-    def empty(cls, shape: tuple[int, int], diagnostics: bool, n_dems: int) -> _Blocks:
+    def empty(cls, area: tuple[int, int, int, int], diagnostics: bool, n_dems: int
+              ) -> _Blocks:
+        shape = (area[1] - area[0], area[3] - area[2])
         diag: dict[str, np.ndarray] = {}
         if diagnostics:
             diag = {"elevation": np.full(shape, np.nan, np.float32),
@@ -429,14 +457,23 @@ class _Blocks:
                     "shift_east_m": np.full(shape, np.nan, np.float32),
                     "shift_north_m": np.full(shape, np.nan, np.float32)}
         # line, col, iterations: not searched (rows or columns without spans) until ``add``
-        return cls(np.full(shape, np.nan, np.float32), np.full(shape, np.nan, np.float32),
-                   np.full(shape, -1, np.int8), diag, np.zeros(n_dems + 1, np.int64))
+        return cls(area, np.full(shape, np.nan, np.float32),
+                   np.full(shape, np.nan, np.float32), np.full(shape, -1, np.int8), diag,
+                   np.zeros(n_dems + 1, np.int64))
+
+    def rows(self, r0: int, r1: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(line, col, iterations) of grid rows [r0, r1) over the area's columns (views)."""
+        a0 = self.area[0]
+        return self.line[r0 - a0:r1 - a0], self.col[r0 - a0:r1 - a0], self.iters[r0 - a0:r1 - a0]
 
     def add(self, window: tuple[int, int, int, int], res: dict[str, Any],
             src: np.ndarray | None, hmode: int) -> None:
-        """Store the solution of rows [r0, r1) and columns [c0, c1) (``window``; ``src``:
-        elevation source per point, None when the heights are not the DEMs')."""
+        """Store the solution of grid rows [r0, r1) and columns [c0, c1) (``window``, inside
+        the area; ``src``: elevation source per point, None when the heights are not the
+        DEMs')."""
+        a0, _, b0, _ = self.area
         r0, r1, c0, c1 = window
+        r0, r1, c0, c1 = r0 - a0, r1 - a0, c0 - b0, c1 - b0
         for whole, part in ((self.line, res["line"]), (self.col, res["col"]),
                             (self.iters, res["iterations"])):
             if not np.may_share_memory(whole[r0:r1, c0:c1], part):  # (solved in place)
@@ -464,8 +501,8 @@ def _run(job: _Job, progress: ProgressCallback | None) -> Antecedents:
     later by the returned ``Antecedents``."""
     grid, spans, stack, hmode, opts = job.grid, job.spans, job.stack, job.hmode, job.options
     nr = grid.shape[0]
-    blocks = _Blocks.empty(grid.shape, opts.diagnostics,
-                           len(stack.sources) if stack is not None else 0)
+    area = job.area
+    blocks = _Blocks.empty(area, opts.diagnostics, len(stack.sources) if stack is not None else 0)
     t_dem = t_lonlat = t_engine = 0.0
     total = nr + len(opts.bands)
     march = None
@@ -496,16 +533,15 @@ def _run(job: _Job, progress: ProgressCallback | None) -> Antecedents:
             h, src = dem_heights(stack, lon, lat, mask)
             t_dem += time.perf_counter() - t0
         t0 = time.perf_counter()
-        whole = (c0, c1) == (0, grid.width)  # the block's rows of the grid: solved in place
+        whole = (c0, c1) == area[2:]  # the block's rows of the area: solved in place
         res = _solve(job, lon, lat, h, (ptr, start, stop), (r0, c0),
-                     (blocks.line[r0:r1], blocks.col[r0:r1], blocks.iters[r0:r1])
-                     if whole else None)
+                     blocks.rows(r0, r1) if whole else None)
+        t_engine += time.perf_counter() - t0
         if march is not None:  # pixel geolocation with DEMs: hidden ground reported
             assert stack is not None and h is not None
             t0 = time.perf_counter()
             occlusion.report_hidden(march, job.tp.kernel_args(), lon, lat, h, res)
             t_dem += time.perf_counter() - t0
-        t_engine += time.perf_counter() - t0
         blocks.add((r0, r1, c0, c1), res, src, hmode)
         if progress is not None:
             progress(r1, total)
@@ -530,31 +566,42 @@ def _antecedents(job: _Job, blocks: _Blocks, seconds: dict[str, float],
             diag["elevation"] = np.where(valid, np.float32(0), np.float32(np.nan))
             diag["shift_east_m"] = diag["elevation"].copy()
             diag["shift_north_m"] = diag["elevation"].copy()
+        diag = {name: on_whole_grid(a, job.grid.shape, blocks.area, DIAGNOSTIC_BACKGROUND[name])
+                for name, a in diag.items()}
     seconds = {**seconds, "total": time.perf_counter() - job.t_start}
     stats = _stats(job, search=blocks.search, hist=hist, processed=int(valid.sum()),
                    window=window, sources=blocks.sources, seconds=seconds)
-    return Antecedents(prod, job.grid, line, col, iters, opts.sampling, list(opts.bands), stats,
-                       diag, progress, job.t_start, max_pixels=job.max_pixels)
+    return Antecedents(prod, job.grid, blocks.area, line, col, iters, opts.sampling,
+                       list(opts.bands), stats, diag, progress, job.t_start,
+                       max_pixels=job.max_pixels,
+                       whole_grid={k: diag[k] for k in BACKGROUND if k in diag})
+
+
+#: background of the diagnostics layers (``OrthoResult.diagnostics``)
+DIAGNOSTIC_BACKGROUND = {**BACKGROUND, "elevation": np.nan, "shift_east_m": np.nan,
+                         "shift_north_m": np.nan, "elevation_source": SOURCE_NONE}
 
 
 def _empty_antecedents(job: _Job) -> Antecedents:
     """No antecedent search can reach the grid (``allow_empty``): all background."""
     grid, stack = job.grid, job.stack
     nr, nc = grid.shape
-    nan = np.full((nr, nc), np.nan, np.float32)
-    iters = np.full((nr, nc), -1, np.int8)
     diag: dict[str, np.ndarray] = {}
     if job.options.diagnostics:
+        nan = np.full((nr, nc), np.nan, np.float32)
         diag = {"line": nan, "col": nan.copy(), "elevation": nan.copy(),
                 "elevation_source": np.full((nr, nc), SOURCE_NONE, np.int8),
-                "iterations": iters, "shift_east_m": nan.copy(), "shift_north_m": nan.copy()}
+                "iterations": np.full((nr, nc), -1, np.int8), "shift_east_m": nan.copy(),
+                "shift_north_m": nan.copy()}
     hist = np.zeros(predcorr.MAX_ITERATIONS + 1, np.int64)
     sources = np.zeros(len(stack.sources) + 1 if stack is not None else 1, np.int64)
     seconds = {**dict.fromkeys(TIMINGS, 0.0), "total": time.perf_counter() - job.t_start}
     stats = _stats(job, search={}, hist=hist, processed=0, window=(0, 0), sources=sources,
                    seconds=seconds)
-    return Antecedents(job.prod, grid, nan, nan, iters, job.options.sampling,
-                       list(job.options.bands), stats, diag, None, job.t_start,
+    none = np.zeros((0, 0), np.float32)
+    return Antecedents(job.prod, grid, (0, 0, 0, 0), none, none, np.zeros((0, 0), np.int8),
+                       job.options.sampling, list(job.options.bands), stats, diag, None,
+                       job.t_start,
                        max_pixels=job.max_pixels)
 
 
