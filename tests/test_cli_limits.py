@@ -29,9 +29,9 @@ def run(capsys, *argv) -> tuple[int, str]:
         (["--pixel-size", "1e-6"],
          ["output grid of", "exceeds the limit", "pixel size of at least"]),
         (["--ul", "-180", "90", "--lr", "180", "-90", "--pixel-size", "0.001"],
-         # 2 bands streamed to the file: 2 bytes a pixel, 16 + 2 x 2 more in the segment's
-         # area (orthorectify: 16 more a pixel, 16 in the area)
-         ["output grid of 360000 x 180000 pixels (6.48e+10 pixels, about 120.7 GiB)"]),
+         # 2 bands streamed to the file: 2 bytes a pixel, refused before the segment's area
+         # (16 + 2 x 2 more a pixel there) is known
+         ["output grid of 360000 x 180000 pixels (6.48e+10 pixels, at least 120.7 GiB)"]),
         (["--pixel-size", "0.001", "--max-pixels", "1000"],
          ["limit of 1e+03 pixels (--max-pixels)"]),
     ],
@@ -74,7 +74,7 @@ def test_map_counts_the_bands_it_streams_and_orthorectify_those_it_holds(product
     assert len(every.bands) == 15
     assert bytes_per_output_pixel(every, hold_bands=False) == 2 + 16 + 16
     assert bytes_per_output_pixel(every, hold_bands=False, area_share=0.25) == 2 + 32 / 4
-    assert bytes_per_output_pixel(every) == 136
+    assert bytes_per_output_pixel(every) == 16 + 8 * 15 + 3
     three = OrthoOptions.of(None, bands=[7, 5, 2], diagnostics=True)
     assert bytes_per_output_pixel(three, hold_bands=False) == 2 + 48 + 16 + 6
 
@@ -85,21 +85,38 @@ def test_map_counts_the_bands_it_streams_and_orthorectify_those_it_holds(product
     assert 0.2 < area / 2e6 < 0.6
     assert np.isnan(ante.line[:r0]).all() and np.isnan(ante.line[:, c1:]).all()
 
-    def mib(n: float) -> str:
-        return f"(2e+06 pixels, about {n / 2**20:.1f} MiB)"
+    def mib(n: float, what: str = "about") -> str:
+        return f"(2e+06 pixels, {what} {n / 2**20:.1f} MiB)"
 
     out = tmp_path / "out.tif"
     code, err = run(capsys, "map", product, "-o", out, "--pixel-size", "0.001", "--elevation",
                     "none", "--ul", "11", "47", "--lr", "13", "46", "--max-pixels", "1000")
-    assert code == 2 and mib(2e6 * 2 + area * 32) in err, err
+    # a pixel limit is checked before the spans: the whole grid's part of the estimate
+    assert code == 2 and mib(2e6 * 2, "at least") in err, err
     with pytest.raises(OptionsError) as info:
         orthorectify(product, grid, elevation="none", max_pixels=1000)
-    assert mib(2e6 * 120 + area * 16) in str(info.value)
-    ante.max_pixels = 1000
+    assert mib(2e6 * 123, "at least") in str(info.value)
+    ante.max_pixels = 1000  # a streamed precompute: result() counts the bands it holds
     with pytest.raises(OptionsError) as info:
         ante.result()
     assert mib(2e6 * (8 * 15 + 3)) in str(info.value)
+    held = precompute(product, grid, elevation="none", max_pixels=2_000_000, hold_bands=True)
+    held.max_pixels = 1000  # counted by precompute: not refused after the search
+    assert held.result().bands[7].shape == (1000, 2000)
     assert list(tmp_path.iterdir()) == []
+
+
+def test_a_grid_of_too_many_rows_is_refused_before_its_spans(product, tmp_path, capsys):
+    """The size guard first counts what the whole grid costs whatever the segment (the map's
+    2 bytes a pixel), before the spans of the segment's rows are computed (one or more a row,
+    5.9e5 rows here): the estimate in the message is that part alone."""
+    from napari_meris_ortho.ortho import product_grid
+
+    grid = product_grid(product, pixel_size=1e-6)
+    code, err = run(capsys, "map", product, "-o", tmp_path / "out.tif", "--pixel-size", "1e-6",
+                    "--bands", "1,2")
+    pixels = grid.width * grid.height
+    assert code == 2 and f"({pixels:.3g} pixels, at least {2 * pixels / 2**40:.1f} TiB)" in err
 
 
 def test_synthesis_over_the_world_is_refused_and_leaves_no_directory(product, tmp_path, capsys):

@@ -164,10 +164,12 @@ def check_grid_size(
     width: float, height: float, pixel_size: tuple[float, float], bytes_per_pixel: float,
     max_pixels: int | None = None, budget_bytes: int | None = None,
     budget_what: str = f"{MEMORY_SHARE:.0%} of the available memory",
+    lower_bound: bool = False,
 ) -> None:
     """Refuse an output grid larger than :func:`pixel_limit` before anything is allocated.
 
-    The message gives the grid size, the estimate, the limit and a pixel size that fits.
+    The message gives the grid size, the estimate ("at least" with ``lower_bound``: the part
+    of the cost known so far), the limit and a pixel size that fits.
     """
     pixels = float(width) * float(height)
     limit = pixel_limit(bytes_per_pixel, max_pixels, budget_bytes)
@@ -180,8 +182,9 @@ def check_grid_size(
     source = ("--max-pixels" if max_pixels is not None else
               f"{_size_text(limit * bytes_per_pixel)}, {budget_what}")  # fmt: skip
     raise OptionsError(
-        f"output grid of {width:.0f} x {height:.0f} pixels ({pixels:.3g} pixels, about "
-        f"{_size_text(pixels * bytes_per_pixel)}) exceeds the limit of {limit:.3g} pixels "
+        f"output grid of {width:.0f} x {height:.0f} pixels ({pixels:.3g} pixels, "
+        f"{'at least' if lower_bound else 'about'} {_size_text(pixels * bytes_per_pixel)}) "
+        f"exceeds the limit of {limit:.3g} pixels "
         f"({source}): use a pixel size of at least {suggest:g} or a smaller extent, or raise "
         "the limit with --max-pixels"
     )

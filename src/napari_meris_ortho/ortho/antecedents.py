@@ -128,8 +128,9 @@ def bytes_per_output_pixel(opts: OrthoOptions, *, hold_bands: bool = True,
     index (16 bytes); streamed to a writer (``writing.write_map``), the ``GATHER_GROUP`` uint16
     bands gathered at a time and the previous group still in the writer (2 x min(bands, 8)).
     Over the whole grid: ``hold_bands`` (``orthorectify``, ``Antecedents.result``), every band
-    as float32 with its resampling buffer (8 x bands), else the writer's overview levels of its
-    bands in flight (2); the diagnostics layers and their float32 copies for writing (48)."""
+    as float32 with its resampling buffer, the flags and the saturation (8 x bands + 3), else
+    the writer's overview levels of its bands in flight (2); the diagnostics layers and their
+    float32 copies for writing (48)."""
     n = len(opts.bands)
     area = 16 + (0 if hold_bands else 2 * min(n, 2 * GATHER_GROUP))
     whole = (_held_band_bytes(n) if hold_bands else 2) + (48 if opts.diagnostics else 0)
@@ -138,8 +139,8 @@ def bytes_per_output_pixel(opts: OrthoOptions, *, hold_bands: bool = True,
 
 def _held_band_bytes(n_bands: int) -> int:
     """Bytes per output pixel of ``n_bands`` bands held as float32, with the resampling
-    buffer of each (``Antecedents.result``)."""
-    return 8 * n_bands
+    buffer of each, the flags (uint8) and the saturation (uint16) (``Antecedents.result``)."""
+    return 8 * n_bands + 3
 
 
 def antecedent_line_window(line: np.ndarray, col: np.ndarray, n_lines: int, n_cols: int,
@@ -202,6 +203,9 @@ class Antecedents:
     _box: tuple[int, int, int, int] | None = field(default=None, repr=False)
     #: the caller's limit of output pixels (``precompute``), for ``result``'s size check
     max_pixels: int | None = None
+    #: ``precompute``'s size check counted every band held (``hold_bands``): ``result`` does
+    #: not check again
+    bands_counted: bool = False
     #: the whole-grid ``line``, ``col``, ``iterations`` built so far (given: the diagnostics')
     whole_grid: dict[str, np.ndarray] = field(default_factory=dict, repr=False)
 
@@ -409,12 +413,12 @@ class Antecedents:
         return self.stats
 
     def result(self) -> OrthoResult:
-        """All bands and flags as an ``OrthoResult`` (what ``orthorectify`` returns); first the
-        grid's size against the memory they take (OptionsError, ``check_grid_size``)."""
-        flags_and_saturation = 3  # uint8 + uint16 per point
-        check_grid_size(self.grid.width, self.grid.height, (self.grid.dx, self.grid.dy),
-                        _held_band_bytes(len(self.bands)) + flags_and_saturation,
-                        self.max_pixels)
+        """All bands and flags as an ``OrthoResult`` (what ``orthorectify`` returns); first,
+        unless ``precompute`` counted them, the grid's size against the memory they take
+        (OptionsError, ``check_grid_size``)."""
+        if not self.bands_counted:
+            check_grid_size(self.grid.width, self.grid.height, (self.grid.dx, self.grid.dy),
+                            _held_band_bytes(len(self.bands)), self.max_pixels)
         radiance = self.radiance()
         flags = self.flags()
         if self.progress is not None:

@@ -311,6 +311,8 @@ class _Job:
     max_pixels: int | None = None
     #: rows [r0, r1) and columns [c0, c1) of the grid the search reaches (``_search_area``)
     area: tuple[int, int, int, int] = (0, 0, 0, 0)
+    #: the size check counted every band held in memory (``precompute(hold_bands=True)``)
+    hold_bands: bool = False
 
 
 def _height_mode(elevation: Elevation, has_dems: bool) -> int:
@@ -325,13 +327,18 @@ def _height_mode(elevation: Elevation, has_dems: bool) -> int:
 def _prepare(seg: Segment, grid: OutputGrid | None, crs: Any, pixel_size: float | None,
              t_start: float, max_pixels: int | None = None,
              hold_bands: bool = False) -> _Job:
-    """Default grid, the spans of ``grid`` to search (3.1) and the area they reach; then the
-    grid's size is checked (``bytes_per_output_pixel``), before any allocation of its size."""
+    """Default grid, the spans of ``grid`` to search (3.1) and the area they reach; the grid's
+    size is checked (``bytes_per_output_pixel``) before the spans for what the whole grid
+    costs, then with the area, before any allocation of the grid's or the area's size."""
     prod, tp, boundary, stack, opts, pixel = (seg.prod, seg.tp, seg.boundary, seg.stack,
                                               seg.options, seg.pixel)
     res_m = _column_spacing_m(prod)
     if grid is None:
         grid = default_grid(boundary, res_m, crs, pixel_size=pixel_size)
+    size = (grid.width, grid.height, (grid.dx, grid.dy))
+    # what the whole grid costs whatever the segment, before the spans (one a row or so)
+    check_grid_size(*size, bytes_per_output_pixel(opts, hold_bands=hold_bands, area_share=0.0),
+                    max_pixels, lower_bound=True)
     # MERSYN processes the points inside the segment boundary; the primary-grid path also tries
     # a margin: the outer half pixel of the product and terrain seen obliquely beyond it (the
     # pixel geolocation always: its terrain points may lie outside the zero-height boundary)
@@ -346,11 +353,10 @@ def _prepare(seg: Segment, grid: OutputGrid | None, crs: Any, pixel_size: float 
         hmode = _height_mode(opts.elevation, stack is not None)
     job = _Job(prod, tp, grid, spans, stack, hmode, opts, margin, inner.count, list(seg.dems),
                t_start, pixel, seg.ellipsoid, max_pixels)
-    job.area = _search_area(job)  # (the spans: a few per row, whatever the grid's size)
+    job.area, job.hold_bands = _search_area(job), hold_bands
     r0, r1, c0, c1 = job.area
     share = (r1 - r0) * (c1 - c0) / max(grid.width * grid.height, 1)
-    check_grid_size(grid.width, grid.height, (grid.dx, grid.dy),
-                    bytes_per_output_pixel(opts, hold_bands=hold_bands, area_share=share),
+    check_grid_size(*size, bytes_per_output_pixel(opts, hold_bands=hold_bands, area_share=share),
                     max_pixels)
     if stack is not None and not seg.dems_prepared:  # the DEM window under the grid, once
         bounds = lonlat_bounds(grid)
@@ -573,7 +579,7 @@ def _antecedents(job: _Job, blocks: _Blocks, seconds: dict[str, float],
                    window=window, sources=blocks.sources, seconds=seconds)
     return Antecedents(prod, job.grid, blocks.area, line, col, iters, opts.sampling,
                        list(opts.bands), stats, diag, progress, job.t_start,
-                       max_pixels=job.max_pixels,
+                       max_pixels=job.max_pixels, bands_counted=job.hold_bands,
                        whole_grid={k: diag[k] for k in BACKGROUND if k in diag})
 
 
@@ -601,8 +607,8 @@ def _empty_antecedents(job: _Job) -> Antecedents:
     none = np.zeros((0, 0), np.float32)
     return Antecedents(job.prod, grid, (0, 0, 0, 0), none, none, np.zeros((0, 0), np.int8),
                        job.options.sampling, list(job.options.bands), stats, diag, None,
-                       job.t_start,
-                       max_pixels=job.max_pixels)
+                       job.t_start, max_pixels=job.max_pixels,
+                       bands_counted=job.hold_bands)
 
 
 def _stats(job: _Job, *, search: dict[str, int], hist: np.ndarray, processed: int,
