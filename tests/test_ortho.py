@@ -374,10 +374,13 @@ def test_a_grid_far_larger_than_the_segment_samples_only_the_segment(fr_small, s
                       bands=bands)
     r0, r1, c0, c1 = ante._extent()
     rows, cols = np.nonzero(np.isfinite(ante.line))
-    assert (r0, r1, c0, c1) == (rows.min(), rows.max() + 1, cols.min(), cols.max() + 1)
+    a0, a1, b0, b1 = ante.area
+    # the rows of the finite antecedents; their columns, or the area's when over half of them
+    assert (r0, r1) == (rows.min(), rows.max() + 1)
+    finite = (cols.min(), cols.max() + 1)
+    assert (c0, c1) == (finite if 2 * (finite[1] - finite[0]) <= b1 - b0 else (b0, b1))
     assert (r1 - r0) * (c1 - c0) < big.width * big.height / 10
     # the search kept only its area (rows, columns the segment reaches), inside: NaN around
-    a0, a1, b0, b1 = ante.area
     assert ante.area_line.shape == (a1 - a0, b1 - b0) and a0 <= r0 < r1 <= a1
     assert ante.area_line.size < big.width * big.height / 5 and b0 <= c0 < c1 <= b1
     assert np.array_equal(ante.line[a0:a1, b0:b1], ante.area_line, equal_nan=True)

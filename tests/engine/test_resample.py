@@ -182,3 +182,31 @@ def test_finite_extent_is_the_bounding_box_of_the_finite_values(seed):
     assert finite_extent(one) == (3, 4, 6, 7)
     with pytest.raises(ValueError, match="2-D"):
         finite_extent(np.zeros(3))
+
+
+def test_gather_places_a_window_of_points_in_the_grid_rows():
+    """``gather``/``gather_scaled`` with ``place`` = (width, stride, offset): the points are a
+    window of rows of a grid flattened in ``out``; the rest of ``out`` is left as it is."""
+    from napari_meris_ortho.engine.resample import gather, gather_scaled
+
+    rng = np.random.default_rng(3)
+    images = rng.integers(0, 4000, (3, 20, 30)).astype(np.uint16)
+    h, w, nr, nc, r0, c0 = 7, 11, 15, 25, 4, 9
+    index = rng.integers(-1, 600, h * w).astype(np.int32)
+    out = np.full((3, nr, nc), 9, np.uint16)
+    gather(images, index, out.reshape(3, -1), (w, nc, r0 * nc + c0))
+    flat = images.reshape(3, -1)
+    expected = np.where(index >= 0, flat[:, np.maximum(index, 0)], 0).reshape(3, h, w)
+    assert np.array_equal(out[:, r0:r0 + h, c0:c0 + w], expected)
+    outside = out.copy()
+    outside[:, r0:r0 + h, c0:c0 + w] = 9
+    assert (outside == 9).all()
+    scaled = np.zeros((3, nr, nc), np.float32)
+    scales = np.array([0.5, 0.25, 2.0])
+    gather_scaled(images, index, scales, scaled.reshape(3, -1), (w, nc, r0 * nc + c0))
+    assert np.array_equal(scaled[:, r0:r0 + h, c0:c0 + w],
+                          expected.astype(np.float32) * scales.astype(np.float32)[:, None, None])
+    with pytest.raises(ValueError, match="do not fit"):
+        gather(images, index, out.reshape(3, -1), (w, nc, (nr - h + 1) * nc))
+    with pytest.raises(ValueError, match="do not fit"):
+        gather(images, index, out.reshape(3, -1), (w + 1, nc, 0))

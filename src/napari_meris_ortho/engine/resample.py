@@ -197,53 +197,79 @@ def _pixels(images: np.ndarray) -> np.ndarray:
     return a.reshape(a.shape[0], -1)
 
 
-def gather(images: np.ndarray, index: np.ndarray, out: np.ndarray) -> None:
+def gather(images: np.ndarray, index: np.ndarray, out: np.ndarray,
+           place: tuple[int, int, int] | None = None) -> None:
     """Nearest neighbour of all bands in one pass: ``out[b, i] = images[b, pixel index[i]]``,
     0 where the index is -1; ``images`` (bands, lines, cols), ``out`` (bands, points) of the
     same dtype (uint16 counts, uint8 flags: no conversion), ``index`` 1-D; points split over
-    threads."""
+    threads. ``place`` = (width, stride, offset): the points are a window of ``width`` columns
+    of a grid of rows of ``stride`` points flattened in ``out``, starting at ``offset``
+    (point i goes to ``offset + (i // width) * stride + i % width``)."""
     pixels = _pixels(images)
-    split_range(lambda lo, hi: _gather_range(lo, hi, pixels, index, out), index.size,
-                min_size=1 << 16)
+    width, stride, offset = _placed(index, out, place)
+    split_range(lambda lo, hi: _gather_range(lo, hi, pixels, index, out, width, stride, offset),
+                index.size // width, min_size=max((1 << 16) // width, 1))
 
 
 def gather_scaled(images: np.ndarray, index: np.ndarray, scales: np.ndarray,
-                  out: np.ndarray) -> None:
+                  out: np.ndarray, place: tuple[int, int, int] | None = None) -> None:
     """``gather`` of counts straight into float32 physical values:
     ``out[b, i] = float32(images[b, pixel index[i]]) * scales[b]`` (float32 arithmetic, the
     numbers of ``counts.astype(float32) * float32(scale)``), 0 where the index is -1."""
     sc = np.ascontiguousarray(scales, dtype=np.float32)
     pixels = _pixels(images)
-    split_range(lambda lo, hi: _gather_scaled_range(lo, hi, pixels, index, sc, out),
-                index.size, min_size=1 << 16)
+    width, stride, offset = _placed(index, out, place)
+    split_range(lambda lo, hi: _gather_scaled_range(lo, hi, pixels, index, sc, out, width,
+                                                    stride, offset),
+                index.size // width, min_size=max((1 << 16) // width, 1))
+
+
+def _placed(index: np.ndarray, out: np.ndarray, place: tuple[int, int, int] | None
+            ) -> tuple[int, int, int]:
+    """(width, stride, offset) of ``gather``'s points in ``out``, checked: every point inside."""
+    n = int(index.size)
+    # no place: rows of one point (the threads split the points)
+    width, stride, offset = (1, 1, 0) if place is None else map(int, place)
+    if width < 1 or n % width or stride < width or offset < 0 or (
+            n and offset + (n // width - 1) * stride + width > out.shape[-1]):
+        raise ValueError(f"{n} points as rows of {width} at {offset} every {stride} do not "
+                         f"fit in {out.shape[-1]}")
+    return width, stride, offset
 
 
 @njit(cache=True, nogil=True)
-def _gather_scaled_range(lo, hi, pixels, index, scales, out):  # pragma: no cover
-    """Points [lo, hi) of ``gather_scaled`` (``pixels``: bands x flat pixels)."""
+def _gather_scaled_range(lo, hi, pixels, index, scales, out, width, stride,
+                         offset):  # pragma: no cover
+    """Rows [lo, hi) of the points of ``gather_scaled`` (``pixels``: bands x flat pixels)."""
     n_bands = pixels.shape[0]
-    for i in range(lo, hi):
-        k = index[i]
-        if k < 0:
-            for b in range(n_bands):
-                out[b, i] = 0.0
-        else:
-            for b in range(n_bands):
-                out[b, i] = np.float32(pixels[b, k]) * scales[b]
+    for r in range(lo, hi):
+        for c in range(width):
+            i = r * width + c
+            j = offset + r * stride + c
+            k = index[i]
+            if k < 0:
+                for b in range(n_bands):
+                    out[b, j] = 0.0
+            else:
+                for b in range(n_bands):
+                    out[b, j] = np.float32(pixels[b, k]) * scales[b]
 
 
 @njit(cache=True, nogil=True)
-def _gather_range(lo, hi, pixels, index, out):  # pragma: no cover
-    """Points [lo, hi) of ``gather`` (``pixels``: bands x flat pixels)."""
+def _gather_range(lo, hi, pixels, index, out, width, stride, offset):  # pragma: no cover
+    """Rows [lo, hi) of the points of ``gather`` (``pixels``: bands x flat pixels)."""
     n_bands = pixels.shape[0]
-    for i in range(lo, hi):
-        k = index[i]
-        if k < 0:
-            for b in range(n_bands):
-                out[b, i] = 0
-        else:
-            for b in range(n_bands):
-                out[b, i] = pixels[b, k]
+    for r in range(lo, hi):
+        for c in range(width):
+            i = r * width + c
+            j = offset + r * stride + c
+            k = index[i]
+            if k < 0:
+                for b in range(n_bands):
+                    out[b, j] = 0
+            else:
+                for b in range(n_bands):
+                    out[b, j] = pixels[b, k]
 
 
 @njit(cache=True)

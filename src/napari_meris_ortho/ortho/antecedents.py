@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -248,12 +248,16 @@ class Antecedents:
     def _extent(self) -> tuple[int, int, int, int]:
         """Rows [r0, r1) and columns [c0, c1) of the grid holding every point with an
         antecedent (``engine.resample.finite_extent``, once): the samplers work there only, the
-        rest of the grid is background (a segment in a far larger grid costs its own size)."""
+        rest of the grid is background (a segment in a far larger grid costs its own size).
+        Columns over half the area's are widened to the area's: whole rows of the area arrays,
+        no copy of the antecedents for the nearest index."""
         from ..engine.resample import finite_extent
 
         if self._box is None:
             r0, r1, c0, c1 = finite_extent(self.area_line)
-            a0, _, b0, _ = self.area
+            a0, _, b0, b1 = self.area
+            if 2 * (c1 - c0) > b1 - b0:
+                c0, c1 = 0, b1 - b0
             self._box = (a0 + r0, a0 + r1, b0 + c0, b0 + c1) if r1 > r0 else (0, 0, 0, 0)
         return self._box
 
@@ -264,24 +268,16 @@ class Antecedents:
         rows, cols = slice(r0 - a0, r1 - a0), slice(c0 - b0, c1 - b0)
         return self.area_line[rows, cols], self.area_col[rows, cols]
 
-    def _on_grid(self, n: int, dtype: Any, sample: Callable[[np.ndarray], None]) -> np.ndarray:
-        """(n, rows, cols) of ``dtype``, 0 = background: ``sample(part)`` fills ``part`` (n,
-        points of ``_extent`` in row order, C-contiguous); an extent of the whole grid is filled
-        in place, a smaller one is copied into a grid of zeros (the untouched pages of a large
-        one cost no memory)."""
+    def _sampled(self, n: int, dtype: Any) -> tuple[np.ndarray, tuple[int, int, int, int] | None]:
+        """(n, rows, cols) of ``dtype`` for sampled values and the ``_extent`` to sample in it
+        (None: nothing to sample, all background 0): uninitialised when the extent is the whole
+        grid, else zeros (the untouched pages of a large grid cost no memory)."""
         nr, nc = self.grid.shape
-        r0, r1, c0, c1 = self._extent()
-        if r1 <= r0 or self.window[1] <= self.window[0] or n == 0:
-            return np.zeros((n, nr, nc), dtype)
-        if (r0, r1, c0, c1) == (0, nr, 0, nc):
-            out = np.empty((n, nr, nc), dtype)
-            sample(out.reshape(n, nr * nc))
-            return out
-        out = np.zeros((n, nr, nc), dtype)
-        part = np.empty((n, (r1 - r0) * (c1 - c0)), dtype)
-        sample(part)
-        out[:, r0:r1, c0:c1] = part.reshape(n, r1 - r0, c1 - c0)
-        return out
+        box = self._extent()
+        if box[1] <= box[0] or self.window[1] <= self.window[0] or n == 0:
+            return np.zeros((n, nr, nc), dtype), None
+        whole = box == (0, nr, 0, nc)
+        return (np.empty if whole else np.zeros)((n, nr, nc), dtype), box
 
     def _nearest_index(self) -> np.ndarray:
         """Flat pixel index (relative to the window) of the nearest pixel of each point of
@@ -300,19 +296,23 @@ class Antecedents:
         sec[key] += time.perf_counter() - t0
 
     def _gather(self, images: Sequence[Any], dtype: Any, out: np.ndarray,
-                scales: np.ndarray | None = None) -> None:
-        """The nearest pixel of every point of ``_extent`` from ``images`` (their window, as
-        ``dtype``) into ``out`` (images, points): as they are (``gather``), or times ``scales``
-        as float32 (``gather_scaled``)."""
+                box: tuple[int, int, int, int], scales: np.ndarray | None = None) -> None:
+        """The nearest pixel of every point of ``box`` (``_extent``) from ``images`` (their
+        window, as ``dtype``) into its place in ``out`` (images, rows, cols): as they are
+        (``gather``), or times ``scales`` as float32 (``gather_scaled``)."""
         from ..engine.resample import gather, gather_scaled
 
         stack = self._stack(images, dtype)
         index = self._nearest_index()
+        n, nr, nc = out.shape
+        r0, r1, c0, c1 = box
+        flat = out.reshape(n, nr * nc)
+        place = None if (c0, c1) == (0, nc) and r0 == 0 else (c1 - c0, nc, r0 * nc + c0)
         t0 = time.perf_counter()
         if scales is None:
-            gather(stack, index, out)
+            gather(stack, index, flat, place)
         else:
-            gather_scaled(stack, index, scales, out)
+            gather_scaled(stack, index, scales, flat, place)
         self._timed("resample", t0)
 
     def _stack(self, images: Sequence[Any], dtype: Any) -> np.ndarray:
@@ -362,16 +362,17 @@ class Antecedents:
         """uint16 counts (len(bands), rows, cols) at the antecedents, 0 = background; nearest:
         the product's counts; bilinear/bicubic: interpolated counts rounded half up."""
         bands = self.bands if bands is None else [int(b) for b in bands]
-
-        def sample(part: np.ndarray) -> None:
-            if self.sampling is Sampling.NEAREST:
-                self._gather([self.prod.counts(b) for b in bands], np.uint16, part)
-                self._clear(part, self._no_data(bands))
-                return
-            for k, v in enumerate(self._interpolated(bands)):
-                part[k] = np.clip(np.floor(v.reshape(-1) + np.float32(0.5)), 0, 65535)
-
-        return self._on_grid(len(bands), np.uint16, sample)
+        out, box = self._sampled(len(bands), np.uint16)
+        if box is None:
+            return out
+        inside = out[:, box[0]:box[1], box[2]:box[3]]
+        if self.sampling is Sampling.NEAREST:
+            self._gather([self.prod.counts(b) for b in bands], np.uint16, out, box)
+            self._clear(inside, self._no_data(bands))
+            return out
+        for k, v in enumerate(self._interpolated(bands)):
+            inside[k] = np.clip(np.floor(v + np.float32(0.5)), 0, 65535)
+        return out
 
     def radiance(self, bands: Sequence[int] | None = None) -> dict[int, np.ndarray]:
         """float32 radiances (counts x sf_rad, Scaling Factor GADS) of ``bands``, 0 = background;
@@ -379,31 +380,34 @@ class Antecedents:
         bands = self.bands if bands is None else [int(b) for b in bands]
         sf = self.prod.scaling.radiance
         scales = np.array([sf[b - 1] for b in bands])
-
-        def sample(part: np.ndarray) -> None:
+        out, box = self._sampled(len(bands), np.float32)
+        if box is not None:
+            inside = out[:, box[0]:box[1], box[2]:box[3]]
             if self.sampling is Sampling.NEAREST:  # counts x sf_rad in one pass, no uint16 copy
-                self._gather([self.prod.counts(b) for b in bands], np.uint16, part,
+                self._gather([self.prod.counts(b) for b in bands], np.uint16, out, box,
                              scales=scales)
-                self._clear(part, self._no_data(bands), scales)
-                return
-            for k, v in enumerate(self._interpolated(bands)):
-                part[k] = v.reshape(-1) * np.float32(scales[k])
-
-        values = self._on_grid(len(bands), np.float32, sample)
-        return {b: values[k] for k, b in enumerate(bands)}
+                self._clear(inside, self._no_data(bands), scales)
+            else:
+                for k, v in enumerate(self._interpolated(bands)):
+                    inside[k] = v * np.float32(scales[k])
+        return {b: out[k] for k, b in enumerate(bands)}
 
     def flags(self) -> np.ndarray:
         """L1b flags (uint8) of the nearest pixel, 0 = background (any sampling)."""
-        return self._on_grid(1, np.uint8,
-                             lambda part: self._gather([self.prod.flags], np.uint8, part))[0]
+        return self._nearest([self.prod.flags], np.uint8)
 
     def saturated(self) -> np.ndarray | None:
         """Per-band saturation bits (uint16, bit b-1: band b) of the nearest pixel, 0 =
         background; None for a product without them (``MerisProduct.saturated``)."""
         sat = self.prod.saturated
-        if sat is None:
-            return None
-        return self._on_grid(1, np.uint16, lambda part: self._gather([sat], np.uint16, part))[0]
+        return None if sat is None else self._nearest([sat], np.uint16)
+
+    def _nearest(self, images: Sequence[Any], dtype: Any) -> np.ndarray:
+        """The nearest pixel of one image at the antecedents (rows, cols), 0 = background."""
+        out, box = self._sampled(1, dtype)
+        if box is not None:
+            self._gather(images, dtype, out, box)
+        return out[0]
 
     def finish(self) -> RunStats:
         """Statistics with the engine and total times up to now (Appendix B log)."""
