@@ -173,7 +173,8 @@ def precompute(product: ProductLike, grid: OutputGrid | None = None,
     ``Antecedents.counts/radiance/flags`` sample any band at them (as pyresample's
     ``get_neighbour_info`` / ``get_sample_from_neighbour_info``). The grid's size is checked
     for bands streamed a few at a time (``writing.write_map``); ``hold_bands``: for every band
-    held in memory (``result()``, which checks it again before allocating)."""
+    held in memory (``result()``; without ``hold_bands``, ``result()`` checks them before it
+    allocates them)."""
     t_start = time.perf_counter()
     opts = OrthoOptions.of(options, n_dems=len(dems), **modes)
     if grid is None:
@@ -608,7 +609,8 @@ def _empty_antecedents(job: _Job) -> Antecedents:
     return Antecedents(job.prod, grid, (0, 0, 0, 0), none, none, np.zeros((0, 0), np.int8),
                        job.options.sampling, list(job.options.bands), stats, diag, None,
                        job.t_start, max_pixels=job.max_pixels,
-                       bands_counted=job.hold_bands)
+                       bands_counted=job.hold_bands,
+                       whole_grid={k: diag[k] for k in BACKGROUND if k in diag})
 
 
 def _stats(job: _Job, *, search: dict[str, int], hist: np.ndarray, processed: int,
