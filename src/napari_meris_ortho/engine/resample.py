@@ -205,10 +205,7 @@ def gather(images: np.ndarray, index: np.ndarray, out: np.ndarray,
     threads. ``place`` = (width, stride, offset): the points are a window of ``width`` columns
     of a grid of rows of ``stride`` points flattened in ``out``, starting at ``offset``
     (point i goes to ``offset + (i // width) * stride + i % width``)."""
-    pixels = _pixels(images)
-    width, stride, offset = _placed(index, out, place)
-    split_range(lambda lo, hi: _gather_range(lo, hi, pixels, index, out, width, stride, offset),
-                index.size // width, min_size=max((1 << 16) // width, 1))
+    _gather(images, index, np.empty(0, np.float32), out, place)
 
 
 def gather_scaled(images: np.ndarray, index: np.ndarray, scales: np.ndarray,
@@ -216,17 +213,14 @@ def gather_scaled(images: np.ndarray, index: np.ndarray, scales: np.ndarray,
     """``gather`` of counts straight into float32 physical values:
     ``out[b, i] = float32(images[b, pixel index[i]]) * scales[b]`` (float32 arithmetic, the
     numbers of ``counts.astype(float32) * float32(scale)``), 0 where the index is -1."""
-    sc = np.ascontiguousarray(scales, dtype=np.float32)
+    _gather(images, index, np.ascontiguousarray(scales, dtype=np.float32), out, place)
+
+
+def _gather(images: np.ndarray, index: np.ndarray, scales: np.ndarray, out: np.ndarray,
+            place: tuple[int, int, int] | None) -> None:
+    """``gather`` (``scales`` empty) and ``gather_scaled``: the placement checked (every point
+    inside ``out``), the rows of points split over threads."""
     pixels = _pixels(images)
-    width, stride, offset = _placed(index, out, place)
-    split_range(lambda lo, hi: _gather_scaled_range(lo, hi, pixels, index, sc, out, width,
-                                                    stride, offset),
-                index.size // width, min_size=max((1 << 16) // width, 1))
-
-
-def _placed(index: np.ndarray, out: np.ndarray, place: tuple[int, int, int] | None
-            ) -> tuple[int, int, int]:
-    """(width, stride, offset) of ``gather``'s points in ``out``, checked: every point inside."""
     n = int(index.size)
     # no place: rows of one point (the threads split the points)
     width, stride, offset = (1, 1, 0) if place is None else map(int, place)
@@ -234,41 +228,28 @@ def _placed(index: np.ndarray, out: np.ndarray, place: tuple[int, int, int] | No
             n and offset + (n // width - 1) * stride + width > out.shape[-1]):
         raise ValueError(f"{n} points as rows of {width} at {offset} every {stride} do not "
                          f"fit in {out.shape[-1]}")
-    return width, stride, offset
+    split_range(lambda lo, hi: _gather_range(lo, hi, pixels, index, scales, out, width, stride,
+                                             offset),
+                n // width, min_size=max((1 << 16) // width, 1))
 
 
 @njit(cache=True, nogil=True)
-def _gather_scaled_range(lo, hi, pixels, index, scales, out, width, stride,
-                         offset):  # pragma: no cover
-    """Rows [lo, hi) of the points of ``gather_scaled`` (``pixels``: bands x flat pixels)."""
+def _gather_range(lo, hi, pixels, index, scales, out, width, stride, offset):  # pragma: no cover
+    """Rows [lo, hi) of the points of ``_gather`` (``pixels``: bands x flat pixels; ``scales``
+    empty: the values as they are, else float32 times the band's scale)."""
     n_bands = pixels.shape[0]
+    scaled = scales.size > 0
     for r in range(lo, hi):
         for c in range(width):
             i = r * width + c
             j = offset + r * stride + c
             k = index[i]
-            if k < 0:
-                for b in range(n_bands):
-                    out[b, j] = 0.0
-            else:
-                for b in range(n_bands):
-                    out[b, j] = np.float32(pixels[b, k]) * scales[b]
-
-
-@njit(cache=True, nogil=True)
-def _gather_range(lo, hi, pixels, index, out, width, stride, offset):  # pragma: no cover
-    """Rows [lo, hi) of the points of ``gather`` (``pixels``: bands x flat pixels)."""
-    n_bands = pixels.shape[0]
-    for r in range(lo, hi):
-        for c in range(width):
-            i = r * width + c
-            j = offset + r * stride + c
-            k = index[i]
-            if k < 0:
-                for b in range(n_bands):
+            for b in range(n_bands):
+                if k < 0:
                     out[b, j] = 0
-            else:
-                for b in range(n_bands):
+                elif scaled:
+                    out[b, j] = np.float32(pixels[b, k]) * scales[b]
+                else:
                     out[b, j] = pixels[b, k]
 
 
