@@ -459,14 +459,12 @@ class _Blocks:
         shape = (area[1] - area[0], area[3] - area[2])
         diag: dict[str, np.ndarray] = {}
         if diagnostics:
-            diag = {"elevation": np.full(shape, np.nan, np.float32),
-                    "elevation_source": np.full(shape, SOURCE_NONE, np.int8),
-                    "shift_east_m": np.full(shape, np.nan, np.float32),
-                    "shift_north_m": np.full(shape, np.nan, np.float32)}
+            diag = {name: _background(name, shape)
+                    for name in ("elevation", "elevation_source", "shift_east_m",
+                                 "shift_north_m")}
         # line, col, iterations: not searched (rows or columns without spans) until ``add``
-        return cls(area, np.full(shape, np.nan, np.float32),
-                   np.full(shape, np.nan, np.float32), np.full(shape, -1, np.int8), diag,
-                   np.zeros(n_dems + 1, np.int64))
+        return cls(area, _background("line", shape), _background("col", shape),
+                   _background("iterations", shape), diag, np.zeros(n_dems + 1, np.int64))
 
     def rows(self, r0: int, r1: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(line, col, iterations) of grid rows [r0, r1) over the area's columns (views)."""
@@ -573,7 +571,7 @@ def _antecedents(job: _Job, blocks: _Blocks, seconds: dict[str, float],
             diag["elevation"] = np.where(valid, np.float32(0), np.float32(np.nan))
             diag["shift_east_m"] = diag["elevation"].copy()
             diag["shift_north_m"] = diag["elevation"].copy()
-        diag = {name: on_whole_grid(a, job.grid.shape, blocks.area, DIAGNOSTIC_BACKGROUND[name])
+        diag = {name: on_whole_grid(a, job.grid.shape, blocks.area, _LAYERS[name][0])
                 for name, a in diag.items()}
     seconds = {**seconds, "total": time.perf_counter() - job.t_start}
     stats = _stats(job, search=blocks.search, hist=hist, processed=int(valid.sum()),
@@ -584,9 +582,19 @@ def _antecedents(job: _Job, blocks: _Blocks, seconds: dict[str, float],
                        whole_grid={k: diag[k] for k in BACKGROUND if k in diag})
 
 
-#: background of the diagnostics layers (``OrthoResult.diagnostics``)
-DIAGNOSTIC_BACKGROUND = {**BACKGROUND, "elevation": np.nan, "shift_east_m": np.nan,
-                         "shift_north_m": np.nan, "elevation_source": SOURCE_NONE}
+#: background value and type of the diagnostics layers (``OrthoResult.diagnostics``): the
+#: antecedents' own (``BACKGROUND``), the elevation, its source and the parallax shifts
+_LAYERS: dict[str, tuple[float, Any]] = {
+    "line": (BACKGROUND["line"], np.float32), "col": (BACKGROUND["col"], np.float32),
+    "iterations": (BACKGROUND["iterations"], np.int8), "elevation": (np.nan, np.float32),
+    "elevation_source": (SOURCE_NONE, np.int8), "shift_east_m": (np.nan, np.float32),
+    "shift_north_m": (np.nan, np.float32)}
+
+
+def _background(name: str, shape: tuple[int, int]) -> np.ndarray:
+    """Layer ``name`` of ``_LAYERS`` over ``shape``, all background."""
+    value, dtype = _LAYERS[name]
+    return np.full(shape, value, dtype)
 
 
 def _empty_antecedents(job: _Job) -> Antecedents:
@@ -595,11 +603,9 @@ def _empty_antecedents(job: _Job) -> Antecedents:
     nr, nc = grid.shape
     diag: dict[str, np.ndarray] = {}
     if job.options.diagnostics:
-        nan = np.full((nr, nc), np.nan, np.float32)
-        diag = {"line": nan, "col": nan.copy(), "elevation": nan.copy(),
-                "elevation_source": np.full((nr, nc), SOURCE_NONE, np.int8),
-                "iterations": np.full((nr, nc), -1, np.int8), "shift_east_m": nan.copy(),
-                "shift_north_m": nan.copy()}
+        diag = {name: _background(name, (nr, nc)) for name in (
+            "line", "col", "elevation", "elevation_source", "iterations", "shift_east_m",
+            "shift_north_m")}
     hist = np.zeros(predcorr.MAX_ITERATIONS + 1, np.int64)
     sources = np.zeros(len(stack.sources) + 1 if stack is not None else 1, np.int64)
     seconds = {**dict.fromkeys(TIMINGS, 0.0), "total": time.perf_counter() - job.t_start}
