@@ -442,8 +442,8 @@ class OutputGrid:
         grid's last row in the last band); every ``step`` columns and the last column."""
         first = band * _TRIAL_STEP
         end = min(first + _TRIAL_STEP, self.height - 1)
-        rows = np.unique(np.r_[np.arange(first, max(end, first + 1), step), end])
-        cols = np.unique(np.r_[np.arange(0, self.width, step), self.width - 1])
+        rows = _nodes(first, end + 1, step)
+        cols = _nodes(0, self.width, step)
         return rows, cols
 
     def _cell_errors(self, rows: np.ndarray, cols: np.ndarray, lon: np.ndarray, lat: np.ndarray
@@ -484,8 +484,8 @@ class OutputGrid:
         """Primary-grid step N (pixels) of each band of 64 output rows, from the error measured on
         a 64-pixel trial grid over the band's cells and its neighbours' (module docstring)."""
         if self._steps is None:
-            all_rows = np.unique(np.r_[np.arange(0, self.height, _TRIAL_STEP), self.height - 1])
-            cols = np.unique(np.r_[np.arange(0, self.width, _TRIAL_STEP), self.width - 1])
+            all_rows = _nodes(0, self.height, _TRIAL_STEP)
+            cols = _nodes(0, self.width, _TRIAL_STEP)
             x, y = self.xy(all_rows[:, None], cols[None, :])
             x, y = np.broadcast_arrays(x, y)
             lon, lat = self._xy_to_lonlat(x, y)
@@ -551,6 +551,12 @@ class OutputGrid:
             elon, elat = self._xy_to_lonlat(ex, ey)
             lon[ii, jj], lat[ii, jj] = elon, elat
             self.interpolation_stats["exact_pixels"] += int(ii.size)
+
+
+def _nodes(start: int, stop: int, step: int) -> np.ndarray:
+    """Primary-grid node positions: every ``step`` from ``start`` below ``stop``, and
+    ``stop - 1``."""
+    return np.unique(np.r_[np.arange(start, stop, step), stop - 1])
 
 
 def _index_range(what: str, start: int, stop: int | None, size: int) -> tuple[int, int]:
