@@ -96,11 +96,17 @@ def compile_late() -> float:
     calls after its first ones, in the order it needs them (while the map compiles the
     primary-grid search, this compiles what comes next): the height rates and
     prediction/correction rows, the counts of solved points, the antecedent line window, the
-    nearest-pixel index and gather of counts, the COG overview kernel, and the DEM lookup and
-    geoid interpolation (the numba cache keeps them); seconds."""
+    extent of the antecedents, the nearest-pixel index and gather of counts, the COG overview
+    kernel, and the DEM lookup and geoid interpolation (the numba cache keeps them); seconds."""
     from .engine import terrain
     from .engine.predcorr import find_antecedents, height_rates, solved_counts
-    from .engine.resample import gather, inside_line_range, nearest_pixel, overview_level
+    from .engine.resample import (
+        finite_extent,
+        gather,
+        inside_line_range,
+        nearest_pixel,
+        overview_level,
+    )
     from .geometry.tiepoints import analytic_swath
 
     t0 = time.perf_counter()
@@ -113,6 +119,7 @@ def compile_late() -> float:
                      df, dj, tp.height, tp.width, 0, 0, 0.01, 10, False)
     solved_counts(np.zeros(2, np.int8), np.zeros(2, np.int8), -1, 2)
     inside_line_range(np.zeros(2, np.float32), np.zeros(2, np.float32), 2, 2)
+    finite_extent(np.zeros((2, 2), np.float32))
     index = nearest_pixel(np.zeros(4, np.float32), np.zeros(4, np.float32), 2, 2,
                           line_offset=1)
     gather(np.zeros((1, 2, 2), np.uint16), index, np.zeros((1, 4), np.uint16))
