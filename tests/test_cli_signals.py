@@ -59,14 +59,20 @@ def _left(out_dir) -> list[str]:
 
 @pytest.mark.timeout(900)
 def test_signals_at_many_offsets_leave_nothing(scene, tmp_path):
-    first = tmp_path / "first"
-    first.mkdir()
-    start = time.perf_counter()
-    proc = _start(scene, first)
-    _, err = proc.communicate(timeout=600)
-    duration = time.perf_counter() - start
-    assert proc.returncode == 0, err.decode()[-2000:]
-    assert _left(first) == ["out.tif", "out_diagnostics.tif", "stats.json"]
+    # the offsets are fractions of a warm run: on a clean checkout the first run also compiles
+    # (or loads) the numba caches and may take several times longer than the runs that follow,
+    # which would push most offsets past their end
+    durations = []
+    for name in ("first", "second"):
+        first = tmp_path / name
+        first.mkdir()
+        start = time.perf_counter()
+        proc = _start(scene, first)
+        _, err = proc.communicate(timeout=600)
+        durations.append(time.perf_counter() - start)
+        assert proc.returncode == 0, err.decode()[-2000:]
+        assert _left(first) == ["out.tif", "out_diagnostics.tif", "stats.json"]
+    duration = min(durations)
 
     interrupted = 0
     for n, fraction in enumerate(FRACTIONS):
@@ -101,4 +107,4 @@ def test_signals_at_many_offsets_leave_nothing(scene, tmp_path):
         assert "Traceback" not in text and "Error" not in text, (fraction, text[-2000:])
         assert _left(out_dir) == ["out.tif"], (fraction, _left(out_dir))
         assert (out_dir / "out.tif").read_bytes() == OLD
-    assert interrupted >= len(FRACTIONS) - 3  # the last offsets may fall after the end
+    assert interrupted >= len(FRACTIONS) - 3, durations  # the last offsets may fall after the end
