@@ -2,6 +2,7 @@
 
     .venv/bin/python benchmarks/bench_synthesis.py [--scene fr-alps] [--products 8]
                                 [--tile 1024] [--bands 15] [--workers 0,1,2] [--repeat 1]
+                                [--codecs zstd,delta-zstd]
 
 Prints two tables:
 
@@ -12,9 +13,9 @@ Prints two tables:
    time is the run's), speed-up against 1 worker, peak resident memory per worker (``VmHWM``),
    tasks and seconds per (product, tile) task.
 2. Update cost: one more product merged into a store holding one product, on the product's
-   footprint ("small") and on Europe at 260 m (50 x 35 deg, 21384 x 14969 pixels): seconds,
-   bytes added to the store, chunks written. Only the tiles the product touches are read and
-   written, so neither should grow with the store.
+   footprint ("small") and on Europe at 260 m (50 x 35 deg, 21384 x 14969 pixels), for each
+   store codec of ``--codecs``: seconds, bytes added to the store, chunks written. Only the
+   tiles the product touches are read and written, so neither should grow with the store.
 
 The paper estimate of 10 000 products on 32 workers (README) uses the measured seconds per
 task. The machine is shared: figures are loaded; ``--repeat N`` prints the median of N runs.
@@ -112,14 +113,15 @@ def _reset_peak() -> None:
 
 
 def update_cost(paths: list[str], grid, bands: list[int], tile: int, tmp: Path,
-                name: str) -> dict:
-    """Seconds and bytes of merging one product into a store holding another."""
+                name: str, codec: str = "zstd") -> dict:
+    """Seconds and bytes of merging one product into a store (of ``codec``) holding
+    another."""
     from napari_meris_ortho.synthesis.api import synthesize
     from napari_meris_ortho.synthesis.store import overview_factors
 
     out = Path(tempfile.mkdtemp(dir=tmp)) / f"update-{name}"
     synthesize(paths[:1], out, grid=grid, bands=bands, algorithm="max-ndvi", tile=tile,
-               elevation="tiepoints")
+               elevation="tiepoints", codec=codec)
     before, files0 = store_bytes(out)
     t0 = time.perf_counter()
     synthesize(paths[1:2], out, input=out, elevation="tiepoints")
@@ -127,7 +129,8 @@ def update_cost(paths: list[str], grid, bands: list[int], tile: int, tmp: Path,
     after, files1 = store_bytes(out)
     shutil.rmtree(out, ignore_errors=True)
     levels = len(overview_factors(grid.width, grid.height, tile))
-    return {"store": name, "size": f"{grid.width} x {grid.height}", "seconds": seconds,
+    return {"store": name, "codec": codec, "size": f"{grid.width} x {grid.height}",
+            "seconds": seconds,
             "bytes": after - before, "files": files1 - files0, "levels": levels}
 
 
@@ -152,6 +155,8 @@ def main() -> None:
     parser.add_argument("--repeat", type=int, default=1,
                         help="runs of every row; the median (by seconds) is printed, with "
                              "the range of the seconds")
+    parser.add_argument("--codecs", default="zstd,delta-zstd",
+                        help="store codecs of the update table (synthesize's codec=)")
     args = parser.parse_args()
 
     from napari_meris_ortho.geometry.grid import OutputGrid
@@ -179,14 +184,15 @@ def main() -> None:
             print(f"{label:>10s} {r['seconds']:8.1f} {r['per_minute']:9.2f} "
                   f"{one['seconds'] / r['seconds']:9.2f} {r['tasks']:6d} {per_task:7.2f} "
                   f"{' '.join(f'{p:.0f}' for p in r['peaks']):>20s}  {r['range']}")
-        updates = [median([update_cost(paths, g, bands, args.tile, tmp, name)
+        updates = [median([update_cost(paths, g, bands, args.tile, tmp, name, codec)
                            for _ in range(args.repeat)])
-                   for name, g in (("small", grid), ("Europe", europe))]
-    print(f"\n{'store':>8s} {'grid':>15s} {'overviews':>9s} {'update s':>9s} "
+                   for name, g in (("small", grid), ("Europe", europe))
+                   for codec in args.codecs.split(",")]
+    print(f"\n{'store':>8s} {'codec':>10s} {'grid':>15s} {'overviews':>9s} {'update s':>9s} "
           f"{'MB added':>9s} {'files added':>12s}")
     for u in updates:
-        print(f"{u['store']:>8s} {u['size']:>15s} {u['levels']:9d} {u['seconds']:9.2f} "
-              f"{u['bytes'] / 1e6:9.1f} {u['files']:12d}  {u['range']}")
+        print(f"{u['store']:>8s} {u['codec']:>10s} {u['size']:>15s} {u['levels']:9d} "
+              f"{u['seconds']:9.2f} {u['bytes'] / 1e6:9.1f} {u['files']:12d}  {u['range']}")
 
 
 if __name__ == "__main__":

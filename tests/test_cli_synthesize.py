@@ -16,6 +16,7 @@ import pytest
 
 from napari_meris_ortho.cli import main
 from napari_meris_ortho.synthesis.reading import open_synthesis
+from napari_meris_ortho.synthesis.store import open_layer
 from test_synthesis import BANDS, layers, scene_product
 
 GRID_ARGS = ["--crs", "EPSG:4326", "--ul", "13.45", "46.70", "--lr", "14.26", "46.19",
@@ -37,7 +38,7 @@ def test_new_then_update_exit_codes(products, tmp_path, caplog) -> None:
     out = tmp_path / "syn"
     bands = ",".join(str(b) for b in BANDS)
     assert main(["-q", "synthesize", products[0], "--out", str(out), "--bands", bands,
-                 "--algorithm", "max-ndvi", *GRID_ARGS, *COMMON]) == 0
+                 "--algorithm", "max-ndvi", "--codec", "delta-zstd", *GRID_ARGS, *COMMON]) == 0
     store = open_synthesis(out)
     assert store.bands == BANDS and store.algorithm == "max-ndvi"
     assert (store.grid.width, store.grid.height) == (540, 340)
@@ -53,6 +54,8 @@ def test_new_then_update_exit_codes(products, tmp_path, caplog) -> None:
     assert store.read("count").max() == 2
     statuses = [p["status"] for p in store.history()[0].products]
     assert statuses == ["failed", "merged"]
+    codecs = open_layer(store.session.store, "band_07").metadata.to_dict()["codecs"]  # kept
+    assert [c["name"] for c in codecs] == ["numcodecs.delta", "bytes", "zstd"]
     # rerun: the product is already there: reported, skipped, exit 0, no new commit
     caplog.clear()
     assert main(["synthesize", products[1], "--input", str(out), "--out", str(out),
@@ -94,7 +97,7 @@ def test_refusals_exit_2(products, tmp_path, capsys) -> None:
                  *GRID_ARGS, *COMMON]) == 0
     before = _snapshot(out)
     for extra in (["--crs", "EPSG:32633"], ["--pixel-size", "0.01"], ["--bands", "3"],
-                  ["--ul", "13", "47", "--lr", "14", "46"]):
+                  ["--ul", "13", "47", "--lr", "14", "46"], ["--codec", "delta-zstd"]):
         assert main(["-q", "synthesize", products[1], "--input", str(out), "--out", str(out),
                      *extra, *COMMON]) == 2
         assert "shall not be given" in capsys.readouterr().err

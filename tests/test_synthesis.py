@@ -14,6 +14,7 @@ import rasterio
 from napari_meris_ortho.engine.synthesis import ndvi_encode, validated_pixels
 from napari_meris_ortho.errors import OptionsError
 from napari_meris_ortho.geometry.grid import OutputGrid
+from napari_meris_ortho.options import StoreCodec
 from napari_meris_ortho.ortho import orthorectify
 from napari_meris_ortho.simulate.radiometry import CLOUD_SPECTRUM
 from napari_meris_ortho.synthesis import store as st
@@ -165,6 +166,8 @@ def test_options_refused_like_mersyn(products, tmp_path) -> None:
         synthesize([product], tmp_path / "syn", input=tmp_path / "syn", pixel_size=0.1)
     with pytest.raises(OptionsError, match="shall not be given"):
         synthesize([product], tmp_path / "syn", input=tmp_path / "syn", bands=[3])
+    with pytest.raises(OptionsError, match="keep their codec"):
+        synthesize([product], tmp_path / "syn", input=tmp_path / "syn", codec="delta-zstd")
     with pytest.raises(OptionsError, match="min-radiance synthesis"):
         synthesize([product], tmp_path / "syn", input=tmp_path / "syn", algorithm="max-ndvi")
     with pytest.raises(OptionsError, match="already holds a synthesis"):
@@ -177,6 +180,8 @@ def test_options_refused_like_mersyn(products, tmp_path) -> None:
         synthesize([product], tmp_path / "new", sampling="sinc")
     with pytest.raises(OptionsError, match="elevation"):
         synthesize([product], tmp_path / "new", elevation="sea")
+    with pytest.raises(OptionsError, match="unknown store codec 'lzma': choose zstd or delta"):
+        synthesize([product], tmp_path / "new", codec="lzma")
     with pytest.raises(OptionsError, match="DEMs are only used with elevation"):
         synthesize([product], tmp_path / "new", elevation="none", dems=["x.tif"])
     with pytest.raises(OptionsError, match="CRS"):
@@ -688,10 +693,58 @@ def test_version_3_store_is_updated_in_its_own_layout(products, tmp_path, monkey
         assert value.tobytes() == new[key].tobytes(), key
 
 
-def test_tile_chunks_are_the_bytes_zarr_writes(tmp_path) -> None:
-    """write_tile encodes chunks itself (padding past the edge, zstd, no chunk for fill values
-    only): every key of the store holds the bytes zarr's own setitem gives, on an edge tile
-    whose array ends inside its chunks, at full resolution and on an overview."""
+def _codecs(root, path: str) -> list[str]:
+    return [c["name"] for c in root[path].metadata.to_dict()["codecs"]]
+
+
+def _chunk_bytes(store, prefix: str) -> int:
+    from zarr.core.buffer import default_buffer_prototype
+    from zarr.core.sync import sync
+
+    async def size() -> int:
+        keys = [k async for k in store.list_prefix(prefix) if k.startswith(f"{prefix}/c/")]
+        return sum([len((await store.get(k, default_buffer_prototype())).to_bytes())
+                    for k in keys])
+
+    return sync(size())
+
+
+@pytest.mark.parametrize("workers", [0, 1])
+def test_store_codecs_kept_by_updates(products, tmp_path, workers) -> None:
+    """A store of codec delta-zstd encodes the full-resolution bands and NDVI by delta then
+    zstd (smaller chunks), the overviews, count and product by zstd alone; a default (zstd)
+    store has zstd everywhere; updates keep each store's codecs, in process and on a
+    LocalCluster, and both hold the same layers."""
+    import zarr
+
+    names = [products["cloudy1"], products["cloudy2"]]
+    old, new = tmp_path / "zstd", tmp_path / "delta"
+    for path, codec in ((old, None), (new, "delta-zstd")):
+        synthesize(names[:1], path, grid=GRID, bands=BANDS, tile=256, algorithm="max-ndvi",
+                   elevation="tiepoints", codec=codec)
+        synthesize(names[1:], path, input=path, elevation="tiepoints", workers=workers)
+    roots = {k: zarr.open_group(open_synthesis(p).session.store, mode="r")
+             for k, p in (("old", old), ("new", new))}
+    zstd, delta = ["bytes", "zstd"], ["numcodecs.delta", "bytes", "zstd"]
+    for layer in ("band_07", "band_13", "ndvi", "count", "product"):
+        assert _codecs(roots["old"], layer) == zstd, layer
+        assert _codecs(roots["new"], layer) == (delta if layer[0] in "bn" else zstd), layer
+        assert _codecs(roots["new"], f"overview_2/{layer}") == zstd, layer
+    want = layers(new)
+    assert sorted(want) == sorted(layers(old))
+    for key, value in layers(old).items():
+        assert value.tobytes() == want[key].tobytes(), key
+    sizes = {k: _chunk_bytes(open_synthesis(p).session.store, "band_07")
+             for k, p in (("old", old), ("new", new))}
+    assert sizes["new"] < 0.95 * sizes["old"], sizes
+
+
+@pytest.mark.parametrize("codec", list(StoreCodec))
+def test_tile_chunks_are_the_bytes_zarr_writes(tmp_path, codec) -> None:
+    """write_tile encodes chunks itself (padding past the edge, [delta,] zstd, no chunk for
+    fill values only): every key of the store holds the bytes zarr's own setitem gives, on an
+    edge tile whose array ends inside its chunks, at full resolution and on an overview, for
+    both store codecs."""
     import zarr
 
     shape, tile, names = (1300, 1100), 1024, ["band_07", "ndvi", "count", "product"]
@@ -705,7 +758,7 @@ def test_tile_chunks_are_the_bytes_zarr_writes(tmp_path) -> None:
     for how in ("ours", "zarr"):
         repo = st.create_repository(tmp_path / how)
         session = repo.writable_session(st.BRANCH)
-        st.create_layout(session.store, {}, shape, tile, names, [2], st.CHUNK)
+        st.create_layout(session.store, {}, shape, tile, names, [2], st.CHUNK, codec)
         for n in names:  # the old values, written by zarr
             for f in (1, 2):
                 a = zarr.open_array(session.store, path=st._level_path(n, f), mode="r+")
@@ -732,6 +785,9 @@ def test_tile_chunks_are_the_bytes_zarr_writes(tmp_path) -> None:
         return sync(read())
 
     ours, theirs = content(stores["ours"]), content(stores["zarr"])
+    root = zarr.open_group(stores["ours"], mode="r")
+    first = "numcodecs.delta" if codec is StoreCodec.DELTA_ZSTD else "bytes"
+    assert [_codecs(root, n)[0] for n in names] == [first] * 2 + ["bytes"] * 2
     assert sorted(ours) == sorted(theirs)
     assert len(ours) == 6 and not any(k.startswith("count/") for k in ours)
     assert all(ours[k] == theirs[k] for k in ours)

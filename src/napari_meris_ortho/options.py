@@ -91,6 +91,15 @@ class MergeRule(StrEnum):
     MAX_NDVI = "max-ndvi"
 
 
+class StoreCodec(StrEnum):
+    """Codec pipeline of a new synthesis store's full-resolution bands and NDVI: zstd alone
+    (Zarr v3 core codecs: every Zarr reader) or a delta filter then zstd (``numcodecs.delta``:
+    smaller, but not in the Zarr v3 specification; zarr-python reads it)."""
+
+    ZSTD = "zstd"
+    DELTA_ZSTD = "delta-zstd"
+
+
 _PARALLAX_CODES = {Parallax.HANDBOOK: 0, Parallax.ELLIPSOID: 1, Parallax.ELLIPSOID_H: 2}
 #: what users are offered (CLI ``--parallax``, widget)
 PARALLAX_CHOICES = (Parallax.HANDBOOK, Parallax.ELLIPSOID)
@@ -99,7 +108,7 @@ E = TypeVar("E", bound=StrEnum)
 
 _WHAT = {Elevation: "elevation source", Parallax: "parallax model",
          Geolocation: "geolocation interpolation", SearchMethod: "search method",
-         Sampling: "sampling method", MergeRule: "algorithm"}
+         Sampling: "sampling method", MergeRule: "algorithm", StoreCodec: "store codec"}
 
 
 def choices(enum: Iterable[E]) -> list[str]:

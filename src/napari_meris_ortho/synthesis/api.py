@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING, Any
 
 from .._atomic import check_writable_dir
 from ..errors import OptionsError, OutputError
-from ..options import MergeRule, OrthoOptions, check_bands, choices, parse
+from ..options import MergeRule, OrthoOptions, StoreCodec, check_bands, choices, parse
 from ..progress import ProgressCallback
 from . import store as st
 
@@ -40,7 +40,8 @@ def synthesize(products: Sequence[str | os.PathLike[str]], out: str | os.PathLik
                bands: Sequence[int] | None = None, reject_bright: bool = False,
                tile: int = DEFAULT_TILE, progress: ProgressCallback | None = None,
                workers: int = 0, scheduler: str | None = None,
-               max_pixels: int | None = None, **modes: Any) -> SynthesisResult:
+               max_pixels: int | None = None, codec: StoreCodec | str | None = None,
+               **modes: Any) -> SynthesisResult:
     """Orthorectify ``products`` onto the synthesis grid and merge them (section 3.1 use cases
     1-2, Appendix C) into the synthesis store ``out``: one Icechunk commit.
 
@@ -61,7 +62,9 @@ def synthesize(products: Sequence[str | os.PathLike[str]], out: str | os.PathLik
     (geolocation "pixel": the products' per-pixel geolocation, a product without one fails);
     the bands are the synthesis's (``bands``), not the options'.
     ``max_pixels``: largest grid of a new synthesis (default: what the free space of the
-    output's file system holds, uncompressed); a larger one is an OptionsError.
+    output's file system holds, uncompressed); a larger one is an OptionsError. ``codec``
+    (``StoreCodec``): how a new synthesis encodes its bands and NDVI (default zstd alone; an
+    update keeps its store's codecs, and giving one with ``input`` is refused).
     """
     from . import run
 
@@ -70,7 +73,7 @@ def synthesize(products: Sequence[str | os.PathLike[str]], out: str | os.PathLik
         raise OptionsError("give the bands of the synthesis as bands=, not in the options")
     opts = OrthoOptions.of(options, n_dems=len(dems), **modes)
     source_path = _check_options(products, out_dir, algorithm, input, grid, crs, pixel_size,
-                                 bands, tile, dems, workers, scheduler)
+                                 bands, tile, dems, workers, scheduler, codec)
     if grid is not None and source_path is None:
         check_new_grid_size(grid, len(bands or ALL_BANDS), out_dir, max_pixels)
     paths = [str(Path(p).absolute()) if scheduler else str(p) for p in products]
@@ -89,7 +92,8 @@ def synthesize(products: Sequence[str | os.PathLike[str]], out: str | os.PathLik
                     target, paths, algorithm=algorithm, grid=grid, crs=crs,
                     pixel_size=pixel_size, dems=[str(d) for d in dems], options=opts,
                     bands=bands, reject_bright=reject_bright, tile=tile,
-                    progress=progress, max_pixels=max_pixels).run(runner)
+                    progress=progress, max_pixels=max_pixels,
+                    codec=parse(StoreCodec, codec or StoreCodec.ZSTD)).run(runner)
             except BaseException:
                 _undo(out_dir, created, was_empty)
                 raise
@@ -183,7 +187,7 @@ def _check_dems(dems: Sequence[Any]) -> None:
 def _check_options(products: Sequence[Any], out_dir: Path, algorithm: str | None,
                    input: Any, grid: OutputGrid | None, crs: Any, pixel_size: float | None,
                    bands: Sequence[int] | None, tile: int, dems: Sequence[Any],
-                   workers: int, scheduler: str | None) -> Path | None:
+                   workers: int, scheduler: str | None, codec: Any = None) -> Path | None:
     """MERSYN's parameter consistency checks (Appendix C), before any work."""
     if algorithm is not None:
         parse(MergeRule, algorithm)
@@ -205,11 +209,16 @@ def _check_options(products: Sequence[Any], out_dir: Path, algorithm: str | None
 
         parse_crs(crs)
     _check_dems(dems)
+    if codec is not None:
+        parse(StoreCodec, codec)
     if input is None:
         return None
     if grid is not None or crs is not None or pixel_size is not None or bands is not None:
         raise OptionsError("when an input synthesis is given, the grid (CRS, extent, pixel "
                            "size) and the bands come from it and shall not be given")
+    if codec is not None:
+        raise OptionsError("when an input synthesis is given, its layers keep their codec: "
+                           "give the store codec for a new synthesis only")
     source = open_synthesis(input)  # refuse a non-synthesis early (again under the lock)
     if algorithm is not None and algorithm != source.algorithm:
         raise OptionsError(f"{input}: is a {source.algorithm} synthesis, cannot update it "

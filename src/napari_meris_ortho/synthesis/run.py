@@ -23,7 +23,7 @@ import numpy as np
 
 from ..engine.synthesis import NDVI_NIR_BAND, NDVI_RED_BAND, TileState
 from ..errors import DemError, MerisOrthoError, OptionsError, OutputError
-from ..options import OrthoOptions
+from ..options import OrthoOptions, StoreCodec
 from ..progress import ProgressCallback
 from . import store as st
 from .reading import SynthesisStore
@@ -496,7 +496,8 @@ class Synthesis:
     def __init__(self, target: Target, paths: list[str], *, algorithm: str | None, grid: Any,
                  crs: Any, pixel_size: float | None, dems: list[str], options: OrthoOptions,
                  bands: Sequence[int] | None, reject_bright: bool, tile: int,
-                 progress: ProgressCallback | None, max_pixels: int | None = None) -> None:
+                 progress: ProgressCallback | None, max_pixels: int | None = None,
+                 codec: StoreCodec = StoreCodec.ZSTD) -> None:
         self.target = target
         self.paths = paths
         old = target.synthesis
@@ -509,6 +510,7 @@ class Synthesis:
         self.options = options
         self.reject_bright = reject_bright
         self.max_pixels = max_pixels
+        self.codec = codec
         self.progress = progress
         self.table: list[dict[str, Any]] = old.products if old else []
         self._branch: str | None = None  # run branch of a new synthesis
@@ -642,7 +644,7 @@ class Synthesis:
         base = repo.lookup_branch(st.BRANCH)
         layout = repo.writable_session(st.BRANCH)
         st.create_layout(layout.store, self._attributes([]), (self.grid.height, self.grid.width),
-                         self.tile, spec.names, spec.overviews, st.CHUNK)
+                         self.tile, spec.names, spec.overviews, st.CHUNK, self.codec)
         snapshot = layout.flush("synthesis layout: grid, bands, empty arrays")
         self._branch = f"{st.RUN_BRANCH_PREFIX}{uuid.uuid4().hex[:12]}"
         repo.create_branch(self._branch, snapshot)
