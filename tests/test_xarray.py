@@ -95,16 +95,18 @@ def test_ortho_result_round_trip_with_the_cli_cog(mapped) -> None:
         assert np.array_equal(back.radiance.values, ds.radiance.values, equal_nan=True)
 
 
-def test_synthesis_as_a_lazy_dataset(product, tmp_path) -> None:
+@pytest.mark.parametrize("codec", ["zstd", "delta-zstd"])
+def test_synthesis_as_a_lazy_dataset(product, tmp_path, codec) -> None:
     """The store as dask arrays chunked by its tile; values equal ``open_synthesis`` reads (0 ->
-    NaN for radiances, NDVI decoded); CRS and transform equal those of ``meris-ortho export``."""
+    NaN for radiances, NDVI decoded); CRS and transform equal those of ``meris-ortho export``;
+    for both store codecs."""
     import dask.array as da
 
     out = tmp_path / "syn"
     assert main(["-q", "synthesize", product, "--out", str(out), "--bands", "7,13",
                  "--algorithm", "max-ndvi", "--crs", "EPSG:4326", "--ul", "13.45", "46.70",
                  "--lr", "14.26", "46.19", "--pixel-size", "0.0015", "--elevation", "tiepoints",
-                 "--tile", "256", "--workers", "0"]) == 0
+                 "--tile", "256", "--workers", "0", "--codec", codec]) == 0
     store = open_synthesis(out)
     ds = store.to_xarray()
     for name in ("radiance", "count", "product", "ndvi"):
