@@ -75,6 +75,7 @@ def test_synthesis_log_and_export(products, tmp_path, capsys) -> None:
     text = capsys.readouterr().out
     names = [p["product_name"] for p in open_synthesis(out).products]
     assert text.count("snapshot ") == 2 and all(n in text for n in names)
+    assert text.splitlines()[0].endswith("2 product(s), codec zstd")
     assert text.index(names[1]) < text.index(names[0])  # newest first
     assert main(["-q", "export", str(out), "-o", str(tmp_path / "old.tif"), "--bands", "13",
                  "--at", first]) == 0

@@ -730,6 +730,7 @@ def test_store_codecs_kept_by_updates(products, tmp_path, workers) -> None:
         assert _codecs(roots["old"], layer) == zstd, layer
         assert _codecs(roots["new"], layer) == (delta if layer[0] in "bn" else zstd), layer
         assert _codecs(roots["new"], f"overview_2/{layer}") == zstd, layer
+    assert (open_synthesis(old).codec, open_synthesis(new).codec) == ("zstd", "delta-zstd")
     want = layers(new)
     assert sorted(want) == sorted(layers(old))
     for key, value in layers(old).items():

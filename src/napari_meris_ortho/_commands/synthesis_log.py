@@ -24,7 +24,8 @@ def run(args: argparse.Namespace) -> int:
     store = open_synthesis(args.store, at=args.at)
     grid = store.grid
     print(f"synthesis {args.store}: {store.algorithm}, bands {list(store.bands)}, "
-          f"{grid.width} x {grid.height} pixels, {len(store.products)} product(s)")
+          f"{grid.width} x {grid.height} pixels, {len(store.products)} product(s), "
+          f"codec {store.codec}")
     for commit in store.history():
         print(f"\nsnapshot {commit.snapshot}  {commit.written_at:%Y-%m-%d %H:%M:%S %Z}")
         print(f"    {commit.message}")

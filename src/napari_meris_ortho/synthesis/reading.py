@@ -54,6 +54,12 @@ class SynthesisStore:
         """The product table: entry k - 1 is the product of index k in the ``product`` layer."""
         return list(self.attrs.get("products", []))
 
+    @property
+    def codec(self) -> str:
+        """How the full-resolution bands are encoded: a ``StoreCodec`` value ("zstd",
+        "delta-zstd"), else the names of the codec pipeline joined by "+" (older stores)."""
+        return st.layer_codec(st.open_layer(self.session.store, self.layers()[0]))
+
     def layers(self) -> list[str]:
         """Layer names (``band_07``, ..., ``ndvi``, ``count``, ``product``)."""
         return st.layer_names(self.bands, self.algorithm)

@@ -395,6 +395,16 @@ def changed_chunks(new: np.ndarray, old: np.ndarray, chunk: int
                 yield i, i + a.shape[0], j, j + a.shape[1]
 
 
+def layer_codec(array: Any) -> str:
+    """The ``StoreCodec`` value of a zarr array's codec pipeline ("zstd": bytes + zstd;
+    "delta-zstd": numcodecs.delta + bytes + zstd), else its codec names joined by "+"."""
+    names = [str(c["name"]) for c in array.metadata.to_dict().get("codecs", [])]
+    known = {("bytes", "zstd"): StoreCodec.ZSTD,
+             ("numcodecs.delta", "bytes", "zstd"): StoreCodec.DELTA_ZSTD}
+    codec = known.get(tuple(names))
+    return str(codec.value) if codec is not None else "+".join(names)
+
+
 class _DeltaZstd:
     """A chunk's delta filter then zstd, as zarr's pipeline ``numcodecs.delta``, bytes
     (little-endian), zstd encodes it: ``encode`` (C-order little-endian chunk) -> stored
