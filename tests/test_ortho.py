@@ -100,7 +100,7 @@ def test_precompute_once_apply_to_any_band(files, dem_run):
     assert np.max(np.abs(c[ok] * sf - rad[ok])) <= 0.5 * sf + 1e-6  # float32 radiances
     assert np.any(np.abs(rad[ok] / sf - np.round(rad[ok] / sf)) > 0.1)  # really interpolated
     assert bil.stats.seconds["resample"] > 0 and bil.window == tuple(
-        bil.stats.product_lines_read)
+        bil.stats.product_lines_read) and bil.columns == tuple(bil.stats.product_columns_read)
 
 
 def test_parallax_shift_matches_the_antecedent_move(files, dem_run):
@@ -220,7 +220,8 @@ def wide_run(files, dem_run):
 
 @pytest.mark.parametrize("sampling", ["nearest", "bicubic"])
 def test_tile_reads_only_the_antecedent_lines(files, wide_run, sampling):
-    """A tile reads min..max antecedent line plus the kernel margin, and samples it right."""
+    """A tile reads min..max antecedent line and column plus the kernel margin, and samples
+    it right."""
     _, prod, dem, _ = files
     tile = wide_run.grid.window(150, 190, 200, 600)
     r = orthorectify(prod, grid=tile, dems=[dem], bands=[1, 2], sampling=sampling,
@@ -233,6 +234,10 @@ def test_tile_reads_only_the_antecedent_lines(files, wide_run, sampling):
     assert first == max(int(np.floor(line.min())) - pad, 0) > 0
     assert stop == int(np.floor(line.max())) + 2 + pad < 200
     assert stop - first <= 100  # at most half of the 200 product lines
+    c_first, c_stop = r.stats.product_columns_read
+    assert c_first == max(int(np.floor(col.min())) - pad, 0) > 0
+    assert c_stop == int(np.floor(col.max())) + 2 + pad < 513
+    assert c_stop - c_first <= 450  # fewer than the 513 columns
     if sampling == "nearest":  # band 1 counts the product line, band 2 the column
         np.testing.assert_array_equal(np.round(r.bands[1][ok] / f1), np.floor(line + 0.5))
         np.testing.assert_array_equal(np.round(r.bands[2][ok] / f2), np.floor(col + 0.5))
@@ -263,6 +268,7 @@ def test_allow_empty_keeps_terrain_points_beyond_the_boundary(files, wide_run):
                      diagnostics=True)
     assert e.valid.sum() == 0 and e.bands[1].max() == 0.0 and e.bands[2].shape == (20, 20)
     assert e.stats.processed_points == 0 and e.stats.product_lines_read == [0, 0]
+    assert e.stats.product_columns_read == [0, 0]
     assert e.stats.elevation_sources == {"tiepoints": 0, "0:dem.tif": 0}
     assert (e.diagnostics["iterations"] == -1).all()
 

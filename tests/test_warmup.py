@@ -32,7 +32,7 @@ def test_no_background_warm_up_when_disabled(monkeypatch):
     assert warmup.warm_up_in_background() is None
 
 
-LATE = ("_linear", "_antecedent_rows", "_solved_counts", "_inside_line_range", "_finite_extent",
+LATE = ("_linear", "_antecedent_rows", "_solved_counts", "_inside_range", "_finite_extent",
         "_nearest_range", "_gather_range", "_halve_average")
 _COMPILED = """
 import json, sys

@@ -103,7 +103,7 @@ def compile_late() -> float:
     from .engine.resample import (
         finite_extent,
         gather,
-        inside_line_range,
+        inside_range,
         nearest_pixel,
         overview_level,
     )
@@ -118,10 +118,10 @@ def compile_late() -> float:
     find_antecedents(z, z, np.zeros((2, 2), np.float32), 2, *spans, z, z, rates, 16.0, coef,
                      df, dj, tp.height, tp.width, 0, 0, 0.01, 10, False)
     solved_counts(np.zeros(2, np.int8), np.zeros(2, np.int8), -1, 2)
-    inside_line_range(np.zeros(2, np.float32), np.zeros(2, np.float32), 2, 2)
+    inside_range(np.zeros(2, np.float32), np.zeros(2, np.float32), 2, 2)
     finite_extent(np.zeros((2, 2), np.float32))
     index = nearest_pixel(np.zeros(4, np.float32), np.zeros(4, np.float32), 2, 2,
-                          line_offset=1)
+                          line_offset=1, col_offset=1)
     gather(np.zeros((1, 2, 2), np.uint16), index, np.zeros((1, 4), np.uint16))
     overview_level(np.ones((3, 3), np.uint16), 0.0)
     one = np.zeros(1)  # last: a map needs it early, before this child is up (it compiles it)

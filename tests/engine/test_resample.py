@@ -131,20 +131,41 @@ def test_gather_scaled_equals_counts_times_scale_in_float32():
 
 
 @pytest.mark.parametrize("dtype", [np.float32, np.float64])
-def test_inside_line_range_equals_the_masked_min_and_max(dtype):
-    from napari_meris_ortho.engine.resample import inside_line_range
+def test_inside_range_equals_the_masked_min_and_max(dtype):
+    from napari_meris_ortho.engine.resample import inside_range
 
     rng = np.random.default_rng(7)
     line = (rng.random((300, 40)) * 70 - 5).astype(dtype)
     col = (rng.random((300, 40)) * 140 - 5).astype(dtype)
     line[rng.random(line.shape) < 0.1] = np.nan
     inside = (line >= -0.5) & (line < 59.5) & (col >= -0.5) & (col < 128.5)
-    assert inside_line_range(line, col, 60, 129) == (float(line[inside].min()),
-                                                     float(line[inside].max()))
-    assert inside_line_range(line, col + 200, 60, 129) is None
-    # the edges: -0.5 is inside, H - 0.5 is not
+    assert inside_range(line, col, 60, 129) == (
+        float(line[inside].min()), float(line[inside].max()), float(col[inside].min()),
+        float(col[inside].max()))
+    assert inside_range(line, col + 200, 60, 129) is None
+    # the edges: -0.5 is inside, H - 0.5 (W - 0.5) is not
     edge = np.array([-0.5, 59.5, 10.0], dtype)
-    assert inside_line_range(edge, np.zeros(3, dtype), 60, 129) == (-0.5, 10.0)
+    assert inside_range(edge, np.zeros(3, dtype), 60, 129) == (-0.5, 10.0, 0.0, 0.0)
+    cols = np.array([-0.5, 128.5, 7.0], dtype)
+    assert inside_range(np.zeros(3, dtype), cols, 60, 129) == (0.0, 0.0, -0.5, 7.0)
+
+
+def test_nearest_pixel_in_a_window_of_lines_and_columns():
+    """The index in a window (line and column offsets) is the whole image's index of the
+    same pixel, re-based; points outside the window are -1."""
+    from napari_meris_ortho.engine.resample import nearest_pixel
+
+    rng = np.random.default_rng(3)
+    lines = rng.random(5000) * 44 - 2
+    cols = rng.random(5000) * 54 - 2
+    whole = nearest_pixel(lines, cols, 40, 50)
+    part = nearest_pixel(lines, cols, 20, 30, line_offset=10, col_offset=15)
+    ok = whole >= 0
+    wl, wc = whole[ok] // 50, whole[ok] % 50
+    inside = (wl >= 10) & (wl < 30) & (wc >= 15) & (wc < 45)
+    np.testing.assert_array_equal(part[ok][inside], (wl[inside] - 10) * 30 + wc[inside] - 15)
+    assert np.all(part[ok][~inside] == -1) and np.all(part[~ok] == -1)
+    assert inside.any() and (~inside).any()
 
 
 @pytest.mark.parametrize("shape", [(37, 51), (38, 52), (1, 9), (9, 1)])

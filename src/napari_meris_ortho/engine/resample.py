@@ -96,12 +96,13 @@ _keys_weights = njit(cache=True, inline="always")(keys_weights)
 
 
 def nearest_pixel(lines: np.ndarray, cols: np.ndarray, n_lines: int, n_cols: int,
-                  line_offset: int = 0) -> np.ndarray:
-    """Flat index ``round(l - line_offset) * W + round(p)`` of the antecedent pixel of every
-    point (Appendix C: iline_segment = TimRound(mer_x0), ties rounded up) in a window of
-    ``n_lines`` product lines starting at ``line_offset``; -1 where the point is NaN or outside
-    the window. float32 antecedents are taken as they are (no float64 copy; the arithmetic is
-    float64 either way). Any shape in, 1-D int32 out (int64 past 2**31 window pixels)."""
+                  line_offset: int = 0, col_offset: int = 0) -> np.ndarray:
+    """Flat index ``round(l - line_offset) * W + round(p - col_offset)`` of the antecedent
+    pixel of every point (Appendix C: iline_segment = TimRound(mer_x0), ties rounded up) in a
+    window of ``n_lines`` x ``n_cols`` (W) product pixels starting at line ``line_offset``,
+    column ``col_offset``; -1 where the point is NaN or outside the window. float32
+    antecedents are taken as they are (no float64 copy; the arithmetic is float64 either way).
+    Any shape in, 1-D int32 out (int64 past 2**31 window pixels)."""
     dtype = np.float32 if np.asarray(lines).dtype == np.float32 else np.float64
     line = np.ascontiguousarray(lines, dtype=dtype).reshape(-1)
     col = np.ascontiguousarray(cols, dtype=dtype).reshape(-1)
@@ -110,17 +111,19 @@ def nearest_pixel(lines: np.ndarray, cols: np.ndarray, n_lines: int, n_cols: int
     # int32 while the window's pixels fit (always, for MERIS): half the memory traffic of the
     # index, which every band's gather reads again
     out = np.empty(line.size, np.int32 if int(n_lines) * int(n_cols) < 2 ** 31 else np.int64)
-    args = (line, col, float(line_offset), np.int64(n_lines), np.int64(n_cols), out)
+    args = (line, col, float(line_offset), float(col_offset), np.int64(n_lines),
+            np.int64(n_cols), out)
     split_range(lambda lo, hi: _nearest_range(lo, hi, *args), line.size, min_size=1 << 16)
     return out
 
 
 @njit(cache=True, nogil=True)
-def _nearest_range(lo, hi, line, col, offset, n_lines, n_cols, out):  # pragma: no cover
+def _nearest_range(lo, hi, line, col, offset, col_offset, n_lines, n_cols, out
+                   ):  # pragma: no cover
     """Points [lo, hi) of ``nearest_pixel``."""
     for i in range(lo, hi):
         x = np.float64(line[i]) - offset
-        y = np.float64(col[i])
+        y = np.float64(col[i]) - col_offset
         if x >= -0.5 and x < n_lines - 0.5 and y >= -0.5 and y < n_cols - 0.5:
             out[i] = int(math.floor(x + 0.5)) * n_cols + int(math.floor(y + 0.5))
         else:
@@ -163,31 +166,34 @@ def _finite_extent(a):  # pragma: no cover
     return r0, r1, c0, c1
 
 
-def inside_line_range(lines: np.ndarray, cols: np.ndarray, n_lines: int, n_cols: int
-                      ) -> tuple[float, float] | None:
-    """Smallest and largest line of the antecedents inside the product (-0.5 <= l < H - 0.5,
-    -0.5 <= p < W - 0.5; NaN is outside), None when there is none; one pass (float32 or
-    float64, any shape)."""
+def inside_range(lines: np.ndarray, cols: np.ndarray, n_lines: int, n_cols: int
+                 ) -> tuple[float, float, float, float] | None:
+    """Smallest and largest line, then column, of the antecedents inside the product
+    (-0.5 <= l < H - 0.5, -0.5 <= p < W - 0.5; NaN is outside), None when there is none; one
+    pass (float32 or float64, any shape)."""
     line = np.asarray(lines).reshape(-1)
     col = np.asarray(cols).reshape(-1)
     if line.size != col.size:
         raise ValueError(f"lines ({line.size}) and cols ({col.size}) differ in size")
     dtype = np.float32 if line.dtype == np.float32 and col.dtype == np.float32 else np.float64
-    lo, hi = _inside_line_range(np.ascontiguousarray(line, dtype), np.ascontiguousarray(
-        col, dtype), float(n_lines), float(n_cols))
-    return None if lo > hi else (lo, hi)
+    lo, hi, c_lo, c_hi = _inside_range(np.ascontiguousarray(line, dtype),
+                                       np.ascontiguousarray(col, dtype), float(n_lines),
+                                       float(n_cols))
+    return None if lo > hi else (lo, hi, c_lo, c_hi)
 
 
 @njit(cache=True, nogil=True)
-def _inside_line_range(line, col, n_lines, n_cols):  # pragma: no cover
-    lo, hi = np.inf, -np.inf
+def _inside_range(line, col, n_lines, n_cols):  # pragma: no cover
+    lo, hi, c_lo, c_hi = np.inf, -np.inf, np.inf, -np.inf
     for i in range(line.size):
         x = np.float64(line[i])
         y = np.float64(col[i])
         if x >= -0.5 and x < n_lines - 0.5 and y >= -0.5 and y < n_cols - 0.5:
             lo = min(lo, x)
             hi = max(hi, x)
-    return lo, hi
+            c_lo = min(c_lo, y)
+            c_hi = max(c_hi, y)
+    return lo, hi, c_lo, c_hi
 
 
 def _pixels(images: np.ndarray) -> np.ndarray:

@@ -20,7 +20,7 @@ from .antecedents import (
     RADIANCE_UNITS,
     Antecedents,
     OrthoResult,
-    antecedent_line_window,
+    antecedent_window,
     band_metadata,
     bytes_per_output_pixel,
 )
@@ -35,6 +35,6 @@ from .core import (
 from .stats import SOURCE_NONE, SOURCE_TIEPOINTS, RunStats, histogram_lines
 
 __all__ = ["RADIANCE_UNITS", "SOURCE_NONE", "SOURCE_TIEPOINTS", "Antecedents", "OrthoResult",
-           "RunStats", "Segment", "antecedent_line_window", "band_metadata",
+           "RunStats", "Segment", "antecedent_window", "band_metadata",
            "bytes_per_output_pixel", "histogram_lines", "lonlat_bounds", "open_segment",
            "orthorectify", "precompute", "product_grid"]

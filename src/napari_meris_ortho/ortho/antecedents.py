@@ -143,21 +143,24 @@ def _held_band_bytes(n_bands: int) -> int:
     return 8 * n_bands + 3
 
 
-def antecedent_line_window(line: np.ndarray, col: np.ndarray, n_lines: int, n_cols: int,
-                           sampling: str = "nearest") -> tuple[int, int]:
-    """Product lines ``[first, stop)`` holding every pixel the resampling of the antecedents
-    inside the product reads (section 3.1 "Retrieve the antecedent"): min..max antecedent line
-    plus the kernel margin (nearest/bilinear: 0 and +1 line, bicubic: -1 and +2); (0, 0) when
-    no antecedent is inside."""
-    from ..engine.resample import inside_line_range
+def antecedent_window(line: np.ndarray, col: np.ndarray, n_lines: int, n_cols: int,
+                      sampling: str = "nearest") -> tuple[int, int, int, int]:
+    """Product lines ``[first, stop)`` and columns ``[col_first, col_stop)`` holding every
+    pixel the resampling of the antecedents inside the product reads (section 3.1 "Retrieve
+    the antecedent"): min..max antecedent line (column) plus the kernel margin
+    (nearest/bilinear: 0 and +1, bicubic: -1 and +2); all 0 when no antecedent is inside."""
+    from ..engine.resample import inside_range
 
-    span = inside_line_range(line, col, n_lines, n_cols)
+    span = inside_range(line, col, n_lines, n_cols)
     if span is None:
-        return 0, 0
+        return 0, 0, 0, 0
     before, after = Sampling(sampling).margin
-    first = int(math.floor(span[0])) - before
-    stop = int(math.floor(span[1])) + 1 + after
-    return max(first, 0), min(stop, n_lines)
+
+    def window(lo: float, hi: float, n: int) -> tuple[int, int]:
+        return (max(int(math.floor(lo)) - before, 0),
+                min(int(math.floor(hi)) + 1 + after, n))
+
+    return (*window(span[0], span[1], n_lines), *window(span[2], span[3], n_cols))
 
 
 #: ``Antecedents`` arrays and their background: antecedent line and column (NaN), iterations
@@ -238,11 +241,22 @@ class Antecedents:
 
     @property
     def window(self) -> tuple[int, int]:
+        """Product lines [first, stop) the resampling reads (``antecedent_window``)."""
         first, stop = self.stats.product_lines_read
+        return int(first), int(stop)
+
+    @property
+    def columns(self) -> tuple[int, int]:
+        """Product columns [first, stop) the resampling reads (``antecedent_window``)."""
+        first, stop = self.stats.product_columns_read
         return int(first), int(stop)
 
     def _rows(self) -> slice:
         first, stop = self.window
+        return slice(first, stop)
+
+    def _cols(self) -> slice:
+        first, stop = self.columns
         return slice(first, stop)
 
     def _extent(self) -> tuple[int, int, int, int]:
@@ -286,9 +300,10 @@ class Antecedents:
 
         if self._index is None:
             first, stop = self.window
+            c_first, c_stop = self.columns
             line, col = self._points()
-            self._index = nearest_pixel(line, col, stop - first, int(self.prod.width),
-                                        line_offset=first)
+            self._index = nearest_pixel(line, col, stop - first, c_stop - c_first,
+                                        line_offset=first, col_offset=c_first)
         return self._index
 
     def _timed(self, key: str, t0: float) -> None:
@@ -316,12 +331,13 @@ class Antecedents:
         self._timed("resample", t0)
 
     def _stack(self, images: Sequence[Any], dtype: Any) -> np.ndarray:
-        """(n, window lines, W) native copy of the window of each image (memmaps read here)."""
+        """(n, window lines, window columns) native copy of the window of each image (memmaps
+        read here)."""
         t0 = time.perf_counter()
-        rows = self._rows()
-        out = np.empty((len(images), rows.stop - rows.start, int(self.prod.width)), dtype)
+        rows, cols = self._rows(), self._cols()
+        out = np.empty((len(images), rows.stop - rows.start, cols.stop - cols.start), dtype)
         for k, im in enumerate(images):
-            out[k] = im[rows]
+            out[k] = im[rows, cols]
         self._timed("read_bands", t0)
         return out
 
@@ -338,12 +354,13 @@ class Antecedents:
         t0 = time.perf_counter()
         line, col = self._points()
         lines = line.astype(np.float64) - self.window[0]
-        out = resample_bands(list(stack), lines, col, self.sampling.value)
+        cols = col.astype(np.float64) - self.columns[0]
+        out = resample_bands(list(stack), lines, cols, self.sampling.value)
         for k, fill in enumerate(self._no_data(bands)):
             if fill is not None:
                 mask = stack[k] == fill
                 if mask.any():
-                    out[k][touches(mask, lines, col, self.sampling.value)] = 0.0
+                    out[k][touches(mask, lines, cols, self.sampling.value)] = 0.0
         self._timed("resample", t0)
         return out
 

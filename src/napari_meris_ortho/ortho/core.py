@@ -37,7 +37,7 @@ from .antecedents import (
     BACKGROUND,
     Antecedents,
     OrthoResult,
-    antecedent_line_window,
+    antecedent_window,
     bytes_per_output_pixel,
     on_whole_grid,
 )
@@ -560,8 +560,7 @@ def _antecedents(job: _Job, blocks: _Blocks, seconds: dict[str, float],
     """The ``Antecedents`` of a run: diagnostics completed, the Appendix B statistics."""
     prod, opts, hmode = job.prod, job.options, job.hmode
     line, col, iters, diag = blocks.line, blocks.col, blocks.iters, blocks.diag
-    window = antecedent_line_window(line, col, int(prod.height), int(prod.width),
-                                    opts.sampling)
+    window = antecedent_window(line, col, int(prod.height), int(prod.width), opts.sampling)
     valid = iters >= 0
     hist = predcorr.iteration_histogram(
         iters, pixelgeo.MAX_PIXEL_ITERATIONS if job.pixel is not None else predcorr.MAX_ITERATIONS)
@@ -609,7 +608,7 @@ def _empty_antecedents(job: _Job) -> Antecedents:
     hist = np.zeros(predcorr.MAX_ITERATIONS + 1, np.int64)
     sources = np.zeros(len(stack.sources) + 1 if stack is not None else 1, np.int64)
     seconds = {**dict.fromkeys(TIMINGS, 0.0), "total": time.perf_counter() - job.t_start}
-    stats = _stats(job, search={}, hist=hist, processed=0, window=(0, 0), sources=sources,
+    stats = _stats(job, search={}, hist=hist, processed=0, window=(0, 0, 0, 0), sources=sources,
                    seconds=seconds)
     none = np.zeros((0, 0), np.float32)
     return Antecedents(job.prod, grid, (0, 0, 0, 0), none, none, np.zeros((0, 0), np.int8),
@@ -620,7 +619,7 @@ def _empty_antecedents(job: _Job) -> Antecedents:
 
 
 def _stats(job: _Job, *, search: dict[str, int], hist: np.ndarray, processed: int,
-           window: tuple[int, int], sources: np.ndarray, seconds: dict[str, float]
+           window: tuple[int, int, int, int], sources: np.ndarray, seconds: dict[str, float]
            ) -> RunStats:
     """The ``RunStats`` of a run (``sources``: points per elevation source, tie points at 0,
     DEM k at k + 1)."""
@@ -640,7 +639,8 @@ def _stats(job: _Job, *, search: dict[str, int], hist: np.ndarray, processed: in
         facet_search=search,
         iterations_histogram=[int(v) for v in hist],
         processed_points=processed,
-        product_lines_read=list(window),
+        product_lines_read=list(window[:2]),
+        product_columns_read=list(window[2:]),
         output_points=nr * nc,
         elevation_sources=source_counts(sources, names, job.hmode != predcorr.HEIGHT_NONE),
         seconds=seconds,

@@ -48,6 +48,8 @@ class RunStats:
     processed_points: int
     #: product lines [first, stop) read by the resampling
     product_lines_read: list[int]
+    #: product columns [first, stop) read by the resampling
+    product_columns_read: list[int]
     output_points: int
     #: points per elevation source: "tiepoints" and "k:NAME" for DEM k (empty: elevation none)
     elevation_sources: dict[str, int]
