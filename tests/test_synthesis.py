@@ -576,6 +576,51 @@ def test_compact_layers_round_trip_within_half_a_count(products, tmp_path, sampl
         assert (stored[~inside] == 0).all()
 
 
+def test_stored_tile_is_read_while_its_first_piece_is_computed(products, tmp_path,
+                                                               monkeypatch) -> None:
+    """A tile task starts reading its stored tile before its first piece is orthorectified
+    (``run._read_ahead``): each read begins before the end of the first piece of its tile,
+    and the update's layers equal those of one run of both products."""
+    import threading
+    import time
+
+    from napari_meris_ortho.synthesis import run
+
+    out = tmp_path / "s"
+    synthesize([products["cloudy1"]], out, grid=GRID, bands=BANDS, tile=256,
+               algorithm="max-ndvi", elevation="tiepoints")
+    reads: dict[tuple[int, ...], float] = {}
+    firsts: dict[tuple[int, ...], float] = {}
+    lock = threading.Lock()
+    real_read, real_segment = st.read_tile, run.segment_task
+
+    def read_tile(store, names, window):
+        with lock:
+            reads.setdefault(tuple(window), time.perf_counter())
+        return real_read(store, names, window)
+
+    def segment_task(spec, index, path, piece, extent):
+        result = real_segment(spec, index, path, piece, extent)
+        tiles = [w for w in tiles_of if w[0] <= piece[0] < w[1] and w[2] <= piece[2] < w[3]]
+        with lock:
+            for w in tiles:
+                firsts.setdefault(w, time.perf_counter())
+        return result
+
+    tiles_of = [tuple(w) for w in tiles((0, GRID.height, 0, GRID.width), 256)]
+    monkeypatch.setattr(st, "read_tile", read_tile)
+    monkeypatch.setattr(run, "segment_task", segment_task)
+    synthesize([products["cloudy2"]], out, input=out, elevation="tiepoints")
+    monkeypatch.undo()
+    assert reads and set(reads) <= set(firsts)
+    assert all(reads[w] < firsts[w] for w in reads), (reads, firsts)
+    both = tmp_path / "both"
+    synthesize([products["cloudy1"], products["cloudy2"]], both, grid=GRID, bands=BANDS,
+               tile=256, algorithm="max-ndvi", elevation="tiepoints")
+    want = layers(both)
+    assert all(value.tobytes() == want[key].tobytes() for key, value in layers(out).items())
+
+
 def test_update_writes_only_the_chunks_it_changes(products, tmp_path, monkeypatch) -> None:
     """An update rewrites exactly the chunks whose values change, counted in Icechunk's diff
     of the two commits: for ``count``, the chunks holding a validated pixel of the new product

@@ -404,19 +404,26 @@ def tile_task(fork: Any, spec: Spec, window: Window, pieces: Iterable[Piece],
     state: TileState | None = None
     stored: dict[str, np.ndarray] = {}
     merged: set[int] = set()
-    for p in pieces:
-        done.pieces.append(Piece(p.index, p.window, None, p.processed, p.validated, p.error,
-                                 p.dem_error))
-        if p.state is None or p.error is not None or p.dem_error is not None:
-            continue
-        if state is None:  # the stored tile, read once a piece has something to merge
-            stored = st.read_tile(fork.store, spec.names, window)  # counts (compact)
-            state = _state_of(stored, spec)
-        r0, r1, c0, c1 = (p.window[0] - window[0], p.window[1] - window[0],
-                          p.window[2] - window[2], p.window[3] - window[2])
-        combine(state.window(r0, r1, c0, c1), p.state, rank)
-        merged.add(p.index)
-        p.state = None  # merged: its memory goes
+    ahead = _read_ahead(fork.store, spec.names, window)
+    try:
+        for p in pieces:
+            done.pieces.append(Piece(p.index, p.window, None, p.processed, p.validated,
+                                     p.error, p.dem_error))
+            if p.state is None or p.error is not None or p.dem_error is not None:
+                continue
+            if state is None:  # the stored tile, once a piece has something to merge
+                stored = ahead.result()  # counts (compact)
+                state = _state_of(stored, spec)
+            r0, r1, c0, c1 = (p.window[0] - window[0], p.window[1] - window[0],
+                              p.window[2] - window[2], p.window[3] - window[2])
+            combine(state.window(r0, r1, c0, c1), p.state, rank)
+            merged.add(p.index)
+            p.state = None  # merged: its memory goes
+    finally:
+        # nothing to merge, or an error (a Cancel): the read is dropped, and waited for when
+        # it has begun (no read of the fork left running while the run is undone)
+        if state is None and not ahead.cancel():
+            ahead.exception()
     if state is None:
         return done
     arrays = _arrays_of(state, spec)
@@ -428,6 +435,19 @@ def tile_task(fork: Any, spec: Spec, window: Window, pieces: Iterable[Piece],
     done.winners = winner_counts(state.winner, merged)
     done.fork = fork
     return done
+
+
+def _read_ahead(store: Any, names: Sequence[str], window: Window) -> Any:
+    """A future of the stored tile (``read_tile``) read on a thread of its own, started before
+    the first piece is orthorectified: the chunk fetches and their decompression (Icechunk's
+    I/O, zstd: outside the GIL) overlap that work instead of following it."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="synthesis-reader")
+    try:
+        return pool.submit(st.read_tile, store, names, window)
+    finally:
+        pool.shutdown(wait=False)  # the thread ends with its read
 
 
 def winner_counts(winner: np.ndarray, indices: set[int]) -> dict[int, int]:
