@@ -459,9 +459,8 @@ class _Blocks:
         shape = (area[1] - area[0], area[3] - area[2])
         diag: dict[str, np.ndarray] = {}
         if diagnostics:
-            diag = {name: _background(name, shape)
-                    for name in ("elevation", "elevation_source", "shift_east_m",
-                                 "shift_north_m")}
+            diag = {name: _background(name, shape) for name in _LAYERS
+                    if name not in BACKGROUND}
         # line, col, iterations: not searched (rows or columns without spans) until ``add``
         return cls(area, _background("line", shape), _background("col", shape),
                    _background("iterations", shape), diag, np.zeros(n_dems + 1, np.int64))
@@ -581,12 +580,13 @@ def _antecedents(job: _Job, blocks: _Blocks, seconds: dict[str, float],
                        whole_grid={k: diag[k] for k in BACKGROUND if k in diag})
 
 
-#: background value and type of the diagnostics layers (``OrthoResult.diagnostics``): the
-#: antecedents' own (``BACKGROUND``), the elevation, its source and the parallax shifts
+#: background value and type of the diagnostics layers (``OrthoResult.diagnostics``), in
+#: the order of an empty result's: the antecedents' own (``BACKGROUND``), the elevation, its
+#: source and the parallax shifts
 _LAYERS: dict[str, tuple[float, Any]] = {
     "line": (BACKGROUND["line"], np.float32), "col": (BACKGROUND["col"], np.float32),
-    "iterations": (BACKGROUND["iterations"], np.int8), "elevation": (np.nan, np.float32),
-    "elevation_source": (SOURCE_NONE, np.int8), "shift_east_m": (np.nan, np.float32),
+    "elevation": (np.nan, np.float32), "elevation_source": (SOURCE_NONE, np.int8),
+    "iterations": (BACKGROUND["iterations"], np.int8), "shift_east_m": (np.nan, np.float32),
     "shift_north_m": (np.nan, np.float32)}
 
 
@@ -602,9 +602,7 @@ def _empty_antecedents(job: _Job) -> Antecedents:
     nr, nc = grid.shape
     diag: dict[str, np.ndarray] = {}
     if job.options.diagnostics:
-        diag = {name: _background(name, (nr, nc)) for name in (
-            "line", "col", "elevation", "elevation_source", "iterations", "shift_east_m",
-            "shift_north_m")}
+        diag = {name: _background(name, (nr, nc)) for name in _LAYERS}
     hist = np.zeros(predcorr.MAX_ITERATIONS + 1, np.int64)
     sources = np.zeros(len(stack.sources) + 1 if stack is not None else 1, np.int64)
     seconds = {**dict.fromkeys(TIMINGS, 0.0), "total": time.perf_counter() - job.t_start}
