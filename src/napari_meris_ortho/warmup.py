@@ -95,7 +95,7 @@ def compile_late() -> float:
     """Compile, on tiny inputs of the types ``meris-ortho map`` gives them, the kernels a map
     calls after its first ones, in the order it needs them (while the map compiles the
     primary-grid search, this compiles what comes next): the height rates and
-    prediction/correction rows, the counts of solved points, the antecedent line window, the
+    prediction/correction rows, the counts of solved points, the antecedent window, the
     extent of the antecedents, the nearest-pixel index and gather of counts, the COG overview
     kernel, and the DEM lookup and geoid interpolation (the numba cache keeps them); seconds."""
     from .engine import terrain
