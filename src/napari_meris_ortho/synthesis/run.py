@@ -209,6 +209,9 @@ class Spec:
     #: band layers stored as uint16 counts (store versions 3, 4): every product's radiances are
     #: quantized to them before the merge, so the merge compares what the store holds
     compact: bool = True
+    #: the snapshot the tile tasks' forks start from (``Run._session``: no uncommitted
+    #: changes): its arrays' metadata is read once per process (``store._open_array``)
+    layout: str = ""
 
     @property
     def needed(self) -> tuple[int, ...]:
@@ -404,7 +407,7 @@ def tile_task(fork: Any, spec: Spec, window: Window, pieces: Iterable[Piece],
     state: TileState | None = None
     stored: dict[str, np.ndarray] = {}
     merged: set[int] = set()
-    ahead = _read_ahead(fork.store, spec.names, window)
+    ahead = _read_ahead(fork.store, spec.names, window, spec.layout)
     try:
         for p in pieces:
             done.pieces.append(Piece(p.index, p.window, None, p.processed, p.validated,
@@ -428,16 +431,17 @@ def tile_task(fork: Any, spec: Spec, window: Window, pieces: Iterable[Piece],
         return done
     arrays = _arrays_of(state, spec)
     if writer is None:
-        done.chunks = st.write_tile(fork.store, window, arrays, stored, spec.overviews)
+        done.chunks = st.write_tile(fork.store, window, arrays, stored, spec.overviews,
+                                    spec.layout)
     else:
         done.writing = writer.submit(lambda: st.write_tile(fork.store, window, arrays, stored,
-                                                           spec.overviews))
+                                                           spec.overviews, spec.layout))
     done.winners = winner_counts(state.winner, merged)
     done.fork = fork
     return done
 
 
-def _read_ahead(store: Any, names: Sequence[str], window: Window) -> Any:
+def _read_ahead(store: Any, names: Sequence[str], window: Window, layout: str = "") -> Any:
     """A future of the stored tile (``read_tile``) read on a thread of its own, started before
     the first piece is orthorectified: the chunk fetches and their decompression (Icechunk's
     I/O, zstd: outside the GIL) overlap that work instead of following it."""
@@ -445,7 +449,7 @@ def _read_ahead(store: Any, names: Sequence[str], window: Window) -> Any:
 
     pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="synthesis-reader")
     try:
-        return pool.submit(st.read_tile, store, names, window)
+        return pool.submit(st.read_tile, store, names, window, layout)
     finally:
         pool.shutdown(wait=False)  # the thread ends with its read
 
@@ -617,6 +621,7 @@ class Synthesis:
             return _log(result)
         spec = self._spec()
         session, finish = self._session(spec)
+        spec = replace(spec, layout=str(session.snapshot_id))
         try:
             rank, jobs = self._rank(todo), self._jobs(todo)
             failed: set[int] = set()
