@@ -14,6 +14,7 @@ from napari_meris_ortho.engine.synthesis import (
     ndvi_decode,
     ndvi_encode,
     ndvi_value,
+    segment_counts_state,
     segment_state,
     validated_pixels,
 )
@@ -78,6 +79,34 @@ def test_segment_state_keeps_only_positive_valid_radiances() -> None:
     state = segment_state(segment, np.array([[True, True, True, False]]), 3)
     assert state.bands.tolist() == [[[5.0, 0.0, 0.0, 0.0]]]
     assert state.winner.tolist() == [[3, 3, 3, 0]] and state.count.tolist() == [[1, 1, 1, 0]]
+
+
+def test_segment_counts_state_is_the_counts_of_segment_state() -> None:
+    """A product's contribution as 16-bit counts, made in one pass from the whole planes
+    (a window from an origin), equals ``segment_state`` of the cropped window with its bands
+    encoded as a compact store encodes them: round(v / scale) on [1, 65535], background
+    (v <= 0, NaN, invalid) 0, values past 65535 counts clipped, tiny ones raised to 1."""
+    rng = np.random.default_rng(11)
+    planes = [rng.uniform(-5.0, 400.0, (40, 50)).astype(np.float32) for _ in range(3)]
+    planes[0][3, 7], planes[1][5, 9], planes[2][6, 6] = np.nan, 1e-6, 1e9
+    scales = [0.0109, 0.0057, 0.0031]
+    divisors = [float(np.float32(s)) for s in scales]
+    valid = rng.random((30, 35)) > 0.2
+    r0, c0 = 3, 6
+    red, nir = planes[1][r0:r0 + 30, c0:c0 + 35], planes[2][r0:r0 + 30, c0:c0 + 35]
+    state = segment_counts_state(planes, (r0, c0), divisors, valid, 4, red, nir)
+    window = np.stack([p[r0:r0 + 30, c0:c0 + 35] for p in planes])
+    expected = segment_state(window, valid, 4, red, nir)
+    for k, divisor in enumerate(divisors):
+        v = expected.bands[k].astype(np.float64)
+        counts = np.clip(np.floor(v / divisor + 0.5), 1, 65535).astype(np.uint16)
+        counts[~(v > 0)] = 0
+        np.testing.assert_array_equal(state.bands[k], counts)
+    assert state.bands.dtype == np.uint16 and state.bands.max() == 65535
+    assert state.bands[1][5 - r0, 9 - c0] == (1 if valid[5 - r0, 9 - c0] else 0)
+    np.testing.assert_array_equal(state.winner, expected.winner)
+    np.testing.assert_array_equal(state.count, expected.count)
+    np.testing.assert_array_equal(state.ndvi, expected.ndvi)
 
 
 @pytest.mark.parametrize("ndvi", [False, True])

@@ -31,6 +31,10 @@ NDVI_SHIFT = (-1.0 * NDVI_MAX_PIXEL - 1.0 * NDVI_MIN_PIXEL) / (NDVI_MAX_PIXEL - 
 NDVI_RED_BAND = 7
 NDVI_NIR_BAND = 13
 
+#: largest count of a radiance stored on 16 bits (a compact store's band layers; 0 =
+#: background)
+MAX_COUNT = 65535
+
 
 @njit(cache=True)
 def ndvi_value(red: float, nir: float) -> float:
@@ -109,6 +113,40 @@ def _segment_fill(bands: np.ndarray, winner: np.ndarray, segment: np.ndarray,
                     bands[b, i, j] = v if v > 0.0 else np.float32(0.0)
 
 
+@njit(cache=True)
+def count_of(value: float, divisor: float) -> np.uint16:
+    """A radiance as a 16-bit count of ``divisor`` (a band's scale, in float64):
+    floor(v / scale + 0.5) on [1, MAX_COUNT] for v > 0; 0 (background) for v <= 0 and NaN."""
+    v = np.float64(value)
+    if not v > 0.0:
+        return np.uint16(0)
+    q = np.floor(v / divisor + 0.5)
+    if q < 1.0:
+        q = 1.0
+    if q > MAX_COUNT:
+        q = MAX_COUNT
+    return np.uint16(q)
+
+
+@njit(cache=True, parallel=True)
+def encode_counts(values: np.ndarray, divisor: float) -> np.ndarray:
+    """``count_of`` every value of a 1-D array."""
+    out = np.empty(values.shape[0], np.uint16)
+    for i in prange(values.shape[0]):
+        out[i] = count_of(values[i], divisor)
+    return out
+
+
+@njit(cache=True, parallel=True)
+def _count_plane(out: np.ndarray, plane: np.ndarray, valid: np.ndarray, r0: int, c0: int,
+                 divisor: float) -> None:
+    """``out`` = the counts (``count_of``) of ``plane[r0:, c0:]`` where ``valid``, 0 elsewhere."""
+    rows, cols = out.shape
+    for i in prange(rows):
+        for j in range(cols):
+            out[i, j] = count_of(plane[r0 + i, c0 + j], divisor) if valid[i, j] else 0
+
+
 @njit(cache=True, parallel=True)
 def _ndvi_codes(red: np.ndarray, nir: np.ndarray, valid: np.ndarray) -> np.ndarray:
     """16-bit NDVI (float32 from R7, R13; Appendix C coding) of the valid pixels, 0 elsewhere."""
@@ -145,6 +183,26 @@ class TileState:
     def copy(self) -> TileState:
         return TileState(self.bands.copy(), self.count.copy(), self.winner.copy(),
                          None if self.ndvi is None else self.ndvi.copy())
+
+
+def segment_counts_state(planes: list[np.ndarray], origin: tuple[int, int],
+                         divisors: list[float], valid: np.ndarray, index: int,
+                         red: np.ndarray | None = None, nir: np.ndarray | None = None
+                         ) -> TileState:
+    """``segment_state`` of the window of ``planes`` (rows, cols radiances; window of the
+    shape of ``valid`` from ``origin``) with its bands as the 16-bit counts of ``divisors``
+    (``count_of``): one pass per band, no float32 copy of the window."""
+    valid = np.ascontiguousarray(valid, dtype=np.bool_)
+    r0, c0 = origin
+    bands = np.empty((len(planes), *valid.shape), np.uint16)
+    for k, plane in enumerate(planes):
+        _count_plane(bands[k], plane, valid, int(r0), int(c0), float(divisors[k]))
+    winner = np.where(valid, np.int32(index), np.int32(0))
+    state = TileState(bands, valid.astype(np.uint16), winner)
+    if red is not None and nir is not None:
+        state.ndvi = _ndvi_codes(np.ascontiguousarray(red, np.float32),
+                                 np.ascontiguousarray(nir, np.float32), valid)
+    return state
 
 
 def segment_state(segment: np.ndarray, valid: np.ndarray, index: int,

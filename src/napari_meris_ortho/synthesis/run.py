@@ -228,7 +228,7 @@ def _needed(bands: Sequence[int], algorithm: str) -> tuple[int, ...]:
 class Piece:
     """One product's contribution to one tile (``state`` covers ``window``; None: nothing).
     In a compact store (``Spec.compact``) the state's bands are the store's uint16 counts
-    (``store.encode_band`` of radiances already quantized to them: exact), merged as counts
+    (``engine.synthesis.count_of`` of radiances already quantized to them: exact), merged as counts
     by ``tile_task`` (``_state_of``)."""
 
     index: int
@@ -303,7 +303,7 @@ def segment_task(spec: Spec, index: int, path: str, window: Window,
     """Orthorectify product ``path`` on ``window`` of the grid: its contribution (cropped to
     its validated pixels); ``extent``: the product's whole window of the grid (default
     ``window``). Errors come back as text (exceptions may not survive pickling)."""
-    from ..engine.synthesis import segment_state, validated_pixels
+    from ..engine.synthesis import segment_counts_state, segment_state, validated_pixels
 
     try:
         segment = _segment(spec, path, window if extent is None else extent)
@@ -325,15 +325,18 @@ def segment_task(spec: Spec, index: int, path: str, window: Window,
     if rows.size == 0:
         return piece
     r0, r1, c0, c1 = int(rows[0]), int(rows[-1]) + 1, int(cols[0]), int(cols[-1]) + 1
-    segment = np.stack([result.bands[b][r0:r1, c0:c1] for b in spec.bands])
     red = nir = None
     if spec.algorithm == "max-ndvi":
         red = result.bands[NDVI_RED_BAND][r0:r1, c0:c1]
         nir = result.bands[NDVI_NIR_BAND][r0:r1, c0:c1]
-    piece.state = segment_state(segment, valid[r0:r1, c0:c1], index, red, nir)
     if spec.compact:  # the store's counts: half the bytes to ship and hold until the merge
-        piece.state.bands = np.stack([st.encode_band(piece.state.bands[k], st.BAND_SCALES[b])
-                                      for k, b in enumerate(spec.bands)])
+        piece.state = segment_counts_state(
+            [result.bands[b] for b in spec.bands], (r0, c0),
+            [float(np.float32(st.BAND_SCALES[b])) for b in spec.bands], valid[r0:r1, c0:c1],
+            index, red, nir)
+    else:
+        segment = np.stack([result.bands[b][r0:r1, c0:c1] for b in spec.bands])
+        piece.state = segment_state(segment, valid[r0:r1, c0:c1], index, red, nir)
     piece.window = (window[0] + r0, window[0] + r1, window[2] + c0, window[2] + c1)
     return piece
 

@@ -77,8 +77,6 @@ ZSTD_LEVEL = 1
 DELTA_LAYERS = ("band_", "ndvi")
 #: stored radiance of a band count: count x the band's Appendix A factor (Scaling Factor GADS)
 BAND_SCALES: dict[int, float] = dict(enumerate(ScalingFactors().radiance, start=1))
-#: largest stored count (radiances above 65535 x the scale are clipped to it)
-MAX_COUNT = 65535
 BRANCH = "main"
 LOCK_SUFFIX = ".meris-ortho-lock"
 COMMIT_KEY = "meris_ortho"
@@ -124,16 +122,14 @@ def _band_number(name: str) -> int | None:
 
 def encode_band(values: np.ndarray, scale: float) -> np.ndarray:
     """float32 radiances -> uint16 counts: round(v / scale) on [1, MAX_COUNT] for v > 0, 0 for
-    the background (v <= 0 or NaN)."""
-    v = np.array(values, np.float64)  # one float64 copy, worked on in place
-    background = ~(v > 0)
-    with np.errstate(invalid="ignore"):
-        v /= float(np.float32(scale))
-        v += 0.5
-        np.floor(v, out=v)
-        np.clip(v, 1, MAX_COUNT, out=v)
-    v[background] = 0
-    return v.astype(np.uint16)
+    the background (v <= 0 or NaN): ``engine.synthesis.count_of``."""
+    from ..engine.synthesis import encode_counts
+
+    v = np.asarray(values)
+    if v.dtype not in (np.float32, np.float64):
+        v = v.astype(np.float64)
+    flat = encode_counts(np.ascontiguousarray(v).reshape(-1), float(np.float32(scale)))
+    return flat.reshape(v.shape)
 
 
 def decode_band(counts: np.ndarray, scale: float, out: np.ndarray | None = None
