@@ -5,7 +5,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from napari_meris_ortho.engine.resample import overview_level, resample, resample_bands
+from napari_meris_ortho.engine.resample import (
+    copy_window,
+    overview_level,
+    resample,
+    resample_bands,
+)
 from napari_meris_ortho.errors import OptionsError
 
 
@@ -231,3 +236,26 @@ def test_gather_places_a_window_of_points_in_the_grid_rows():
         gather(images, index, out.reshape(3, -1), (w, nc, (nr - h + 1) * nc))
     with pytest.raises(ValueError, match="do not fit"):
         gather(images, index, out.reshape(3, -1), (w + 1, nc, 0))
+
+
+def test_copy_window_swaps_big_endian_windows_as_numpy_converts_them():
+    """The window of a big-endian uint16 image (the records of an N1 band: a 13-byte header
+    then the pixels) is copied with its values, as numpy's conversion gives them; any other
+    dtype (native uint16, uint8 flags, float) is numpy's copy."""
+    rng = np.random.default_rng(5)
+    records = np.zeros((700, 13 + 2 * 301), np.uint8)
+    records[:, 13:] = rng.integers(0, 256, (700, 602), dtype=np.uint8)
+    image = records[:, 13:].view(">u2")
+    assert image.shape == (700, 301) and not image.dtype.isnative
+    for rows, cols in [(slice(0, 700), slice(0, 301)), (slice(17, 650), slice(3, 290)),
+                       (slice(5, 6), slice(100, 101))]:
+        window = image[rows, cols]
+        out = np.empty(window.shape, np.uint16)
+        copy_window(out, window)
+        np.testing.assert_array_equal(out, window.astype(np.uint16))
+        assert out.max() > 255 or out.size == 1
+    for src in (image.astype(np.uint16), image.astype(np.uint8), image.astype(np.float32)):
+        out = np.empty(src.shape, src.dtype)
+        copy_window(out, src)
+        np.testing.assert_array_equal(out, src)
+

@@ -203,6 +203,30 @@ def _pixels(images: np.ndarray) -> np.ndarray:
     return a.reshape(a.shape[0], -1)
 
 
+def copy_window(out: np.ndarray, window: np.ndarray) -> None:
+    """``out[...] = window`` for 2-D uint16 arrays, the window of an image of the other byte
+    order (an N1 band's big-endian memory map) byte-swapped on the engine's threads: a tile's
+    15-band stack in 5 ms instead of numpy's 11 ms (fr-alps, 1100 x 690 pixels a band). Any
+    other dtype or byte order: numpy's copy."""
+    swapped = window.dtype.newbyteorder("=") == np.uint16 and not window.dtype.isnative
+    if (not swapped or out.dtype != np.uint16 or window.ndim != 2
+            or out.shape != window.shape or window.strides[1] != 2):
+        out[...] = window
+        return
+    native = np.asarray(window).view(np.uint16)  # the stored bytes, read as native
+    split_range(lambda lo, hi: _swapped_rows(lo, hi, native, out), out.shape[0],
+                min_size=64)
+
+
+@njit(cache=True, nogil=True)
+def _swapped_rows(lo, hi, src, out):  # pragma: no cover - numba
+    """Rows [lo, hi) of ``copy_window``: the two bytes of every value swapped."""
+    for i in range(lo, hi):
+        for j in range(out.shape[1]):
+            v = src[i, j]
+            out[i, j] = (v >> 8) | ((v & 0xFF) << 8)
+
+
 def gather(images: np.ndarray, index: np.ndarray, out: np.ndarray,
            place: tuple[int, int, int] | None = None) -> None:
     """Nearest neighbour of all bands in one pass: ``out[b, i] = images[b, pixel index[i]]``,

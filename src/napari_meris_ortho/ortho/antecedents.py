@@ -333,11 +333,13 @@ class Antecedents:
     def _stack(self, images: Sequence[Any], dtype: Any) -> np.ndarray:
         """(n, window lines, window columns) native copy of the window of each image (memmaps
         read here)."""
+        from ..engine.resample import copy_window
+
         t0 = time.perf_counter()
         rows, cols = self._rows(), self._cols()
         out = np.empty((len(images), rows.stop - rows.start, cols.stop - cols.start), dtype)
         for k, im in enumerate(images):
-            out[k] = im[rows, cols]
+            copy_window(out[k], im[rows, cols])
         self._timed("read_bands", t0)
         return out
 
