@@ -96,11 +96,13 @@ def compile_late() -> float:
     calls after its first ones, in the order it needs them (while the map compiles the
     primary-grid search, this compiles what comes next): the height rates and
     prediction/correction rows, the counts of solved points, the antecedent window, the
-    extent of the antecedents, the nearest-pixel index and gather of counts, the COG overview
-    kernel, and the DEM lookup and geoid interpolation (the numba cache keeps them); seconds."""
+    extent of the antecedents, the byte-swapped copy of the bands' window, the nearest-pixel
+    index and gather of counts, the COG overview kernel, and the DEM lookup and geoid
+    interpolation (the numba cache keeps them); seconds."""
     from .engine import terrain
     from .engine.predcorr import find_antecedents, height_rates, solved_counts
     from .engine.resample import (
+        copy_window,
         finite_extent,
         gather,
         inside_range,
@@ -120,6 +122,7 @@ def compile_late() -> float:
     solved_counts(np.zeros(2, np.int8), np.zeros(2, np.int8), -1, 2)
     inside_range(np.zeros(2, np.float32), np.zeros(2, np.float32), 2, 2)
     finite_extent(np.zeros((2, 2), np.float32))
+    copy_window(np.zeros((2, 2), np.uint16), np.zeros((2, 2), ">u2"))
     index = nearest_pixel(np.zeros(4, np.float32), np.zeros(4, np.float32), 2, 2,
                           line_offset=1, col_offset=1)
     gather(np.zeros((1, 2, 2), np.uint16), index, np.zeros((1, 4), np.uint16))
