@@ -332,7 +332,7 @@ def segment_task(spec: Spec, index: int, path: str, window: Window,
     if spec.compact:  # the store's counts: half the bytes to ship and hold until the merge
         piece.state = segment_counts_state(
             [result.bands[b] for b in spec.bands], (r0, c0),
-            [float(np.float32(st.BAND_SCALES[b])) for b in spec.bands], valid[r0:r1, c0:c1],
+            [st.count_divisor(st.BAND_SCALES[b]) for b in spec.bands], valid[r0:r1, c0:c1],
             index, red, nir)
     else:
         segment = np.stack([result.bands[b][r0:r1, c0:c1] for b in spec.bands])

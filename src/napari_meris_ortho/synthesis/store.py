@@ -128,8 +128,14 @@ def encode_band(values: np.ndarray, scale: float) -> np.ndarray:
     v = np.asarray(values)
     if v.dtype not in (np.float32, np.float64):
         v = v.astype(np.float64)
-    flat = encode_counts(np.ascontiguousarray(v).reshape(-1), float(np.float32(scale)))
+    flat = encode_counts(np.ascontiguousarray(v).reshape(-1), count_divisor(scale))
     return flat.reshape(v.shape)
+
+
+def count_divisor(scale: float) -> float:
+    """The divisor of ``engine.synthesis.count_of`` for a band scale: the scale as float32
+    (as the store's ``scale_factor`` and a product's radiances use it), in float64."""
+    return float(np.float32(scale))
 
 
 def decode_band(counts: np.ndarray, scale: float, out: np.ndarray | None = None
