@@ -159,6 +159,16 @@ def test_a_run_shows_its_layers_one_per_frame(make_napari_viewer, qtbot, tiny_n1
             ("ortho", "footprint", "facets", "parallax")) and layer.visible]
         shown_at_draw.append(len(new))
 
+    native = viewer.window._qt_viewer.canvas.native
+    painting_when_shown: dict[str, bool] = {}
+
+    def watch(event):  # each new layer, as it goes in: is the canvas painting when shown?
+        layer = event.value
+        layer.events.visible.connect(
+            lambda e, name=layer.name: painting_when_shown.setdefault(
+                name, bool(e.source.visible and native.updatesEnabled())))
+
+    viewer.layers.events.inserted.connect(watch)
     scene_canvas.events.draw.connect(count)
     _run(widget, qtbot)
     qtbot.wait(200)
@@ -168,6 +178,12 @@ def test_a_run_shows_its_layers_one_per_frame(make_napari_viewer, qtbot, tiny_n1
     assert shown_at_draw and shown_at_draw[-1] == len(visible)
     steps = np.diff([0, *shown_at_draw])
     assert steps.max() == 1, f"new layers per frame: {shown_at_draw}"
+    # the first draw of a shown layer is in a turn after the one that showed it (its slicing
+    # and thumbnail, 0.01-0.04 s, and its first draw, 0.03-0.09 s, were one stall)
+    shown = {layer.name for layer in visible}
+    assert set(painting_when_shown) >= shown
+    assert not any(painting_when_shown[name] for name in shown), painting_when_shown
+    assert native.updatesEnabled()
 
 
 def test_a_rerun_removes_the_replaced_layers_top_first(make_napari_viewer, qtbot, tiny_n1):

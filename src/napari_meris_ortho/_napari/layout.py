@@ -66,7 +66,8 @@ def compact_combo(combo: Any) -> Any:
 
 
 #: ms between showing two new layers (a run's, a sample's), one per frame: vispy builds a new
-#: visual's shaders at its first draw, so a frame drawing them all was the longest stall
+#: visual's shaders at its first draw, so a frame drawing them all was the longest stall. Each
+#: is drawn in the turn after the one that shows it (canvas updates off while it is shown)
 SHOW_STEP_MS = 40
 
 

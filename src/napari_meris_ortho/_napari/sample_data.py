@@ -265,14 +265,23 @@ class SampleLoader:
         self._show_next()
 
     def _show_next(self) -> None:
-        """Show the next of the sample's visible layers, then come back after its frame."""
+        """Show the next of the sample's visible layers; the canvas draws it in the next turn
+        (``_draw_shown``), not in this one, as a run's layers (``OrthorectifyWidget._draw``)."""
         from qtpy.QtCore import QTimer
 
         if self._hidden:
+            canvas_updates(self.viewer, False)
             show_in(self.viewer, [self._hidden.pop(0)])
-            QTimer.singleShot(SHOW_STEP_MS, self._show_next)
+            QTimer.singleShot(1, self._draw_shown)
             return
         self._finish()
+
+    def _draw_shown(self) -> None:
+        """Let the canvas draw the layer just shown, then come back after its frame."""
+        from qtpy.QtCore import QTimer
+
+        canvas_updates(self.viewer, True)
+        QTimer.singleShot(SHOW_STEP_MS, self._show_next)
 
     def _finish(self) -> None:
         canvas_updates(self.viewer, True)

@@ -484,7 +484,8 @@ class OrthorectifyWidget(Container):
         self._queue = [*removals, *((self._append, layer) for layer in layers),
                        *((self._activate, layer) for layer in layers[-1:]),
                        (self._frame_result, shown), (self._canvas_updates, True),
-                       *((self._show, layer) for layer in shown)]
+                       *(step for layer in shown
+                         for step in ((self._show, layer), (self._draw, layer)))]
         self._queued = len(self._queue)
         self._hidden = shown
         self._summary = run.summary()
@@ -498,10 +499,18 @@ class OrthorectifyWidget(Container):
         append_inactive(self.viewer, layer)
 
     def _show(self, layer: Any) -> None:
-        """Show one of the run's layers (hidden until all were in; ``_done``)."""
+        """Show one of the run's layers (hidden until all were in; ``_done``); the canvas
+        draws it in the next turn (``_draw``), not in this one."""
         if layer in self._hidden:
             self._hidden.remove(layer)
+        self._canvas_updates(False)
         show_in(self.viewer, [layer])
+
+    def _draw(self, layer: Any) -> None:
+        """Let the canvas draw the layer ``_show`` made visible, in a turn of its own: its
+        first draw (vispy builds its shaders) is the longest of a run's insertions, and the
+        same turn as the showing (its slicing, its thumbnail) added up to one stall."""
+        self._canvas_updates(True)
 
     def _show_hidden(self) -> None:
         """Show at once the run's layers still waiting for their turn (Cancel, an error)."""
@@ -556,7 +565,7 @@ class OrthorectifyWidget(Container):
         if self._queue:
             # a shown layer is drawn in the paint that follows: the next change waits for
             # it (a paint and a change within one turn would add up to one stall)
-            self._schedule_step(SHOW_STEP_MS if change == self._show else 1)
+            self._schedule_step(SHOW_STEP_MS if change == self._draw else 1)
             return
         self.progress_bar.value = self.progress_bar.max
         self.status.value = self._summary
