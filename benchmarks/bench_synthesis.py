@@ -2,7 +2,7 @@
 
     .venv/bin/python benchmarks/bench_synthesis.py [--scene fr-alps] [--products 8]
                                 [--tile 1024] [--bands 15] [--workers 0,1,2] [--repeat 1]
-                                [--codecs zstd,delta-zstd]
+                                [--codecs zstd,delta-zstd] [--pin]
 
 Prints two tables:
 
@@ -11,7 +11,11 @@ Prints two tables:
    in this process (numba threads) and on a LocalCluster of 1 and 2 worker processes (one
    thread each). Products merged per minute (workers started and warmed up beforehand: the
    time is the run's), speed-up against 1 worker, peak resident memory per worker (``VmHWM``),
-   tasks and seconds per (product, tile) task.
+   tasks and seconds per (product, tile) task. Workers as many as the cores are each held to a
+   core of its own (all their threads: the task's, Icechunk's, zstd's), as ``--workers N``
+   holds them; with ``--pin``, fewer workers are too, so that the rows compare one core with
+   two (a worker left free uses more than one core: its writes run beside its task). Rows of
+   held workers say "pinned". The client and the scheduler are never held.
 2. Update cost: one more product merged into a store holding one product, on the product's
    footprint ("small") and on Europe at 260 m (50 x 35 deg, 21384 x 14969 pixels), for each
    store codec of ``--codecs``: seconds, bytes added to the store, chunks written. Only the
@@ -64,13 +68,15 @@ def store_bytes(path: Path) -> tuple[int, int]:
 
 
 def throughput(paths: list[str], grid, bands: list[int], tile: int, workers: int,
-               tmp: Path) -> dict:
-    """One new synthesis of every product; workers = 0: in this process."""
+               tmp: Path, pin: bool = False) -> dict:
+    """One new synthesis of every product; workers = 0: in this process. The workers are held
+    to a core each as ``--workers N`` holds them (``hold_workers_to_cores``: as many workers as
+    cores), or, with ``pin``, whatever their number."""
     tmp = Path(tempfile.mkdtemp(dir=tmp))  # a new directory per repetition
     from distributed import Client, LocalCluster
 
     from napari_meris_ortho.synthesis.api import synthesize
-    from napari_meris_ortho.synthesis.run import WORKER_ENV
+    from napari_meris_ortho.synthesis.run import WORKER_ENV, hold_workers_to_cores
 
     kwargs = dict(grid=grid, bands=bands, algorithm="max-ndvi", tile=tile,
                   elevation="tiepoints")
@@ -84,13 +90,14 @@ def throughput(paths: list[str], grid, bands: list[int], tile: int, workers: int
         t0 = time.perf_counter()
         result = synthesize(paths, tmp / "run0", progress=count, **kwargs)
         seconds = time.perf_counter() - t0
-        peaks = [peak_rss_mb()]
+        peaks, held = [peak_rss_mb()], {}
     else:
         with LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
                           dashboard_address=None, env=WORKER_ENV,
                           silence_logs=logging.ERROR) as cluster, \
                 Client(cluster) as client:
             address = cluster.scheduler_address
+            held = hold_workers_to_cores(client, every=pin)
             synthesize(paths[:workers], tmp / f"warm{workers}", scheduler=address, **kwargs)
             client.run(_reset_peak)
             t0 = time.perf_counter()
@@ -99,7 +106,7 @@ def throughput(paths: list[str], grid, bands: list[int], tile: int, workers: int
             seconds = time.perf_counter() - t0
             peaks = sorted(client.run(peak_rss_mb).values())
     assert len(result.merged) == len(paths), [r.error for r in result.failed]
-    return {"workers": workers, "seconds": seconds,
+    return {"workers": workers, "pinned": workers > 0 and bool(held), "seconds": seconds,
             "per_minute": 60.0 * len(paths) / seconds, "peaks": peaks, "tasks": tasks["n"]}
 
 
@@ -155,6 +162,9 @@ def main() -> None:
     parser.add_argument("--repeat", type=int, default=1,
                         help="runs of every row; the median (by seconds) is printed, with "
                              "the range of the seconds")
+    parser.add_argument("--pin", action="store_true",
+                        help="hold each worker to a core of its own even when there are fewer "
+                             "workers than cores (one core against two)")
     parser.add_argument("--codecs", default="zstd,delta-zstd",
                         help="store codecs of the update table (synthesize's codec=)")
     args = parser.parse_args()
@@ -172,14 +182,15 @@ def main() -> None:
           f"{grid.height}, tile {args.tile}; {os.cpu_count()} cores (shared, loaded)")
     with tempfile.TemporaryDirectory() as tmp_dir:
         tmp = Path(tmp_dir)
-        rows = [median([throughput(paths, grid, bands, args.tile, int(w), tmp)
+        rows = [median([throughput(paths, grid, bands, args.tile, int(w), tmp, args.pin)
                         for _ in range(args.repeat)])
                 for w in args.workers.split(",") if w]
         one = next((r for r in rows if r["workers"] == 1), rows[0] if rows else {})
         print(f"\n{'workers':>10s} {'seconds':>8s} {'prod/min':>9s} {'speed-up':>9s} "
               f"{'tasks':>6s} {'s/task':>7s} {'peak MB per worker':>20s}")
         for r in rows:
-            label = "in-process" if r["workers"] == 0 else str(r["workers"])
+            label = ("in-process" if r["workers"] == 0 else
+                     f"{r['workers']}{' pinned' if r['pinned'] else ''}")
             per_task = r["seconds"] * max(r["workers"], 1) / max(r["tasks"], 1)
             print(f"{label:>10s} {r['seconds']:8.1f} {r['per_minute']:9.2f} "
                   f"{one['seconds'] / r['seconds']:9.2f} {r['tasks']:6d} {per_task:7.2f} "

@@ -189,3 +189,35 @@ def test_two_concurrent_runs_on_one_store(products, tmp_path) -> None:
     for key, value in layers(tmp_path / "ref").items():
         if key != "product":
             assert value.tobytes() == layers(out)[key].tobytes(), key
+
+
+@pytest.mark.slow
+def test_embedded_workers_are_held_to_a_core_each_when_they_fit() -> None:
+    """As many embedded workers as cores: each worker process is held to a core of its own,
+    every thread it runs and the threads it starts later (Icechunk's, zstd's); fewer workers
+    than cores are left free (``run.hold_workers_to_cores``)."""
+    import os
+    import threading
+
+    from napari_meris_ortho.synthesis.run import engine
+
+    def thread_cores() -> list[tuple[int, ...]]:
+        later: list[tuple[int, ...]] = []
+        t = threading.Thread(target=lambda: later.append(tuple(sorted(os.sched_getaffinity(0)))))
+        t.start()
+        t.join()
+        now = [tuple(sorted(os.sched_getaffinity(int(tid))))
+               for tid in os.listdir("/proc/self/task")]
+        return now + later
+
+    cores = tuple(sorted(os.sched_getaffinity(0)))
+    with engine(len(cores), None) as runner:
+        held = runner.client.run(thread_cores)
+    assert len(held) == len(cores)
+    per_worker = [set(threads) for threads in held.values()]
+    assert all(len(s) == 1 and len(next(iter(s))) == 1 for s in per_worker), per_worker
+    assert sorted(next(iter(s))[0] for s in per_worker) == list(cores)
+    if len(cores) > 1:
+        with engine(1, None) as runner:
+            free = runner.client.run(thread_cores)
+        assert [set(threads) for threads in free.values()] == [{cores}]
