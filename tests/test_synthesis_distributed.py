@@ -211,13 +211,27 @@ def test_embedded_workers_are_held_to_a_core_each_when_they_fit() -> None:
         return now + later
 
     cores = tuple(sorted(os.sched_getaffinity(0)))
-    with engine(len(cores), None) as runner:
-        held = runner.client.run(thread_cores)
+    if len(cores) <= 4:  # the CLI's own path: one embedded worker per core
+        with engine(len(cores), None) as runner:
+            held = runner.client.run(thread_cores)
+    else:  # a bigger machine: 2 workers held as ``every`` holds them, not 1 per core
+        from distributed import Client, LocalCluster
+
+        from napari_meris_ortho.synthesis.run import WORKER_ENV, hold_workers_to_cores
+
+        with LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                          dashboard_address=None, env=WORKER_ENV) as cluster, \
+                Client(cluster, set_as_default=False) as client:
+            assert hold_workers_to_cores(client) == {}  # fewer workers than cores: free
+            assert sorted(hold_workers_to_cores(client, every=True).values()) == [*cores[:2]]
+            held = client.run(thread_cores)
+        cores = cores[:2]
     assert len(held) == len(cores)
     per_worker = [set(threads) for threads in held.values()]
     assert all(len(s) == 1 and len(next(iter(s))) == 1 for s in per_worker), per_worker
     assert sorted(next(iter(s))[0] for s in per_worker) == list(cores)
-    if len(cores) > 1:
+    all_cores = tuple(sorted(os.sched_getaffinity(0)))
+    if len(all_cores) > 1:
         with engine(1, None) as runner:
             free = runner.client.run(thread_cores)
-        assert [set(threads) for threads in free.values()] == [{cores}]
+        assert [set(threads) for threads in free.values()] == [{all_cores}]
