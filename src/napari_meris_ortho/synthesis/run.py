@@ -155,13 +155,12 @@ class TileWriter:
         self._pool.shutdown(wait=True)
 
 
-def hold_to_core(core: int) -> list[int]:
+def hold_to_core(core: int) -> None:
     """Hold every thread of this process to ``core`` (the threads it starts later inherit it
-    from the thread that starts them); returns the cores the calling thread may now use."""
+    from the thread that starts them)."""
     for tid in os.listdir("/proc/self/task"):
         with contextlib.suppress(OSError):  # a thread that has just ended
             os.sched_setaffinity(int(tid), {core})
-    return sorted(os.sched_getaffinity(0))
 
 
 def hold_workers_to_cores(client: Any, every: bool = False) -> dict[str, int]:
