@@ -3,6 +3,8 @@ message, exit code 2, before any allocation, nothing left behind."""
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 
@@ -124,11 +126,65 @@ def test_synthesis_over_the_world_is_refused_and_leaves_no_directory(product, tm
     code, err = run(capsys, "synthesize", product, "--out", out, "--ul", "-180", "90", "--lr",
                     "180", "-90", "--pixel-size", "1e-4")  # fmt: skip
     assert code == 2 and "output grid of 3600000 x 1800000 pixels" in err, err
-    assert "free space in" in err
+    assert "65536 chunks of 512 x 512 pixels per layer" in err
     assert list(tmp_path.iterdir()) == []  # refused before anything is created
-    code, err = run(capsys, "synthesize", product, "--out", out, "--pixel-size", "1e-5")
+    code, err = run(capsys, "synthesize", product, "--out", out, "--pixel-size", "1e-6")
     assert code == 2 and "exceeds the limit" in err, err
     assert not out.exists()  # (the store's lock file beside it may stay)
+
+
+def test_a_sparse_synthesis_grid_larger_than_the_disk_is_accepted(product, tmp_path, capsys):
+    """A synthesis store holds the chunks its products write, not its extent: a grid of
+    1.6e10 pixels (15 bands: 0.8 TB uncompressed, dense) takes one small product and stays
+    small. Before, the dense grid had to fit in the free disk space (refused here)."""
+    from napari_meris_ortho.synthesis import open_synthesis
+
+    out = tmp_path / "continent"
+    code, err = run(capsys, "-q", "synthesize", product, "--out", out, "--ul", "-40", "80",
+                    "--lr", "86", "-46", "--pixel-size", "1e-3", "--elevation", "tiepoints",
+                    "--workers", "0")  # fmt: skip
+    assert code == 0, err
+    synthesis = open_synthesis(out)
+    assert (synthesis.grid.width, synthesis.grid.height) == (126000, 126000)
+    assert len(synthesis.history()) == 1
+    stored = sum(f.stat().st_size for f in out.rglob("*") if f.is_file())
+    assert stored < 100 * 2**20  # the product's tiles, not the grid
+
+
+def test_a_run_that_does_not_fit_the_disk_is_refused_before_it_writes(product, tmp_path,
+                                                                      monkeypatch):
+    """What a run writes (its whole tiles, uncompressed, overviews included) is checked
+    against the free space before anything is written; ``max_pixels`` lifts the check."""
+    import shutil
+
+    from napari_meris_ortho.synthesis import synthesize, tiling
+
+    def tiny_disk(path):
+        return shutil._ntuple_diskusage(10**12, 10**12 - 2**20, 2**20)
+
+    monkeypatch.setattr(tiling.shutil, "disk_usage", tiny_disk)
+    out = tmp_path / "store"
+    with pytest.raises(OptionsError, match=r"to write, uncompressed, and 1\.0 MiB free in") as exc:
+        synthesize([product], out, elevation="tiepoints", bands=(7,))
+    assert "give --max-pixels to run anyway" in str(exc.value)
+    assert list(tmp_path.iterdir()) in ([], [tmp_path / ".store.meris-ortho-lock"])
+    result = synthesize([product], out, elevation="tiepoints", bands=(7,), max_pixels=10**9)
+    assert result.snapshot is not None
+
+
+def test_the_write_estimate_counts_whole_tiles_bands_and_overviews(tmp_path):
+    from napari_meris_ortho.synthesis.tiling import check_write_size, stored_bytes_per_pixel
+
+    tiles = [(0, 1024, 0, 1024), (0, 1024, 1024, 1500)]
+    pixels = 1024 * 1024 + 1024 * 476
+    assert stored_bytes_per_pixel(15) == pytest.approx((30 + 8) * 4 / 3)
+    need = pixels * stored_bytes_per_pixel(15)
+    check_write_size(tiles, 15, tmp_path, None, free=int(need) + 1)
+    with pytest.raises(OptionsError, match=re.escape(f"cover {pixels:.3g} pixels")):
+        check_write_size(tiles, 15, tmp_path, None, free=int(need) - 1)
+    with pytest.raises(OptionsError):  # float32 bands (stores of version 2): twice the bytes
+        check_write_size(tiles, 15, tmp_path, None, band_bytes=4, free=int(need) + 1)
+    check_write_size(tiles, 15, tmp_path, 10, free=0)  # max_pixels given: not checked
 
 
 @pytest.mark.parametrize(

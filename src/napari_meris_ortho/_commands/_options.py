@@ -60,7 +60,9 @@ def add_grid_options(p: Any, crs_default: str | None, crs_help: str) -> None:
                    help="lower-right corner of the output (CRS units)")
     p.add_argument("--max-pixels", type=_pixel_count, default=None, metavar="N",
                    help="largest output grid in pixels (default: what fits in 80%% of the "
-                   "available memory; synthesize: in the free disk space)")
+                   "available memory; synthesize: 65536 chunks of 512 x 512 pixels per layer, "
+                   "and the tiles a run writes must fit in the free disk space, which is not "
+                   "checked when this is given)")
 
 
 def _pixel_count(text: str) -> int:

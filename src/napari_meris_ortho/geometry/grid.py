@@ -142,7 +142,7 @@ def available_memory_bytes() -> int:
         return 4 << 30
 
 
-def _size_text(n: float) -> str:
+def size_text(n: float) -> str:
     for unit in ("bytes", "KiB", "MiB", "GiB", "TiB", "PiB"):
         if n < 1024 or unit == "PiB":
             return f"{n:.0f} {unit}" if unit == "bytes" else f"{n:.1f} {unit}"
@@ -180,10 +180,10 @@ def check_grid_size(
     digits = 1 - int(math.floor(math.log10(dx))) if dx > 0 and math.isfinite(dx) else 0
     suggest = math.ceil(dx * 10**digits) / 10**digits
     source = ("--max-pixels" if max_pixels is not None else
-              f"{_size_text(limit * bytes_per_pixel)}, {budget_what}")  # fmt: skip
+              f"{size_text(limit * bytes_per_pixel)}, {budget_what}")  # fmt: skip
     raise OptionsError(
         f"output grid of {width:.0f} x {height:.0f} pixels ({pixels:.3g} pixels, "
-        f"{'at least' if lower_bound else 'about'} {_size_text(pixels * bytes_per_pixel)}) "
+        f"{'at least' if lower_bound else 'about'} {size_text(pixels * bytes_per_pixel)}) "
         f"exceeds the limit of {limit:.3g} pixels "
         f"({source}): use a pixel size of at least {suggest:g} or a smaller extent, or raise "
         "the limit with --max-pixels"

@@ -61,8 +61,10 @@ def synthesize(products: Sequence[str | os.PathLike[str]], out: str | os.PathLik
     ``orthorectify``, checked by ``OrthoOptions.of``): how each product is orthorectified
     (geolocation "pixel": the products' per-pixel geolocation, a product without one fails);
     the bands are the synthesis's (``bands``), not the options'.
-    ``max_pixels``: largest grid of a new synthesis (default: what the free space of the
-    output's file system holds, uncompressed); a larger one is an OptionsError. ``codec``
+    ``max_pixels``: largest grid of a new synthesis (default: ``tiling.MAX_GRID_CHUNKS``
+    chunks per layer, and the tiles the run writes must fit, uncompressed, in the free space of
+    the store's file system; with ``max_pixels`` the free space is not checked); a larger one
+    is an OptionsError. ``codec``
     (``StoreCodec``): how a new synthesis encodes its bands and NDVI (default zstd alone; an
     update keeps its store's codecs, and giving one with ``input`` is refused).
     """
@@ -75,7 +77,7 @@ def synthesize(products: Sequence[str | os.PathLike[str]], out: str | os.PathLik
     source_path = _check_options(products, out_dir, algorithm, input, grid, crs, pixel_size,
                                  bands, tile, dems, workers, scheduler, codec)
     if grid is not None and source_path is None:
-        check_new_grid_size(grid, len(bands or ALL_BANDS), out_dir, max_pixels)
+        check_new_grid_size(grid, len(bands or ALL_BANDS), max_pixels)
     paths = [str(Path(p).absolute()) if scheduler else str(p) for p in products]
     with run.engine(workers, scheduler) as runner:
         created = _make_dir(out_dir)

@@ -38,6 +38,7 @@ from .reports import (
 from .tiling import (
     ALL_BANDS,
     check_new_grid_size,
+    check_write_size,
     footprint_window,
     grid_from_dict,
     grid_to_dict,
@@ -608,7 +609,7 @@ class Synthesis:
             from ..ortho import product_grid
 
             self.grid = product_grid(todo[0].product, self.crs or "EPSG:4326", self.pixel_size)
-            check_new_grid_size(self.grid, len(self.bands), self.target.path, self.max_pixels)
+            check_new_grid_size(self.grid, len(self.bands), self.max_pixels)
         for k, item in enumerate(todo):
             item.report.index = len(self.table) + k + 1
             item.margin = terrain_margin_px(item.product, self.grid)
@@ -653,11 +654,13 @@ class Synthesis:
                                  reports)
         if not todo:
             return _log(result)
+        rank, jobs = self._rank(todo), self._jobs(todo)
+        check_write_size(jobs, len(self.bands), self.target.path, self.max_pixels,
+                         2 if self._version >= 3 else 4)
         spec = self._spec()
         session, finish = self._session(spec)
         spec = replace(spec, layout=str(session.snapshot_id))
         try:
-            rank, jobs = self._rank(todo), self._jobs(todo)
             failed: set[int] = set()
             while True:
                 done = self._execute(runner, session, spec, jobs, rank, frozenset(failed))

@@ -4,12 +4,16 @@ chunks."""
 
 from __future__ import annotations
 
+import math
 import shutil
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
+
+from ..errors import OptionsError
+from .store import CHUNK, Window
 
 if TYPE_CHECKING:
     from ..geometry.grid import OutputGrid
@@ -20,6 +24,10 @@ ALL_BANDS = tuple(range(1, 16))
 #: terrain parallax a tile must be within to be orthorectified: ``geometry.earth.MAX_TERRAIN_M``
 #: seen at 45 deg view zenith or the product's largest one if larger (section 3.1)
 SKIP_VIEW_ZENITH_DEG = 45.0
+#: full-resolution chunks per layer of a new synthesis grid, at most, unless ``max_pixels`` is
+#: given: 65 536 chunks of 512 x 512 pixels are 1.7e10 pixels (the world at 300 m, Europe at
+#: 60 m); every reader walks that chunk grid (xarray's and napari's dask arrays, ``export``)
+MAX_GRID_CHUNKS = 2**16
 
 
 # --------------------------------------------------------------------------- grid helpers
@@ -92,16 +100,49 @@ def tile_of(piece: tuple[int, int, int, int], tile: int, shape: tuple[int, int]
     return r, min(r + tile, shape[0]), c, min(c + tile, shape[1])
 
 
-def check_new_grid_size(grid: OutputGrid, n_bands: int, out_dir: Path,
-                     max_pixels: int | None) -> None:
-    """A new synthesis grid must fit the free space of the output's file system (its layers
-    uncompressed: the bands and the bookkeeping layers) or ``max_pixels``."""
+def stored_bytes_per_pixel(n_bands: int, band_bytes: int = 2) -> float:
+    """Bytes one grid pixel of a store's layers takes uncompressed, overviews (a third more)
+    included: each band (uint16 counts; 4 in stores of version 2, float32), NDVI and count
+    (uint16), the product index (int32). An upper bound of what a write costs."""
+    return (band_bytes * n_bands + 8) * 4.0 / 3.0
+
+
+def check_new_grid_size(grid: OutputGrid, n_bands: int, max_pixels: int | None) -> None:
+    """A new synthesis grid: at most ``max_pixels``, else :data:`MAX_GRID_CHUNKS` chunks of
+    ``store.CHUNK`` pixels square per layer. A store holds the chunks its products wrote, not its
+    extent (a Europe-size store is as big as what was merged into it; the free space is
+    checked per run, :func:`check_write_size`), but every reader walks the chunk grid."""
     from ..geometry.grid import check_grid_size
 
+    limit = max_pixels if max_pixels is not None else MAX_GRID_CHUNKS * CHUNK * CHUNK
+    per_pixel = stored_bytes_per_pixel(n_bands)
+    check_grid_size(grid.width, grid.height, (grid.dx, grid.dy), per_pixel, max_pixels,
+                    math.ceil(limit * per_pixel),
+                    f"{MAX_GRID_CHUNKS} chunks of {CHUNK} x {CHUNK} pixels per layer")
+
+
+def check_write_size(windows: Iterable[Window], n_bands: int, out_dir: Path,
+                     max_pixels: int | None, band_bytes: int = 2,
+                     free: int | None = None) -> None:
+    """The tiles a run writes (``windows``), uncompressed (:func:`stored_bytes_per_pixel`),
+    must fit the free space of the store's file system (``free``: measured when None), so
+    that a run too big for the disk stops before it starts rather than when the disk is full.
+    Not checked when ``max_pixels`` is given (the user sets the limits)."""
+    if max_pixels is not None:
+        return
+    pixels = sum((r1 - r0) * (c1 - c0) for r0, r1, c0, c1 in windows)
+    need = pixels * stored_bytes_per_pixel(n_bands, band_bytes)
     parent = out_dir if out_dir.exists() else out_dir.absolute().parent
-    try:
-        free: int | None = shutil.disk_usage(parent).free
-    except OSError:
-        free = None
-    check_grid_size(grid.width, grid.height, (grid.dx, grid.dy), 4 * (n_bands + 2),
-                    max_pixels, free, f"the free space in {parent}")
+    if free is None:
+        try:
+            free = shutil.disk_usage(parent).free
+        except OSError:
+            return
+    if need <= free:
+        return
+    from ..geometry.grid import size_text
+
+    raise OptionsError(
+        f"the products cover {pixels:.3g} pixels of the synthesis grid (whole tiles): up to "
+        f"{size_text(need)} to write, uncompressed, and {size_text(free)} free in {parent}: "
+        "free some space or use a larger pixel size, or give --max-pixels to run anyway")
