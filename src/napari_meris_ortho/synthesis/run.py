@@ -35,6 +35,7 @@ from .reports import (
     SynthesisResult,
     message_of,
 )
+from .store import Window
 from .tiling import (
     ALL_BANDS,
     check_new_grid_size,
@@ -57,7 +58,6 @@ CACHE_SIZE = 16
 WORKER_ENV = {"NUMBA_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1",
               "MKL_NUM_THREADS": "1"}
 
-Window = tuple[int, int, int, int]
 #: a segment task: product index, path, its piece of the grid, the product's whole window
 Job = tuple[int, str, Window, Window]
 
