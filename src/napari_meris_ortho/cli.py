@@ -27,8 +27,8 @@ from ._terminal import printable, stderr_is_terminal
 from .errors import MerisOrthoError
 
 #: subcommand modules; each defines ``register(subparsers)`` which sets ``func`` on its parser.
-COMMANDS = ("info", "sample", "map", "synthesize", "synthesis-log", "export", "disparity",
-            "demcheck")
+COMMANDS = ("info", "sample", "map", "synthesize", "synthesis-log", "synthesis-prune", "export",
+            "disparity", "demcheck")
 #: subcommands that run numba kernels in this process
 NUMBA_COMMANDS = ("sample", "map", "synthesize", "disparity", "demcheck")
 

@@ -28,7 +28,7 @@ from typing import Any
 #: the room's public names and the module of each, imported on first use (``import
 #: napari_meris_ortho.synthesis.store`` stays cheap)
 _LAZY = {
-    "synthesize": "api", "ALGORITHMS": "api",
+    "synthesize": "api", "ALGORITHMS": "api", "prune_synthesis": "api",
     "open_synthesis": "reading", "is_synthesis": "reading", "SynthesisStore": "reading",
     "export_cog": "export",
     "ProductReport": "reports", "SynthesisResult": "reports",

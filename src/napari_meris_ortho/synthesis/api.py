@@ -104,6 +104,24 @@ def synthesize(products: Sequence[str | os.PathLike[str]], out: str | os.PathLik
     return result
 
 
+def prune_synthesis(path: str | os.PathLike[str], keep: int) -> st.Pruned:
+    """Keep the newest ``keep`` (>= 1) commits of the synthesis ``path`` and delete the chunk
+    versions and metadata that only older commits held (``store.prune``): a season of updates
+    costs the disk what the synthesis holds now, not every version of every chunk it held.
+    The layers are unchanged; ``synthesis-log`` and ``--at`` reach the commits kept only.
+    Under the store's lock: refused while a run uses the store."""
+    if isinstance(keep, bool) or not isinstance(keep, int) or keep < 1:
+        raise OptionsError(f"keep must be a number of commits >= 1, not {keep!r}")
+    root = Path(path)
+    open_synthesis(root)  # one clear message when it is none
+    with st.locked(root):
+        pruned = st.prune(st.open_repository(root), keep)
+    log.info("%s: kept %d commit(s), expired %d, deleted %d object(s), %.1f MB",
+             root, pruned.kept, pruned.expired, pruned.files_deleted,
+             pruned.bytes_deleted / 1e6)
+    return pruned
+
+
 def _undo(out_dir: Path, created: bool, was_empty: bool) -> None:
     """Under the lock, when a run committed nothing: remove the store directory this run
     created, or empty again the empty directory it was given (a repository without a

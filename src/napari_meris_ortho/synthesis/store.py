@@ -598,3 +598,44 @@ def history(repo: Any, branch: str = BRANCH, snapshot: str | None = None) -> lis
             out.append(Commit(info.id, info.written_at, info.message,
                               list(meta.get("products", []))))
     return out
+
+
+@dataclass
+class Pruned:
+    """What :func:`prune` did: synthesis commits kept and expired, run branches of killed
+    runs deleted, objects the garbage collection deleted."""
+
+    kept: int
+    expired: int
+    run_branches: int
+    bytes_deleted: int
+    chunks_deleted: int
+    files_deleted: int
+
+
+def prune(repo: Any, keep: int) -> Pruned:
+    """Keep the newest ``keep`` synthesis commits of ``main`` and delete what only older ones
+    held: the run branches of killed runs, then Icechunk's ``expire_snapshots`` (older than the
+    oldest commit kept) and ``garbage_collect`` of every object nothing references any more
+    (chunk versions an update replaced, their manifests). The commits kept keep their snapshot
+    ids; the product table (in the attributes) keeps every product, so "already in the
+    synthesis" still holds. The caller holds the lock (:func:`locked`): the collection would
+    take the chunks of a run in flight. Other branches and tags are left as they are."""
+    import datetime
+
+    runs = sorted(b for b in repo.list_branches() if b.startswith(RUN_BRANCH_PREFIX))
+    for branch in runs:  # left by killed runs: nothing else holds them
+        repo.delete_branch(branch)
+    commits = history(repo)
+    expired = set()
+    if 0 < keep < len(commits):
+        expired = repo.expire_snapshots(commits[keep - 1].written_at)
+    summary = repo.garbage_collect(datetime.datetime.now(datetime.UTC))
+    return Pruned(kept=min(keep, len(commits)),
+                  expired=sum(1 for c in commits[keep:] if c.snapshot in expired),
+                  run_branches=len(runs), bytes_deleted=int(summary.bytes_deleted),
+                  chunks_deleted=int(summary.chunks_deleted),
+                  files_deleted=int(summary.chunks_deleted + summary.manifests_deleted
+                                    + summary.snapshots_deleted
+                                    + summary.transaction_logs_deleted
+                                    + summary.attributes_deleted))
