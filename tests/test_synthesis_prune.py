@@ -101,6 +101,9 @@ def test_prune_is_refused_while_a_run_uses_the_store(products, tmp_path) -> None
 def test_synthesis_prune_command(products, tmp_path, capsys) -> None:
     out = tmp_path / "store"
     season(products[:2], out)
+    old = open_synthesis(out).history()[1].snapshot
+    assert main(["synthesis-log", str(out), "--at", old]) == 0
+    capsys.readouterr()
     assert main(["synthesis-prune", str(out), "--keep", "1"]) == 0
     said = capsys.readouterr().out
     assert said.startswith(f"{out}: kept 1 commit(s), expired 1; deleted ") and "MB freed" in said
@@ -111,6 +114,10 @@ def test_synthesis_prune_command(products, tmp_path, capsys) -> None:
         with pytest.raises(SystemExit) as exc:
             main(["synthesis-prune", str(out), *argv])
         assert exc.value.code == 2 and message in capsys.readouterr().err
+    assert main(["synthesis-log", str(out), "--at", old]) == 2  # the pruned commit
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [f"meris-ortho: error: {out}: no snapshot '{old}' in the synthesis store "
+                   "(its commits: synthesis-log; a pruned commit is gone)"]
     assert main(["synthesis-prune", str(tmp_path / "none"), "--keep", "1"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("meris-ortho: error:")

@@ -153,8 +153,12 @@ def open_synthesis(path: str | os.PathLike[str], at: str | None = None) -> Synth
         session = (repo.readonly_session(snapshot_id=at) if at
                    else repo.readonly_session(branch=st.BRANCH))
     except Exception as exc:  # icechunk's own error types
-        what = f"snapshot {at!r}" if at else f"branch {st.BRANCH!r}"
-        raise OptionsError(f"{root}: no {what} in the synthesis store ({exc})") from None
+        if at:  # its message is a multi-line Rust error report: not ours to print
+            raise OptionsError(f"{root}: no snapshot {at!r} in the synthesis store (its "
+                               "commits: synthesis-log; a pruned commit is gone)") from None
+        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise OptionsError(f"{root}: no branch {st.BRANCH!r} in the synthesis store "
+                           f"({first.strip(' x')})") from None
     attrs = st.read_attributes(session.store)
     if attrs is None:
         raise OptionsError(f"{root}: not a synthesis store (no synthesis committed there)")
