@@ -145,6 +145,34 @@ class SynthesisStore:
         return st.history(self.repo, snapshot=self.snapshot)
 
 
+class DecodedLayer:
+    """A layer level read lazily, window by window, straight from its zarr array (no task
+    graph: zarr fetches a window's chunks concurrently), compact band counts decoded to
+    float32 radiances (``store.decode_band``). An array-like for viewers (napari's
+    multiscale levels, napari's ``LayerDataProtocol``): ``shape``, ``dtype``, ``ndim``,
+    ``size``, ``__getitem__``, ``__array__``."""
+
+    def __init__(self, array: Any) -> None:
+        self.array = array
+        self.scale = st.stored_scale(array)
+        self.shape = tuple(int(n) for n in array.shape)
+        self.ndim = len(self.shape)
+        self.size = int(np.prod(self.shape))
+        self.dtype = np.dtype(np.float32) if self.scale is not None else np.dtype(
+            st.native_dtype(array))
+
+    def __getitem__(self, key: Any) -> np.ndarray:
+        values = np.asarray(self.array[key])
+        return values if self.scale is None else st.decode_band(values, self.scale)
+
+    def __array__(self, dtype: Any = None, copy: Any = None) -> np.ndarray:
+        values = self[...]
+        return values if dtype is None else values.astype(dtype)
+
+    def __len__(self) -> int:
+        return self.shape[0]
+
+
 def open_synthesis(path: str | os.PathLike[str], at: str | None = None) -> SynthesisStore:
     """Open the synthesis store ``path`` at its latest commit, or at snapshot ``at``."""
     root = Path(path)

@@ -327,6 +327,28 @@ def read_window(store: Any, names: Sequence[str], window: Window, level: int = 1
     return out
 
 
+def written_window(store: Any, name: str, level: int = 1) -> Window | None:
+    """Rows and columns, at overview ``level``, of the bounding box of the chunks of layer
+    ``name`` that hold values; None when none does. A synthesis writes only the chunks its
+    products touch: on a Europe-size grid the others have no key. Listed from the store's
+    manifests (no chunk is read): 8-25 ms for a layer of a Europe-size store."""
+    array = open_layer(store, name, level)
+    prefix = f"{_level_path(name, level)}/c/"
+
+    async def keys() -> list[str]:
+        return [k async for k in store.list_prefix(_level_path(name, level))]
+
+    found = [k[len(prefix):].split("/") for k in _sync(keys()) if k.startswith(prefix)]
+    if not found:
+        return None
+    rows, cols = (int(n) for n in array.chunks)
+    height, width = (int(n) for n in array.shape)
+    i = [int(a) for a, _ in found]
+    j = [int(b) for _, b in found]
+    return (min(i) * rows, min((max(i) + 1) * rows, height),
+            min(j) * cols, min((max(j) + 1) * cols, width))
+
+
 def _sync(coroutine: Any) -> Any:
     """Run ``coroutine`` on zarr's event loop (the loop of its synchronous API)."""
     from zarr.core.sync import sync
@@ -395,7 +417,7 @@ def read_tile(store: Any, names: Sequence[str], window: Window, layout: str = ""
         codec = _chunk_encoder(array)
         if codec is None:
             return np.asarray(await array.getitem((slice(r0, r1), slice(c0, c1))))
-        out = np.zeros((r1 - r0, c1 - c0), _native_dtype(array))
+        out = np.zeros((r1 - r0, c1 - c0), native_dtype(array))
         rows, cols = (int(c) for c in array.chunks)
         await asyncio.gather(*(chunk(array, codec, out, i, j) for i in range(r0, r1, rows)
                                for j in range(c0, c1, cols)))
@@ -407,7 +429,7 @@ def read_tile(store: Any, names: Sequence[str], window: Window, layout: str = ""
     return dict(zip(names, _sync(gather()), strict=True))
 
 
-def _native_dtype(array: Any) -> np.dtype[Any]:
+def native_dtype(array: Any) -> np.dtype[Any]:
     """The numpy dtype of a zarr array (zarr 3.1: a ``ZDType`` wrapping it)."""
     dtype = array.dtype
     native = getattr(dtype, "to_native_dtype", None)
@@ -467,7 +489,7 @@ def _chunk_encoder(array: Any) -> Any:
     if codecs and isinstance(codecs[0], Delta):
         config = {k: v for k, v in codecs[0].codec_config.items() if k != "id"}
         dtype = np.dtype(str(config.pop("dtype"))) if "dtype" in config else None
-        if config or dtype is None or dtype != _native_dtype(array).newbyteorder("<"):
+        if config or dtype is None or dtype != native_dtype(array).newbyteorder("<"):
             return None  # an astype, or another dtype: zarr's own pipeline
         delta = numcodecs.Delta(dtype=dtype.str)
         codecs = codecs[1:]
