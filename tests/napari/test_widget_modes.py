@@ -123,3 +123,40 @@ def test_mode_label_and_remembered_selection(make_napari_viewer, tiny_n1, tiny_d
     assert again.algorithm.value == "max-ndvi"
     assert again.mode.value == "new synthesis (max-ndvi) of 0 products"
     assert "max-ndvi" in again.status.value and "last session" in again.status.value
+
+
+def test_update_of_a_large_store_reads_only_what_the_products_changed(make_napari_viewer, qtbot,
+                                                                      tiny_n1, tmp_path):
+    """A store nine times the product's footprint (a Europe-size store, in small): the widget's
+    update shows the part the product reached, read from the store, placed where it lies;
+    before, it read every layer of the whole grid into memory (15 x 3.2e8 pixels for Europe)."""
+    from napari_meris_ortho.geometry.grid import OutputGrid
+    from napari_meris_ortho.ortho import product_grid
+    from napari_meris_ortho.synthesis.api import synthesize
+    from napari_meris_ortho.synthesis.tiling import products_window
+
+    foot = product_grid(read_product(tiny_n1), "EPSG:4326")
+    big = OutputGrid(foot.crs, foot.x0 - foot.width * foot.dx, foot.y0 + foot.height * foot.dy,
+                     foot.dx, foot.dy, 3 * foot.width, 3 * foot.height)
+    store = tmp_path / "store"
+    synthesize([tiny_n1], store, grid=big, bands=(7,), algorithm="min-radiance",
+               elevation="tiepoints")
+    second = _copy(tiny_n1, tmp_path / "MER_FR__1PTWO.N1", dt.datetime(2003, 9, 24, 9, 41), 0.7)
+    viewer = make_napari_viewer()
+    widget = _widget(viewer)
+    widget.elevation.value = "tiepoints"
+    widget.geometry.value = False
+    widget.products.value = [second]
+    widget.algorithm.value = "min-radiance"
+    widget.input_store.value = store
+    _run(widget, qtbot)
+    synthesis = open_synthesis(store)
+    window = products_window(synthesis.grid, [read_product(second)])
+    r0, r1, c0, c1 = window
+    assert (r1 - r0) * (c1 - c0) < big.width * big.height / 4
+    layer = next(x for x in viewer.layers if x.name == "synthesis min-radiance b7")
+    np.testing.assert_allclose(np.asarray(layer.data), synthesis.band(7, window))
+    assert layer.metadata["window"] == list(window)
+    # placed where it lies: its first pixel's world position is the store's pixel (r0, c0)
+    x, y = synthesis.grid.xy(r0, c0)
+    np.testing.assert_allclose(layer.data_to_world((0, 0)), (-y, x), rtol=0, atol=1e-9)

@@ -302,26 +302,31 @@ def _run_synthesis(options: RunSettings, progress: ProgressCallback | None) -> O
         if not result.merged:
             raise OptionsError(f"no product could be merged into the synthesis "
                                f"({'; '.join(skipped)})")
-        item = _synthesis_item(out)
+        merged = {str(Path(r.path)) for r in result.merged}
+        item = _synthesis_item(out, [p for p in products if str(p.path) in merged])
     finally:
         if temporary:
             shutil.rmtree(out.parent, ignore_errors=True)
-    merged = {str(Path(r.path)) for r in result.merged}
     items = [item] + [_item(p, grid=item["grid"]) for p in products if str(p.path) in merged]
     return OrthoRun(items, options, [] if temporary else [out], skipped)
 
 
-def _synthesis_item(path: Path) -> dict[str, Any]:
-    """The synthesis layers read into memory: bands, NDVI (maximum-NDVI rule), count."""
+def _synthesis_item(path: Path, products: list[Any]) -> dict[str, Any]:
+    """The synthesis layers read into memory over the part of the store the run's
+    ``products`` changed (``synthesis.tiling.products_window``; a new synthesis on their
+    footprint: all of it; an update of a Europe-size store: the products' footprint, not
+    15 x 3.2e8 pixels): bands, NDVI (maximum-NDVI rule), count."""
     from ..synthesis.reading import open_synthesis
+    from ..synthesis.tiling import products_window
 
     store = open_synthesis(path)
     algorithm = store.algorithm
-    grid, prefix = store.grid, f"synthesis {algorithm}"
-    count = np.asarray(store.read("count"))
+    window = products_window(store.grid, products)
+    grid, prefix = store.grid.window(*window), f"synthesis {algorithm}"
+    count = np.asarray(store.read("count", window))
     extra = []
     if algorithm == MergeRule.MAX_NDVI:
-        ndvi = np.asarray(store.ndvi(), np.float32)
+        ndvi = np.asarray(store.ndvi(window), np.float32)
         extra.append((np.nan_to_num(ndvi, nan=0.0), geo_image_kwargs(
             grid, name=f"{prefix} NDVI", colormap="RdYlGn", contrast_limits=(-1.0, 1.0),
             metadata={"units": "NDVI (band 13 - band 7) / (band 13 + band 7)"}), "image"))
@@ -330,8 +335,10 @@ def _synthesis_item(path: Path) -> dict[str, Any]:
         contrast_limits=(0.0, float(max(int(count.max()), 1))),
         metadata={"units": "products"}), "image"))
     return {"prefix": prefix, "suffix": "", "meta": {"synthesis": str(path),
-                                                     "algorithm": algorithm},
-            "tie_points": None, "bands": {b: np.asarray(store.band(b)) for b in store.bands},
+                                                     "algorithm": algorithm,
+                                                     "window": list(window)},
+            "tie_points": None,
+            "bands": {b: np.asarray(store.band(b, window)) for b in store.bands},
             "extra": extra, "grid": grid, "valid": count > 0, "diagnostics": {}, "stats": {}}
 
 

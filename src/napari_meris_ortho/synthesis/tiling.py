@@ -93,6 +93,16 @@ def tiles(window: tuple[int, int, int, int], tile: int) -> Iterator[tuple[int, i
             yield max(r, row0), min(r + tile, row1), max(c, col0), min(c + tile, col1)
 
 
+def products_window(grid: OutputGrid, products: Iterable[ProductGeometry]) -> Window:
+    """Rows and columns of ``grid`` that ``products`` may reach: the union of their
+    :func:`footprint_window` (terrain margin included); the whole grid when none does."""
+    windows = [w for w in (footprint_window(p, grid) for p in products) if w is not None]
+    if not windows:
+        return (0, grid.height, 0, grid.width)
+    return (min(w[0] for w in windows), max(w[1] for w in windows),
+            min(w[2] for w in windows), max(w[3] for w in windows))
+
+
 def tile_of(piece: tuple[int, int, int, int], tile: int, shape: tuple[int, int]
             ) -> tuple[int, int, int, int]:
     """The whole output tile (one chunk of the store) holding ``piece``."""
