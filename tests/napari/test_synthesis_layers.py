@@ -28,9 +28,23 @@ def test_store_opens_as_multiscale_layers(store, tmp_path) -> None:
     assert get_reader(str(tmp_path)) is None  # a plain directory is not ours
     layers = read_store(str(store))
     names = [kwargs["name"] for _, kwargs, _ in layers]
-    assert names == [f"syn {n}" for n in ("band_07", "band_13", "ndvi", "count", "product")]
+    assert names == [f"syn {n}" for n in ("radiance", "ndvi", "count", "product")]
     synthesis = open_synthesis(store)
-    for data, kwargs, kind in layers:
+    radiance, kwargs, kind = layers[0]
+    # bands 7 and 13: one stack whose band axis is the MERIS band number (world 7, 13)
+    assert kind == "image" and kwargs.get("visible", True)
+    assert kwargs["scale"] == (6.0, *layer_scale(GRID)) and kwargs["translate"][0] == 7.0
+    assert [level.shape for level in radiance] == [(2, 340, 540), (2, 170, 270)]
+    for k, band in enumerate((7, 13)):
+        np.testing.assert_array_equal(radiance[0][k], synthesis.band(band))
+        np.testing.assert_array_equal(radiance[1][k, 10:20, 30:40],
+                                      synthesis.read(f"band_{band:02d}", level=2)[10:20, 30:40])
+    np.testing.assert_array_equal(np.asarray(radiance[1]),
+                                  np.stack([synthesis.read(f"band_{b:02d}", level=2)
+                                            for b in (7, 13)]))
+    assert radiance[0][1:, ..., :5].shape == (1, 340, 5)
+    assert radiance[0][[1, 0], 0, :3].shape == (2, 3) and radiance[0][2:].shape == (0, 340, 540)
+    for data, kwargs, kind in layers[1:]:
         assert kwargs["multiscale"] and [level.shape for level in data] == [(340, 540),
                                                                             (170, 270)]
         assert kwargs["scale"] == layer_scale(GRID)
@@ -38,6 +52,31 @@ def test_store_opens_as_multiscale_layers(store, tmp_path) -> None:
         np.testing.assert_array_equal(np.asarray(data[1][:]), synthesis.read(name, level=2))
         np.testing.assert_array_equal(np.asarray(data[0][:]), synthesis.read(name))
         assert kind == ("labels" if name == "product" else "image")
+        assert kwargs["visible"] is False  # under the radiance
+
+
+def test_uneven_bands_open_as_a_layer_each(tmp_path) -> None:
+    """Bands 2, 7, 13 have no common spacing for a band axis: a layer per band, the top one
+    visible."""
+    out = tmp_path / "uneven"
+    synthesize([scene_product()], out, grid=GRID, bands=(2, 7, 13), tile=256,
+               elevation="tiepoints")
+    layers = read_store(str(out))
+    assert [kwargs["name"] for _, kwargs, _ in layers] == [
+        f"uneven {n}" for n in ("band_02", "band_07", "band_13", "count", "product")]
+    assert [kwargs["visible"] for _, kwargs, _ in layers] == [False, False, True, False, False]
+
+
+def test_the_band_slider_names_the_meris_band(store, make_napari_viewer) -> None:
+    viewer = make_napari_viewer()
+    (radiance, *_) = viewer.open(str(store), plugin="napari-meris-ortho")
+    assert radiance.name == "syn radiance" and radiance.visible
+    axis = viewer.dims.ndim - radiance.ndim
+    viewer.dims.set_point(axis, 13)
+    assert radiance.axis_labels[0] == "MERIS band 13 (865 nm)"
+    viewer.dims.set_point(axis, 7)
+    assert radiance.axis_labels[0] == "MERIS band 7 (665 nm)"
+    np.testing.assert_array_equal(np.asarray(radiance._slice.image.raw)[:5, :5] >= 0, True)
 
 
 def test_winning_product_tooltip_names_the_product(store, make_napari_viewer) -> None:
@@ -57,3 +96,30 @@ def test_winning_product_tooltip_names_the_product(store, make_napari_viewer) ->
     row, col = np.argwhere(winner == 0)[0]
     assert "product: (none)" in labels._get_tooltip_text(
         np.asarray(labels.data_to_world((row, col))), world=True)
+
+
+def test_a_sparse_store_is_read_only_where_it_holds_values(tmp_path) -> None:
+    """A grid three times the product's footprint each way: every level knows the box of the
+    written chunks, reads only where a window meets it (the rest is background), and gives
+    what zarr reads."""
+    from napari_meris_ortho._napari.synthesis_layers import pyramids
+    from napari_meris_ortho.geometry.grid import OutputGrid
+
+    big = OutputGrid(GRID.crs, GRID.x0 - GRID.width * GRID.dx, GRID.y0 + GRID.height * GRID.dy,
+                     GRID.dx, GRID.dy, 3 * GRID.width, 3 * GRID.height)
+    out = tmp_path / "sparse"
+    synthesize([scene_product()], out, grid=big, bands=(7, 13), tile=256,
+               elevation="tiepoints")
+    synthesis = open_synthesis(out)
+    levels = pyramids(synthesis)
+    full = levels["band_07"][0]
+    r0, r1, c0, c1 = full.written
+    assert (r1 - r0) * (c1 - c0) < big.width * big.height / 3
+    stored = synthesis.read("band_07")
+    assert stored[:r0].max() == 0 and stored[r1:].max() == 0  # nothing outside the box
+    for window in ((slice(r0 - 100, r0 + 100), slice(c0 - 50, c1 + 50)),
+                   (slice(0, 200), slice(0, 300)), (slice(None), slice(None))):
+        np.testing.assert_array_equal(full[window], stored[window])
+    coarse = levels["count"][-1]
+    factor = synthesis.overviews[-1]
+    np.testing.assert_array_equal(np.asarray(coarse), synthesis.read("count", level=factor))

@@ -76,6 +76,7 @@ def read_store(path: str | list[str]) -> list[LayerData]:
     """Read a synthesis store (multiscale layers, winning product as labels)."""
     from .synthesis_layers import store_layers
 
+    _current_frame()  # map coordinates and the band slider's names in the status bar
     return store_layers(path[0] if isinstance(path, list) else path)
 
 

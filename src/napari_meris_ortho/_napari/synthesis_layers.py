@@ -7,9 +7,13 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from ..display import contrast_limits
+from ..products.n1.format import APPENDIX_A_WAVELENGTHS
 from ..synthesis import store as st
-from ..synthesis.reading import DecodedLayer, SynthesisStore, open_synthesis
+from ..synthesis.reading import DecodedLayer, DecodedStack, SynthesisStore, open_synthesis
+from .status import BAND_AXIS
 from .world import geo_image_kwargs
 
 LayerData = tuple[Any, dict[str, Any], str]
@@ -20,38 +24,79 @@ def is_store(path: str | Path) -> bool:
     return Path(path).is_dir() and st.is_repository(path)
 
 
-def pyramid(store: SynthesisStore, name: str) -> list[Any]:
-    """Layer ``name`` at full resolution, then at each overview level: read window by window
-    as napari asks (``DecodedLayer``: compact band counts decoded to radiances)."""
+def pyramids(store: SynthesisStore) -> dict[str, list[DecodedLayer]]:
+    """Every layer at full resolution, then at each overview level: read window by window as
+    napari asks (``DecodedLayer``: compact band counts decoded to radiances), only where the
+    store holds values: the box of the ``count`` layer's written chunks (every product that
+    touched a chunk counted there, so it holds every layer's), at each level's scale."""
+    levels = (1, *store.overviews)
     session_store = store.session.store
-    return [DecodedLayer(st.open_layer(session_store, name, level))
-            for level in (1, *store.overviews)]
+    arrays = st.open_layers(session_store, store.layers(), levels)
+    box = st.written_windows(session_store, {("count", 1): arrays["count", 1]})["count", 1]
+
+    def at(level: int, shape: tuple[int, ...]) -> tuple[int, int, int, int] | None:
+        if box is None:
+            return None
+        r0, r1, c0, c1 = box
+        return (r0 // level, min(-(-r1 // level), shape[0]),
+                c0 // level, min(-(-c1 // level), shape[1]))
+
+    return {name: [DecodedLayer(arrays[name, level],
+                                at(level, tuple(arrays[name, level].shape)), known=True)
+                   for level in levels]
+            for name in store.layers()}
 
 
-def coarse_limits(store: SynthesisStore, name: str, levels: list[Any]) -> tuple[float, float]:
-    """Contrast limits from the coarsest level, over the bounding box of its written chunks
-    only (``store.written_window``): a Europe-size store holding one product reads 2 of its
-    315 coarsest chunks, not all of them (4.6 s of napari's open, on the event loop)."""
-    factor = store.overviews[-1] if len(levels) > 1 else 1
-    window = st.written_window(store.session.store, name, factor)
-    if window is None:
-        return (0.0, 1.0)
-    r0, r1, c0, c1 = window
-    return contrast_limits(levels[-1][r0:r1, c0:c1], 0.0)
+def coarse_limits(pyramids: dict[str, list[DecodedLayer]]) -> dict[str, tuple[float, float]]:
+    """Contrast limits of each layer from its coarsest level, over the bounding box of its
+    written chunks only (``store.written_windows``): a Europe-size store holding one product
+    reads 2 of its 315 coarsest chunks per layer, not all of them (4.6 s of napari's open,
+    on the event loop)."""
+    out = {}
+    for name, levels in pyramids.items():
+        window = levels[-1].written
+        if window is None:
+            out[name] = (0.0, 1.0)
+            continue
+        r0, r1, c0, c1 = window
+        out[name] = contrast_limits(levels[-1][r0:r1, c0:c1], 0.0)
+    return out
 
 
 def store_layers(path: str | Path, at: str | None = None) -> list[LayerData]:
-    """Bands, NDVI, count and winning product of the synthesis ``path`` (at snapshot ``at``).
-    Only the last band is visible (the top layer: the bands under it would be drawn, read
-    and hidden by it)."""
+    """The radiance of the synthesis ``path`` (at snapshot ``at``), its NDVI, count and
+    winning product. Bands evenly spaced (all 15, the default; one; 7 and 13) go in one
+    ``radiance`` stack whose band axis is the MERIS band number, as an N1's does (one layer
+    to insert, not 15: napari inserts a layer in about 0.1 s, on its event loop); others as a
+    layer per band, the last one visible (the top layer hides the others)."""
     store = open_synthesis(path, at=at)
     grid = store.grid
     stem = Path(path).name
     meta = {"synthesis": str(path), "snapshot": store.snapshot, "algorithm": store.algorithm}
     layers: list[LayerData] = []
-    top = st.band_layer(store.bands[-1])
-    for name in store.layers():
-        levels = pyramid(store, name)
+    bands = store.bands
+    names = pyramids(store)
+    limits = coarse_limits({n: v for n, v in names.items() if n != "product"})
+    steps = set(np.diff(bands).tolist())
+    if len(steps) <= 1:
+        step = steps.pop() if steps else 1
+        band_names = [st.band_layer(b) for b in bands]
+        stack = [DecodedStack([names[n][k] for n in band_names])
+                 for k in range(len(names[band_names[0]]))]
+        kwargs = geo_image_kwargs(grid, name=f"{stem} radiance", metadata={
+            **meta, "band_names": [f"band {b} ({w:.0f} nm)"
+                                   for b, w in enumerate(APPENDIX_A_WAVELENGTHS, 1)]},
+            multiscale=len(stack) > 1, colormap="gray",
+            contrast_limits=(min(limits[n][0] for n in band_names),
+                             max(limits[n][1] for n in band_names)))
+        kwargs.update(scale=(float(step), *kwargs["scale"]),
+                      translate=(float(bands[0]), *kwargs["translate"]),
+                      units=("pixel", *kwargs["units"]),
+                      axis_labels=(BAND_AXIS, *kwargs["axis_labels"]))
+        layers.append((stack if len(stack) > 1 else stack[0], kwargs, "image"))
+        names = {n: v for n, v in names.items() if n not in band_names}
+    top = st.band_layer(bands[-1])
+    for name, levels in names.items():
         kwargs = geo_image_kwargs(grid, name=f"{stem} {name}", metadata=dict(meta),
                                   multiscale=len(levels) > 1)
         if name == "product":
@@ -59,8 +104,7 @@ def store_layers(path: str | Path, at: str | None = None) -> list[LayerData]:
                            {**kwargs, "features": product_features(store), "opacity": 0.5,
                             "visible": False}, "labels"))
             continue
-        kwargs.update(colormap="gray", visible=name == top,
-                      contrast_limits=coarse_limits(store, name, levels))
+        kwargs.update(colormap="gray", visible=name == top, contrast_limits=limits[name])
         layers.append((levels if len(levels) > 1 else levels[0], kwargs, "image"))
     return layers
 

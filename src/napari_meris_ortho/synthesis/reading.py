@@ -148,12 +148,18 @@ class SynthesisStore:
 class DecodedLayer:
     """A layer level read lazily, window by window, straight from its zarr array (no task
     graph: zarr fetches a window's chunks concurrently), compact band counts decoded to
-    float32 radiances (``store.decode_band``). An array-like for viewers (napari's
-    multiscale levels, napari's ``LayerDataProtocol``): ``shape``, ``dtype``, ``ndim``,
+    float32 radiances (``store.decode_band``). With ``known``, ``written`` is the box of the
+    chunks that hold values (``store.written_windows``; None: no chunk does) and a window is
+    read only where it meets that box, the rest is background (0): on a sparse Europe-size
+    store, a level's empty windows cost no chunk lookups. An array-like for viewers
+    (napari's multiscale levels, its ``LayerDataProtocol``): ``shape``, ``dtype``, ``ndim``,
     ``size``, ``__getitem__``, ``__array__``."""
 
-    def __init__(self, array: Any) -> None:
+    def __init__(self, array: Any, written: tuple[int, int, int, int] | None = None, *,
+                 known: bool = False) -> None:
         self.array = array
+        self.written = written
+        self.known = known  # False: ``written`` unknown, every chunk asked for is read
         self.scale = st.stored_scale(array)
         self.shape = tuple(int(n) for n in array.shape)
         self.ndim = len(self.shape)
@@ -161,9 +167,73 @@ class DecodedLayer:
         self.dtype = np.dtype(np.float32) if self.scale is not None else np.dtype(
             st.native_dtype(array))
 
-    def __getitem__(self, key: Any) -> np.ndarray:
+    def _read(self, key: Any) -> np.ndarray:
         values = np.asarray(self.array[key])
         return values if self.scale is None else st.decode_band(values, self.scale)
+
+    def __getitem__(self, key: Any) -> np.ndarray:
+        box = _box(key, self.shape) if self.known else None
+        if box is None:
+            return self._read(key)
+        r0, r1, c0, c1 = box
+        out = np.zeros((r1 - r0, c1 - c0), self.dtype)
+        if self.written is None:
+            return out
+        w0, w1, v0, v1 = self.written
+        i0, i1, j0, j1 = max(r0, w0), min(r1, w1), max(c0, v0), min(c1, v1)
+        if i0 < i1 and j0 < j1:
+            out[i0 - r0:i1 - r0, j0 - c0:j1 - c0] = self._read((slice(i0, i1), slice(j0, j1)))
+        return out
+
+    def __array__(self, dtype: Any = None, copy: Any = None) -> np.ndarray:
+        values = self[...]
+        return values if dtype is None else values.astype(dtype)
+
+    def __len__(self) -> int:
+        return self.shape[0]
+
+
+def _box(key: Any, shape: tuple[int, ...]) -> tuple[int, int, int, int] | None:
+    """``key`` as rows and columns (row0, row1, col0, col1) of a 2-D array of ``shape`` when
+    it is slices of step 1 (or ``...``); None otherwise (integers, arrays, steps)."""
+    key = key if isinstance(key, tuple) else (key,)
+    if any(k is Ellipsis for k in key):
+        at = next(i for i, k in enumerate(key) if k is Ellipsis)
+        key = (*key[:at], *(slice(None),) * (3 - len(key)), *key[at + 1:])
+    key = (*key, *(slice(None),) * (2 - len(key)))
+    if len(shape) != 2 or len(key) != 2 or not all(isinstance(k, slice) for k in key):
+        return None
+    (r0, r1, rs), (c0, c1, cs) = (k.indices(n) for k, n in zip(key, shape, strict=True))
+    if rs != 1 or cs != 1:
+        return None
+    return r0, max(r1, r0), c0, max(c1, c0)
+
+
+class DecodedStack:
+    """Band layers of one level as a (band, row, column) array-like, read lazily: a window of
+    a band is read from that band's ``DecodedLayer`` only."""
+
+    def __init__(self, layers: list[DecodedLayer]) -> None:
+        self.layers = layers
+        self.shape = (len(layers), *layers[0].shape)
+        self.ndim = 3
+        self.size = int(np.prod(self.shape))
+        self.dtype = np.dtype(np.float32)
+
+    def __getitem__(self, key: Any) -> np.ndarray:
+        key = key if isinstance(key, tuple) else (key,)
+        if any(k is Ellipsis for k in key):
+            at = next(i for i, k in enumerate(key) if k is Ellipsis)
+            key = (*key[:at], *(slice(None),) * (4 - len(key)), *key[at + 1:])
+        key = (*key, *(slice(None),) * (3 - len(key)))
+        band, window = key[0], key[1:]
+        if isinstance(band, int | np.integer):
+            return self.layers[int(band)][window]
+        picked = np.arange(len(self.layers))[band]
+        if not len(picked):
+            return np.zeros((0, *np.broadcast_to(np.float32(0), self.shape[1:])[window].shape),
+                            np.float32)
+        return np.stack([self.layers[int(k)][window] for k in picked])
 
     def __array__(self, dtype: Any = None, copy: Any = None) -> np.ndarray:
         values = self[...]

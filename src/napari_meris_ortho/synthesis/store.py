@@ -313,6 +313,24 @@ def open_layer(store: Any, name: str, level: int = 1) -> Any:
     return zarr.open_array(store, path=_level_path(name, level), mode="r", zarr_format=3)
 
 
+def open_layers(store: Any, names: Sequence[str], levels: Sequence[int]) -> dict[
+        tuple[str, int], Any]:
+    """The Zarr arrays of layers ``names`` at each overview level of ``levels`` (1: full
+    resolution), read only, their metadata fetched concurrently (one round trip of zarr's
+    event loop: 90 arrays of a Europe-size store in 0.02 s, against 0.18 s one by one)."""
+    import asyncio
+
+    import zarr
+
+    keys = [(n, level) for n in names for level in levels]
+
+    async def opened() -> list[Any]:
+        return await asyncio.gather(*(_open_array(store, _level_path(n, level), "r")
+                                      for n, level in keys))
+
+    return {key: zarr.Array(array) for key, array in zip(keys, _sync(opened()), strict=True)}
+
+
 def read_window(store: Any, names: Sequence[str], window: Window, level: int = 1
                 ) -> dict[str, np.ndarray]:
     """Arrays ``names`` over ``window`` (rows/columns of the full grid; at overview ``level``
@@ -327,26 +345,43 @@ def read_window(store: Any, names: Sequence[str], window: Window, level: int = 1
     return out
 
 
-def written_window(store: Any, name: str, level: int = 1) -> Window | None:
-    """Rows and columns, at overview ``level``, of the bounding box of the chunks of layer
-    ``name`` that hold values; None when none does. A synthesis writes only the chunks its
-    products touch: on a Europe-size grid the others have no key. Listed from the store's
-    manifests (no chunk is read): 8-25 ms for a layer of a Europe-size store."""
-    array = open_layer(store, name, level)
-    prefix = f"{_level_path(name, level)}/c/"
+def written_windows(store: Any, arrays: dict[tuple[str, int], Any]
+                    ) -> dict[tuple[str, int], Window | None]:
+    """For each (layer name, overview level) of ``arrays`` (its zarr array): rows and columns,
+    at that level, of the bounding box of its chunks that hold values (None: none does). A
+    synthesis writes only the chunks its products touch: on a Europe-size grid the others
+    have no key. Listed from the store's manifests, every array at once; no chunk read."""
 
-    async def keys() -> list[str]:
-        return [k async for k in store.list_prefix(_level_path(name, level))]
+    import asyncio
 
-    found = [k[len(prefix):].split("/") for k in _sync(keys()) if k.startswith(prefix)]
-    if not found:
-        return None
-    rows, cols = (int(n) for n in array.chunks)
-    height, width = (int(n) for n in array.shape)
-    i = [int(a) for a, _ in found]
-    j = [int(b) for _, b in found]
-    return (min(i) * rows, min((max(i) + 1) * rows, height),
-            min(j) * cols, min((max(j) + 1) * cols, width))
+    paths = [_level_path(name, level) for name, level in arrays]
+
+    async def listed(path: str) -> list[str]:
+        return [k async for k in store.list_prefix(path)]
+
+    async def keys() -> list[list[str]]:
+        return await asyncio.gather(*(listed(path) for path in paths))
+
+    found: dict[str, list[tuple[int, int]]] = {}
+    for path, names in zip(paths, _sync(keys()), strict=True):
+        prefix = f"{path}/c/"
+        for key in names:
+            if key.startswith(prefix):
+                i, _, j = key[len(prefix):].partition("/")
+                found.setdefault(path, []).append((int(i), int(j)))
+    out: dict[tuple[str, int], Window | None] = {}
+    for (name, level), array in arrays.items():
+        chunks = found.get(_level_path(name, level))
+        if not chunks:
+            out[name, level] = None
+            continue
+        rows, cols = (int(n) for n in array.chunks)
+        height, width = (int(n) for n in array.shape)
+        i = [a for a, _ in chunks]
+        j = [b for _, b in chunks]
+        out[name, level] = (min(i) * rows, min((max(i) + 1) * rows, height),
+                            min(j) * cols, min((max(j) + 1) * cols, width))
+    return out
 
 
 def _sync(coroutine: Any) -> Any:
