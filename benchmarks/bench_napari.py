@@ -16,6 +16,10 @@ One run prints, in a real napari viewer (run it under Xvfb: ``xvfb-run -a``):
 4. ``RERUNS`` more runs whose layers replace the previous run's (the user pressing Run again:
    napari removes the old layers and collects garbage), their longest stalls.
 
+With ``--store``: a Europe-size synthesis store (21384 x 14969 pixels at 260 m, 15 bands,
+maximum NDVI) holding the scene's product, made once in the cache directory, opened instead
+(no runs): what a user opening a season's store waits for.
+
 With ``--sen3``: the scene's ``.SEN3`` product instead (``simulate.geocorrected``, written
 next to the scene once), opened only (no runs), and the reader's peak allocation
 (``tracemalloc`` around ``read_layers``, outside the timed opens).
@@ -111,7 +115,26 @@ def _reader_peak_mb(path: str) -> float:
     return peak / 2**20
 
 
-def bench(scene_name: str, sen3: bool = False) -> dict[str, Any]:
+def europe_store(scene_name: str) -> str:
+    """A Europe-size maximum-NDVI store holding the scene's product (made once, next to the
+    simulated product in the cache)."""
+    from pathlib import Path
+
+    from bench_synthesis import EUROPE, PIXEL_260M, products
+    from napari_meris_ortho.geometry.grid import OutputGrid
+    from napari_meris_ortho.synthesis.api import synthesize
+    from napari_meris_ortho.synthesis.reading import is_synthesis
+
+    paths = products(1, scene_name)
+    store = Path(paths[0]).parent / "bench-europe-store"
+    if not is_synthesis(store):
+        grid = OutputGrid("EPSG:4326", EUROPE[0], EUROPE[1], PIXEL_260M, PIXEL_260M,
+                          round(EUROPE[2] / PIXEL_260M), round(EUROPE[3] / PIXEL_260M))
+        synthesize(paths, store, grid=grid, algorithm="max-ndvi", elevation="tiepoints")
+    return str(store)
+
+
+def bench(scene_name: str, sen3: bool = False, store: bool = False) -> dict[str, Any]:
     import tempfile
 
     os.environ.setdefault("MERIS_ORTHO_NO_WARMUP", "1")  # no compiler thread competing
@@ -130,6 +153,8 @@ def bench(scene_name: str, sen3: bool = False) -> dict[str, Any]:
         from napari_meris_ortho.simulate.geocorrected import write_geocorrected
 
         product = str(write_geocorrected(scene, fsg=False)["sen3"])
+    if store:
+        product = europe_store(scene_name)
     viewer = napari.Viewer(show=True)
     app = QApplication.instance()
     _spin(app, lambda: False, 1.0)  # the window is up
@@ -148,6 +173,7 @@ def bench(scene_name: str, sen3: bool = False) -> dict[str, Any]:
         _spin(app, lambda: False, 0.3)
     if sen3:
         out["reader_peak_mb"] = _reader_peak_mb(product)
+    if sen3 or store:
         viewer.close()
         return out
 
@@ -198,17 +224,19 @@ def main() -> None:
     parser.add_argument("--scene", default="fr-alps")
     parser.add_argument("--sen3", action="store_true",
                         help="open the scene's .SEN3 product instead of its N1 (no runs)")
+    parser.add_argument("--store", action="store_true",
+                        help="open a Europe-size synthesis store of the scene (no runs)")
     parser.add_argument("--json", help="write the figures to this file")
     args = parser.parse_args()
-    out = bench(args.scene, args.sen3)
+    out = bench(args.scene, args.sen3, args.store)
     print(f"source: {out['source']}")
-    kind = "SEN3" if args.sen3 else "N1"
+    kind = "SEN3" if args.sen3 else "Europe-size synthesis store" if args.store else "N1"
     print(f"open {args.scene} {kind} to first pixels: {out['open_to_first_pixels_s']:.2f} s "
           f"(longest stall {out['open_longest_stall_s']:.2f} s), again "
           f"{out['warm_open_to_first_pixels_s']:.2f} s")
     if args.sen3:
         print(f"reader peak allocation (tracemalloc): {out['reader_peak_mb']:.1f} MB")
-    else:
+    elif not args.store:
         _print_runs(out)
     if args.json:
         with open(args.json, "w") as fh:
