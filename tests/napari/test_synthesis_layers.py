@@ -123,3 +123,29 @@ def test_a_sparse_store_is_read_only_where_it_holds_values(tmp_path) -> None:
     coarse = levels["count"][-1]
     factor = synthesis.overviews[-1]
     np.testing.assert_array_equal(np.asarray(coarse), synthesis.read("count", level=factor))
+
+
+def test_a_sparse_store_opened_into_an_empty_viewer_frames_its_data(tmp_path, make_napari_viewer,
+                                                                    qtbot) -> None:
+    """napari frames the whole grid of a store it opens; the plugin then frames the pixels the
+    store holds (a Europe-size store of one product: the product, not a speck in the black)."""
+    from napari_meris_ortho.geometry.grid import OutputGrid
+
+    big = OutputGrid(GRID.crs, GRID.x0 - 4 * GRID.width * GRID.dx,
+                     GRID.y0 + 4 * GRID.height * GRID.dy, GRID.dx, GRID.dy,
+                     9 * GRID.width, 9 * GRID.height)
+    out = tmp_path / "sparse"
+    synthesize([scene_product()], out, grid=big, bands=(7,), tile=256, elevation="tiepoints")
+    viewer = make_napari_viewer(show=True)
+    (radiance, *_) = viewer.open(str(out), plugin="napari-meris-ortho")
+    qtbot.wait(200)
+    framed, centre = viewer.camera.zoom, radiance.world_to_data(viewer.camera.center)[-2:]
+    r0, r1, c0, c1 = radiance.metadata["data_window"]
+    assert r0 <= centre[0] <= r1 and c0 <= centre[1] <= c1
+    viewer.reset_view()  # napari's view: the whole grid
+    whole = viewer.camera.zoom
+    assert framed > 4 * whole
+    # into a viewer that already shows something, the camera stays where the user put it
+    viewer.open(str(out), plugin="napari-meris-ortho")
+    qtbot.wait(200)
+    assert viewer.camera.zoom == whole

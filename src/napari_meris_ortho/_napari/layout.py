@@ -136,3 +136,25 @@ def append_inactive(viewer: Any, layer: Any) -> None:
     finally:
         layers._activate_on_insert = previous
 
+
+
+def frame_extent(viewer: Any, low: Any, high: Any) -> None:
+    """Point the camera at the world box ``low``..``high`` (its last two axes: row, column),
+    the box filling 95 % of the canvas."""
+    import numpy as np
+
+    low, high = np.asarray(low, np.float64)[-2:], np.asarray(high, np.float64)[-2:]
+    size = np.where(np.isclose(high - low, 0.0), 1.0, high - low)
+    viewer.camera.center = tuple(float(v) for v in (low + high) / 2.0)
+    canvas = np.asarray(viewer.canvas.size, np.float64)
+    viewer.camera.zoom = float(0.95 * np.min(canvas / size))
+
+
+def frame_later(viewer: Any, low: Any, high: Any) -> None:
+    """:func:`frame_extent` at the next turn of the event loop: after napari has added the
+    layers a reader returned (and reset its view to all of them). No-op without Qt."""
+    try:
+        from qtpy.QtCore import QTimer
+    except ImportError:  # pragma: no cover - napari always has Qt
+        return
+    QTimer.singleShot(0, lambda: frame_extent(viewer, low, high))

@@ -74,10 +74,17 @@ def get_reader(path: str | list[str]) -> Callable[[str | list[str]], list[LayerD
 
 def read_store(path: str | list[str]) -> list[LayerData]:
     """Read a synthesis store (multiscale layers, winning product as labels)."""
-    from .synthesis_layers import store_layers
+    from .layout import frame_later
+    from .synthesis_layers import data_extent, store_layers
 
+    viewer = _current_viewer()
+    empty = viewer is not None and not len(viewer.layers)
     _current_frame()  # map coordinates and the band slider's names in the status bar
-    return store_layers(path[0] if isinstance(path, list) else path)
+    layers = store_layers(path[0] if isinstance(path, list) else path)
+    extent = data_extent(layers)
+    if empty and extent is not None:  # napari frames the whole grid: frame what it holds
+        frame_later(viewer, *extent)
+    return layers
 
 
 def _file_or_directory(path: str | Path) -> bool:
@@ -138,15 +145,20 @@ def _frame_args(kwargs: dict[str, Any]) -> dict[str, Any]:
     return {"crs": geo["crs"], "transform": geo["transform"], "shape": geo["shape"]}
 
 
-def _current_frame() -> OutputGrid | None:
-    """The world frame of the current napari viewer (None without viewer or geocoded layer);
-    the viewer's status bar then shows map coordinates (``status``)."""
+def _current_viewer() -> Any:
+    """The current napari viewer; None without one (no Qt app: plain reading)."""
     try:
         import napari
 
-        viewer = napari.current_viewer()
-    except Exception:  # no Qt app: plain reading
+        return napari.current_viewer()
+    except Exception:
         return None
+
+
+def _current_frame() -> OutputGrid | None:
+    """The world frame of the current napari viewer (None without viewer or geocoded layer);
+    the viewer's status bar then shows map coordinates (``status``)."""
+    viewer = _current_viewer()
     if viewer is None:
         return None
     from .._process import unit_registry_from_disk

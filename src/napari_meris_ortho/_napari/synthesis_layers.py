@@ -72,10 +72,12 @@ def store_layers(path: str | Path, at: str | None = None) -> list[LayerData]:
     store = open_synthesis(path, at=at)
     grid = store.grid
     stem = Path(path).name
-    meta = {"synthesis": str(path), "snapshot": store.snapshot, "algorithm": store.algorithm}
+    names = pyramids(store)
+    box = names["count"][0].written
+    meta = {"synthesis": str(path), "snapshot": store.snapshot, "algorithm": store.algorithm,
+            "data_window": None if box is None else list(box)}
     layers: list[LayerData] = []
     bands = store.bands
-    names = pyramids(store)
     limits = coarse_limits({n: v for n, v in names.items() if n != "product"})
     steps = set(np.diff(bands).tolist())
     if len(steps) <= 1:
@@ -115,3 +117,19 @@ def product_features(store: SynthesisStore) -> dict[str, list[Any]]:
     return {"index": [0] + [int(p["index"]) for p in table],
             "product": ["(none)"] + [str(p["product_name"]) for p in table],
             "sensing_start": [""] + [str(p.get("sensing_start", "")) for p in table]}
+
+
+def data_extent(layers: list[LayerData]) -> tuple[tuple[float, float], tuple[float, float]] | None:
+    """World box (low and high (row, column) corners) of the pixels a store's layers hold
+    (their ``data_window``, rows and columns of the grid); None when empty."""
+    if not layers:
+        return None
+    kwargs = layers[0][1]
+    window = kwargs["metadata"].get("data_window")
+    if window is None:
+        return None
+    r0, r1, c0, c1 = window
+    (sy, sx), (ty, tx) = kwargs["scale"][-2:], kwargs["translate"][-2:]
+    # translate: the centre of pixel (0, 0); the box runs from pixel edge to pixel edge
+    return ((ty + (r0 - 0.5) * sy, tx + (c0 - 0.5) * sx),
+            (ty + (r1 - 0.5) * sy, tx + (c1 - 0.5) * sx))

@@ -45,6 +45,7 @@ from .layout import (
     StatusLabel,
     append_inactive,
     canvas_updates,
+    frame_extent,
     hide_for_now,
     prepare_dash_patterns,
     show_in,
@@ -584,11 +585,7 @@ class OrthorectifyWidget(Container):
         # indexes their 2-D extent with the viewer's 3-D displayed axes; frame them directly
         extents = np.array([np.asarray(layer.extent.world, np.float64)[:, -2:]
                             for layer in shown])
-        low, high = extents[:, 0].min(axis=0), extents[:, 1].max(axis=0)
-        size = np.where(np.isclose(high - low, 0.0), 1.0, high - low)
-        self.viewer.camera.center = tuple(float(v) for v in (low + high) / 2.0)
-        canvas = np.asarray(self.viewer.canvas.size, np.float64)
-        self.viewer.camera.zoom = float(0.95 * np.min(canvas / size))
+        frame_extent(self.viewer, extents[:, 0].min(axis=0), extents[:, 1].max(axis=0))
 
     def _failed(self, exc: BaseException) -> None:
         if self._closed:
