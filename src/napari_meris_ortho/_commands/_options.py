@@ -65,6 +65,22 @@ def add_grid_options(p: Any, crs_default: str | None, crs_help: str) -> None:
                    "checked when this is given)")
 
 
+def positive_int(what: str) -> Any:
+    """An argparse type: an integer >= 1, else "'TEXT' is not WHAT" (``what``: "a positive
+    integer", "a number of commits >= 1")."""
+
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            value = 0
+        if value < 1:
+            raise argparse.ArgumentTypeError(f"{text!r} is not {what}")
+        return value
+
+    return parse
+
+
 def _pixel_count(text: str) -> int:
     """argparse type of ``--max-pixels``: a positive count ("2e9" allowed)."""
     try:

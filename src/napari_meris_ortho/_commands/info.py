@@ -18,6 +18,7 @@ from ..products.n1 import FLAG_NAMES, MerisL1bProduct
 from ..products.n1.format import EPOCH_2000
 from ..products.open import read_product
 from ..products.protocol import MerisProduct
+from ._options import positive_int
 
 _RESOLUTION_NAMES = {"FR": "full resolution", "RR": "reduced resolution"}
 
@@ -38,22 +39,12 @@ def register(subparsers: Any) -> None:
     )
     p.add_argument(
         "--every",
-        type=_positive,
+        type=positive_int("a positive integer"),
         default=8,
         metavar="N",
         help="tie-point lines in the table: 1, 1+N, 1+2N, ... and the last (default 8)",
     )
     p.set_defaults(func=run)
-
-
-def _positive(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        value = 0
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a positive integer")
-    return value
 
 
 def run(args: argparse.Namespace) -> int:

@@ -5,16 +5,7 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-
-def _commits(text: str) -> int:
-    """argparse type of ``--keep``: a number of commits >= 1."""
-    try:
-        value = int(text)
-    except ValueError:
-        value = 0
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a number of commits >= 1")
-    return value
+from ._options import positive_int
 
 
 def register(subparsers: Any) -> None:
@@ -27,8 +18,8 @@ def register(subparsers: Any) -> None:
         "synthesis-log and --at reach the commits kept only. Refused while a run uses the "
         "store.")
     p.add_argument("store", metavar="STORE", help="synthesis store")
-    p.add_argument("--keep", type=_commits, required=True, metavar="N",
-                   help="commits to keep, newest first (1: the current state only)")
+    p.add_argument("--keep", type=positive_int("a number of commits >= 1"), required=True,
+                   metavar="N", help="commits to keep, newest first (1: the current state only)")
     p.set_defaults(func=run)
 
 

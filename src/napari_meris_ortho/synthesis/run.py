@@ -700,9 +700,7 @@ class Synthesis:
                 raise OutputError(f"{self.target.path}: the synthesis changed while this run "
                                   "started (another writer without the lock?); run it again")
             return session, lambda s, m, r: self._commit(s, m, r, base)
-        for branch in repo.list_branches():  # left by a killed run
-            if branch.startswith(st.RUN_BRANCH_PREFIX):
-                repo.delete_branch(branch)
+        st.delete_run_branches(repo)  # left by a killed run
         base = repo.lookup_branch(st.BRANCH)
         layout = repo.writable_session(st.BRANCH)
         st.create_layout(layout.store, self._attributes([]), (self.grid.height, self.grid.width),

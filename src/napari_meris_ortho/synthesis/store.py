@@ -657,6 +657,15 @@ def history(repo: Any, branch: str = BRANCH, snapshot: str | None = None) -> lis
     return out
 
 
+def delete_run_branches(repo: Any) -> int:
+    """Delete the run branches a killed run left (``RUN_BRANCH_PREFIX``; nothing else holds
+    them: a live run holds the lock); their number."""
+    runs = [b for b in repo.list_branches() if b.startswith(RUN_BRANCH_PREFIX)]
+    for branch in runs:
+        repo.delete_branch(branch)
+    return len(runs)
+
+
 @dataclass
 class Pruned:
     """What :func:`prune` did: synthesis commits kept and expired, run branches of killed
@@ -680,9 +689,7 @@ def prune(repo: Any, keep: int) -> Pruned:
     take the chunks of a run in flight. Other branches and tags are left as they are."""
     import datetime
 
-    runs = sorted(b for b in repo.list_branches() if b.startswith(RUN_BRANCH_PREFIX))
-    for branch in runs:  # left by killed runs: nothing else holds them
-        repo.delete_branch(branch)
+    runs = delete_run_branches(repo)
     commits = history(repo)
     expired = set()
     if 0 < keep < len(commits):
@@ -690,7 +697,7 @@ def prune(repo: Any, keep: int) -> Pruned:
     summary = repo.garbage_collect(datetime.datetime.now(datetime.UTC))
     return Pruned(kept=min(keep, len(commits)),
                   expired=sum(1 for c in commits[keep:] if c.snapshot in expired),
-                  run_branches=len(runs), bytes_deleted=int(summary.bytes_deleted),
+                  run_branches=runs, bytes_deleted=int(summary.bytes_deleted),
                   chunks_deleted=int(summary.chunks_deleted),
                   files_deleted=int(summary.chunks_deleted + summary.manifests_deleted
                                     + summary.snapshots_deleted
