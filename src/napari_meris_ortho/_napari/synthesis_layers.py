@@ -32,7 +32,7 @@ def pyramids(store: SynthesisStore) -> dict[str, list[DecodedLayer]]:
     levels = (1, *store.overviews)
     session_store = store.session.store
     arrays = st.open_layers(session_store, store.layers(), levels)
-    box = st.written_windows(session_store, {("count", 1): arrays["count", 1]})["count", 1]
+    box = st.written_window(session_store, "count", arrays["count", 1])
 
     def at(level: int, shape: tuple[int, ...]) -> tuple[int, int, int, int] | None:
         if box is None:
@@ -48,8 +48,8 @@ def pyramids(store: SynthesisStore) -> dict[str, list[DecodedLayer]]:
 
 
 def coarse_limits(pyramids: dict[str, list[DecodedLayer]]) -> dict[str, tuple[float, float]]:
-    """Contrast limits of each layer from its coarsest level, over the bounding box of its
-    written chunks only (``store.written_windows``): a Europe-size store holding one product
+    """Contrast limits of each layer from its coarsest level, inside the box of the store's
+    written chunks only (``DecodedLayer.written``): a Europe-size store holding one product
     reads 2 of its 315 coarsest chunks per layer, not all of them (4.6 s of napari's open,
     on the event loop)."""
     out = {}

@@ -149,7 +149,7 @@ class DecodedLayer:
     """A layer level read lazily, window by window, straight from its zarr array (no task
     graph: zarr fetches a window's chunks concurrently), compact band counts decoded to
     float32 radiances (``store.decode_band``). With ``known``, ``written`` is the box of the
-    chunks that hold values (``store.written_windows``; None: no chunk does) and a window is
+    chunks that hold values (``store.written_window``; None: no chunk does) and a window is
     read only where it meets that box, the rest is background (0): on a sparse Europe-size
     store, a level's empty windows cost no chunk lookups. An array-like for viewers
     (napari's multiscale levels, its ``LayerDataProtocol``): ``shape``, ``dtype``, ``ndim``,
@@ -193,14 +193,20 @@ class DecodedLayer:
         return self.shape[0]
 
 
-def _box(key: Any, shape: tuple[int, ...]) -> tuple[int, int, int, int] | None:
-    """``key`` as rows and columns (row0, row1, col0, col1) of a 2-D array of ``shape`` when
-    it is slices of step 1 (or ``...``); None otherwise (integers, arrays, steps)."""
+def _full_key(key: Any, ndim: int) -> tuple[Any, ...]:
+    """An index ``key`` as one entry per axis of an ``ndim``-D array (``...`` and the
+    missing trailing axes as whole slices)."""
     key = key if isinstance(key, tuple) else (key,)
     if any(k is Ellipsis for k in key):
         at = next(i for i, k in enumerate(key) if k is Ellipsis)
-        key = (*key[:at], *(slice(None),) * (3 - len(key)), *key[at + 1:])
-    key = (*key, *(slice(None),) * (2 - len(key)))
+        key = (*key[:at], *(slice(None),) * (ndim + 1 - len(key)), *key[at + 1:])
+    return (*key, *(slice(None),) * (ndim - len(key)))
+
+
+def _box(key: Any, shape: tuple[int, ...]) -> tuple[int, int, int, int] | None:
+    """``key`` as rows and columns (row0, row1, col0, col1) of a 2-D array of ``shape`` when
+    it is slices of step 1 (or ``...``); None otherwise (integers, arrays, steps)."""
+    key = _full_key(key, 2)
     if len(shape) != 2 or len(key) != 2 or not all(isinstance(k, slice) for k in key):
         return None
     (r0, r1, rs), (c0, c1, cs) = (k.indices(n) for k, n in zip(key, shape, strict=True))
@@ -221,12 +227,8 @@ class DecodedStack:
         self.dtype = np.dtype(np.float32)
 
     def __getitem__(self, key: Any) -> np.ndarray:
-        key = key if isinstance(key, tuple) else (key,)
-        if any(k is Ellipsis for k in key):
-            at = next(i for i, k in enumerate(key) if k is Ellipsis)
-            key = (*key[:at], *(slice(None),) * (4 - len(key)), *key[at + 1:])
-        key = (*key, *(slice(None),) * (3 - len(key)))
-        band, window = key[0], key[1:]
+        band, *rest = _full_key(key, 3)
+        window = tuple(rest)
         if isinstance(band, int | np.integer):
             return self.layers[int(band)][window]
         picked = np.arange(len(self.layers))[band]

@@ -345,43 +345,26 @@ def read_window(store: Any, names: Sequence[str], window: Window, level: int = 1
     return out
 
 
-def written_windows(store: Any, arrays: dict[tuple[str, int], Any]
-                    ) -> dict[tuple[str, int], Window | None]:
-    """For each (layer name, overview level) of ``arrays`` (its zarr array): rows and columns,
-    at that level, of the bounding box of its chunks that hold values (None: none does). A
-    synthesis writes only the chunks its products touch: on a Europe-size grid the others
-    have no key. Listed from the store's manifests, every array at once; no chunk read."""
+def written_window(store: Any, name: str, array: Any, level: int = 1) -> Window | None:
+    """Rows and columns, at overview ``level``, of the bounding box of the chunks of layer
+    ``name`` (its zarr ``array``) that hold values; None when none does. A synthesis writes
+    only the chunks its products touch: on a Europe-size grid the others have no key. Listed
+    from the store's manifests, no chunk read."""
+    path = _level_path(name, level)
+    prefix = f"{path}/c/"
 
-    import asyncio
-
-    paths = [_level_path(name, level) for name, level in arrays]
-
-    async def listed(path: str) -> list[str]:
+    async def keys() -> list[str]:
         return [k async for k in store.list_prefix(path)]
 
-    async def keys() -> list[list[str]]:
-        return await asyncio.gather(*(listed(path) for path in paths))
-
-    found: dict[str, list[tuple[int, int]]] = {}
-    for path, names in zip(paths, _sync(keys()), strict=True):
-        prefix = f"{path}/c/"
-        for key in names:
-            if key.startswith(prefix):
-                i, _, j = key[len(prefix):].partition("/")
-                found.setdefault(path, []).append((int(i), int(j)))
-    out: dict[tuple[str, int], Window | None] = {}
-    for (name, level), array in arrays.items():
-        chunks = found.get(_level_path(name, level))
-        if not chunks:
-            out[name, level] = None
-            continue
-        rows, cols = (int(n) for n in array.chunks)
-        height, width = (int(n) for n in array.shape)
-        i = [a for a, _ in chunks]
-        j = [b for _, b in chunks]
-        out[name, level] = (min(i) * rows, min((max(i) + 1) * rows, height),
-                            min(j) * cols, min((max(j) + 1) * cols, width))
-    return out
+    found = [k[len(prefix):].partition("/") for k in _sync(keys()) if k.startswith(prefix)]
+    if not found:
+        return None
+    rows, cols = (int(n) for n in array.chunks)
+    height, width = (int(n) for n in array.shape)
+    i = [int(a) for a, _, _ in found]
+    j = [int(b) for _, _, b in found]
+    return (min(i) * rows, min((max(i) + 1) * rows, height),
+            min(j) * cols, min((max(j) + 1) * cols, width))
 
 
 def _sync(coroutine: Any) -> Any:

@@ -124,10 +124,9 @@ def check_new_grid_size(grid: OutputGrid, n_bands: int, max_pixels: int | None) 
     checked per run, :func:`check_write_size`), but every reader walks the chunk grid."""
     from ..geometry.grid import check_grid_size
 
-    limit = max_pixels if max_pixels is not None else MAX_GRID_CHUNKS * CHUNK * CHUNK
-    per_pixel = stored_bytes_per_pixel(n_bands)
+    per_pixel = stored_bytes_per_pixel(n_bands)  # the limit, in pixels, is max_pixels if given
     check_grid_size(grid.width, grid.height, (grid.dx, grid.dy), per_pixel, max_pixels,
-                    math.ceil(limit * per_pixel),
+                    math.ceil(MAX_GRID_CHUNKS * CHUNK * CHUNK * per_pixel),
                     f"{MAX_GRID_CHUNKS} chunks of {CHUNK} x {CHUNK} pixels per layer")
 
 
