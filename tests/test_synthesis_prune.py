@@ -121,3 +121,40 @@ def test_synthesis_prune_command(products, tmp_path, capsys) -> None:
     assert main(["synthesis-prune", str(tmp_path / "none"), "--keep", "1"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("meris-ortho: error:")
+
+
+def test_synthesize_keep_prunes_after_its_commit(products, tmp_path, capsys) -> None:
+    """``synthesize --keep N``: the update commits, then prunes under the same lock; the
+    store ends as an update followed by ``synthesis-prune --keep N`` leaves its twin."""
+    out, twin = tmp_path / "kept", tmp_path / "twin"
+    season(products[:2], out)
+    season(products[:2], twin)
+    result = synthesize(products[2:3], out, input=out, keep=1, **RUN)
+    assert result.snapshot is not None and result.pruned is not None
+    assert (result.pruned.kept, result.pruned.expired) == (1, 2)
+    assert result.pruned.bytes_deleted > 0
+    synthesize(products[2:3], twin, input=twin, **RUN)
+    freed = prune_synthesis(twin, 1)
+    # the same objects freed (metadata bytes differ by their ids and times)
+    assert (freed.chunks_deleted, freed.files_deleted) == (result.pruned.chunks_deleted,
+                                                           result.pruned.files_deleted)
+    assert freed.bytes_deleted == pytest.approx(result.pruned.bytes_deleted, rel=1e-3)
+    assert [c.snapshot for c in open_synthesis(out).history()] == [result.snapshot]
+    for name, value in layers(out).items():
+        assert value.tobytes() == layers(twin)[name].tobytes(), name
+    assert disk_bytes(out) == pytest.approx(disk_bytes(twin), rel=1e-3)
+    # nothing merged (already in the synthesis): no commit, no prune
+    again = synthesize(products[2:3], out, input=out, keep=1, **RUN)
+    assert again.snapshot is None and again.pruned is None and again.skipped
+    # the CLI: --keep after the commit, logged; a bad --keep refused before anything runs
+    assert main(["-q", "synthesize", products[3], "--out", str(out), "--input", str(out),
+                 "--keep", "2", "--workers", "0", "--elevation", "tiepoints"]) == 0
+    assert len(open_synthesis(out).history()) == 2
+    capsys.readouterr()
+    with pytest.raises(SystemExit) as exc:
+        main(["synthesize", products[3], "--out", str(out), "--input", str(out),
+              "--keep", "0"])
+    assert exc.value.code == 2 and "'0' is not a number of commits >= 1" in capsys.readouterr().err
+    with pytest.raises(OptionsError, match="keep must be a number of commits >= 1"):
+        synthesize(products[3:], tmp_path / "new", grid=GRID, bands=BANDS, keep=0, **RUN)
+    assert not (tmp_path / "new").exists()

@@ -23,6 +23,7 @@ from ._options import (
     add_sampling_option,
     grid_from_args,
     ortho_options,
+    positive_int,
 )
 
 log = logging.getLogger("napari_meris_ortho")
@@ -62,6 +63,9 @@ def register(subparsers: Any) -> None:
                    "every Zarr v3 reader) or delta-zstd (a delta filter first: about 12 %% "
                    "fewer bytes, read by zarr-python but not by readers of the Zarr v3 core "
                    "codecs only); an update keeps its store's")
+    p.add_argument("--keep", type=positive_int("a number of commits >= 1"), default=None,
+                   metavar="N", help="after the commit, keep the newest N commits of the store "
+                   "and free what only older ones held (as synthesis-prune; default: keep all)")
     engine = p.add_argument_group("workers (dask.distributed)")
     engine.add_argument("--workers", type=int, default=None, metavar="N",
                         help="worker processes of an embedded LocalCluster (default: the "
@@ -97,10 +101,14 @@ def run(args: argparse.Namespace) -> int:
             pixel_size=None if grid is not None else args.pixel_size, dems=args.dem,
             options=options, bands=args.bands, reject_bright=args.reject_bright,
             tile=args.tile, progress=progress, workers=0 if args.scheduler else workers,
-            scheduler=args.scheduler or None, max_pixels=args.max_pixels, codec=args.codec)
+            scheduler=args.scheduler or None, max_pixels=args.max_pixels, codec=args.codec,
+            keep=args.keep)
     if result.snapshot is not None:
         log.info("synthesis %s (%s) committed to %s: %d product(s) merged", result.snapshot,
                  result.algorithm, result.path, len(result.merged))
+    if result.pruned is not None:
+        log.info("kept %d commit(s), expired %d: %.1f MB freed", result.pruned.kept,
+                 result.pruned.expired, result.pruned.bytes_deleted / 1e6)
     if result.skipped:
         log.warning("%d product(s) already in the synthesis, skipped: %s", len(result.skipped),
                     ", ".join(r.product_name for r in result.skipped))

@@ -41,7 +41,7 @@ def synthesize(products: Sequence[str | os.PathLike[str]], out: str | os.PathLik
                tile: int = DEFAULT_TILE, progress: ProgressCallback | None = None,
                workers: int = 0, scheduler: str | None = None,
                max_pixels: int | None = None, codec: StoreCodec | str | None = None,
-               **modes: Any) -> SynthesisResult:
+               keep: int | None = None, **modes: Any) -> SynthesisResult:
     """Orthorectify ``products`` onto the synthesis grid and merge them (section 3.1 use cases
     1-2, Appendix C) into the synthesis store ``out``: one Icechunk commit.
 
@@ -66,11 +66,15 @@ def synthesize(products: Sequence[str | os.PathLike[str]], out: str | os.PathLik
     the store's file system; with ``max_pixels`` the free space is not checked); a larger one
     is an OptionsError. ``codec``
     (``StoreCodec``): how a new synthesis encodes its bands and NDVI (default zstd alone; an
-    update keeps its store's codecs, and giving one with ``input`` is refused).
+    update keeps its store's codecs, and giving one with ``input`` is refused). ``keep``: after
+    a commit, keep the newest ``keep`` (>= 1) commits of ``out`` and delete what only older ones
+    held, still under the run's lock (``prune_synthesis``; ``result.pruned``).
     """
     from . import run
 
     out_dir = Path(out)
+    if keep is not None:
+        _check_keep(keep)
     if "bands" in modes:
         raise OptionsError("give the bands of the synthesis as bands=, not in the options")
     opts = OrthoOptions.of(options, n_dems=len(dems), **modes)
@@ -101,6 +105,8 @@ def synthesize(products: Sequence[str | os.PathLike[str]], out: str | os.PathLik
                 raise
             if result.snapshot is None:  # nothing merged: no store
                 _undo(out_dir, created, was_empty)
+            elif keep is not None:
+                result.pruned = _prune(out_dir, keep)
     return result
 
 
@@ -110,12 +116,21 @@ def prune_synthesis(path: str | os.PathLike[str], keep: int) -> st.Pruned:
     costs the disk what the synthesis holds now, not every version of every chunk it held.
     The layers are unchanged; ``synthesis-log`` and ``--at`` reach the commits kept only.
     Under the store's lock: refused while a run uses the store."""
-    if isinstance(keep, bool) or not isinstance(keep, int) or keep < 1:
-        raise OptionsError(f"keep must be a number of commits >= 1, not {keep!r}")
+    _check_keep(keep)
     root = Path(path)
     open_synthesis(root)  # one clear message when it is none
     with st.locked(root):
-        pruned = st.prune(st.open_repository(root), keep)
+        return _prune(root, keep)
+
+
+def _check_keep(keep: Any) -> None:
+    if isinstance(keep, bool) or not isinstance(keep, int) or keep < 1:
+        raise OptionsError(f"keep must be a number of commits >= 1, not {keep!r}")
+
+
+def _prune(root: Path, keep: int) -> st.Pruned:
+    """``store.prune`` of the store ``root``, logged; the caller holds its lock."""
+    pruned = st.prune(st.open_repository(root), keep)
     log.info("%s: kept %d commit(s), expired %d, deleted %d object(s), %.1f MB",
              root, pruned.kept, pruned.expired, pruned.files_deleted,
              pruned.bytes_deleted / 1e6)

@@ -9,6 +9,7 @@ from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
     from ..geometry.grid import OutputGrid
+    from .store import Pruned
 
 log = logging.getLogger("napari_meris_ortho.synthesis")
 #: radiance layers: what their values are
@@ -90,6 +91,8 @@ class SynthesisResult:
     algorithm: str
     bands: tuple[int, ...]
     reports: list[ProductReport] = field(default_factory=list)
+    #: what ``synthesize(keep=N)`` pruned after the commit (None: no pruning)
+    pruned: Pruned | None = None
 
     @property
     def failed(self) -> list[ProductReport]:
