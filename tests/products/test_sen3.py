@@ -71,9 +71,9 @@ def test_sen3_reads_like_the_n1_product(scene, products):
 
 
 def test_sen3_derives_the_corrections_as_operational_n1_products_store_them(products):
-    """The format has no lat_corr/lon_corr: the reader derives them from its own tie points with
-    the sign of ``geodetic_correction`` (operational N1 products) and 0 where the tie-point
-    altitude is the seabed (< 0), as ESA writes them."""
+    """The format has no lat_corr/lon_corr: the reader derives them from its own tie points as
+    operational N1 products store them (lat_corr the dlat of ``geodetic_correction``, lon_corr
+    minus its dlon: Appendix E) and 0 where the tie-point altitude is the seabed (< 0)."""
     from napari_meris_ortho import geodetic_correction
 
     tp = read_sen3(products[0]["sen3"]).tie_points
@@ -82,7 +82,7 @@ def test_sen3_derives_the_corrections_as_operational_n1_products_store_them(prod
     land, sea = h > 0, h < 0
     assert land.any() and sea.any()
     np.testing.assert_allclose(tp["lat_corr"][land], dlat[land], rtol=1e-12, atol=0)
-    np.testing.assert_allclose(tp["lon_corr"][land], dlon[land], rtol=1e-12, atol=0)
+    np.testing.assert_allclose(tp["lon_corr"][land], -dlon[land], rtol=1e-12, atol=0)
     assert np.abs(tp["lon_corr"][land]).max() > 0.005
     assert np.all(tp["lat_corr"][sea] == 0.0) and np.all(tp["lon_corr"][sea] == 0.0)
 

@@ -117,8 +117,8 @@ def test_vegetation_ndvi_and_flags(fr_small):
 
 
 def test_stored_corrections_as_operational_products_store_them(fr_small):
-    """lat_corr/lon_corr with the sign of ``geodetic_correction`` (the correction added, as in
-    2003 NRT and 2007 MERIS/5.04 products): within 0.2 m of it on land (the 1e-6 deg
+    """lat_corr as ``geodetic_correction``'s dlat, lon_corr as minus its dlon (eq. 2 as the
+    Appendix E dumps of real products store it): within 0.2 m on land (the 1e-6 deg
     quantization), exactly 0 over the sea, where dem_alt holds the seabed (< 0)."""
     tp = read_product(fr_small.product_path).tie_points
     h, lat = tp["dem_alt"], tp["latitude"]
@@ -127,7 +127,7 @@ def test_stored_corrections_as_operational_products_store_them(fr_small):
     assert land.sum() > 40 and sea.sum() >= 3
     m_per_deg = np.pi * MEAN_EARTH_RADIUS / 180.0
     assert np.max(np.abs(tp["lat_corr"] - dlat)[land]) * m_per_deg < 0.2
-    east = np.abs(tp["lon_corr"] - dlon) * np.cos(np.radians(lat))
+    east = np.abs(tp["lon_corr"] + dlon) * np.cos(np.radians(lat))
     assert np.max(east[land]) * m_per_deg < 0.2
     assert np.abs(tp["lon_corr"][land]).max() > 0.005  # real corrections, up to ~1 km
     assert np.all(tp["lat_corr"][sea] == 0.0) and np.all(tp["lon_corr"][sea] == 0.0)

@@ -6,9 +6,10 @@ reader's derived ones.
 Over sea, real products store the seabed as a negative ``dem_alt`` (bathymetry: -228 m off
 Portugal in MER_FRS_1PNMAP20070709, down to -5103 m in MER_RR__1PRACR20060116 over the open
 Pacific) and set ``lat_corr``/``lon_corr`` to exactly 0 there: the line of sight meets the sea
-surface, not the seabed. :func:`parallax_height` is that rule; operational products (2003 NRT,
-2007 MERIS/5.04) store the corrections with the sign of :func:`geodetic_offsets` (added to the
-ellipsoid position), which :func:`stored_corrections` writes.
+surface, not the seabed. :func:`parallax_height` is that rule. On land, operational N1 products
+store eq. 2 of the Detailed Processing Model as it is: ``lat_corr`` with the sign of the
+correction added, ``lon_corr`` with the opposite one (Appendix E: every FR and RR dump, e.g.
+-1146e-6 deg at view azimuth 100 deg in E.1), which :func:`stored_corrections` writes.
 """
 
 from __future__ import annotations
@@ -63,9 +64,15 @@ def geodetic_offsets(height_m: ArrayLike, view_zenith_deg: ArrayLike,
 def stored_corrections(dem_alt: ArrayLike, view_zenith_deg: ArrayLike,
                        view_azimuth_deg: ArrayLike, lat_deg: ArrayLike
                        ) -> tuple[np.ndarray, np.ndarray]:
-    """Tie-point ``(lat_corr, lon_corr)`` (deg) as operational products store them: eq. 2 on
-    the sphere with the sign of :func:`geodetic_offsets`, from the :func:`parallax_height` of
-    ``dem_alt`` (exactly 0 where ``dem_alt`` <= 0, over sea)."""
+    """Tie-point ``(lat_corr, lon_corr)`` (deg) as operational products store them (eq. 2 on
+    the sphere, Appendix E)::
+
+        lat_corr = +h tan(vz) cos(va) / R      lon_corr = -h tan(vz) sin(va) / (R cos lat)
+
+    i.e. ``lat_corr`` is the ``dlat`` of :func:`geodetic_offsets` and ``lon_corr`` minus its
+    ``dlon`` (the handbook's remark under eq. 2: the signs are "not compliant"; eq. 2c' is the
+    one to add), from the :func:`parallax_height` of ``dem_alt`` (exactly 0 where ``dem_alt``
+    <= 0, over sea)."""
     dlon, dlat = geodetic_offsets(parallax_height(dem_alt), view_zenith_deg, view_azimuth_deg,
                                   lat_deg, SPHERE)
-    return dlat, dlon
+    return dlat, -dlon + 0.0  # + 0.0: no -0.0 over sea

@@ -38,7 +38,7 @@ from .terrain import DemGrid, Terrain, auxiliary_dem, bathymetry, block_max, mak
 log = logging.getLogger(__name__)
 
 #: bump when the generator changes its output for a given config (part of the cache key)
-GENERATOR_VERSION = 3
+GENERATOR_VERSION = 4
 RESOLUTIONS = {
     # frame time (s), column spacing (m), tie-point spacing DF = DJ, product type
     "FR": (0.044, 260.0, 64, "MER_FR__1P"),
@@ -461,7 +461,8 @@ def tie_point_values(geom: SceneGeometry, grid: DemGrid, dem: np.ndarray,
         dem_alt = np.where(open_sea, floor, dem_alt)
     times = geom.line_time(geom.tie_lines)[:, None] * np.ones_like(lon)
     sz, sa = solar_angles(times, lon, lat)
-    # eq. 2 as operational products store it: the sign of the correction added, 0 over sea
+    # eq. 2 as operational products store it (Appendix E: lon_corr with the sign opposite to
+    # the correction added), 0 over sea
     lat_corr, lon_corr = stored_corrections(dem_alt, vz, va, lat)
     tp = {"latitude": lat, "longitude": lon, "dem_alt": dem_alt, "dem_rough": dem_rough,
           "lat_corr": lat_corr, "lon_corr": lon_corr, "sun_zenith": sz, "sun_azimuth": sa,

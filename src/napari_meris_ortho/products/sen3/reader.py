@@ -628,7 +628,7 @@ def _tie_points(members: Members, height: int, width: int
     tp.update(_meteo(meteo, meteo_attrs, shape))
     if mirrored:  # ESA's columns in the N1 order
         tp = {k: mirror_columns(v) for k, v in tp.items()}
-    # the DEM corrections as operational N1 products store them (0 over sea), derived
+    # the DEM corrections as operational N1 products store them (Appendix E; 0 over sea)
     tp["lat_corr"], tp["lon_corr"] = stored_corrections(
         tp["dem_alt"], tp["view_zenith"], tp["view_azimuth"], tp["latitude"])
     return tp, df, dj, mirrored
