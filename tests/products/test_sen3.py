@@ -195,3 +195,25 @@ def test_no_data_of_a_packed_variable(dtype, attrs, expected):
               np.float32: [0.0, -1.0, 50.0, 150.0, np.nan]}[dtype]
     np.testing.assert_array_equal(no_data(np.array(values, dtype), attrs),
                                   np.array(expected, bool))
+
+
+def test_sen3_name_and_geolocation_labels_are_esas(products):
+    """The product name has the 99 characters and fields of ESA's (17 underscores between the
+    stop time and the duration, as ``ENV_ME_1_RRG____20111230T102706_20111230T111042____...``);
+    the tie points are labelled as on the ellipsoid, the pixels as terrain-corrected."""
+    import re
+
+    import netCDF4
+
+    from napari_meris_ortho.products.sen3 import TIE_GEO_FILE
+
+    name = products[0]["sen3"].name
+    assert len(name) == 99, name
+    assert re.fullmatch(r"ENV_ME_1_FRG____\d{8}T\d{6}_\d{8}T\d{6}_{17}\d{4}_\d{3}_\d{3}_{6}"
+                        r"[A-Z]{3}_R_NT_{4}\.SEN3", name), name
+    with netCDF4.Dataset(products[0]["sen3"] / TIE_GEO_FILE) as ds:
+        assert ds["latitude"].long_name == "Latitude"
+        assert ds["longitude"].long_name == "Longitude"
+        assert ds["altitude"].long_name == "DEM corrected altitude"
+    with netCDF4.Dataset(products[0]["sen3"] / GEO_FILE) as ds:
+        assert ds["latitude"].long_name == "DEM corrected latitude"

@@ -347,6 +347,53 @@ def test_signed_flag_masks_mean_the_same_bits(copy, product_dir):
     np.testing.assert_array_equal(signed, unsigned)
 
 
+def test_flag_meanings_as_an_array_of_strings(copy, product_dir):
+    """flag_meanings stored as an array of strings (one meaning each; an NC_STRING array)
+    decodes to the same flags; before, the array's repr was split into words, which by chance
+    counted as many as the masks, and every flag read 0."""
+    from napari_meris_ortho.flags import FLAG_INVALID, FLAG_LAND_OCEAN
+    from napari_meris_ortho.products.sen3.layout import flag_coding
+
+    path = copy / "qualityFlags.nc"
+    with netCDF4.Dataset(path, "a") as ds:
+        v = ds.variables["quality_flags"]
+        words = str(v.getncattr("flag_meanings")).split()
+        v.setncattr_string("flag_meanings", words)
+    with netCDF4.Dataset(path) as ds:
+        assert not isinstance(ds.variables["quality_flags"].getncattr("flag_meanings"), str)
+    as_array, plain = read_product(copy).flags, read_product(product_dir).flags
+    assert (plain & FLAG_LAND_OCEAN).any() and (plain & FLAG_INVALID).any()
+    np.testing.assert_array_equal(as_array, plain)
+    coding = flag_coding({"flag_masks": [1, 2], "flag_meanings": np.array([b"a", b"b"])})
+    assert coding == {"a": 1, "b": 2}
+
+
+def test_humidity_on_pressure_levels_is_left_out(copy, product_dir, caplog):
+    """``humidity`` on (tie_rows, tie_columns, pressure levels), as OLCI's tie_meteo has it
+    and SNAP's MERIS 4RP adapter reads it: the N1 annotation has no levels, so it is left NaN
+    (logged) and the rest of the product reads as before; before, the product was refused
+    ("rel_humidity of shape (6, 9, 25)")."""
+    path = copy / "tie_meteo.nc"
+    with netCDF4.Dataset(path) as ds:  # the real-like file has the temperature profile's levels
+        rows, cols = (len(ds.dimensions[d]) for d in ds.variables["humidity"].dimensions)
+        n = len(ds.dimensions["tie_pressure_levels"])
+
+    def levels(b, v):
+        nv = b.createVariable("humidity", "f4", (*v.dimensions, "tie_pressure_levels"))
+        nv.setncatts({"units": "%", "long_name": "Relative humidity"})
+        nv[:] = np.full((rows, cols, n), 60.0, np.float32)
+
+    _copy(path, "humidity", levels)
+    with caplog.at_level(logging.INFO, logger="napari_meris_ortho"):
+        p = read_product(copy)
+    plain = read_product(product_dir)
+    assert np.isnan(p.tie_points["rel_humidity"]).all()
+    assert not np.isnan(plain.tie_points["rel_humidity"]).any()
+    np.testing.assert_array_equal(p.tie_points["ozone"], plain.tie_points["ozone"])
+    np.testing.assert_array_equal(p.counts(7), plain.counts(7))
+    assert f"humidity has shape ({rows}, {cols}, {n})" in caplog.text
+
+
 def _without(path: Path, name: str) -> None:
     """Rewrite ``path`` without variable ``name`` (everything else as stored)."""
     _copy(path, name)
@@ -397,6 +444,9 @@ def test_time_stamps_in_their_own_units_and_zero_stamps(copy, product_dir, caplo
     assert time_units("microseconds since 2000-01-01 00:00:00 ") == (1e-6, 0.0)
     assert time_units("seconds since 1970-01-01T00:00:00Z") == (1.0, -946684800.0)
     assert time_units("days since 2000-01-02") == (86400.0, 86400.0)
+    # UDUNITS' short forms: one-digit fields
+    assert time_units("microseconds since 2000-1-1 0:0:0") == (1e-6, 0.0)
+    assert time_units("seconds since 2000-1-1 1:2:3.5") == (1.0, 3723.5)
     assert time_units("furlongs since 2000-01-01") is None and time_units("m") is None
     want = read_product(product_dir).line_times
     f = copy / "time_coordinates.nc"

@@ -212,7 +212,7 @@ def cf_decode(raw: np.ndarray, attrs: Mapping[str, Any], dtype: Any = np.float64
 _TIME_UNITS = {"microseconds": 1e-6, "milliseconds": 1e-3, "seconds": 1.0, "minutes": 60.0,
                "hours": 3600.0, "days": 86_400.0}
 _TIME_SINCE = re.compile(r"^\s*(\w+)\s+since\s+(\d{4})-(\d{1,2})-(\d{1,2})"
-                         r"(?:[ T](\d{1,2}):(\d{2})(?::(\d{2}(?:\.\d*)?))?)?\s*(?:Z|UTC)?\s*$")
+                         r"(?:[ T](\d{1,2}):(\d{1,2})(?::(\d{1,2}(?:\.\d*)?))?)?\s*(?:Z|UTC)?\s*$")
 #: ESA's ``time_stamp``: microseconds since 2000-01-01 (also when a file names no units)
 ESA_TIME_UNITS = "microseconds since 2000-01-01 00:00:00"
 
@@ -242,13 +242,23 @@ def flag_coding(attrs: Mapping[str, Any]) -> dict[str, int]:
     section 3.5), or ESA's coding (:data:`QUALITY_FLAGS`) when it carries none."""
     masks, meanings = attrs.get("flag_masks"), attrs.get("flag_meanings")
     if masks is not None and meanings is not None:
-        names = str(meanings).split()
+        names = _words(meanings)
         # masks stored as signed 32-bit integers (a rewrite as NETCDF4_CLASSIC): land is
         # -2**31 there; the same 32 bits as ESA's uint32 masks
         values = (np.atleast_1d(np.asarray(masks)).astype(np.int64) & 0xFFFFFFFF).tolist()
         if len(names) == len(values):
             return {n: int(v) for n, v in zip(names, values, strict=True)}
     return {name: 1 << bit for name, bit in QUALITY_FLAGS}
+
+
+def _words(value: Any) -> list[str]:
+    """The blank-separated words of a string attribute, also stored as an array of strings
+    (one meaning per element, or bytes)."""
+    if isinstance(value, bytes):
+        value = value.decode("utf-8", "replace")
+    if isinstance(value, str):
+        return value.split()
+    return [w for v in np.ravel(np.asarray(value, dtype=object)) for w in _words(v)]
 
 
 def quality_to_l1b(quality: np.ndarray, coding: Mapping[str, int] | None = None) -> np.ndarray:

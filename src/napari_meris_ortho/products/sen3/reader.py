@@ -651,7 +651,8 @@ def _tie_altitude_of_pixels(members: Members, shape: tuple[int, int], df: int, d
 def _meteo(raw: dict[str, np.ndarray], attrs: dict[str, Any], shape: tuple[int, ...]
            ) -> dict[str, np.ndarray]:
     """The N1 meteo annotations from whichever tie_meteo variables there are (each optional;
-    fill -> NaN)."""
+    fill -> NaN). A variable on other dimensions than the tie grid's (``humidity`` on pressure
+    levels, as OLCI's and some MERIS files have it) has no N1 counterpart: left NaN, logged."""
     def value(name: str) -> np.ndarray | None:
         if name not in raw:
             return None
@@ -667,8 +668,11 @@ def _meteo(raw: dict[str, np.ndarray], attrs: dict[str, Any], shape: tuple[int, 
                               ("total_ozone", "ozone", 1.0 / DOBSON_KG_M2),
                               ("humidity", "rel_humidity", 1.0)):
         v = value(name)
-        if v is not None:
+        if v is not None and v.shape == tuple(shape):
             out[key] = v * factor
+        elif v is not None:
+            log.info("%s: %s has shape %s, not the tie grid's %s (pressure levels?): not read",
+                     TIE_METEO_FILE, name, v.shape, tuple(shape))
     return out
 
 

@@ -50,13 +50,14 @@ from .layout import (
 
 
 def default_sen3_name(resolution: str, start: np.datetime64, duration_s: float) -> str:
-    """``ENV_ME_1_FRG____<start>_<stop>_________________<dur>_000_000______MOR_R_NT____.SEN3``."""
+    """``ENV_ME_1_FRG____<start>_<stop>_________________<dur>_000_000______MOR_R_NT____.SEN3``:
+    99 characters, 17 underscores between the stop time and the duration, as ESA's names."""
     stop = start + np.timedelta64(int(round(duration_s * 1e6)), "us")
 
     def stamp(t: np.datetime64) -> str:
         return str(t.astype("datetime64[s]")).replace("-", "").replace(":", "")
 
-    return (f"ENV_ME_1_{resolution}G____{stamp(start)}_{stamp(stop)}_{'_' * 17}"
+    return (f"ENV_ME_1_{resolution}G____{stamp(start)}_{stamp(stop)}{'_' * 17}"
             f"{int(round(duration_s)):04d}_000_000______MOR_R_NT____.SEN3")
 
 
@@ -203,7 +204,7 @@ def _write_tie_points(nc: _NcWriter, tie_points: Mapping[str, np.ndarray]) -> No
 
     with nc.dataset(TIE_GEO_FILE, tdims) as ds:
         _write_geo(nc.var, ds, tie, {"longitude": get("longitude"), "latitude": get("latitude"),
-                                     "altitude": get("dem_alt")})
+                                     "altitude": get("dem_alt")}, corrected=False)
     with nc.dataset(TIE_GEOMETRY_FILE, tdims) as ds:
         for name, key, long in (("SZA", "sun_zenith", "Sun zenith angle"),
                                 ("SAA", "sun_azimuth", "Sun azimuth angle"),
@@ -226,7 +227,11 @@ def _write_tie_points(nc: _NcWriter, tie_points: Mapping[str, np.ndarray]) -> No
                    long_name=name.replace("_", " ").capitalize())
 
 
-def _write_geo(var, ds, dims: tuple[str, str], geo: dict[str, np.ndarray]) -> None:
+def _write_geo(var, ds, dims: tuple[str, str], geo: dict[str, np.ndarray],
+               corrected: bool = True) -> None:
+    """Latitude, longitude (int32 x 1e-6) and altitude: the per-pixel ones terrain-corrected
+    ("DEM corrected latitude"), the tie points' on the ellipsoid (SNAP: "Latitude"); the
+    altitude is the DEM's in both ("DEM corrected altitude", SNAP's TP_altitude)."""
     for key, std, unit in (("latitude", "latitude", "degrees_north"),
                            ("longitude", "longitude", "degrees_east")):
         values = np.asarray(geo[key], np.float64)
@@ -235,7 +240,8 @@ def _write_geo(var, ds, dims: tuple[str, str], geo: dict[str, np.ndarray]) -> No
         limit = 90_000_000 if key == "latitude" else 180_000_000
         var(ds, key, "i4", dims, np.round(values * 1e6), np.int32(INT32_FILL),
             scale_factor=1e-6, add_offset=0.0, units=unit, standard_name=std,
-            long_name=f"DEM corrected {key}", valid_min=np.int32(-limit),
+            long_name=f"DEM corrected {key}" if corrected else key.capitalize(),
+            valid_min=np.int32(-limit),
             valid_max=np.int32(limit))
     var(ds, "altitude", "i2", dims, np.round(np.asarray(geo["altitude"], np.float64)),
         np.int16(INT16_FILL), units="m", standard_name="height_above_reference_ellipsoid",
