@@ -235,3 +235,32 @@ def test_other_fr_level1b_types_are_tolerated(tmp_path, other):
     assert product.product_type == other
     assert product.lines_per_tie_point == 64
     np.testing.assert_array_equal(product.counts(4), inputs["counts"][3])
+
+
+def test_blank_records_are_invalid(tmp_path, caplog):
+    """A Flags MDS(16) record with quality indicator -1 is blank (the DDDB's "-1 for blank
+    MDSR"): its line is INVALID, so no merge takes its counts; the other lines are as stored.
+    Before, a blank line's counts passed as data."""
+    from napari_meris_ortho.products.n1.format import FLAGS_MDS, flags_dtype
+
+    inputs = sample_inputs("MER_RR__1P", height=20, width=33)
+    path = write_product(tmp_path / "blank.N1", **inputs)
+    plain = read_product(path)
+    assert plain.blank_lines.size == 0 and isinstance(plain.flags, np.memmap)
+    stored = np.array(plain.flags)
+    ds = plain._datasets[FLAGS_MDS]
+    size = flags_dtype(plain.width).itemsize
+    with open(path, "r+b") as f:
+        for line in (3, 4, 5, 10):
+            f.seek(ds.offset + line * size + 12)  # days, seconds, microseconds, quality
+            f.write(b"\xff")
+    with caplog.at_level("WARNING"):
+        p = read_product(path)
+        flags = p.flags
+    assert p.blank_lines.tolist() == [3, 4, 5, 10]
+    assert np.all(flags[[3, 4, 5, 10]] & FLAG_INVALID)
+    others = np.setdiff1d(np.arange(p.height), [3, 4, 5, 10])
+    np.testing.assert_array_equal(flags[others], stored[others])
+    keep = np.uint8(0xFF & ~FLAG_INVALID)
+    np.testing.assert_array_equal(flags[3] & keep, stored[3] & keep)
+    assert "4 blank record(s) (quality indicator -1), lines 3-5, 10" in caplog.text

@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 
 from ...errors import N1FormatError
+from ...flags import FLAG_INVALID
 from ...geometry.tiepoints import TiePoints
 from .checks import (
     PIXEL_GEOLOCATION_RANGES,
@@ -323,8 +324,26 @@ class MerisL1bProduct:
 
     @property
     def flags(self) -> np.ndarray:
-        """L1b flags (uint8 (H, W) memory map); bits as the ``FLAG_*`` constants."""
-        return self._flags_records["flags"]
+        """L1b flags (uint8 (H, W) memory map); bits as the ``FLAG_*`` constants. Lines whose
+        record is blank (:attr:`blank_lines`) are INVALID (an array then, not a map)."""
+        flags = self._flags_records["flags"]
+        blank = self.blank_lines
+        if blank.size == 0:
+            return flags
+        out = np.array(flags)
+        out[blank] |= FLAG_INVALID
+        return out
+
+    @cached_property
+    def blank_lines(self) -> np.ndarray:
+        """Lines whose Flags MDS(16) record is blank: record header quality indicator -1
+        (the DDDB's "Quality Indicator (-1 for blank MDSR)"); their counts are no data."""
+        quality = self._flags_records["quality"].view(np.int8)
+        blank = np.flatnonzero(quality < 0)
+        if blank.size:
+            log.warning("%s: %d blank record(s) (quality indicator -1), lines %s: flagged "
+                        "INVALID", self.path.name, blank.size, _line_ranges(blank))
+        return blank
 
     @property
     def detector_index(self) -> np.ndarray:
@@ -584,3 +603,17 @@ def _read_records(f, path: Path, offset: int, dtype: np.dtype, count: int) -> np
     if len(data) != dtype.itemsize * count:  # pragma: no cover - sizes checked before
         raise N1FormatError(path, f"truncated at byte {offset}")
     return np.frombuffer(data, dtype=dtype, count=count)
+
+
+def _line_ranges(lines: np.ndarray, most: int = 4) -> str:
+    """'3-7, 120' for sorted line numbers (the first ``most`` runs, then '...')."""
+    runs: list[str] = []
+    start = prev = int(lines[0])
+    for n in [*map(int, lines[1:]), None]:
+        if n is not None and n == prev + 1:
+            prev = n
+            continue
+        runs.append(f"{start}" if start == prev else f"{start}-{prev}")
+        if n is not None:
+            start = prev = n
+    return ", ".join(runs[:most]) + (", ..." if len(runs) > most else "")
