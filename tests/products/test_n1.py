@@ -264,3 +264,17 @@ def test_blank_records_are_invalid(tmp_path, caplog):
     keep = np.uint8(0xFF & ~FLAG_INVALID)
     np.testing.assert_array_equal(flags[3] & keep, stored[3] & keep)
     assert "4 blank record(s) (quality indicator -1), lines 3-5, 10" in caplog.text
+
+
+def test_the_file_name_agrees_with_the_mph(fr_product):
+    """The file name's phase, cycle and orbits are the MPH's (E.1:
+    ``MER_FR__1PNUPA20030921_092217_000000982020_00079_08149_0354.N1``: phase 2, cycle 020,
+    relative orbit 79, absolute 8149)."""
+    _, p = fr_product
+    name = p.product_name
+    assert len(name) == 62 and name.endswith(".N1")
+    duration, phase, cycle = name[30:38], name[38], name[39:42]
+    rel, abs_ = name[43:48], name[49:54]
+    assert duration.isdigit() and phase == str(p.mph["PHASE"])
+    assert (int(cycle), int(rel), int(abs_)) == (p.mph["CYCLE"], p.mph["REL_ORBIT"],
+                                                 p.mph["ABS_ORBIT"])

@@ -186,15 +186,22 @@ def _corners(lat: np.ndarray, lon: np.ndarray, height: int, width: int, df: int,
     return out
 
 
+#: mission phase of simulated products (MPH ``PHASE`` and the file name's phase digit)
+PHASE = "2"
+
+
 def default_product_name(product_type: str, start: np.datetime64, duration_s: float,
                          counter: int = 0) -> str:
     """An ENVISAT product file name (62 characters), e.g.
-    ``MER_FR__1PNSIM20030921_092341_000000982020_00000_00000_0000.N1``; ``counter`` is the
-    file counter (last 4 digits: products of one acquisition told apart)."""
+    ``MER_FR__1PNSIM20030921_092341_000000982000_00000_00000_0000.N1``: duration (s), phase
+    (2, as the MPH's ``PHASE``), cycle, relative and absolute orbit (0, as the MPH's: no
+    orbit is simulated); ``counter`` is the file counter (last 4 digits: products of one
+    acquisition told apart)."""
     s = str(np.asarray(start, dtype="datetime64[s]"))
     s = s.replace("-", "").replace(":", "").replace("T", "_")
     duration = min(int(round(duration_s)), 99_999_999)
-    return f"{product_type}NSIM{s}_{duration:08d}0000_00000_00000_{int(counter) % 10000:04d}.N1"
+    return (f"{product_type}NSIM{s}_{duration:08d}{PHASE}000_00000_00000_"
+            f"{int(counter) % 10000:04d}.N1")
 
 
 def _check_overrides(which: str, overrides: Mapping[str, Any] | None, fields) -> dict:
@@ -332,7 +339,7 @@ def write_product(
         "SOFTWARE_VER": f"MORTHO/{__version__}",
         "SENSING_START": format_utc(t0),
         "SENSING_STOP": format_utc(t_last),
-        "PHASE": "2",
+        "PHASE": PHASE,
         "CYCLE": 0,
         "REL_ORBIT": 0,
         "ABS_ORBIT": 0,
