@@ -184,7 +184,7 @@ def _write_instrument(nc: _NcWriter, detector_index: np.ndarray, flags: np.ndarr
                 ("solar_flux", scaling.sun_flux, "mW.m-2.nm-1", "In-band solar irradiance")):
             nc.var(ds, name, "f4", ("bands", "detectors"),
                    np.repeat(np.asarray(values, np.float32)[:, None], det, axis=1),
-                   np.float32(np.nan), units=unit, long_name=long)
+                   np.float32(-1.0), units=unit, long_name=long)  # SNAP: no-data -1
     with nc.dataset(QUALITY_FILE, img) as ds:
         nc.var(ds, "quality_flags", "u4", ("rows", "columns"), l1b_to_quality(flags), None,
                long_name="Classification and quality flags",
