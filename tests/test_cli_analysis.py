@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import os
 import time
 
 import numpy as np
@@ -93,6 +94,10 @@ def test_disparity_cli_errors(image_pair, tmp_path, capsys):
     assert main(["disparity", str(a), str(a), "--band", "3"]) == 2
     assert "no band 3" in capsys.readouterr().err
     assert main(["disparity", str(a), str(a), "--vectors", str(tmp_path / "no" / "v.csv")]) == 2
+    fifo = tmp_path / "fifo.tif"
+    os.mkfifo(fifo)  # QA of stop 43: blocked its reader forever
+    assert main(["disparity", str(fifo), str(a)]) == 2
+    assert "the image is a FIFO, not a regular file" in capsys.readouterr().err
 
 
 def test_demcheck_cli(tmp_path, capsys):
@@ -124,7 +129,15 @@ def test_demcheck_cli(tmp_path, capsys):
 def test_demcheck_cli_errors(tmp_path, capsys):
     pts, dem = appendix_f2_scene(tmp_path)
     assert main(["demcheck", str(tmp_path / "none.csv"), "--dem", str(dem)]) == 2
-    assert "cannot read" in capsys.readouterr().err
+    assert "points file not found" in capsys.readouterr().err
+    # QA of stop 43: a FIFO blocked its reader forever; a missing geoid file was "DEM not found"
+    fifo = tmp_path / "fifo.csv"
+    os.mkfifo(fifo)
+    assert main(["demcheck", str(fifo), "--dem", str(dem)]) == 2
+    assert "the points file is a FIFO, not a regular file" in capsys.readouterr().err
+    assert main(["demcheck", str(pts), "--dem", str(dem), "--geoid",
+                 str(tmp_path / "nofile.gtx")]) == 2
+    assert "nofile.gtx: geoid undulation grid not found" in capsys.readouterr().err
     assert main(["demcheck", str(pts), "--dem", str(tmp_path / "none.tif")]) == 2
     assert "DEM not found" in capsys.readouterr().err
     with pytest.raises(SystemExit) as exc:

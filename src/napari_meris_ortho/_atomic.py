@@ -39,6 +39,21 @@ def _kind(mode: int) -> str:
     return _KINDS.get(stat.S_IFMT(mode), "not a regular file")
 
 
+def check_input_file(path: str | os.PathLike[str], what: str) -> Path:
+    """An input file that exists and is a regular file (a FIFO would block its reader
+    forever; symlinks followed); OptionsError naming ``what`` otherwise."""
+    p = Path(path)
+    try:
+        mode = p.stat().st_mode
+    except FileNotFoundError:
+        raise OptionsError(f"{p}: {what} not found") from None
+    except OSError as exc:
+        raise OptionsError(f"{p}: cannot read the {what} ({exc.strerror or exc})") from None
+    if not stat.S_ISREG(mode):
+        raise OptionsError(f"{p}: the {what} is {_kind(mode)}, not a regular file")
+    return p
+
+
 def resolve_target(path: str | os.PathLike[str]) -> Path:
     """The file an output ``path`` writes: symlinks followed; an existing target must be a
     regular file (OutputError otherwise)."""
@@ -77,11 +92,22 @@ def _same_file(a: Path, b: Path) -> bool:
         return False
 
 
+def is_inside(path: Path, directory: Path) -> bool:
+    """True when ``path`` (resolved, existing or not) lies below the existing directory
+    ``directory`` (resolved)."""
+    if not directory.is_dir():
+        return False
+    inner, outer = os.path.realpath(path), os.path.realpath(directory)
+    return inner != outer and inner.startswith(outer.rstrip(os.sep) + os.sep)
+
+
 def check_distinct(
     outputs: dict[str, str | os.PathLike[str] | None],
     inputs: dict[str, Iterable[str | os.PathLike[str]]],
 ) -> None:
-    """Refuse an output that resolves to an input file or to another output of the same run.
+    """Refuse an output that resolves to an input file, lies inside an input directory (a
+    ``.SEN3`` product, a DEM tile directory, a synthesis store), or is another output of the
+    same run.
 
     ``outputs``: option name -> path (None: not requested); ``inputs``: what -> paths.
     """
@@ -92,6 +118,9 @@ def check_distinct(
                 if _same_file(out, Path(p)):
                     raise OptionsError(f"{name} {out} is the {what} {p}: refusing to overwrite "
                                        "an input")
+                if is_inside(out, Path(p)):
+                    raise OptionsError(f"{name} {out} is inside the {what} {p}: refusing to "
+                                       "write into an input")
         for other, out2 in given[:i]:
             if _same_file(out, out2):
                 raise OptionsError(f"{name} {out} and {other} {out2} are the same file")

@@ -21,8 +21,9 @@ from napari_meris_ortho.products.n1 import tie_columns, tie_lines, write_product
 from napari_meris_ortho.products.open import read_product
 from napari_meris_ortho.products.sen3 import write_sen3
 
-#: a full-width FR product (2241 columns), 1400 lines: levels 2241, 1121 and 561 columns wide
-H, W = 1400, 2241
+#: a full-width FR product (2241 columns), 1409 lines (22 tie intervals, ending on a tie row
+#: as ESA's): levels 2241, 1121 and 561 columns wide
+H, W = 1409, 2241
 #: SEN3 fill value of the radiances (``layout.RADIANCE_FILL``): no data, NaN radiance
 FILL = 65535
 
@@ -68,9 +69,9 @@ def test_sen3_opens_as_multiscale_levels_of_its_bands(pair):
     product = read_product(pair[1])
     (radiance, kw, _), (rgb, rgb_kw, _), (flags, flags_kw, _) = read_layers(str(pair[1]))
     assert kw["multiscale"] and rgb_kw["multiscale"] and flags_kw["multiscale"]
-    assert [level.shape for level in radiance] == [(15, H, W), (15, 700, 1121),
-                                                   (15, 350, 561)]
-    assert [level.shape for level in rgb] == [(H, W, 3), (700, 1121, 3), (350, 561, 3)]
+    assert [level.shape for level in radiance] == [(15, H, W), (15, 705, 1121),
+                                                   (15, 353, 561)]
+    assert [level.shape for level in rgb] == [(H, W, 3), (705, 1121, 3), (353, 561, 3)]
     for b in (1, 7, 15):
         full = product.radiance(b)
         for level, f in zip(radiance, (1, 2, 4), strict=True):

@@ -57,8 +57,9 @@ def _read_band(path: str, band: int) -> tuple[np.ndarray, Any, Any]:
     import rasterio
     from rasterio.errors import RasterioError
 
-    if not Path(path).exists():
-        raise OptionsError(f"{path}: image not found")
+    from .._atomic import check_input_file
+
+    check_input_file(path, "image")
     try:
         with rasterio.open(path) as ds:
             if not 1 <= band <= ds.count:

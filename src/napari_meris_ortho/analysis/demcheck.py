@@ -31,7 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .._atomic import atomic_path
+from .._atomic import atomic_path, check_input_file
 from ..dem.base import METHODS, DemSource
 from ..dem.geoid import EGM96, ELLIPSOID, GEOID_GRID, split_datum
 from ..dem.stack import DemStack, open_dem
@@ -210,6 +210,8 @@ def _geoid_undulation(geoid, points: GroundControlPoints) -> np.ndarray:
     """N at the points (bilinear) from a raster of undulations, or zeros without one."""
     if geoid is None:
         return np.zeros(len(points))
+    if not isinstance(geoid, DemSource):
+        check_input_file(geoid, "geoid undulation grid")
     source = geoid if isinstance(geoid, DemSource) else open_dem(f"{geoid}:{ELLIPSOID}")
     return np.asarray(source.sample(points.lon, points.lat, "bilinear"), dtype=np.float64)
 
@@ -218,7 +220,7 @@ def read_points(path: str | os.PathLike[str]) -> GroundControlPoints:
     """GPS points from a CSV (columns lon, lat, h; header names tolerant: longitude/easting/x,
     latitude/northing/y, height/elevation/z...; ',', ';', tab or blanks; '#' comments) or from
     a DEMCHK listing of Appendix F (``N : easting northing elevation ...``)."""
-    p = Path(path)
+    p = check_input_file(path, "points file")
     try:
         text = p.read_text(encoding="utf-8-sig", errors="replace")
     except OSError as exc:

@@ -54,8 +54,10 @@ def export_cog(store: SynthesisStore, out: str | os.PathLike[str], *,
                progress: ProgressCallback | None = None) -> Path:
     """Write bands (default all of the synthesis) or one other ``layer`` (``ndvi``, ``count``,
     ``product``) of ``store`` as a Cloud-Optimized GeoTIFF (module docstring); atomic."""
+    from .._atomic import check_distinct
     from ..ortho.writing import write_map
 
+    check_distinct({"output": out}, {"synthesis store": [store.path]})
     if layer is not None and bands is not None:
         raise OptionsError("choose bands or one other layer, not both")
     tags = {"algorithm": store.algorithm, "snapshot": store.snapshot,
