@@ -53,3 +53,50 @@ def test_export_into_its_store_and_a_store_inside_its_input_are_refused(tmp_path
     # an update in place is no copy into itself
     assert main(["-q", "synthesize", scene_product({"seed": 3}), "--input", str(store),
                  "--out", str(store), "--workers", "0", "--elevation", "tiepoints"]) == 0
+
+
+def test_a_damaged_store_is_one_error_line(tmp_path):
+    """A chunk object of the store missing or truncated: export and an update end in one
+    line naming what is wrong, exit 2, nothing else on stderr (before: Icechunk's multi-line
+    report in a traceback, and at exit a panic of its Rust runtime)."""
+    import shutil
+    import subprocess
+    import sys
+
+    store = tmp_path / "store"
+    product = scene_product()
+    synthesize([product], store, grid=GRID, bands=BANDS, algorithm="max-ndvi", tile=256,
+               elevation="tiepoints")
+    for damage, said in (("truncate", "a chunk object is truncated"),
+                         ("remove", "a chunk object is missing")):
+        copy = tmp_path / damage
+        shutil.copytree(store, copy)
+        for chunk in (copy / "chunks").iterdir():
+            if damage == "remove":
+                chunk.unlink()
+            else:
+                chunk.write_bytes(b"garbage")
+        for argv in (["export", str(copy), "-o", str(tmp_path / "out.tif")],
+                     ["synthesize", scene_product({"seed": 3}), "--input", str(copy),
+                      "--out", str(copy), "--workers", "0", "--elevation", "tiepoints"]):
+            run = subprocess.run([sys.executable, "-m", "napari_meris_ortho.cli", "-q", *argv],
+                                 capture_output=True, text=True, timeout=300)
+            assert run.returncode == 2, run.stderr
+            assert run.stderr.strip().splitlines() == [
+                f"meris-ortho: error: the synthesis store: {said}: the store is damaged"], (
+                    run.stderr)
+        assert not (tmp_path / "out.tif").exists()
+
+
+def test_a_reader_that_leaves_is_no_error(geolocated):
+    """``meris-ortho info P | head -1``: the reader closes the pipe; the command ends quietly
+    with the status of a SIGPIPE (141), as other tools do (before: exit 2, "[Errno 32]")."""
+    import subprocess
+    import sys
+
+    run = subprocess.Popen([sys.executable, "-m", "napari_meris_ortho.cli", "info",
+                            str(geolocated["fsg"])], stdout=subprocess.PIPE,
+                           stderr=subprocess.PIPE)
+    run.stdout.close()  # before it writes
+    _, err = run.communicate(timeout=120)
+    assert run.returncode == 141 and err == b""

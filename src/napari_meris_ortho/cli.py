@@ -89,16 +89,27 @@ def console_main() -> NoReturn:
     """The ``meris-ortho`` process (console script and ``python -m``): ``main`` in a process
     tuned for one run (``_process``; ``MERIS_ORTHO_NO_TUNING=1`` turns that off)."""
     tune_process()
-    sys.exit(main(last=True))
+    code = main(last=True)
+    if code:
+        # a failed run may leave reads in flight in Icechunk's runtime (zarr stops at the
+        # first failed chunk); their Rust threads panic if the interpreter is torn down
+        # under them: the error is said and the outputs are undone, so leave at once
+        for stream in (sys.stdout, sys.stderr):
+            with contextlib.suppress(Exception):
+                stream.flush()
+        os._exit(code)
+    sys.exit(code)
 
 
 def main(argv: Sequence[str] | None = None, *, last: bool = False) -> int:
     """Run one ``meris-ortho`` command line (``argv``: without the program name; None: the
     process's). ``last``: the process ends after this run (``console_main``)."""
+    command = ""
     with _signals_handled(), few_collections(last):
         try:
             parser = build_parser()
             args = parser.parse_args(argv)
+            command = str(args.command)
             quiet = logging.WARNING if args.quiet else logging.INFO
             level = logging.DEBUG if args.verbose else quiet
             logging.basicConfig(level=level, format="%(message)s", stream=sys.stderr)
@@ -108,13 +119,25 @@ def main(argv: Sequence[str] | None = None, *, last: bool = False) -> int:
                 return int(args.func(args) or 0)
         except MerisOrthoError as exc:
             return _error(exc)
+        except BrokenPipeError:  # the reader of our output left (``| head``): as tools do
+            with contextlib.suppress(OSError):
+                os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+            return 128 + signal.SIGPIPE
         except OSError as exc:  # file system problems not caught by a reader: still one line
             return _error(exc)
         except MemoryError:
-            return _error("out of memory (a smaller output grid or --bands may help)")
+            hint = MEMORY_HINTS.get(command, "")
+            return _error("out of memory" + (f" ({hint})" if hint else ""))
         except KeyboardInterrupt:  # signals not delivered through the handler
             print("meris-ortho: interrupted", file=sys.stderr)
             return 130
+
+
+#: what may help a command that ran out of memory
+MEMORY_HINTS = {"map": "a smaller output grid or --bands may help",
+                "synthesize": "a smaller --tile or fewer --workers may help",
+                "disparity": "a smaller --explore window may help",
+                "demcheck": "a larger --bin-width may help"}
 
 
 def _error(exc: object) -> int:

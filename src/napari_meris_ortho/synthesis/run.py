@@ -214,7 +214,8 @@ def engine(workers: int, scheduler: str | None) -> Iterator[InProcess | Dask]:
                 warnings.simplefilter("ignore", UserWarning)
                 cluster = stack.enter_context(distributed.LocalCluster(
                     n_workers=workers, threads_per_worker=1, processes=True,
-                    dashboard_address=None, env=WORKER_ENV, silence_logs=logging.ERROR))
+                    dashboard_address=None, env=WORKER_ENV,
+                    silence_logs=logging.CRITICAL))  # a failed task: the client reports it
             client = distributed.Client(cluster, set_as_default=False)
             hold_workers_to_cores(client)  # our own processes: one core each, if they fit
         stack.callback(client.close)
@@ -808,7 +809,8 @@ class Synthesis:
         metadata = {st.COMMIT_KEY: {"products": [r.commit_entry() for r in reports],
                                     "algorithm": self.algorithm}}
         try:
-            snapshot = session.commit(message, metadata=metadata)
+            with st.store_errors(self.target.path, "the commit failed"):
+                snapshot = session.commit(message, metadata=metadata)
             if move_main:
                 self.target.repo.reset_branch(st.BRANCH, snapshot, from_snapshot_id=base)
                 self.target.repo.delete_branch(self._branch)

@@ -339,7 +339,12 @@ def read_window(store: Any, names: Sequence[str], window: Window, level: int = 1
     out = {}
     for n in names:
         array = open_layer(store, n, level)
-        values = np.asarray(array[r0:r1, c0:c1])
+        try:
+            with store_errors():
+                values = np.asarray(array[r0:r1, c0:c1])
+        except (RuntimeError, ValueError) as exc:  # zarr's codecs: "Zstd decompression error"
+            raise OutputError(f"the synthesis store: layer {n} does not decode ({exc}): "
+                              "the store is damaged") from None
         scale = stored_scale(array)
         out[n] = values if scale is None else decode_band(values, scale)
     return out
@@ -368,10 +373,53 @@ def written_window(store: Any, name: str, array: Any, level: int = 1) -> Window 
 
 
 def _sync(coroutine: Any) -> Any:
-    """Run ``coroutine`` on zarr's event loop (the loop of its synchronous API)."""
+    """Run ``coroutine`` on zarr's event loop (the loop of its synchronous API); the store's
+    own errors as one-line ``OutputError`` (:func:`store_errors`)."""
     from zarr.core.sync import sync
 
-    return sync(coroutine)
+    with store_errors():
+        return sync(coroutine)
+
+
+async def gather_all(*awaitables: Any) -> list[Any]:
+    """``asyncio.gather`` that lets every awaitable end before it raises the first error: no
+    fetch of a failed read is left in flight in Icechunk's runtime (one still running when
+    the process ends panics in its Rust thread)."""
+    results = await asyncio.gather(*awaitables, return_exceptions=True)
+    for r in results:
+        if isinstance(r, BaseException):
+            raise r
+    return list(results)
+
+
+@contextlib.contextmanager
+def store_errors(path: str | os.PathLike[str] | None = None,
+                 doing: str = "the synthesis store") -> Iterator[None]:
+    """Icechunk's errors (a missing or truncated object of a damaged store, a full disk) and
+    a chunk that does not decode, as one ``OutputError`` line naming ``path`` (Icechunk's own
+    message is a multi-line report); a commit conflict passes as it is."""
+    import icechunk
+
+    try:
+        yield
+    except icechunk.ConflictError:
+        raise
+    except icechunk.IcechunkError as exc:
+        where = f"{path}: " if path is not None else ""
+        raise OutputError(f"{where}{doing}: {brief_store_error(exc)}") from None
+
+
+def brief_store_error(exc: BaseException) -> str:
+    """What an Icechunk error report says, in a few words."""
+    text = str(exc)
+    if "No space left on device" in text:
+        return "no space left on device (nothing was committed)"
+    if "not found" in text and "chunks/" in text:
+        return "a chunk object is missing: the store is damaged"
+    if "range was invalid" in text or "object was only" in text:
+        return "a chunk object is truncated: the store is damaged"
+    lines = (ln.strip(" x|") for ln in text.splitlines())
+    return next((ln for ln in lines if ln), type(exc).__name__)[:200]
 
 
 def _level_path(name: str, factor: int) -> str:
@@ -425,7 +473,11 @@ def read_tile(store: Any, names: Sequence[str], window: Window, layout: str = ""
         if data is None:  # never written: fill value
             return
         dtype = out.dtype.newbyteorder("<")
-        raw = await asyncio.to_thread(codec.decode, data.to_bytes())
+        try:
+            raw = await asyncio.to_thread(codec.decode, data.to_bytes())
+        except (RuntimeError, ValueError) as exc:  # numcodecs: "Zstd decompression error"
+            raise OutputError(f"the synthesis store: chunk {key} does not decode ({exc}): "
+                              "the store is damaged") from None
         block = np.frombuffer(raw, dtype).reshape(rows, cols)
         part = out[i - r0:i - r0 + rows, j - c0:j - c0 + cols]
         part[...] = block[:part.shape[0], :part.shape[1]]
@@ -437,12 +489,12 @@ def read_tile(store: Any, names: Sequence[str], window: Window, layout: str = ""
             return np.asarray(await array.getitem((slice(r0, r1), slice(c0, c1))))
         out = np.zeros((r1 - r0, c1 - c0), native_dtype(array))
         rows, cols = (int(c) for c in array.chunks)
-        await asyncio.gather(*(chunk(array, codec, out, i, j) for i in range(r0, r1, rows)
+        await gather_all(*(chunk(array, codec, out, i, j) for i in range(r0, r1, rows)
                                for j in range(c0, c1, cols)))
         return out
 
     async def gather() -> list[np.ndarray]:
-        return list(await asyncio.gather(*(read(n) for n in names)))
+        return await gather_all(*(read(n) for n in names))
 
     return dict(zip(names, _sync(gather()), strict=True))
 
@@ -564,12 +616,11 @@ def write_tile(store: Any, window: Window, arrays: dict[str, np.ndarray],
         else:
             writes = [put(array, encoder, ((top + i0) // chunk, (left + j0) // chunk),
                           new[i0:i1, j0:j1]) for i0, i1, j0, j1 in blocks]
-        await asyncio.gather(*writes)
+        await gather_all(*writes)
         return len(writes)
 
     async def gather() -> list[int]:
-        return list(await asyncio.gather(*(write(n, f) for n in arrays
-                                           for f in (1, *factors))))
+        return await gather_all(*(write(n, f) for n in arrays for f in (1, *factors)))
 
     return sum(_sync(gather()))
 
