@@ -262,3 +262,32 @@ def test_widgets_dock_through_the_manifest(make_napari_viewer, qtbot, tiny_n1):
     # the flicker widget sees the new layers (two top-most images pre-selected)
     assert flicker.layer_a.value is not None and flicker.layer_b.value is not None
     assert flicker.layer_a.value.name != flicker.layer_b.value.name
+
+
+def test_a_rerun_replaces_all_its_layers_and_shows_a_band(make_napari_viewer, qtbot, tiny_n1,
+                                                          tmp_path):
+    """QA of stop 43: a rerun with fewer bands left the first run's RGB and other bands
+    beside the new layers (and crashed Mesa's software GL drawing them); now every layer an
+    earlier run made of the same product goes. A run without bands 7, 5 and 2 showed no
+    image: its first band is shown. Two products of one sensing time got one name."""
+    viewer = make_napari_viewer(show=True)
+    widget = OrthorectifyWidget(viewer)
+    widget.products.value = [tiny_n1]
+    widget.elevation.value = "tiepoints"
+    _run(widget, qtbot)
+    assert f"ortho RGB 7-5-2{STAMP}" in [x.name for x in viewer.layers]
+    widget.bands.value = "7"
+    widget.geometry.value = False
+    _run(widget, qtbot)
+    assert widget.status.value.startswith("done"), widget.status.value
+    assert [x.name for x in viewer.layers] == [f"ortho b7{STAMP}"]
+    assert viewer.layers[0].visible
+    # two products of one sensing time: distinct names, and a rerun replaces both sets
+    twin = tmp_path / "MER_FR__1PTWIN.N1"
+    twin.write_bytes(tiny_n1.read_bytes())
+    widget.products.value = [tiny_n1, twin]
+    for _ in range(2):
+        _run(widget, qtbot)
+        names = [x.name for x in viewer.layers]
+        assert sorted(names) == sorted([f"ortho b7{STAMP} {tiny_n1.name}",
+                                        f"ortho b7{STAMP} {twin.name}"]), names

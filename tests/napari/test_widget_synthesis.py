@@ -81,7 +81,12 @@ def test_min_radiance_layers(make_napari_viewer, qtbot, tiny_n1, second_n1, monk
     _run(widget, qtbot)
     assert widget.status.value.startswith("done"), widget.status.value
     assert "2 products" in widget.status.value
+    # the bands asked for, no others (QA of stop 43: all 15 were merged and shown), the
+    # first shown (no RGB quick-look without bands 5 and 2)
+    bands = [x.name for x in viewer.layers if x.name.startswith("synthesis min-radiance b")]
+    assert sorted(bands) == ["synthesis min-radiance b13", "synthesis min-radiance b7"]
     band7 = _layer(viewer, "b7")
+    assert band7.visible
     grid = widget.last_run.items[0]["grid"]
     one, two = _mapped([tiny_n1, second_n1], grid)
     both = one.valid & two.valid

@@ -207,7 +207,8 @@ class OrthoRun:
 
 
 def _item(product: Any, prefix: str = "ortho", **values: Any) -> dict[str, Any]:
-    meta = {"product": getattr(product, "product_name", ""), "path": str(product.path)}
+    meta = {"product": getattr(product, "product_name", ""), "path": str(product.path),
+            "product_type": str(getattr(product, "product_type", "")).strip("_")}
     return {"prefix": prefix, "suffix": f" · {product_stamp(product)}", "meta": meta,
             "tie_points": product.tie_points, "bands": {}, "extra": [], "valid": None,
             "diagnostics": {}, "stats": {}, **values}
@@ -288,7 +289,8 @@ def _run_synthesis(options: RunSettings, progress: ProgressCallback | None) -> O
     grid_options: dict[str, Any] = {}
     if options.input_store is None:  # a new synthesis: its grid from the first product
         crs = output_crs(options, products[0].tie_points)
-        grid_options = {"crs": crs, "pixel_size": _pixel_size(options, products[0], crs)}
+        grid_options = {"crs": crs, "pixel_size": _pixel_size(options, products[0], crs),
+                        "bands": options.bands}  # an update keeps its store's bands
     temporary = options.output is None and options.input_store is None
     out = (Path(options.output) if options.output is not None
            else Path(options.input_store) if options.input_store is not None
@@ -349,13 +351,53 @@ def run_layers(run: OrthoRun, world: OutputGrid | None = None) -> list[LayerData
     ``world``: the viewer's frame; results in another CRS are moved into it (reprojected).
     """
     layers: list[LayerData] = []
+    _distinct_suffixes(run.items)
     for item in run.items:
         frame = item["grid"]
         item_layers = _item_layers(item, frame, run.options)
         if world is not None and not same_crs(world.crs, frame.crs):
             item_layers = [move_to_frame(layer, frame, world) for layer in item_layers]
-        layers += [multiscale_layer(layer) for layer in item_layers]
+        key = run_key(item)
+        layers += [_tagged(multiscale_layer(layer), key) for layer in item_layers]
     return layers
+
+
+#: layer metadata key: the product (or synthesis store) a run's layer shows
+RUN_KEY = "meris_ortho_source"
+
+
+def run_key(item: dict[str, Any]) -> str:
+    """What a run's item shows: its product's (or store's) path; a later run of the same
+    source replaces every layer of this one (``layer_source``)."""
+    meta = item.get("meta", {})
+    return str(meta.get("path") or meta.get("synthesis") or item.get("suffix", ""))
+
+
+def layer_source(layer: Any) -> str | None:
+    """The ``run_key`` a layer was made for (None: not a run's layer)."""
+    value = (getattr(layer, "metadata", None) or {}).get(RUN_KEY)
+    return None if value is None else str(value)
+
+
+def _tagged(layer: LayerData, key: str) -> LayerData:
+    data, kwargs, kind = layer
+    return data, {**kwargs, "metadata": {**(kwargs.get("metadata") or {}), RUN_KEY: key}}, kind
+
+
+def _distinct_suffixes(items: list[dict[str, Any]]) -> None:
+    """Items of one run sharing a name suffix (two products of one sensing time: an FR and its
+    FRG, an N1 and its .SEN3) get their product type too, so no two layers share a name."""
+    groups: dict[str, list[dict[str, Any]]] = {}
+    for item in items:
+        groups.setdefault(item["suffix"], []).append(item)
+    for group in groups.values():
+        if len(group) < 2:
+            continue
+        types = [str(item["meta"].get("product_type", "")) for item in group]
+        by_type = all(types) and len(set(types)) == len(types)
+        for item, kind in zip(group, types, strict=True):
+            tag = kind if by_type else Path(str(item["meta"].get("path", ""))).name
+            item["suffix"] = f"{item['suffix']} {tag}"
 
 
 def multiscale_layer(layer: LayerData) -> LayerData:

@@ -21,11 +21,14 @@ def band_layers(bands: dict[int, np.ndarray], frame: OutputGrid, prefix: str,
                 suffix: str = "") -> list[tuple[Any, dict, str]]:
     """Image layers of radiance bands on ``frame``: an RGB 7-5-2 quick-look when those bands
     are present ("<prefix> RGB 7-5-2<suffix>"), then one grey layer per band
-    ("<prefix> b7<suffix>", background 0)."""
+    ("<prefix> b7<suffix>", background 0), hidden under the quick-look; without one, the grey
+    layer of the first band given is shown."""
     layers: list[tuple[Any, dict, str]] = []
     base = dict(meta or {})
     limits = {b: contrast_limits(bands[b]) for b in bands}
-    if all(b in bands for b in QUICKLOOK_BANDS):
+    quicklook = all(b in bands for b in QUICKLOOK_BANDS)
+    shown = None if quicklook or not bands else next(iter(bands))
+    if quicklook:
         rgb = stretch_rgb([bands[b] for b in QUICKLOOK_BANDS], valid,
                           [limits[b] for b in QUICKLOOK_BANDS])
         layers.append((rgb, geo_image_kwargs(frame, name=f"{prefix} RGB 7-5-2{suffix}", rgb=True,
@@ -35,7 +38,7 @@ def band_layers(bands: dict[int, np.ndarray], frame: OutputGrid, prefix: str,
         data = np.asarray(bands[b])
         kwargs = geo_image_kwargs(frame, name=f"{prefix} b{b}{suffix}", colormap="gray",
                                   contrast_limits=limits[b],
-                                  metadata=dict(base, band=b), visible=False)
+                                  metadata=dict(base, band=b), visible=b == shown)
         layers.append((data, kwargs, "image"))
     return layers
 

@@ -62,6 +62,7 @@ from .ortho_run import (
     Cancelled,
     OrthoRun,
     RunSettings,
+    layer_source,
     output_crs,
     parse_bands,
     run_layers,
@@ -470,9 +471,15 @@ class OrthorectifyWidget(Container):
         run, layers = value
         self.last_run = run
         names = {layer.name for layer in layers}
+        sources = {layer_source(layer) for layer in layers} - {None}
+        # a rerun replaces every layer an earlier run made of the same products (or store),
+        # not only those of the same names: a layer the new settings no longer make (a band
+        # left out, geometry off) would seem to describe the new run (and a rerun with fewer
+        # bands crashed Mesa's software GL drawing beside such leftovers)
         # top first: a removal that narrows the world slices again the layers left, and the
         # parallax vectors (on top) redrew their thumbnail in Python (0.09 s)
-        replaced = [old for old in self.viewer.layers[::-1] if old.name in names]
+        replaced = [old for old in self.viewer.layers[::-1]
+                    if old.name in names or layer_source(old) in sources]
         # napari collects garbage after every removal (0.1-0.5 s): the removals go in one
         # batch of napari's, one per turn, and the batch ends (one collection) in a turn alone
         removals: list[tuple[Any, Any]] = [(self._remove_layer, old) for old in replaced]
