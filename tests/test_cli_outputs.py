@@ -94,3 +94,32 @@ def test_a_failing_second_output_removes_the_first(files, tmp_path):
     assert "Traceback" not in err and err.strip().splitlines()[-1].startswith("meris-ortho: error")
     assert sorted(p.name for p in full.iterdir()) == ["out.tif"]
     assert (full / "out.tif").read_bytes() == b"old output"
+
+
+def test_band_order_and_unneeded_dems(files, tmp_path, caplog):
+    """QA of stop 43: ``--bands 7,5,2`` wrote planes 2, 5, 7 (no RGB composite in any viewer);
+    a DEM after one that answered every point was warned about as "contributed no height";
+    a DEM that misses the product, before it, still is."""
+    import logging
+
+    import rasterio
+
+    prod, dem = files
+    out = tmp_path / "rgb.tif"
+    far = make_dem(tmp_path / "far.tif", -60.0, -10.0, -59.5, -9.5)
+    dem, far = f"{dem}:ellipsoid", f"{far}:ellipsoid"
+    with caplog.at_level(logging.WARNING):
+        assert main(["-q", "map", str(prod), "-o", str(out), "--bands", "7,5,2,7",
+                     "--dem", dem, "--dem", far, "--elevation", "dem"]) == 0
+    with rasterio.open(out) as ds:
+        assert ds.count == 3
+        assert [d.split()[2] for d in ds.descriptions] == ["7", "5", "2"], ds.descriptions
+        band7 = ds.read(1)
+    assert "far.tif" not in caplog.text  # not needed: the first DEM answered every point
+    caplog.clear()
+    with caplog.at_level(logging.WARNING):
+        assert main(["-q", "map", str(prod), "-o", str(out), "--bands", "7", "--dem", far,
+                     "--dem", dem]) == 0
+    assert "far.tif:ellipsoid contributed no height" in caplog.text
+    with rasterio.open(out) as ds:
+        assert (ds.read(1) == band7).all()

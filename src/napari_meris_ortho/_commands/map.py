@@ -101,7 +101,7 @@ def _map(args: argparse.Namespace, grid: Any) -> Any:
                         "CRS, or only no data / heights outside -500..9000 m)", dem)
         write_map(args.output, ante, dtype=args.dtype, compress=args.compress,
                   diagnostics=args.diagnostics, software="napari-meris-ortho map",
-                  progress=progress)
+                  progress=progress, order=args.bands)
     return ante
 
 

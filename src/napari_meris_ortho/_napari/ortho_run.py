@@ -244,7 +244,7 @@ def _run_mapping(options: RunSettings, progress: ProgressCallback | None) -> Ort
                      "the scene, wrong CRS or only no data)" for d in ante.stats.unused_dems()]
         if options.output is not None:
             written.append(write_map(_output_path(options.output, k, n), ante,
-                                     software="napari-meris-ortho widget"))
+                                     software="napari-meris-ortho widget", order=options.bands))
         result = ante.result()
         # the model after the band ("ortho b7 (pixel geolocation) · ..."): names differ within
         # the width the layer list shows, and differ from the tie-point run's

@@ -120,14 +120,22 @@ class RunStats:
         return out
 
     def unused_dems(self) -> list[str]:
-        """The DEMs of the list that gave no height (outside the product, a wrong CRS tag,
-        only no data or implausible heights)."""
-        out = []
+        """The DEMs of the list that gave no height where one was still wanted (outside the
+        product, a wrong CRS tag, only no data or implausible heights): points went on to a
+        later DEM or to the tie points. A DEM after ones that answered every point was not
+        needed, not unused."""
+        counts: dict[int, int] = {}
+        later_than: dict[int, int] = {}
+        fallback = 0
         for key, count in self.elevation_sources.items():
             index, _, _ = key.partition(":")
-            if index.isdigit() and int(index) < len(self.dems) and count == 0:
-                out.append(self.dems[int(index)])
-        return out
+            if index.isdigit() and int(index) < len(self.dems):
+                counts[int(index)] = count
+            else:  # tie points (or none): after every DEM
+                fallback += count
+        for k in counts:
+            later_than[k] = fallback + sum(c for j, c in counts.items() if j > k)
+        return [self.dems[k] for k, c in sorted(counts.items()) if c == 0 and later_than[k]]
 
 
 def histogram_lines(hist: Sequence[int]) -> list[str]:

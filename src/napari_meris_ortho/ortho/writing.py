@@ -11,7 +11,7 @@ optionally the diagnostics as ``OUT_diagnostics.tif``.
 from __future__ import annotations
 
 import os
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Iterable, Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import Any, Protocol
 
@@ -80,17 +80,20 @@ def check_outputs(outputs: Mapping[str, str | os.PathLike[str] | None],
 def write_map(path: str | os.PathLike[str], mapped: Mapped, *, dtype: str = "uint16",
               compress: str = "zstd", diagnostics: bool = False,
               metadata: Mapping[str, Any] | None = None, software: str = "napari-meris-ortho",
-              progress: ProgressCallback | None = None) -> Path:
+              progress: ProgressCallback | None = None,
+              order: Sequence[int] | None = None) -> Path:
     """Write the bands of ``mapped`` as a Cloud-Optimized GeoTIFF (module docstring); with
     ``diagnostics`` also its diagnostics layers. ``dtype``: "uint16" (counts + GDAL scale;
     needs ``mapped.counts``, which ``Antecedents`` have) or "float32" (radiances);
-    ``metadata``: more dataset tags. Atomic (tmp file + rename); OutputError/OptionsError."""
+    ``metadata``: more dataset tags; ``order``: the bands' order in the file (the user's
+    ``--bands 7,5,2``: an RGB composite in any viewer; default ascending; repeats dropped).
+    Atomic (tmp file + rename); OutputError/OptionsError."""
     if dtype not in DTYPES:
         raise OptionsError(f"unknown output type {dtype!r}: choose {', '.join(DTYPES)}")
     if compress not in COMPRESSIONS:
         raise OptionsError(f"unknown compression {compress!r}: choose "
                            f"{', '.join(COMPRESSIONS)}")
-    bands = sorted(int(b) for b in mapped.bands)
+    bands = band_order(mapped.bands, order)
     stats = mapped.stats
     counts = dtype == "uint16"
     if counts and not hasattr(mapped, "counts"):
@@ -120,6 +123,19 @@ def write_map(path: str | os.PathLike[str], mapped: Mapped, *, dtype: str = "uin
                   compress=compress, overview_resampling="nearest", halve=overview_level,
                   metadata={"elevation_source": "k >= 0: DEM k; -1: tie points; -2: none"})
     return Path(path)
+
+
+def band_order(available: Iterable[int], order: Sequence[int] | None) -> list[int]:
+    """``order`` without repeats (every band of it must be ``available``), or the available
+    bands ascending."""
+    have = sorted(int(b) for b in available)
+    if order is None:
+        return have
+    wanted = list(dict.fromkeys(int(b) for b in order))
+    missing = [b for b in wanted if b not in have]
+    if missing or not wanted:
+        raise OptionsError(f"bands {wanted} to write, the result has {have}")
+    return wanted
 
 
 def _streamed(mapped: Mapped, bands: list[int], counts: bool,

@@ -69,14 +69,15 @@ def export_cog(store: SynthesisStore, out: str | os.PathLike[str], *,
                                f"{', '.join(others)})")
         path = _write_layer(store, out, layer, tags)
     else:
-        chosen = list(store.bands) if bands is None else [int(b) for b in bands]
+        chosen = list(store.bands) if bands is None else list(dict.fromkeys(int(b)
+                                                                             for b in bands))
         missing = [b for b in chosen if b not in store.bands]
         if missing:
             raise OptionsError(f"{store.path}: bands {missing} are not in the synthesis "
                                f"(it has {list(store.bands)})")
         path = write_map(out, _StoreBands(store, chosen, progress), dtype="float32",
                          compress=COMPRESS, metadata=tags,
-                         software="napari-meris-ortho export")
+                         software="napari-meris-ortho export", order=chosen)
     if progress is not None:
         progress(1, 1)
     return path
