@@ -94,6 +94,9 @@ def test_disparity_cli_errors(image_pair, tmp_path, capsys):
     assert main(["disparity", str(a), str(a), "--band", "3"]) == 2
     assert "no band 3" in capsys.readouterr().err
     assert main(["disparity", str(a), str(a), "--vectors", str(tmp_path / "no" / "v.csv")]) == 2
+    for size in (["0", "0"], ["-5", "nan"]):  # QA of stop 43: "(0.000, 0.000) m", "nan m"
+        assert main(["disparity", str(a), str(a), "--pixel-size", *size]) == 2
+        assert "--pixel-size must be two sizes > 0" in capsys.readouterr().err
     fifo = tmp_path / "fifo.tif"
     os.mkfifo(fifo)  # QA of stop 43: blocked its reader forever
     assert main(["disparity", str(fifo), str(a)]) == 2

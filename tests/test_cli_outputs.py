@@ -123,3 +123,6 @@ def test_band_order_and_unneeded_dems(files, tmp_path, caplog):
     assert "far.tif:ellipsoid contributed no height" in caplog.text
     with rasterio.open(out) as ds:
         assert (ds.read(1) == band7).all()
+    with pytest.raises(SystemExit) as exc:  # an empty list is no "all bands"
+        main(["map", str(prod), "-o", str(out), "--bands", ""])
+    assert exc.value.code == 2

@@ -309,3 +309,15 @@ def test_terrain_margin_is_the_parallax_of_the_highest_terrain_in_pixels():
     assert terrain_margin_px(geo, 30.0, 60.0, 4000.0) == math.ceil(
         4000.0 * math.tan(math.radians(30.0)) / side) + 2
     assert terrain_margin_px(utm, 0.0, 0.0) == 2
+
+
+def test_a_geographic_extent_beyond_the_poles_is_refused():
+    """QA of stop 43: --ul 13 95 --lr 14 45.8 made a grid reaching latitude 95."""
+    from napari_meris_ortho.errors import OptionsError
+
+    with pytest.raises(OptionsError, match="beyond \\+-90 degrees"):
+        OutputGrid.from_extent("EPSG:4326", (13.0, 95.0), (14.0, 45.8), 0.0025)
+    grid = OutputGrid.from_extent("EPSG:4326", (13.0, 90.0), (14.0, 89.0), 0.25)
+    assert (grid.width, grid.height) == (4, 4)
+    # a projected CRS has no such bound on its y
+    OutputGrid.from_extent("EPSG:32632", (300000.0, 9_500_000.0), (301000.0, 9_499_000.0), 100.0)

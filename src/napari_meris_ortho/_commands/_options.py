@@ -19,6 +19,9 @@ from ..options import Elevation, OrthoOptions, Sampling, choices, parse_band_lis
 def parse_bands(text: str) -> list[int] | None:
     """argparse type of ``--bands``: "3,5,7" or "3 5 7" -> [3, 5, 7], "all" -> None (all 15
     MERIS bands); ``options.parse_band_list``."""
+    if not text.strip():  # an empty shell variable, not a choice of all bands
+        raise argparse.ArgumentTypeError("no band given: MERIS band numbers 1..15 separated "
+                                         "by commas, or all")
     try:
         values = parse_band_list(text)
     except OptionsError as exc:

@@ -109,6 +109,9 @@ def run(args: argparse.Namespace) -> int:
     if not transform.almost_equals(transform_b):
         raise OptionsError(f"{args.second}: georeferencing differs from {args.first} "
                            "(the two images must be on the same grid)")
+    if args.pixel_size and not all(math.isfinite(v) and v > 0 for v in args.pixel_size):
+        raise OptionsError(f"--pixel-size must be two sizes > 0 in metres, got "
+                           f"{' '.join(f'{v:g}' for v in args.pixel_size)}")
     size = tuple(args.pixel_size) if args.pixel_size else pixel_size_metres(transform, crs,
                                                                             a.shape[0])
     with tqdm_progress("disparity", enabled=not args.quiet, unit="lines") as progress:

@@ -286,6 +286,9 @@ class OutputGrid:
         if not (ulx < lrx and uly > lry):
             raise OptionsError(
                 f"upper-left {tuple(ul)} must be left of and above lower-right {tuple(lr)}")
+        if crs.is_geographic and not (-90.0 <= lry and uly <= 90.0):
+            raise OptionsError(f"latitudes of the extent {uly:g} .. {lry:g} beyond +-90 degrees "
+                               f"(a geographic CRS: corners are longitude, latitude)")
         width = max(1, math.ceil((lrx - ulx) / dx - 1e-9))
         height = max(1, math.ceil((uly - lry) / dy - 1e-9))
         return cls(crs, ulx, uly, dx, dy, width, height)
