@@ -6,10 +6,12 @@ import json
 import shutil
 from pathlib import Path
 
+import pytest
+
 from napari_meris_ortho.cli import main
 from napari_meris_ortho.products.n1 import read_product
 
-SMALL = {"lines": 40, "columns": 65,
+SMALL = {"lines": 65, "columns": 65,  # one tie interval: the least a .SEN3 holds
          "exports": {"getasse30": False, "getasse30_beam": True, "srtm30": False,
                      "geotiff_utm": False, "reference": True}}
 
@@ -23,7 +25,7 @@ def test_sample_writes_the_scene_and_prints_the_paths(tmp_path, capsys):
     product = Path(lines["product"])
     assert product.parent == out and product.name.startswith("MER_FR__1PNSIM20030921")
     p = read_product(product)
-    assert (p.height, p.width) == (40, 65)
+    assert (p.height, p.width) == (65, 65)
     assert "geotiff" in text and "getasse30_beam" in text
     assert (out / "getasse30_beam" / "45N000E.GETASSE30").stat().st_size == 6_480_000
     assert Path(lines["reference"]).exists()
@@ -79,3 +81,21 @@ def test_sample_rerun_after_the_product_was_deleted(tmp_path, capsys):
     product.unlink()
     assert main(args) == 2
     assert "output exists and is a regular file, not a directory" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("override, said", [
+    ('{"clouds": {"fraction": 5}}', "clouds.fraction is a fraction 0..1, not 5"),
+    ('{"clouds": {"fraction": "lots"}}', "clouds.fraction must be a number, not 'lots'"),
+    ('{"clouds": 3}', "clouds must be a JSON object, not 3"),
+    ('{"exports": "yes"}', "exports must be a JSON object, not 'yes'"),
+    ('{"nonsense": 1}', "unknown scene key 'nonsense'"),
+    ('{"dem": {"spacing_deg": true}}', "dem.spacing_deg must be a number, not True"),
+])
+def test_bad_overrides_are_one_line_and_leave_nothing(override, said, tmp_path, capsys):
+    """QA of stop 43: each of these ended in a Python error deep in the simulator (and left
+    an empty --out directory); an unknown key was silently ignored."""
+    out = tmp_path / "out"
+    assert main(["-q", "sample", "fr-small", "--out", str(out), "--set", override]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [f"meris-ortho: error: --set: {said}" + err[0].split(said, 1)[1]], err
+    assert not out.exists()

@@ -42,6 +42,7 @@ def register(subparsers: Any) -> None:
 def run(args: argparse.Namespace) -> int:
     from ..progress import tqdm_progress
     from ..simulate import generate_scene, scene_names
+    from ..simulate.scene import check_overrides
 
     if args.list:
         print("\n".join(scene_names()))
@@ -54,6 +55,7 @@ def run(args: argparse.Namespace) -> int:
             raise OptionsError(f"--set: not valid JSON ({exc})") from None
         if not isinstance(over, dict):
             raise OptionsError("--set: expected a JSON object")
+        check_overrides(args.name, over)
         scene = {"base": args.name, **over}
     quiet = getattr(args, "quiet", False)
     with tqdm_progress(f"sample {args.name}", enabled=not quiet, unit="%") as progress:

@@ -128,6 +128,59 @@ def resolve_config(name_or_config: str | dict, _depth: int = 0) -> dict:
     return out
 
 
+#: the keys of a ``clouds`` config (None in ``DEFAULTS``: no clouds) and their types
+CLOUDS_SCHEMA = {"seed": 0, "fraction": 0.3, "scale_km": 40.0}
+#: keys a scene config names itself by, whatever its base
+_FREE_KEYS = {"name", "description", "base"}
+
+
+def check_overrides(base: str, overrides: dict) -> None:
+    """Refuse, with one OptionsError naming the key, overrides of scene ``base`` (the CLI's
+    ``sample --set``) that name a key the scene does not have, give a value of another type
+    than the scene's (a number for a number, an object for an object...), or a fraction
+    outside 0..1: each would otherwise end in a Python error deep in the simulator."""
+    _check_keys(resolve_config(base), overrides, "")
+
+
+def _check_keys(base: dict, over: dict, where: str) -> None:
+    for key, value in over.items():
+        path = f"{where}{key}"
+        if not where and key in _FREE_KEYS:
+            continue
+        if key not in base:
+            known = ", ".join(sorted(k for k in base if k not in _FREE_KEYS))
+            raise OptionsError(f"--set: unknown scene key {path!r} (known here: {known})")
+        have = base[key]
+        if have is None and key == "clouds":
+            have = CLOUDS_SCHEMA
+            if value is None:
+                continue
+        if isinstance(have, dict):
+            if not isinstance(value, dict):
+                raise OptionsError(f"--set: {path} must be a JSON object, not {value!r}")
+            _check_keys(have, value, f"{path}.")
+        elif not _same_kind(have, value):
+            raise OptionsError(f"--set: {path} must be {_kind_of(have)}, not {value!r}")
+        elif key.endswith("fraction") and not 0.0 <= float(value) <= 1.0:
+            raise OptionsError(f"--set: {path} is a fraction 0..1, not {value!r}")
+
+
+def _same_kind(have: Any, value: Any) -> bool:
+    if isinstance(have, bool) or isinstance(value, bool):
+        return isinstance(have, bool) and isinstance(value, bool)
+    if isinstance(have, int | float):
+        return isinstance(value, int | float) and math.isfinite(value)
+    return have is None or isinstance(value, type(have))
+
+
+def _kind_of(have: Any) -> str:
+    if isinstance(have, bool):
+        return "true or false"
+    if isinstance(have, int | float):
+        return "a number"
+    return {list: "a JSON list", str: "a string"}.get(type(have), type(have).__name__)
+
+
 def _validate(cfg: dict) -> None:
     if cfg["resolution"] not in RESOLUTIONS:
         raise OptionsError(f"scene resolution must be FR or RR, not {cfg['resolution']!r}")
