@@ -178,7 +178,9 @@ def _kind_of(have: Any) -> str:
         return "true or false"
     if isinstance(have, int | float):
         return "a number"
-    return {list: "a JSON list", str: "a string"}.get(type(have), type(have).__name__)
+    if isinstance(have, list):
+        return "a JSON list"
+    return "a string" if isinstance(have, str) else type(have).__name__
 
 
 def _validate(cfg: dict) -> None:
