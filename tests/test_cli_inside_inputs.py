@@ -100,3 +100,29 @@ def test_a_reader_that_leaves_is_no_error(geolocated):
     run.stdout.close()  # before it writes
     _, err = run.communicate(timeout=120)
     assert run.returncode == 141 and err == b""
+
+
+def test_a_product_outside_the_grid_is_skipped_not_merged(tmp_path, caplog):
+    """QA of stop 43: a product whose footprint misses the grid was "merged, added 0" and a
+    new synthesis of it committed an empty store (``map`` refuses the same case)."""
+    from napari_meris_ortho.geometry.grid import OutputGrid
+
+    far = OutputGrid("EPSG:4326", 0.0, 10.0, 0.01, 0.01, 100, 100)
+    store = tmp_path / "far"
+    result = synthesize([scene_product()], store, grid=far, bands=BANDS,
+                        algorithm="max-ndvi", tile=256, elevation="tiepoints")
+    assert result.snapshot is None and not result.merged
+    assert [r.status for r in result.reports] == ["outside the synthesis grid"]
+    assert not store.exists()
+    # with one product on the grid: it is merged, the other reported; exit 1 from the CLI
+    code = main(["-q", "synthesize", scene_product(), scene_product({"seed": 3}),
+                 "--out", str(tmp_path / "ok"), "--ul", "13.45", "46.70", "--lr", "14.26",
+                 "46.19", "--pixel-size", "0.0015", "--bands", "7,13", "--workers", "0",
+                 "--elevation", "tiepoints"])
+    assert code == 0
+    with caplog.at_level("WARNING"):
+        code = main(["-q", "synthesize", scene_product({"seed": 5}), "--out", str(store),
+                     "--ul", "0", "10", "--lr", "1", "9", "--pixel-size", "0.01",
+                     "--workers", "0", "--elevation", "tiepoints"])
+    assert code == 1 and not store.exists()
+    assert "1 product(s) outside the synthesis grid, skipped" in caplog.text

@@ -2,8 +2,9 @@
 1-2) with dask workers.
 
 Exit code 0 when every product was merged (or was already in the synthesis), 1 when some
-product failed (reported and skipped), 2 on bad options (handbook Appendix C parameter checks),
-an unreachable scheduler or a store that is not a synthesis.
+product failed or missed the synthesis grid (reported and skipped), 2 on bad options
+(handbook Appendix C parameter checks), an unreachable scheduler or a store that is not a
+synthesis.
 """
 
 from __future__ import annotations
@@ -112,8 +113,10 @@ def run(args: argparse.Namespace) -> int:
     if result.skipped:
         log.warning("%d product(s) already in the synthesis, skipped: %s", len(result.skipped),
                     ", ".join(r.product_name for r in result.skipped))
+    if result.outside:
+        log.warning("%d product(s) outside the synthesis grid, skipped: %s",
+                    len(result.outside), ", ".join(r.product for r in result.outside))
     if result.failed:
         log.warning("%d of %d product(s) failed and were skipped", len(result.failed),
                     len(result.reports))
-        return 1
-    return 0
+    return 1 if result.failed or result.outside else 0

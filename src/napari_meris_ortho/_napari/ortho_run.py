@@ -301,6 +301,7 @@ def _run_synthesis(options: RunSettings, progress: ProgressCallback | None) -> O
             progress=progress, dems=options.dem_list, options=options.options(), **grid_options)
         skipped += [f"{Path(r.path).name}: {r.error}" for r in result.failed]
         skipped += [f"{Path(r.path).name}: already in the synthesis" for r in result.skipped]
+        skipped += [f"{Path(r.path).name}: outside the synthesis grid" for r in result.outside]
         if not result.merged:
             raise OptionsError(f"no product could be merged into the synthesis "
                                f"({'; '.join(skipped)})")

@@ -19,6 +19,7 @@ RADIANCE_NOTE = ("TOA radiance (float32, 0 = background) = counts x sf_rad of th
 STATUS_MERGED = "merged"
 STATUS_FAILED = "failed"
 STATUS_ALREADY = "already in the synthesis"
+STATUS_OUTSIDE = "outside the synthesis grid"
 
 
 # --------------------------------------------------------------------------- reports
@@ -48,6 +49,9 @@ class ProductReport:
         if self.status == STATUS_ALREADY:
             return [f"PRODUCT {self.path}: SKIPPED ({self.product_name} {self.sensing_start} "
                     f"is already in the synthesis)"]
+        if self.status == STATUS_OUTSIDE:
+            return [f"PRODUCT {self.path}: SKIPPED (no point of its footprint falls on the "
+                    "synthesis grid)"]
         if self.error is not None:
             return [f"PRODUCT {self.path}: SKIPPED ({self.error})"]
         total = max(synthesis_pixels, 1)
@@ -106,6 +110,11 @@ class SynthesisResult:
     def skipped(self) -> list[ProductReport]:
         """Products already in the synthesis (same product name and sensing time)."""
         return [r for r in self.reports if r.status == STATUS_ALREADY]
+
+    @property
+    def outside(self) -> list[ProductReport]:
+        """Products whose footprint misses the synthesis grid (nothing to merge)."""
+        return [r for r in self.reports if r.status == STATUS_OUTSIDE]
 
 
 def message_of(exc: BaseException) -> str:

@@ -31,6 +31,7 @@ from .reports import (
     RADIANCE_NOTE,
     STATUS_ALREADY,
     STATUS_FAILED,
+    STATUS_OUTSIDE,
     ProductReport,
     SynthesisResult,
     message_of,
@@ -635,14 +636,20 @@ class Synthesis:
         jobs: dict[Window, list[Job]] = {}
         for item in todo:
             if item.window is None:
+                item.report.status = STATUS_OUTSIDE
+                item.product = None
                 continue
             tp = item.product.tie_points
             boundary = segment_boundary(tp["latitude"], tp["longitude"])
+            touched = False
             for piece in tiles(item.window, self.tile):
                 if row_spans(boundary, self.grid.window(*piece), margin=item.margin).count == 0:
                     continue  # beyond any terrain point of the product
                 jobs.setdefault(tile_of(piece, self.tile, shape), []).append(
                     (item.report.index, item.report.path, piece, item.window))
+                touched = True
+            if not touched:
+                item.report.status = STATUS_OUTSIDE
             item.product = None  # the workers open it themselves
         return dict(sorted(jobs.items()))
 
@@ -656,6 +663,9 @@ class Synthesis:
         if not todo:
             return _log(result)
         rank, jobs = self._rank(todo), self._jobs(todo)
+        todo = [i for i in todo if i.report.status != STATUS_OUTSIDE]
+        if not todo:  # no product touches the grid: nothing to commit
+            return _log(result)
         check_write_size(jobs, len(self.bands), self.target.path, self.max_pixels,
                          2 if self._version >= 3 else 4)
         spec = self._spec()
