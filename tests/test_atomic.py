@@ -79,7 +79,9 @@ def test_failed_run_removes_new_outputs_and_restores_replaced(tmp_path):
     old.write_text("before")
     new = tmp_path / "new.txt"
     folder = tmp_path / "synthesis"
-    with pytest.raises(OSError, match="disk full"), output_run():
+    # the output's name in the message, not the temporary file's (QA of stop 43)
+    with pytest.raises(OutputError, match=r"third.txt: cannot write \(disk full\); nothing was "
+                       "written"), output_run():
         write(old, "replaced")
         write(new, "created")
         folder.mkdir()
@@ -143,3 +145,13 @@ def test_scratch_dir_is_removed_on_abort_and_when_stale(tmp_path):
     (stale / "ov2.tif").write_text("x")
     write(out, "done")
     assert [p.name for p in tmp_path.iterdir()] == ["out.tif"]
+
+
+def test_a_directory_that_takes_no_file_names_the_output(tmp_path):
+    """/proc passes the writable-directory check as root but takes no new file: the message
+    named the temporary ``/proc/.out.tif.<pid>-<random>.tif.part`` (QA of stop 43)."""
+    if not os.access("/proc", os.W_OK):
+        pytest.skip("needs /proc to look writable (root)")
+    with pytest.raises(OutputError, match=r"^/proc/out.tif: cannot write in /proc \("):
+        with atomic_path("/proc/out.tif"):
+            pass

@@ -166,7 +166,7 @@ def test_a_run_that_does_not_fit_the_disk_is_refused_before_it_writes(product, t
     out = tmp_path / "store"
     with pytest.raises(OptionsError, match=r"to write, uncompressed, and 1\.0 MiB free in") as exc:
         synthesize([product], out, elevation="tiepoints", bands=(7,))
-    assert "give --max-pixels to run anyway" in str(exc.value)
+    assert "(max_pixels; the command line's --max-pixels) to run anyway" in str(exc.value)
     assert list(tmp_path.iterdir()) in ([], [tmp_path / ".store.meris-ortho-lock"])
     result = synthesize([product], out, elevation="tiepoints", bands=(7,), max_pixels=10**9)
     assert result.snapshot is not None

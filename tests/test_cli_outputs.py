@@ -89,7 +89,7 @@ def test_a_failing_second_output_removes_the_first(files, tmp_path):
         preexec_fn=_fsize_limit((main_size + diag_size) // 2),
     )  # fmt: skip
     err = failed.stderr.decode()
-    assert failed.returncode == 2 and "out_diagnostics.tif: cannot write GeoTIFF" in err, err
+    assert failed.returncode == 2 and "out_diagnostics.tif: cannot write" in err, err
     # libtiff may print its own "File too large" lines first; ours is one line, the last
     assert "Traceback" not in err and err.strip().splitlines()[-1].startswith("meris-ortho: error")
     assert sorted(p.name for p in full.iterdir()) == ["out.tif"]
@@ -126,3 +126,14 @@ def test_band_order_and_unneeded_dems(files, tmp_path, caplog):
     with pytest.raises(SystemExit) as exc:  # an empty list is no "all bands"
         main(["map", str(prod), "-o", str(out), "--bands", ""])
     assert exc.value.code == 2
+
+
+def test_a_geotiff_is_named_as_one(files, tmp_path, capsys):
+    """QA of stop 43: ``-o out.png`` wrote a TIFF named .png."""
+    prod, _ = files
+    for name in ("out.png", "out.nc", "out"):
+        code, err = run_map(capsys, prod, "-o", tmp_path / name, "--bands", "7")
+        assert code == 2 and "the output is a Cloud-Optimized GeoTIFF: name it .tif or .tiff" in err
+    code, _ = run_map(capsys, prod, "-o", tmp_path / "OUT.TIF", "--bands", "7",
+                      "--elevation", "tiepoints")
+    assert code == 0 and sorted(p.name for p in tmp_path.iterdir()) == ["OUT.TIF"]

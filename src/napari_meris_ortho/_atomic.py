@@ -15,6 +15,7 @@ Policy (README "Reliability"):
 from __future__ import annotations
 
 import contextlib
+import errno
 import os
 import re
 import shutil
@@ -236,6 +237,12 @@ def _alive(pid: int) -> bool:
     return True
 
 
+#: errors of writing an output (disk full, quota, read-only, too large, permissions): said
+#: with the output's name, not the temporary file's
+_WRITE_ERRNOS = {errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EFBIG, errno.EACCES,
+                 errno.EPERM}
+
+
 @contextlib.contextmanager
 def atomic_path(path: str | os.PathLike[str], suffix: str = "") -> Iterator[Path]:
     """Yield a temporary path next to ``path``; rename it onto ``path`` only on success.
@@ -248,9 +255,13 @@ def atomic_path(path: str | os.PathLike[str], suffix: str = "") -> Iterator[Path
     remove_stale_parts(out)
     run = _RUNS[-1] if _RUNS else None
     live = run.live if run is not None else _LIVE
-    fd, tmp = tempfile.mkstemp(
-        prefix=f".{out.name}.{os.getpid()}-", suffix=suffix + ".part", dir=out.parent
-    )
+    try:
+        fd, tmp = tempfile.mkstemp(
+            prefix=f".{out.name}.{os.getpid()}-", suffix=suffix + ".part", dir=out.parent
+        )
+    except OSError as exc:  # not the temporary name: the user named ``path``
+        raise OutputError(f"{path}: cannot write in {out.parent} "
+                          f"({exc.strerror or exc})") from None
     os.close(fd)
     tmp_path = Path(tmp)
     live.add(tmp_path)
@@ -264,7 +275,7 @@ def atomic_path(path: str | os.PathLike[str], suffix: str = "") -> Iterator[Path
             commit = _Commit(out, tmp_path, _keep_copy(out))
             run.commits.append(commit)
         os.replace(tmp_path, out)
-    except BaseException:
+    except BaseException as exc:
         with contextlib.suppress(OSError):
             tmp_path.unlink()
         if commit is not None and run is not None and commit in run.commits:
@@ -272,6 +283,9 @@ def atomic_path(path: str | os.PathLike[str], suffix: str = "") -> Iterator[Path
             if commit.backup is not None:
                 with contextlib.suppress(OSError):
                     commit.backup.unlink()
+        if isinstance(exc, OSError) and exc.errno in _WRITE_ERRNOS:
+            raise OutputError(f"{path}: cannot write ({exc.strerror or exc}); nothing was "
+                              "written") from None
         raise
     finally:
         live.discard(tmp_path)

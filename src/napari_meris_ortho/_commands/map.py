@@ -71,12 +71,13 @@ def register(subparsers: Any) -> None:
 
 def _check(args: argparse.Namespace) -> Any:
     """Every check that needs no product read, before any work (Appendix C parameter checks)."""
-    from ..ortho.writing import check_outputs, diagnostics_path
+    from ..ortho.writing import check_geotiff_name, check_outputs, diagnostics_path
 
     check_outputs({"-o": args.output, "--stats-json": args.stats_json,
                    "the diagnostics output": (diagnostics_path(args.output)
                                               if args.diagnostics else None)},
                   [args.product], args.dem)
+    check_geotiff_name("-o", args.output)
     if not (math.isfinite(args.tolerance) and args.tolerance > 0):
         raise OptionsError(f"--tolerance must be > 0 product pixels, got {args.tolerance}")
     args.options = ortho_options(args, tolerance=args.tolerance, parallax=args.parallax,

@@ -130,11 +130,12 @@ class RunSettings:
                                    f"cannot update it with {self.algorithm} (choose selection "
                                    f"{rule!r} or 'mapping')")
         if self.output is not None and not self.synthesis:
-            from ..ortho.writing import check_outputs
+            from ..ortho.writing import check_geotiff_name, check_outputs
 
             n = len(self.products)
             check_outputs({f"output {k + 1}": _output_path(self.output, k, n)
                            for k in range(n)}, self.products, self.dem_list)
+            check_geotiff_name("output", self.output)
 
 
 #: "7,5,2" -> (7, 5, 2); "all" or "" -> None (all 15 bands); OptionsError otherwise

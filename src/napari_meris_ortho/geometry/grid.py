@@ -186,7 +186,7 @@ def check_grid_size(
         f"{'at least' if lower_bound else 'about'} {size_text(pixels * bytes_per_pixel)}) "
         f"exceeds the limit of {limit:.3g} pixels "
         f"({source}): use a pixel size of at least {suggest:g} or a smaller extent, or raise "
-        "the limit with --max-pixels"
+        "the limit (max_pixels; the command line's --max-pixels)"
     )
 
 

@@ -77,6 +77,18 @@ def check_outputs(outputs: Mapping[str, str | os.PathLike[str] | None],
             check_writable_dir(out)
 
 
+#: what a GeoTIFF output may be named
+GEOTIFF_SUFFIXES = (".tif", ".tiff")
+
+
+def check_geotiff_name(name: str, path: str | os.PathLike[str]) -> None:
+    """A GeoTIFF output named as one: ``out.png`` would hold a TIFF under another format's
+    name (OptionsError)."""
+    if Path(path).suffix.lower() not in GEOTIFF_SUFFIXES:
+        raise OptionsError(f"{name} {path}: the output is a Cloud-Optimized GeoTIFF: name it "
+                           f"{' or '.join(GEOTIFF_SUFFIXES)}")
+
+
 def write_map(path: str | os.PathLike[str], mapped: Mapped, *, dtype: str = "uint16",
               compress: str = "zstd", diagnostics: bool = False,
               metadata: Mapping[str, Any] | None = None, software: str = "napari-meris-ortho",

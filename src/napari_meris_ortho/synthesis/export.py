@@ -55,8 +55,9 @@ def export_cog(store: SynthesisStore, out: str | os.PathLike[str], *,
     """Write bands (default all of the synthesis) or one other ``layer`` (``ndvi``, ``count``,
     ``product``) of ``store`` as a Cloud-Optimized GeoTIFF (module docstring); atomic."""
     from .._atomic import check_distinct
-    from ..ortho.writing import write_map
+    from ..ortho.writing import check_geotiff_name, write_map
 
+    check_geotiff_name("output", out)
     check_distinct({"output": out}, {"synthesis store": [store.path]})
     if layer is not None and bands is not None:
         raise OptionsError("choose bands or one other layer, not both")

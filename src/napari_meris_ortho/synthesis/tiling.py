@@ -154,4 +154,5 @@ def check_write_size(windows: Iterable[Window], n_bands: int, out_dir: Path,
     raise OptionsError(
         f"the products cover {pixels:.3g} pixels of the synthesis grid (whole tiles): up to "
         f"{size_text(need)} to write, uncompressed, and {size_text(free)} free in {parent}: "
-        "free some space or use a larger pixel size, or give --max-pixels to run anyway")
+        "free some space (a new synthesis: or use a larger pixel size), or give a pixel limit "
+        "(max_pixels; the command line's --max-pixels) to run anyway")
