@@ -82,3 +82,16 @@ def test_disparity_vectors_are_thin_on_screen(make_napari_viewer, qtbot, shifted
     out = widget.export_gif(tmp_path / "after_disparity.gif")
     frames = iio.imread(out, index=None)[..., :3].astype(float)
     assert np.abs(frames[0] - frames[1]).mean() > 5.0
+
+
+def test_an_rgb_layer_is_named_as_the_reason(make_napari_viewer, shifted_pair):
+    """QA of stop 43: an RGB composite against a band gave "different shapes and no
+    georeference" although both were on one grid."""
+    viewer = make_napari_viewer()
+    widget, a, _ = _flicker(viewer, *shifted_pair)
+    rgb = viewer.add_image(np.zeros((*a.data.shape, 3), np.float32), rgb=True, name="an RGB",
+                           scale=a.scale, translate=a.translate, metadata=dict(a.metadata))
+    widget.layer_a.value = rgb
+    assert widget.start_disparity() is None
+    assert widget.disparity_label.value == ("'an RGB' is an RGB composite: the disparity "
+                                            "compares two single bands (choose a grey band layer)")

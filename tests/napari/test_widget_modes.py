@@ -84,7 +84,13 @@ def test_synthesis_update_from_the_widget(make_napari_viewer, qtbot, tiny_n1, tm
     widget.products.value = [third]
     widget.output.value = None
     widget.input_store.value = store
-    assert widget.mode.value == "update synthesis store (min-radiance) with 1 product"
+    assert widget.mode.value == "update synthesis store (min-radiance) with 1 product in place"
+    widget.output.value = store  # the same store as output: in place too (QA of stop 43)
+    assert widget.mode.value == "update synthesis store (min-radiance) with 1 product in place"
+    widget.output.value = store.parent / "copy"
+    assert widget.mode.value == ("update synthesis store (min-radiance) with 1 product into a "
+                                 f"copy at {store.parent / 'copy'}")
+    widget.output.value = None
     _run(widget, qtbot)
     assert "updated synthesis (min-radiance) of 1 product" in widget.status.value
     synthesis = open_synthesis(store)

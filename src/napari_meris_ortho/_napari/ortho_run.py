@@ -10,6 +10,7 @@ time), "footprint · ...", "parallax ×10 · ..."; with the per-pixel geolocatio
 
 from __future__ import annotations
 
+import os
 import shutil
 import tempfile
 from collections.abc import Mapping
@@ -89,7 +90,9 @@ class RunSettings:
         what = f"{n} product{'s' if n != 1 else ''}"
         if self.input_store is not None:
             rule = "" if self.algorithm == MAPPING else f" ({self.algorithm})"
-            into = f" into a copy at {self.output}" if self.output is not None else ""
+            copy = self.output is not None and (
+                os.path.realpath(self.output) != os.path.realpath(self.input_store))
+            into = f" into a copy at {self.output}" if copy else " in place"
             return f"update synthesis {Path(self.input_store).name}{rule} with {what}{into}"
         if self.algorithm != MAPPING:
             return f"new synthesis ({self.algorithm}) of {what}"

@@ -193,8 +193,9 @@ class FlickerWidget(Container):
         self.cycles = SpinBox(label="GIF cycles", value=2, min=1, max=50,
                               tooltip="A/B cycles in the exported GIF")
         self.gif_path = FileEdit(label="GIF file", mode=FileDialogMode.OPTIONAL_FILE,
-                                 filter="*.gif", value=Path("flicker_anim.gif"),
-                                 tooltip="animated GIF to write")
+                                 filter="*.gif", value=Path.home() / "flicker_anim.gif",
+                                 tooltip="animated GIF to write (default in your home "
+                                         "directory, not wherever napari was started)")
         self.export_button = PushButton(text="Export GIF", tooltip="write the flicker as a GIF")
         self.disparity_button = PushButton(
             text="Measure disparity", tooltip="ZNCC disparity of B against A (section 4.6), "
@@ -360,6 +361,10 @@ class FlickerWidget(Container):
         """Layer A, its grid and the arguments of ``analysis.disparity`` (GUI thread): layer B
         is reprojected onto layer A's grid when they differ."""
         a, b = self._pair()
+        for layer in (a, b):
+            if getattr(layer, "rgb", False) or getattr(layer, "multichannel", False):
+                raise OptionsError(f"{layer.name!r} is an RGB composite: the disparity "
+                                   "compares two single bands (choose a grey band layer)")
         frame_a, frame_b = layer_frame(a), layer_frame(b)
         image_a, image_b = (np.asarray(full_resolution(layer.data), np.float32)
                             for layer in (a, b))

@@ -171,9 +171,9 @@ class OrthorectifyWidget(Container):
         self._dems: list[Path] = []
         self.products = FileEdit(label="products (N1, SEN3 manifest)",
                                  mode=FileDialogMode.EXISTING_FILES,
-                                 filter="*.N1 *.n1 xfdumanifest.xml",
-                                 tooltip="MERIS L1b products: .N1 files (FR/RR, FRG/FSG) or the "
-                                         "xfdumanifest.xml of a .SEN3 product")
+                                 filter="*.N1 *.n1 xfdumanifest.xml *.zip *.ZIP",
+                                 tooltip="MERIS L1b products: .N1 files (FR/RR, FRG/FSG), the "
+                                         "xfdumanifest.xml of a .SEN3 product or its .zip")
         self.dem_kind = ComboBox(label="DEM type", choices=[DEM_FILE, DEM_DIR], value=DEM_FILE,
                                  tooltip="a DEM file, or a directory of GETASSE30 tiles")
         self.dem_path = FileEdit(label="DEM", mode=FileDialogMode.EXISTING_FILE,
@@ -323,7 +323,11 @@ class OrthorectifyWidget(Container):
         from ..dem.stack import open_dem
 
         p = Path(path) if isinstance(path, str | Path) else Path()
-        if str(p) in ("", ".") or not p.exists():
+        if str(p) in ("", "."):
+            self.status.value = ("no DEM to add: choose a GeoTIFF, an SRTM30 tile or a tile "
+                                 "directory")
+            return
+        if not p.exists():
             self.status.value = f"DEM not found: {path}"
             return
         try:
