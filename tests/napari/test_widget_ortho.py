@@ -291,3 +291,26 @@ def test_a_rerun_replaces_all_its_layers_and_shows_a_band(make_napari_viewer, qt
         names = [x.name for x in viewer.layers]
         assert sorted(names) == sorted([f"ortho b7{STAMP} {tiny_n1.name}",
                                         f"ortho b7{STAMP} {twin.name}"]), names
+
+
+def test_cancel_while_the_layers_go_in_leaves_the_viewer_as_before(make_napari_viewer, qtbot,
+                                                                   tiny_n1):
+    """QA of stop 43: a Cancel between a rerun's layer changes left the old layers partly
+    removed and none of the new ones in. Now the changes made are undone."""
+    viewer = make_napari_viewer(show=True)
+    widget = OrthorectifyWidget(viewer)
+    widget.products.value = [tiny_n1]
+    widget.elevation.value = "tiepoints"
+    _run(widget, qtbot)
+    before = list(viewer.layers)
+    visible = [layer.visible for layer in before]
+    assert len(before) > 5 and any(visible) and not all(visible)
+    assert widget.start() is not None
+    qtbot.waitUntil(lambda: len(widget._removed) >= 3, timeout=60_000)  # in the middle
+    widget.cancel()
+    qtbot.waitUntil(lambda: not widget.running, timeout=10_000)
+    assert widget.status.value.startswith("cancelled by the user: the viewer is as before")
+    assert list(viewer.layers) == before  # the same layer objects, in the same order
+    assert [layer.visible for layer in viewer.layers] == visible
+    assert widget._removed == [] and widget._appended == []
+    assert widget.run_button.enabled

@@ -264,6 +264,10 @@ class OrthorectifyWidget(Container):
         self._queued, self._summary = 0, ""
         self._hidden: list[Any] = []  # a run's layers waiting to be shown (``_done``)
         self._batch_open = False  # napari's batch of layer removals (``_removals``)
+        #: what the queued changes have done so far: (index, layer) removed, layers appended;
+        #: a Cancel in the middle undoes them (``_undo_changes``)
+        self._removed: list[tuple[int, Any]] = []
+        self._appended: list[Any] = []
         self.last_run: OrthoRun | None = None
         remembered = {"elevation": self.elevation, "geolocation": self.geolocation,
                       "algorithm": self.algorithm, "parallax": self.parallax,
@@ -499,6 +503,7 @@ class OrthorectifyWidget(Container):
                        *(step for layer in shown
                          for step in ((self._show, layer), (self._draw, layer)))]
         self._queued = len(self._queue)
+        self._removed, self._appended = [], []
         self._hidden = shown
         self._summary = run.summary()
         self._canvas_updates(False)
@@ -509,6 +514,7 @@ class OrthorectifyWidget(Container):
 
     def _append(self, layer: Any) -> None:
         append_inactive(self.viewer, layer)
+        self._appended.append(layer)
 
     def _show(self, layer: Any) -> None:
         """Show one of the run's layers (hidden until all were in; ``_done``); the canvas
@@ -546,7 +552,25 @@ class OrthorectifyWidget(Container):
 
     def _remove_layer(self, layer: Any) -> None:
         if layer in self.viewer.layers:
+            self._removed.append((self.viewer.layers.index(layer), layer))
             self.viewer.layers.remove(layer)
+
+    def _undo_changes(self) -> int:
+        """Cancel while a run's layers go in: take out the new layers appended so far and put
+        back the ones they replaced, where they were: the viewer is as before the run, not
+        half replaced. Returns the changes undone."""
+        undone = 0
+        for layer in reversed(self._appended):
+            if layer in self.viewer.layers:
+                self.viewer.layers.remove(layer)
+                undone += 1
+        for index, layer in reversed(self._removed):
+            if layer not in self.viewer.layers:
+                self.viewer.layers.insert(min(index, len(self.viewer.layers)), layer)
+                undone += 1
+        self._hidden = [x for x in self._hidden if x in self.viewer.layers]
+        self._removed, self._appended = [], []
+        return undone
 
     def _schedule_step(self, delay_ms: int = 1) -> None:
         """The next step on a 1 ms timer: Qt delivers a 0 ms single shot as a posted event,
@@ -562,9 +586,11 @@ class OrthorectifyWidget(Container):
             self._queue = []
             return
         if self._cancel.is_set():
-            added = self._queued - len(self._queue)
             self._queue = []
-            self.status.value = f"cancelled after {added} of {self._queued} layer changes"
+            self._removals(False)  # end napari's batch before the layers go back
+            undone = self._undo_changes()
+            self.status.value = ("cancelled by the user: the viewer is as before the run"
+                                 + (f" ({undone} layer changes undone)" if undone else ""))
             self._end()
             return
         change, layer = self._queue.pop(0)
@@ -620,6 +646,7 @@ class OrthorectifyWidget(Container):
             self._end()
 
     def _end(self) -> None:
+        self._removed, self._appended = [], []  # the replaced layers may go now
         self._removals(False)  # a batch left open by Cancel
         self._canvas_updates(True)
         self._show_hidden()
