@@ -204,7 +204,7 @@ def test_read_points_errors(tmp_path, text, word):
     p.write_text(text)
     with pytest.raises(OptionsError, match=word):
         read_points(p)
-    with pytest.raises(OptionsError, match="cannot read"):
+    with pytest.raises(OptionsError, match="points file not found"):
         read_points(tmp_path / "absent.csv")
 
 

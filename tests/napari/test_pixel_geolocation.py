@@ -35,7 +35,7 @@ def test_reader_opens_a_sen3_directory(sen3):
     kinds = [kind for _, _, kind in layers]
     assert kinds == ["image", "image", "labels"]
     stack, meta, _ = layers[0]
-    assert stack.shape == (15, 321, 513)
+    assert stack.shape == (15, 320, 513)
     assert meta["metadata"]["product_type"] == "ME_1_FRG___"
     assert meta["metadata"]["pixel_geolocation"] is True
     assert get_reader(str(sen3.parent)) is None  # a plain directory is not a product

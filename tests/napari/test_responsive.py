@@ -315,25 +315,29 @@ def test_a_job_makes_one_full_collection_and_none_when_it_replaces_layers(make_n
     assert rerun == 0, full
 
 
-def test_a_runs_shapes_are_triangulated_by_napari_rust_backend(make_napari_viewer, tiny_n1):
-    """The footprint and facets layers are napari Shapes, built in the job. With bermuda (napari's
-    Rust triangulation, a dependency of ours) napari triangulates them in compiled code; without
-    it, with numba helpers compiled at the session's first Shapes and vispy's Python
-    triangulation (fr-alps: 0.31 s for the two layers, 0.12 s with bermuda)."""
-    from napari_meris_ortho._napari.widget_ortho import build_layers
+def test_a_runs_removed_layers_are_collected(make_napari_viewer, qtbot, tiny_n1):
+    """Every layer of a run is freed once removed (QA of stop 43: the footprint and facets
+    were napari Shapes, which napari keeps alive through their mode buttons after removal,
+    napari issue 2027: +9 MB per run and clear of fr-small, no plateau). They are Vectors now;
+    a weak reference to each of a run's layers is dead after the viewer is cleared."""
+    import gc
+    import weakref
 
-    viewer = make_napari_viewer()
+    viewer = make_napari_viewer(show=True)
     widget = OrthorectifyWidget(viewer)
     widget.products.value = [tiny_n1]
     widget.elevation.value = "tiepoints"
-    widget.geometry.value = True
-    _, layers = build_layers(widget.settings(), lambda done, total: None, lambda: None, None)
-    shapes = {layer.name.split(" ")[0]: layer for layer in layers
-              if layer._type_string == "shapes"}
-    assert set(shapes) == {"facets", "footprint"}
-    for layer in shapes.values():
-        kind = type(layer._data_view.shapes[0])
-        assert kind._set_meshes is kind._set_meshes_compiled_bermuda, layer.name
+    for _ in range(2):
+        assert widget.start() is not None
+        qtbot.waitUntil(lambda: not widget.running, timeout=60_000)
+        kinds = {layer.name.split(" ")[0]: layer._type_string for layer in viewer.layers}
+        assert kinds["facets"] == kinds["footprint"] == "vectors"
+        refs = [weakref.ref(layer) for layer in viewer.layers]
+        viewer.layers.clear()
+        qtbot.wait(300)  # napari's deferred deletions of the layer controls
+        gc.collect()
+        alive = [r().name for r in refs if r() is not None]
+        assert alive == [], alive
 
 
 def test_removing_layers_hands_the_heap_back(make_napari_viewer, qtbot):

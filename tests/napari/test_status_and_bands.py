@@ -5,7 +5,7 @@ distinct names for the per-pixel geolocation results within what the layer list 
 from __future__ import annotations
 
 import pytest
-from napari.layers import Shapes, Vectors
+from napari.layers import Vectors
 
 from napari_meris_ortho.products.n1 import read_product
 
@@ -25,7 +25,7 @@ def _run(widget, qtbot):
     assert widget.status.value.startswith("done"), widget.status.value
 
 
-def test_status_bar_over_vectors_and_shapes(make_napari_viewer, qtbot, tiny_n1):
+def test_status_bar_over_the_geometry_layers(make_napari_viewer, qtbot, tiny_n1):
     viewer = make_napari_viewer()
     widget = _widget(viewer, tiny_n1)
     _run(widget, qtbot)
@@ -34,7 +34,7 @@ def test_status_bar_over_vectors_and_shapes(make_napari_viewer, qtbot, tiny_n1):
     grid = widget.last_run.items[0]["grid"]
     x, y = grid.xy(40, 60)
     footprint = viewer.layers[f"footprint{STAMP}"]
-    assert isinstance(footprint, Shapes)
+    assert isinstance(footprint, Vectors)
     for layer in (active, footprint, viewer.layers[f"facets{STAMP}"]):
         status = layer.get_status((-y, x), view_direction=None, dims_displayed=[0, 1],
                                   world=True)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from napari.layers import Image, Labels, Shapes, Vectors
+from napari.layers import Image, Labels, Vectors
 from pyproj import Transformer
 
 from napari_meris_ortho._napari.widget_ortho import (
@@ -85,28 +85,40 @@ def test_footprint_and_facets_match_engine_boundary(make_napari_viewer, qtbot, t
     to_utm = Transformer.from_crs("EPSG:4326", "EPSG:32632", always_xy=True)
 
     footprint = viewer.layers[f"footprint{STAMP}"]
-    assert isinstance(footprint, Shapes) and len(footprint.data) == 1
-    assert footprint.shape_type == ["polygon"]
-    assert np.all(footprint.face_color[:, 3] == 0)  # transparent face
+    assert isinstance(footprint, Vectors) and footprint.vector_style == "line"
     boundary = segment_boundary(lat, lon)
     bx, by = to_utm.transform(boundary.lon, boundary.lat)
-    vertices = footprint.data[0]
+    vertices = footprint.data[:, 0]  # the edges' starts: the polygon's vertices, in order
+    ends = footprint.data[:, 0] + footprint.data[:, 1]
+    np.testing.assert_allclose(ends, np.roll(vertices, -1, axis=0), atol=1.0)  # closed ring
     # every boundary vertex (border tie point) is a footprint vertex: world = (-northing, easting)
     for x, y in zip(bx, by, strict=True):
         d = np.hypot(vertices[:, 0] + y, vertices[:, 1] - x)
-        assert d.min() < 1.0  # napari keeps shapes in float32: 0.5 m steps at 5000 km
+        assert d.min() < 1.0  # napari keeps vectors in float32: 0.5 m steps at 5000 km
     n_border = 2 * (lat.shape[0] - 1) + 2 * (lat.shape[1] - 1)
     assert len(vertices) in (n_border * 4, n_border * 4 + 1)  # densified x4
 
     facets = viewer.layers[f"facets{STAMP}"]
     n_lines, n_cols = lat.shape
-    assert len(facets.data) == (n_lines - 1) * (n_cols - 1)
+    assert isinstance(facets, Vectors)
+    # every edge of the tie-point grid once: along the lines, then along the columns
+    assert len(facets.data) == n_lines * (n_cols - 1) + (n_lines - 1) * n_cols
     x, y = to_utm.transform(lon, lat)
-    first = facets.data[0]
-    np.testing.assert_allclose(first, [[-y[0, 0], x[0, 0]], [-y[0, 1], x[0, 1]],
-                                       [-y[1, 1], x[1, 1]], [-y[1, 0], x[1, 0]]], atol=1.0)
+    np.testing.assert_allclose(facets.data[0], [[-y[0, 0], x[0, 0]],
+                                                [-y[0, 1] + y[0, 0], x[0, 1] - x[0, 0]]],
+                               atol=1.0)
     last = facets.data[-1]
-    np.testing.assert_allclose(last[2], [-y[-1, -1], x[-1, -1]], atol=1.0)
+    np.testing.assert_allclose(last[0] + last[1], [-y[-1, -1], x[-1, -1]], atol=1.0)
+    # the status bar names the facet under the cursor (section 3.4): the centre of a facet
+    i, k = n_lines - 2, n_cols // 2
+    row = -(y[i, k] + y[i, k + 1] + y[i + 1, k + 1] + y[i + 1, k]) / 4
+    col = (x[i, k] + x[i, k + 1] + x[i + 1, k + 1] + x[i + 1, k]) / 4
+    status = facets.get_status((row, col), view_direction=None, dims_displayed=[0, 1],
+                               world=True)
+    assert status["coordinates"].endswith(f"; facet of tie line {i}, tie column {k}"), status
+    far = facets.get_status((row - 1e6, col), view_direction=None, dims_displayed=[0, 1],
+                            world=True)
+    assert "facet" not in far["coordinates"]
 
 
 def test_parallax_vectors_count_and_direction(make_napari_viewer, qtbot, tiny_n1):

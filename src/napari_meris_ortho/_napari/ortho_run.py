@@ -372,10 +372,12 @@ RUN_KEY = "meris_ortho_source"
 
 
 def run_key(item: dict[str, Any]) -> str:
-    """What a run's item shows: its product's (or store's) path; a later run of the same
-    source replaces every layer of this one (``layer_source``)."""
+    """What a run's item shows: its product's (or store's) path and its layers' name suffix
+    (a pixel-geolocation run's differs from a tie-point run's: both stay, to be compared); a
+    later run of the same key replaces every layer of this one (``layer_source``)."""
     meta = item.get("meta", {})
-    return str(meta.get("path") or meta.get("synthesis") or item.get("suffix", ""))
+    suffix = item.get("base_suffix", item.get("suffix", ""))  # before ``_distinct_suffixes``
+    return f"{meta.get('path') or meta.get('synthesis') or ''}|{suffix}"
 
 
 def layer_source(layer: Any) -> str | None:
@@ -402,6 +404,7 @@ def _distinct_suffixes(items: list[dict[str, Any]]) -> None:
         by_type = all(types) and len(set(types)) == len(types)
         for item, kind in zip(group, types, strict=True):
             tag = kind if by_type else Path(str(item["meta"].get("path", ""))).name
+            item["base_suffix"] = item["suffix"]
             item["suffix"] = f"{item['suffix']} {tag}"
 
 

@@ -4,7 +4,7 @@ band slider of a product's radiance stack naming the MERIS band shown.
 
 napari builds the status text from the selected layer's ``get_status``;
 ``show_map_coordinates(viewer)`` wraps it for every layer of the viewer that lives in the world
-(``world.world_crs``: rasters, products, footprint/facet shapes and parallax vectors), now and
+(``world.world_crs``: rasters, products, footprint/facet and parallax vectors), now and
 when added, so that the coordinates are right whatever layer is selected (after a run, a
 vectors layer). napari's slider shows the step index (0-14); the axis label of a radiance stack
 names the band at the dims point instead ("MERIS band 7 (665 nm)", world band axis = 1..15).
@@ -18,7 +18,8 @@ from typing import Any
 import numpy as np
 
 from ..geometry.grid import crs_facts
-from .world import GEO_KEY, world_crs
+from .geometry_layers import facet_at
+from .world import GEO_KEY, TIE_GRID_KEY, world_crs
 
 _WATCHED: weakref.WeakSet[Any] = weakref.WeakSet()
 _WRAPPED = "_meris_ortho_status"
@@ -55,6 +56,12 @@ def wrap_status(layer: Any) -> None:
         status["coordinates"] = (status.get("coordinates", "").replace(old, coords, 1)
                                  if old else coords)
         status["coords"] = coords
+        grid = (getattr(layer, "metadata", None) or {}).get(TIE_GRID_KEY)
+        if grid is not None:  # the facets layer: the facet under the cursor (section 3.4)
+            facet = facet_at(grid, row, col)
+            if facet is not None:
+                status["coordinates"] += (f"; facet of tie line {facet[0]}, tie column "
+                                          f"{facet[1]}")
         return status
 
     layer.get_status = get_status

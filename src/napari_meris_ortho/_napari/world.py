@@ -38,6 +38,9 @@ from ..geometry.grid import OutputGrid, crs_wkt, lonlat_to_crs
 GEO_KEY = "geo"
 #: the world grid a layer without a raster grid of its own was placed in (module doc)
 WORLD_KEY = "world"
+#: layer metadata: a tie-point grid in world coordinates (n_lines, n_cols, 2), moved with the
+#: layer (the facets layer: the status bar names the facet under the cursor)
+TIE_GRID_KEY = "tie_grid_world"
 
 
 def to_world(x: np.ndarray, y: np.ndarray) -> np.ndarray:
@@ -246,6 +249,11 @@ def move_to_frame(layer: tuple[Any, dict, str], source: OutputGrid, target: Outp
         start = transform_world(vec[:, 0], source.crs, target.crs)
         end = transform_world(vec[:, 0] + vec[:, 1], source.crs, target.crs)
         _rescale_width(kwargs, vec[:, 0], start)
+        grid = kwargs["metadata"].get(TIE_GRID_KEY)
+        if grid is not None:
+            grid = np.asarray(grid, np.float64)
+            ties = transform_world(grid.reshape(-1, 2), source.crs, target.crs)
+            kwargs["metadata"][TIE_GRID_KEY] = ties.reshape(grid.shape)
         return np.stack([start, end - start], axis=1), kwargs, kind
     return layer
 

@@ -10,16 +10,12 @@ reprocessing store after removing the parallax.
 
 from __future__ import annotations
 
-import logging
 import os
 from pathlib import Path
 
 import numpy as np
 
-from ..errors import OptionsError
 from ..progress import ProgressCallback
-
-log = logging.getLogger(__name__)
 
 #: product lines per block of the line-of-sight computation
 _CHUNK = 64
@@ -63,9 +59,8 @@ def write_geocorrected(scene, fsg: bool = True, sen3: bool = True,
     amorgos = "MER_FRG_1P" if resolution == "FR" else "MER_RRG_1P"
     if fsg:
         paths["fsg"] = target / default_product_name(amorgos, start, g.lines * g.frame_time)
-    rows = sen3_rows(g.lines, prod.lines_per_tie_point) if sen3 else g.lines
     if sen3:
-        paths["sen3"] = target / default_sen3_name(resolution, start, rows * g.frame_time)
+        paths["sen3"] = target / default_sen3_name(resolution, start, g.lines * g.frame_time)
     todo = {k: p for k, p in paths.items() if not _newer(p, scene.product_path)}
     if not todo:
         return paths
@@ -80,30 +75,11 @@ def write_geocorrected(scene, fsg: bool = True, sen3: bool = True,
                       scaling=prod.scaling, product_name=todo["fsg"].name,
                       pixel_geolocation=geo, progress=progress)
     if "sen3" in todo:
-        if rows < g.lines:
-            log.info("%s: %d of the scene's %d lines (the tie rows end on the last line, as "
-                     "in ESA's products)", todo["sen3"].name, rows, g.lines)
-        cut = slice(0, rows)
-        n_tie = (rows - 1) // prod.lines_per_tie_point + 1
-        write_sen3(todo["sen3"], resolution=resolution,
-                   tie_points={k: v[:n_tie] for k, v in prod.tie_points.items()},
-                   counts=[c[cut] for c in counts], flags=flags[cut], detector_index=det[cut],
-                   pixel_geolocation={k: v[cut] for k, v in geo.items()},
+        write_sen3(todo["sen3"], resolution=resolution, tie_points=prod.tie_points,
+                   counts=counts, flags=flags, detector_index=det, pixel_geolocation=geo,
                    first_line_time=start, line_interval_s=g.frame_time, scaling=prod.scaling,
                    progress=progress)
     return paths
-
-
-def sen3_rows(lines: int, lines_per_tie_point: int) -> int:
-    """Rows of the ``.SEN3`` version of a scene of ``lines`` lines: ESA's fourth-reprocessing
-    products end on a tie row ((tie rows - 1) x DF + 1 rows; 1617 = 101 x 16 + 1 in the real
-    RR product, and ocssw requires it), so a scene that does not is cut after its last whole
-    tie interval. Fewer than DF + 1 lines make no product (an OptionsError)."""
-    df = int(lines_per_tie_point)
-    if lines < df + 1:
-        raise OptionsError(f"a .SEN3 product needs at least {df + 1} lines (one tie interval "
-                           f"ending on its last line); the scene has {lines}")
-    return (lines - 1) // df * df + 1
 
 
 def _newer(path: Path, than: Path) -> bool:

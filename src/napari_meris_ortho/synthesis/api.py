@@ -264,8 +264,8 @@ def _check_options(products: Sequence[Any], out_dir: Path, algorithm: str | None
     _check_dems(dems)
     if codec is not None:
         parse(StoreCodec, codec)
-    _check_not_an_input(out_dir, products, input, dems)
     if input is None:
+        _check_not_an_input(out_dir, products, input, dems)
         return None
     if grid is not None or crs is not None or pixel_size is not None or bands is not None:
         raise OptionsError("when an input synthesis is given, the grid (CRS, extent, pixel "
@@ -277,4 +277,5 @@ def _check_options(products: Sequence[Any], out_dir: Path, algorithm: str | None
     if algorithm is not None and algorithm != source.algorithm:
         raise OptionsError(f"{input}: is a {source.algorithm} synthesis, cannot update it "
                            f"with {algorithm}")
+    _check_not_an_input(out_dir, products, input, dems)
     return Path(input)
