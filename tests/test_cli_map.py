@@ -90,15 +90,16 @@ def test_map_geotiff_carries_band_and_scaling_metadata(files, tmp_path):
     assert cog_validate(out, quiet=True)[0]
     with rasterio.open(out) as ds:
         tags, band_tags = ds.tags(), [ds.tags(1), ds.tags(2)]
-        assert ds.descriptions == (f"MERIS band 7 ({product.wavelengths[6]:.1f} nm)",
-                                   f"MERIS band 13 ({product.wavelengths[12]:.1f} nm)")
+        # in the order given (stop 43: an RGB composite is its bands' order)
+        assert ds.descriptions == (f"MERIS band 13 ({product.wavelengths[12]:.1f} nm)",
+                                   f"MERIS band 7 ({product.wavelengths[6]:.1f} nm)")
         assert ds.dtypes == ("uint16", "uint16") and ds.nodata == 0 and ds.overviews(1)
-        assert ds.scales == (product.scaling.radiance[6], product.scaling.radiance[12])
+        assert ds.scales == (product.scaling.radiance[12], product.scaling.radiance[6])
         assert ds.offsets == (0.0, 0.0)
-        band7 = ds.read(1)
+        band7 = ds.read(2)
     assert tags["product_name"] == product.product_name != ""
     assert tags["product"] == str(prod) and "sf_rad" in tags["radiance"]
-    for tag, b in zip(band_tags, (7, 13), strict=True):
+    for tag, b in zip(band_tags, (13, 7), strict=True):
         assert tag["meris_band"] == str(b) and tag["units"] == "W m-2 sr-1 um-1"
         assert float(tag["sf_rad"]) == product.scaling.radiance[b - 1]
         assert float(tag["wavelength_nm"]) == pytest.approx(product.wavelengths[b - 1])

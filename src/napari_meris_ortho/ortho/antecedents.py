@@ -59,7 +59,7 @@ class OrthoResult:
         return self.grid.transform
 
     def band_metadata(self) -> list[dict[str, Any]]:
-        """Per output band (sorted band numbers), ``band_metadata``; the band values are
+        """Per output band (``self.bands``: ascending), ``band_metadata``; the band values are
         already radiances."""
         return band_metadata(self.stats, list(self.bands))
 
@@ -104,11 +104,11 @@ class OrthoResult:
 
 
 def band_metadata(stats: RunStats, bands: Sequence[int]) -> list[dict[str, Any]]:
-    """Per band (sorted band numbers): MERIS band number, central wavelength and bandwidth
+    """Per band, in the order given: MERIS band number, central wavelength and bandwidth
     (nm), radiance unit and ``sf_rad``, the source product's counts-to-radiance factor
     (Scaling Factor GADS, Appendix A)."""
     out = []
-    for b in sorted(bands):
+    for b in bands:
         meta: dict[str, Any] = {"meris_band": b, "units": RADIANCE_UNITS}
         for key, name in (("wavelengths", "wavelength_nm"), ("bandwidths", "bandwidth_nm"),
                           ("scale_factors", "sf_rad")):

@@ -57,8 +57,8 @@ def export_cog(store: SynthesisStore, out: str | os.PathLike[str], *,
     from .._atomic import check_distinct
     from ..ortho.writing import check_geotiff_name, write_map
 
-    check_geotiff_name("output", out)
     check_distinct({"output": out}, {"synthesis store": [store.path]})
+    check_geotiff_name("output", out)
     if layer is not None and bands is not None:
         raise OptionsError("choose bands or one other layer, not both")
     tags = {"algorithm": store.algorithm, "snapshot": store.snapshot,
