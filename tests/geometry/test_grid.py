@@ -321,3 +321,21 @@ def test_a_geographic_extent_beyond_the_poles_is_refused():
     assert (grid.width, grid.height) == (4, 4)
     # a projected CRS has no such bound on its y
     OutputGrid.from_extent("EPSG:32632", (300000.0, 9_500_000.0), (301000.0, 9_499_000.0), 100.0)
+
+
+def test_a_footprint_the_crs_cuts_at_the_antimeridian_is_refused():
+    """QA of stop 43: rr-antimeridian in EPSG:3857 made a 38534 x 1701 grid, 3.5 % of it
+    data (the footprint's two pieces at both ends of Web Mercator's x range). EPSG:4326 and
+    Pacific Mercator (EPSG:3832) keep it compact."""
+    from napari_meris_ortho.engine.boundary import segment_boundary
+    from napari_meris_ortho.errors import OptionsError
+    from napari_meris_ortho.geometry.grid import default_grid
+
+    lat, lon = np.meshgrid(np.linspace(62.0, 60.0, 5), np.linspace(178.0, 182.0, 7),
+                           indexing="ij")
+    boundary = segment_boundary(lat, (lon + 180.0) % 360.0 - 180.0)
+    with pytest.raises(OptionsError, match="crosses the antimeridian, where WGS 84 / Pseudo-"):
+        default_grid(boundary, crs="EPSG:3857")
+    for crs in ("EPSG:4326", "EPSG:3832"):
+        grid = default_grid(boundary, crs=crs)
+        assert grid.width < 2000, (crs, grid.width)

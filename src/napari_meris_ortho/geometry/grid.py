@@ -639,6 +639,29 @@ def terrain_margin_px(grid: OutputGrid, view_zenith_deg: float, max_abs_lat_deg:
     return int(math.ceil(shift_m / max(pixel_m, 1e-9))) + 2
 
 
+#: a footprint cut in pieces by the CRS (at the antimeridian) whose rectangle is this many
+#: times the pieces' own rectangles spans the CRS's world, not the footprint
+CUT_FOOTPRINT_RATIO = 4.0
+
+
+def _check_not_cut(pieces: list[tuple[np.ndarray, np.ndarray]], crs: pyproj.CRS,
+                   area: float) -> None:
+    """Refuse a footprint that ``crs`` cuts (the boundary polygons of fig. 20 land at both
+    ends of its x range, e.g. Web Mercator at 180 deg): the smallest rectangle holding them
+    would be as wide as the world, the footprint a few percent of it."""
+    own = 0.0
+    for x, y in pieces:
+        ok = np.isfinite(x) & np.isfinite(y)
+        if ok.any():
+            own += float(np.ptp(x[ok]) * np.ptp(y[ok]))
+    if own > 0 and area > CUT_FOOTPRINT_RATIO * own:
+        raise OptionsError(
+            f"the footprint crosses the antimeridian, where {crs.name} cuts the world: its "
+            f"rectangle would be {area / own:.0f} times the footprint's own; use a CRS that "
+            "does not cut there (EPSG:4326, EPSG:3832 Pacific Mercator, the footprint's UTM "
+            "zone) or give the extent (--ul/--lr)")
+
+
 def default_grid(
     boundary: _HasPolygons, resolution_m: float = FR_PIXEL_SIZE_M, crs: Any = "EPSG:4326", *,
     pixel_size: float | Sequence[float] | None = None, mersyn_size: bool = False,
@@ -669,6 +692,8 @@ def default_grid(
     if _is_lonlat_identity(crs):  # west edge in [-180, 180); the east edge may pass 180
         turn = 360.0 * math.floor((x_min + 180.0) / 360.0)
         x_min, x_max = x_min - turn, x_max - turn
+    elif len(pts) > 1:
+        _check_not_cut(pts, crs, (x_max - x_min) * (y_max - y_min))
     if mersyn_size:
         y_max = y_max + (y_max - y_min) / 10000.0
         height = int((y_max - y_min + 1.0) / dy)
