@@ -114,3 +114,45 @@ def test_bad_tile_directories(tmp_path):
     (tmp_path / "b" / tile_name(61, 20, "10")).write_bytes(b"")
     with pytest.raises(DemError, match="mixes GLO-30 and GLO-90"):
         open_dem(tmp_path / "b")
+
+
+def test_a_missing_tile_under_the_footprint_is_reported(scene, tmp_path, caplog):
+    """QA of stop 43: with one tile of the directory gone, 45 % of the points took the tie
+    points and nothing said so. The tiles under the footprint the directory lacks are in the
+    run's statistics and warned about by ``map``; a complete directory gives no warning."""
+    import logging
+
+    from napari_meris_ortho.cli import main
+    from napari_meris_ortho.ortho import orthorectify
+
+    full = scene.dem_paths["copernicus"]
+    assert open_dem(full).missing_tiles((13.2, 45.9, 14.6, 46.8)) == []
+    holed = tmp_path / "holed"
+    shutil.copytree(full, holed)
+    (gone,) = list(holed.rglob("*N46_00_E013_00_DEM.tif"))
+    gone.unlink()
+    src = open_dem(holed)
+    assert src.missing_tiles((13.2, 45.9, 14.6, 46.8)) == ["N46 E013"]
+    src.close()
+    res = orthorectify(scene.product_path, dems=[holed], bands=[7])
+    assert res.stats.dem_gaps == {str(holed): ["N46 E013"]}
+    assert res.stats.elevation_sources.get("tiepoints", 0) > 0
+    complete = orthorectify(scene.product_path, dems=[full], bands=[7])
+    assert complete.stats.dem_gaps == {}
+    with caplog.at_level(logging.WARNING):
+        assert main(["-q", "map", str(scene.product_path), "-o", str(tmp_path / "o.tif"),
+                     "--dem", str(holed), "--bands", "7"]) == 0
+    assert f"DEM {holed} has no tile N46 E013 under the footprint" in caplog.text
+
+
+def test_getasse30_names_its_missing_tiles(fr_small):
+    """GETASSE30 covers the globe in 15-degree tiles: under a box across 15 E the scene's
+    directory (one tile, 45N000E) lacks 45N015E."""
+    src = open_dem(fr_small.dem_paths["getasse30"])
+    assert src.missing_tiles((13.2, 45.9, 14.6, 46.8)) == []
+    assert src.missing_tiles((14.5, 45.9, 15.5, 46.8)) == ["45N015E.GETASSE30"]
+    assert src.missing_tiles((179.0, 44.0, 181.0, 46.0)) == ["30N165E.GETASSE30",
+                                                              "30N180W.GETASSE30",
+                                                              "45N165E.GETASSE30",
+                                                              "45N180W.GETASSE30"]
+    src.close()

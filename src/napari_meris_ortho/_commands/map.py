@@ -97,6 +97,8 @@ def _map(args: argparse.Namespace, grid: Any) -> Any:
         ante = precompute(args.product, grid=grid, dems=args.dem, options=args.options,
                           progress=progress, crs=args.crs, pixel_size=args.pixel_size,
                           max_pixels=args.max_pixels)
+        for text in ante.stats.gap_warnings():
+            log.warning("warning: %s", text)
         for dem in ante.stats.unused_dems():
             log.warning("warning: DEM %s contributed no height (outside the product, wrong "
                         "CRS, or only no data / heights outside -500..9000 m)", dem)

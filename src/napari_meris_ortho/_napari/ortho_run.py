@@ -244,6 +244,7 @@ def _run_mapping(options: RunSettings, progress: ProgressCallback | None) -> Ort
         grid = product_grid(product, crs, _pixel_size(options, product, crs))
         ante = precompute(product, grid, options.dem_list, options=opts, progress=part,
                           hold_bands=True)  # the layers hold every band (``result``)
+        warnings += ante.stats.gap_warnings()
         warnings += [f"DEM {Path(d).name} gave no height for {Path(product.path).name} (outside "
                      "the scene, wrong CRS or only no data)" for d in ante.stats.unused_dems()]
         if options.output is not None:

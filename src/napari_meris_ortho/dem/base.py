@@ -141,6 +141,12 @@ class DemSource:
         lookups' longitudes are moved next to (NaN: none); None: ``prepare`` keeps no posts."""
         return None
 
+    def missing_tiles(self, bounds: tuple[float, float, float, float]) -> list[str]:
+        """Names of the tiles of this DEM's tiling under ``bounds`` (lon_min, lat_min, lon_max,
+        lat_max; lon may pass 180) that it lacks: their points get no height from it. Empty
+        for sources that are no tile directory."""
+        return []
+
     def prepare(self, lon_min: float, lat_min: float, lon_max: float, lat_max: float) -> None:
         """Read the posts lookups inside these WGS84 bounds need (plus the bicubic margin),
         once, by ``_fetch`` (tile directories, memmapped tiles): the compiled lookup then

@@ -276,6 +276,11 @@ class CopernicusSource(DemSource):
             f"{lon_min:.2f}..{lon_max:.2f}, lat {lat_min:.2f}..{lat_max:.2f}); the directory "
             f"holds {len(self.tile_keys)} tile(s): {have}{more}")
 
+    def missing_tiles(self, bounds: tuple[float, float, float, float]) -> list[str]:
+        """The 1-degree tiles under ``bounds`` the directory lacks (open sea has none)."""
+        have = set(self.tile_keys)
+        return [_short(*k) for k in covering_tiles(bounds) if k not in have]
+
     def close(self) -> None:
         for z in self.zones:
             z.close()

@@ -4,6 +4,7 @@ variant (rows North to South, also zipped)."""
 
 from __future__ import annotations
 
+import math
 import re
 import zipfile
 from collections.abc import Sequence
@@ -151,6 +152,22 @@ class GetasseSource(DemSource):
             raise DemError(f"{f}: not a 15-degree GETASSE30 tile name")
         key = ((lat0 + 90) // GETASSE_TILE_DEG, (lon0 + 180) // GETASSE_TILE_DEG)
         self.tiles.setdefault(key, _GetasseTile(f, member))
+
+    def missing_tiles(self, bounds: tuple[float, float, float, float]) -> list[str]:
+        """The 15-degree tiles under ``bounds`` the directory lacks (GETASSE30 covers the
+        globe: a missing tile is one not copied)."""
+        lon_min, lat_min, lon_max, lat_max = bounds
+        out = []
+        step = GETASSE_TILE_DEG
+        lat_lo = max(-90, int(math.floor(lat_min / step)) * step)
+        lat_hi = min(90, int(math.ceil(lat_max / step)) * step)
+        for lat0 in range(lat_lo, lat_hi, step):
+            for k in range(int(math.floor(lon_min / step)), int(math.ceil(lon_max / step))):
+                lon0 = (k * step + 180) % 360 - 180
+                key = ((lat0 + 90) // step, (lon0 + 180) // step)
+                if key not in self.tiles:
+                    out.append(getasse_tile_name(lat0, lon0))
+        return out
 
     @property
     def bounds(self) -> tuple[float, float, float, float]:

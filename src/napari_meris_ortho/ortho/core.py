@@ -77,16 +77,25 @@ def _open_dems(dems: Sequence[DemSource | str | os.PathLike[str]]) -> DemStack |
         raise DemError(f"cannot open DEM: {exc}") from exc
 
 
-def _check_dem_coverage(stack: Any, boundary: Any) -> None:
+def _check_dem_coverage(stack: Any, boundary: Any) -> dict[str, list[str]]:
     """A tile directory none of whose tiles meets the footprint is a DemError (a wrong
-    directory, not a DEM gap): DEM entries with ``check_covers`` are asked."""
+    directory, not a DEM gap): DEM entries with ``check_covers`` are asked. Returns the tiles
+    each DEM lacks under the footprint (``missing_tiles``; its points go to the next source)."""
     pad = 0.2  # degrees: terrain seen beyond the zero-height boundary
-    bounds = (float(np.nanmin(boundary.lon)) - pad, float(np.nanmin(boundary.lat)) - pad,
-              float(np.nanmax(boundary.lon)) + pad, float(np.nanmax(boundary.lat)) + pad)
-    for src in stack.sources:
+    lon = np.asarray(boundary.lon, np.float64)
+    if np.nanmax(lon) - np.nanmin(lon) > 180.0:  # across the antimeridian: unwrapped past 180
+        lon = np.where(lon < 0.0, lon + 360.0, lon)
+    bounds = (float(np.nanmin(lon)) - pad, float(np.nanmin(boundary.lat)) - pad,
+              float(np.nanmax(lon)) + pad, float(np.nanmax(boundary.lat)) + pad)
+    gaps = {}
+    for k, src in enumerate(stack.sources):
         check = getattr(src, "check_covers", None)
         if check is not None:
             check(bounds)
+        missing = src.missing_tiles(bounds) if hasattr(src, "missing_tiles") else []
+        if missing:
+            gaps[str(getattr(src, "name", None) or getattr(src, "path", f"dem{k}"))] = missing
+    return gaps
 
 
 def _margin_px(tp: TiePointGrid, grid: OutputGrid, terrain: bool = True,
@@ -235,6 +244,8 @@ class Segment:
     dems_prepared: bool = False
     #: per-pixel ellipsoid points (lon, lat) of the pixel geolocation with DEMs, else None
     ellipsoid: tuple[np.ndarray, np.ndarray] | None = None
+    #: DEM name -> the tiles of its tiling under the footprint it lacks (``missing_tiles``)
+    dem_gaps: dict[str, list[str]] = field(default_factory=dict)
 
     def prepare_dems(self, extent: OutputGrid) -> None:
         """Read the DEM window under ``extent`` once; the grids of later ``precompute`` calls
@@ -274,8 +285,7 @@ def open_segment(product: str | os.PathLike[str] | MerisProduct,
     try:
         tp = TiePointGrid.from_product(prod)
         boundary = segment_boundary(tp.latitude, tp.longitude)
-        if stack is not None:
-            _check_dem_coverage(stack, boundary)
+        gaps = _check_dem_coverage(stack, boundary) if stack is not None else {}
         pixel = _pixel_grids(prod) if opts.geolocation is Geolocation.PIXEL else None
         ellipsoid = (_ellipsoid_grid(pixel, tp, opts)
                      if pixel is not None and stack is not None else None)
@@ -284,7 +294,7 @@ def open_segment(product: str | os.PathLike[str] | MerisProduct,
             stack.close()
         raise
     return Segment(prod, tp, boundary, stack, opts, [str(d) for d in dems], pixel,
-                   ellipsoid=ellipsoid)
+                   ellipsoid=ellipsoid, dem_gaps=gaps)
 
 
 @dataclass
@@ -314,6 +324,8 @@ class _Job:
     area: tuple[int, int, int, int] = (0, 0, 0, 0)
     #: the size check counted every band held in memory (``precompute(hold_bands=True)``)
     hold_bands: bool = False
+    #: DEM name -> tiles it lacks under the footprint (``Segment.dem_gaps``)
+    dem_gaps: dict[str, list[str]] = field(default_factory=dict)
 
 
 def _height_mode(elevation: Elevation, has_dems: bool) -> int:
@@ -355,6 +367,7 @@ def _prepare(seg: Segment, grid: OutputGrid | None, crs: Any, pixel_size: float 
     job = _Job(prod, tp, grid, spans, stack, hmode, opts, margin, inner.count, list(seg.dems),
                t_start, pixel, seg.ellipsoid, max_pixels)
     job.area, job.hold_bands = _search_area(job), hold_bands
+    job.dem_gaps = dict(seg.dem_gaps)
     r0, r1, c0, c1 = job.area
     share = (r1 - r0) * (c1 - c0) / max(grid.width * grid.height, 1)
     check_grid_size(*size, bytes_per_output_pixel(opts, hold_bands=hold_bands, area_share=share),
@@ -648,7 +661,8 @@ def _stats(job: _Job, *, search: dict[str, int], hist: np.ndarray, processed: in
         elevation=opts.elevation.value, parallax=opts.parallax.value,
         sampling=opts.sampling.value, geolocation=opts.geolocation.value,
         tolerance=opts.tolerance, method=opts.method.value, margin_px=job.margin_px,
-        points_in_boundary=job.points_in_boundary, dems=list(job.dems))
+        points_in_boundary=job.points_in_boundary, dems=list(job.dems),
+        dem_gaps={k: list(v) for k, v in job.dem_gaps.items()})
 
 
 def _mark(mask: np.ndarray, ptr: np.ndarray, start: np.ndarray, stop: np.ndarray) -> None:

@@ -69,6 +69,20 @@ class RunStats:
     margin_px: int
     points_in_boundary: int
     dems: list[str] = field(default_factory=list)
+    #: DEM name -> the tiles of its tiling under the footprint it lacks (their points took
+    #: the next DEM or the tie points)
+    dem_gaps: dict[str, list[str]] = field(default_factory=dict)
+
+    def gap_warnings(self) -> list[str]:
+        """One sentence per DEM that lacks tiles under the footprint."""
+        out = []
+        for dem, tiles in self.dem_gaps.items():
+            names = ", ".join(tiles[:4]) + (f" and {len(tiles) - 4} more" if len(tiles) > 4
+                                           else "")
+            out.append(f"DEM {dem} has no tile {names} under the footprint (missing, or open "
+                       "sea where the tiling has none): those points took the next DEM or the "
+                       "tie points")
+        return out
 
     def to_dict(self) -> dict[str, Any]:
         """Plain dict (the ``--stats-json`` file)."""
