@@ -339,3 +339,14 @@ def test_a_footprint_the_crs_cuts_at_the_antimeridian_is_refused():
     for crs in ("EPSG:4326", "EPSG:3832"):
         grid = default_grid(boundary, crs=crs)
         assert grid.width < 2000, (crs, grid.width)
+
+
+def test_a_pixel_in_metres_given_to_a_geographic_crs_is_refused():
+    """QA of stop 43: ``map --pixel-size 260`` (EPSG:4326 by default) said "the extent misses
+    the product footprint"; the unit was the problem."""
+    from napari_meris_ortho.errors import OptionsError
+
+    with pytest.raises(OptionsError, match=r"pixel size 260 in WGS 84 is in degrees"):
+        OutputGrid.from_extent("EPSG:4326", (10.0, 50.0), (20.0, 40.0), 260.0)
+    OutputGrid.from_extent("EPSG:4326", (10.0, 50.0), (20.0, 40.0), 1.0)  # a coarse 1-degree
+    OutputGrid.from_extent("EPSG:32632", (0.0, 5e6), (1e4, 4.99e6), 260.0)

@@ -283,6 +283,7 @@ class OutputGrid:
         (ulx, uly), (lrx, lry) = (map(float, ul), map(float, lr))
         if not all(math.isfinite(v) for v in (ulx, uly, lrx, lry)):
             raise OptionsError(f"extent corners must be finite numbers, got {ul} and {lr}")
+        check_degree_pixel(crs, dx, dy)
         if not (ulx < lrx and uly > lry):
             raise OptionsError(
                 f"upper-left {tuple(ul)} must be left of and above lower-right {tuple(lr)}")
@@ -662,6 +663,22 @@ def _check_not_cut(pieces: list[tuple[np.ndarray, np.ndarray]], crs: pyproj.CRS,
             "zone) or give the extent (--ul/--lr)")
 
 
+#: the largest pixel (degrees) a user may ask of a geographic CRS: more is a size in metres
+#: given in degrees (``--pixel-size 260`` with EPSG:4326: a 260-degree pixel)
+MAX_DEGREE_PIXEL = 1.0
+
+
+def check_degree_pixel(crs: pyproj.CRS, dx: float, dy: float) -> None:
+    """Refuse a pixel of more than ``MAX_DEGREE_PIXEL`` in a geographic CRS (OptionsError
+    saying the unit; before, 260 "m" in EPSG:4326 ended in "the extent misses the product
+    footprint")."""
+    if crs.is_geographic and max(dx, dy) > MAX_DEGREE_PIXEL:
+        raise OptionsError(
+            f"pixel size {max(dx, dy):g} in {crs.name} is in degrees ({max(dx, dy):g} deg is "
+            f"about {max(dx, dy) * 111.2:.0f} km): a MERIS FR pixel is 0.0023 deg (260 m), RR "
+            "0.0094 deg (1040 m); for metres choose a projected CRS")
+
+
 def default_grid(
     boundary: _HasPolygons, resolution_m: float = FR_PIXEL_SIZE_M, crs: Any = "EPSG:4326", *,
     pixel_size: float | Sequence[float] | None = None, mersyn_size: bool = False,
@@ -681,6 +698,8 @@ def default_grid(
         dx, dy = pixel_pair(pixel_size)
     if not (dx > 0 and dy > 0 and math.isfinite(dx) and math.isfinite(dy)):
         raise OptionsError(f"pixel size must be > 0, got {dx}, {dy}")
+    if pixel_size is not None:
+        check_degree_pixel(crs, dx, dy)
     pts = [p for p in boundary.polygons(crs) if p[0].size]
     if not pts:
         raise OptionsError(f"the segment boundary has no position in {crs.name}")
