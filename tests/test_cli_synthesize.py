@@ -226,6 +226,8 @@ def test_refused_or_empty_runs_leave_nothing_behind(products, tmp_path, capsys) 
         code = main(["-q", "synthesize", str(bad), "--out", str(work / store), *GRID_ARGS,
                      *COMMON])
         assert code == 1  # the only product failed: nothing merged
+        assert f"meris-ortho: error: nothing merged into {work / store}: 1 product(s) failed" in (
+            capsys.readouterr().err)
         assert sorted(p.name for p in work.rglob("*")) == ["given"], store
     assert main(["-q", "synthesize", products[0], "--out", str(work / "given"), *GRID_ARGS,
                  *COMMON]) == 0

@@ -37,8 +37,7 @@ log = logging.getLogger("napari_meris_ortho")
 
 class _Parser(argparse.ArgumentParser):
     def error(self, message: str) -> NoReturn:  # argparse's own errors: one line, exit 2
-        self.print_usage(sys.stderr)
-        self.exit(2, f"meris-ortho: error: {message}\n")
+        self.exit(2, f"meris-ortho: error: {message} (usage: {self.prog} --help)\n")
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -36,7 +36,7 @@ def add_bands_option(p: Any, help: str) -> None:
 #: what a ``--dem`` entry may be (dem, dem.copernicus, dem.geoid)
 DEM_ENTRY_HELP = (
     "PATH: GeoTIFF/VRT, SRTM30 .DEM, a directory of GETASSE30, SRTM30 or Copernicus GLO-30/90 "
-    "tiles; DATUM: egm96 (heights above the geoid) or ellipsoid; default: SRTM30 and "
+    "tiles; DATUM: egm96 or egm2008 (heights above that geoid) or ellipsoid; default: SRTM30 and "
     "Copernicus egm96, GETASSE30 ellipsoid, GeoTIFF from its vertical CRS (else ellipsoid, "
     "with a warning). EGM96 comes from proj-data's egm96_15.gtx")
 

@@ -12,6 +12,7 @@ from __future__ import annotations
 import argparse
 import logging
 import os
+import sys
 from typing import Any
 
 from ..cores import usable_cores
@@ -119,4 +120,8 @@ def run(args: argparse.Namespace) -> int:
     if result.failed:
         log.warning("%d of %d product(s) failed and were skipped", len(result.failed),
                     len(result.reports))
+    if result.snapshot is None and (result.failed or result.outside):
+        print(f"meris-ortho: error: nothing merged into {args.out}: "
+              f"{len(result.failed)} product(s) failed, {len(result.outside)} outside the grid "
+              "(their reasons above)", file=sys.stderr)
     return 1 if result.failed or result.outside else 0
