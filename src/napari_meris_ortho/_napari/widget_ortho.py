@@ -9,8 +9,10 @@ cancels it. Everything heavy (reading, orthorectification, layer data, contrast 
 stretch, geometry, the napari layer objects) runs in the job (``build_layers``); the Qt thread
 only inserts the ready layers (rasters as pyramids), one per event-loop turn and without
 making each the active layer, in the world frame (``world``); a rerun replaces the layers of the
-same names, removed one per turn in one napari batch (one garbage collection). A finished run
-keeps nothing alive but its layers. The settings are remembered (``settings``).
+same names and every layer an earlier run made of the same product (``layer_source``), removed
+one per turn in one napari batch (one garbage collection); Cancel in the middle undoes the
+changes made. A finished run keeps nothing alive but its layers. The settings are remembered
+(``settings``).
 """
 
 from __future__ import annotations
