@@ -47,11 +47,16 @@ def _centre_on(viewer, layer, row: int, col: int, half_width_px: int) -> None:
     camera.zoom = canvas_px / (2 * half_width_px * layer.scale[0])
 
 
+def _full(layer) -> np.ndarray:
+    """A raster layer's full-resolution data (the first level of a multiscale layer)."""
+    return np.asarray(layer.data[0] if layer.multiscale else layer.data)
+
+
 def _zoom_on_peak(viewer, half_width_px: int = 70) -> tuple[float, float]:
     """Centre the camera on the highest DEM pixel, showing about 2 x half_width_px pixels."""
     dem = viewer.layers["DEM"]
-    valid = viewer.layers["orthorectified b7"].data > 0
-    heights = np.where(valid, dem.data, -np.inf)
+    valid = _full(viewer.layers["orthorectified b7"]) > 0
+    heights = np.where(valid, _full(dem), -np.inf)
     row, col = np.unravel_index(np.argmax(heights), heights.shape)
     _centre_on(viewer, dem, int(row), int(col), half_width_px)
     return float(heights[row, col]), float(dem.scale[0])
@@ -86,7 +91,7 @@ def _zoom_on_parallax(viewer, half_width_px: int = 70) -> tuple[float, float]:
         r, c = pixels[k]
         win = (slice(max(r - half_width_px, 0), r + half_width_px),
                slice(max(c - half_width_px, 0), c + half_width_px))
-        a, b = ref.data[win], flat.data[win]
+        a, b = _full(ref)[win], _full(flat)[win]
         inside = (a > 0) & (b > 0)
         if inside.size == 0 or inside.mean() < 0.95:
             continue
