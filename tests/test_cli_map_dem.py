@@ -102,5 +102,5 @@ def test_help_tells_the_dem_entries_and_the_handbook_search(capsys):
     out = " ".join(capsys.readouterr().out.split())
     assert exc.value.code == 0
     assert "--dem PATH[:DATUM]" in out and "Copernicus GLO-30/90" in out
-    assert "DATUM: egm96 (heights above the geoid) or ellipsoid" in out
+    assert "DATUM: egm96 or egm2008 (heights above that geoid) or ellipsoid" in out
     assert "the outer half pixel and, on high relief, terrain within one parallax shift" in out
