@@ -156,3 +156,17 @@ def test_getasse30_names_its_missing_tiles(fr_small):
                                                               "45N165E.GETASSE30",
                                                               "45N180W.GETASSE30"]
     src.close()
+
+
+def test_srtm30_names_its_missing_tiles(fr_small):
+    """SRTM30/GTOPO30 cover the globe in 40 x 50 deg tiles (60 x 30 deg in the Antarctic): the
+    scene's directory holds W020N90 (20 W to 20 E, 40 N to 90 N) only."""
+    from napari_meris_ortho.dem.srtm import srtm30_tiles
+
+    src = open_dem(fr_small.dem_paths["srtm30"].parent)
+    assert src.missing_tiles((13.2, 45.9, 14.6, 46.8)) == []
+    assert src.missing_tiles((19.0, 39.0, 21.0, 41.0)) == ["E020N90.DEM", "W020N40.DEM",
+                                                            "E020N40.DEM"]
+    src.close()
+    assert srtm30_tiles((179.0, 60.0, 181.0, 61.0)) == ["E140N90", "W180N90"]
+    assert srtm30_tiles((-5.0, -70.0, 5.0, -65.0)) == ["W060S60", "W000S60"]

@@ -98,3 +98,22 @@ class SrtmTile(DemSource):
     def close(self) -> None:
         self._data = None
         super().close()
+
+
+def srtm30_tiles(bounds: tuple[float, float, float, float]) -> list[str]:
+    """Names of the SRTM30/GTOPO30 tiles meeting ``bounds`` (lon_min, lat_min, lon_max,
+    lat_max; lon may pass 180): 40 x 50 deg tiles north of 60 S (``W020N90``: 20 W to 20 E,
+    90 N to 40 N), 60 x 30 deg Antarctic tiles (``W000S60``: 0 to 60 E, 60 S to 90 S)."""
+    lon_min, lat_min, lon_max, lat_max = bounds
+    out = []
+    rows = [(90, 40, 40, -180), (40, -10, 40, -180), (-10, -60, 40, -180), (-60, -90, 60, -180)]
+    for top, bottom, width, west in rows:
+        if lat_max <= bottom or lat_min >= top:
+            continue
+        for k in range(int((lon_min - west) // width), int(-(-(lon_max - west) // width))):
+            lon0 = (west + k * width + 180) % 360 - 180
+            name = (f"{'W' if lon0 < 0 or (lon0 == 0 and top == -60) else 'E'}{abs(lon0):03d}"
+                    f"{'N' if top > 0 else 'S'}{abs(top):02d}")
+            if name not in out:
+                out.append(name)
+    return out

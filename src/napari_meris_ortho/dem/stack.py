@@ -53,7 +53,7 @@ from .base import DemSource, LatticeWindow, check_regular
 from .geoid import ELLIPSOID, GEOIDS, geoid_grid_path, resolve_datum, split_datum
 from .getasse import _TILE_RE, _ZIP_RE, GetasseSource
 from .raster import RasterSource
-from .srtm import SrtmTile
+from .srtm import SrtmTile, srtm30_tiles
 
 log = logging.getLogger(__name__)
 #: a compiled lookup in a lattice window (``DemStack.walk``): (window, DEM index, lon, lat,
@@ -222,6 +222,16 @@ def _resolve_geoids(src: DemSource) -> None:
     _set_datums(src, resolve_datum)
 
 
+class SrtmDirectory(CompositeSource):
+    """A directory of SRTM30/GTOPO30 tiles (``W020N90.DEM``...)."""
+
+    def missing_tiles(self, bounds: tuple[float, float, float, float]) -> list[str]:
+        """The tiles of the SRTM30/GTOPO30 tiling under ``bounds`` the directory lacks (the
+        tiling covers the globe, the sea as no data: a missing tile is one not copied)."""
+        have = {Path(s.name).stem.upper() for s in self.sources}
+        return [f"{n}.DEM" for n in srtm30_tiles(bounds) if n not in have]
+
+
 def _assume_ellipsoid(src: DemSource) -> None:
     """Ellipsoidal heights where a source (or a part of it) does not say its datum."""
     _set_datums(src, lambda datum: ELLIPSOID if datum is None else datum)
@@ -256,7 +266,7 @@ def _open_directory(p: Path) -> DemSource:
         return CopernicusSource(p, tiles)
     dems = [f for f in files if f.suffix.upper() == ".DEM"]
     if dems:
-        return CompositeSource(str(p), [SrtmTile(f) for f in dems])
+        return SrtmDirectory(str(p), [SrtmTile(f) for f in dems])
     rasters = [f for f in files if f.suffix.lower() in (".tif", ".tiff", ".vrt", ".img")]
     if rasters:
         return CompositeSource(str(p), [RasterSource(f) for f in rasters])
