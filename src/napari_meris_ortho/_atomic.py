@@ -84,7 +84,8 @@ def check_writable_dir(path: str | os.PathLike[str]) -> Path:
     return out
 
 
-def _same_file(a: Path, b: Path) -> bool:
+def same_file(a: str | os.PathLike[str], b: str | os.PathLike[str]) -> bool:
+    """The same file or directory: one real path, or hard links of one file."""
     if os.path.realpath(a) == os.path.realpath(b):
         return True
     try:
@@ -116,14 +117,14 @@ def check_distinct(
     for i, (name, out) in enumerate(given):
         for what, paths in inputs.items():
             for p in paths:
-                if _same_file(out, Path(p)):
+                if same_file(out, Path(p)):
                     raise OptionsError(f"{name} {out} is the {what} {p}: refusing to overwrite "
                                        "an input")
                 if is_inside(out, Path(p)):
                     raise OptionsError(f"{name} {out} is inside the {what} {p}: refusing to "
                                        "write into an input")
         for other, out2 in given[:i]:
-            if _same_file(out, out2):
+            if same_file(out, out2):
                 raise OptionsError(f"{name} {out} and {other} {out2} are the same file")
 
 

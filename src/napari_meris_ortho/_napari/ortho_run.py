@@ -10,7 +10,6 @@ time), "footprint · ...", "parallax ×10 · ..."; with the per-pixel geolocatio
 
 from __future__ import annotations
 
-import os
 import shutil
 import tempfile
 from collections.abc import Mapping
@@ -20,6 +19,7 @@ from typing import Any
 
 import numpy as np
 
+from .._atomic import same_file
 from ..errors import MerisOrthoError, OptionsError
 from ..geometry.grid import OutputGrid, same_crs
 from ..options import Elevation, MergeRule, OrthoOptions, choices, parse_band_list
@@ -90,8 +90,7 @@ class RunSettings:
         what = f"{n} product{'s' if n != 1 else ''}"
         if self.input_store is not None:
             rule = "" if self.algorithm == MAPPING else f" ({self.algorithm})"
-            copy = self.output is not None and (
-                os.path.realpath(self.output) != os.path.realpath(self.input_store))
+            copy = self.output is not None and not same_file(self.output, self.input_store)
             into = f" into a copy at {self.output}" if copy else " in place"
             return f"update synthesis {Path(self.input_store).name}{rule} with {what}{into}"
         if self.algorithm != MAPPING:

@@ -210,9 +210,11 @@ def _geoid_undulation(geoid, points: GroundControlPoints) -> np.ndarray:
     """N at the points (bilinear) from a raster of undulations, or zeros without one."""
     if geoid is None:
         return np.zeros(len(points))
-    if not isinstance(geoid, DemSource):
+    if isinstance(geoid, DemSource):
+        source = geoid
+    else:
         check_input_file(geoid, "geoid undulation grid")
-    source = geoid if isinstance(geoid, DemSource) else open_dem(f"{geoid}:{ELLIPSOID}")
+        source = open_dem(f"{geoid}:{ELLIPSOID}")
     return np.asarray(source.sample(points.lon, points.lat, "bilinear"), dtype=np.float64)
 
 

@@ -223,18 +223,14 @@ def _check_not_an_input(out_dir: Path, products: Sequence[Any], input: Any,
                         dems: Sequence[Any]) -> None:
     """The store is no input product or DEM, nor inside one (a ``.SEN3`` directory, a tile
     directory), nor inside the input synthesis it would be copied from."""
-    from .._atomic import check_distinct
+    from .._atomic import check_distinct, same_file
     from ..dem.geoid import split_datum
 
-    sources = [] if input is None or _same_path(Path(input), out_dir) else [Path(input)]
+    sources = [] if input is None or same_file(input, out_dir) else [Path(input)]
     check_distinct({"output store": out_dir},
                    {"input product": [Path(p) for p in products], "input synthesis": sources,
                     "DEM": [split_datum(str(d))[0] for d in dems
                             if isinstance(d, str | os.PathLike)]})
-
-
-def _same_path(a: Path, b: Path) -> bool:
-    return os.path.realpath(a) == os.path.realpath(b)
 
 
 def _check_options(products: Sequence[Any], out_dir: Path, algorithm: str | None,
