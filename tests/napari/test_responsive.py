@@ -495,3 +495,102 @@ def test_a_docked_widget_holds_the_canvas_without_napari_privates(make_napari_vi
         assert not native.updatesEnabled()
         canvas_updates(widget.viewer, True)
     assert native.updatesEnabled()
+
+
+def test_a_layers_controls_are_made_in_a_turn_of_their_own(make_napari_viewer, qtbot, tiny_n1,
+                                                            monkeypatch):
+    """Making napari's controls of a new layer (and Qt's styling of their widgets after) was
+    0.1-0.2 s of the 0.2-0.3 s an insertion's turn took (fr-alps, software GL): the widget
+    appends a layer with a stand-in in napari's controls stack and makes its controls in the
+    next turn. After the run every layer has its own controls, selecting one shows them, no
+    stand-in is left, and the scene graph held during the insertions is rebuilt in order."""
+    from napari._qt.layer_controls import qt_layer_controls_container as qlc
+
+    from napari_meris_ortho._napari.layout import CONTROLS_STAND_IN
+
+    viewer = make_napari_viewer(show=True)
+    _, widget = viewer.window.add_plugin_dock_widget("napari-meris-ortho", "Orthorectify")
+    widget.products.value = [tiny_n1]
+    widget.elevation.value = "tiepoints"
+    widget.geometry.value = True
+    container = viewer.window._qt_viewer.controls
+    appending: list[bool] = [False]
+    made_while_appending: list[str] = []
+    made: list[str] = []
+    create = qlc.create_qt_layer_controls
+
+    def spy(layer):
+        made.append(layer.name)
+        if appending[0]:
+            made_while_appending.append(layer.name)
+        return create(layer)
+
+    monkeypatch.setattr(qlc, "create_qt_layer_controls", spy)
+    from napari_meris_ortho._napari import widget_ortho
+
+    original = widget_ortho.append_inactive
+
+    def append(*args, **kwargs):
+        appending[0] = True
+        try:
+            return original(*args, **kwargs)
+        finally:
+            appending[0] = False
+
+    monkeypatch.setattr(widget_ortho, "append_inactive", append)
+    _run(widget, qtbot)
+    names = [layer.name for layer in viewer.layers]
+    assert len(names) >= 6
+    assert not made_while_appending, made_while_appending
+    assert sorted(made) == sorted(names)
+    stack = [container.widget(i) for i in range(container.count())]
+    assert not [w for w in stack if w.objectName() == CONTROLS_STAND_IN]
+    for layer in viewer.layers:
+        controls = container.widgets[layer]
+        assert type(controls).__name__.endswith("Controls"), type(controls)
+        viewer.layers.selection.active = layer
+        assert container.currentWidget() is controls
+    canvas = viewer.window._qt_viewer.canvas
+    assert not canvas._pause_scene_graph
+    orders = [canvas.layer_to_visual[layer].order for layer in viewer.layers]
+    assert orders == sorted(orders) and len(set(orders)) == len(orders), orders
+
+
+def test_a_layer_selected_or_removed_before_its_controls_are_made(make_napari_viewer):
+    """In the turn between a layer's insertion and its controls, napari finds the stand-in:
+    selecting the layer shows it (then its controls once made), removing the layer removes it
+    (napari looked the controls up and failed with a KeyError without one)."""
+    from napari_meris_ortho._napari.layout import (
+        CONTROLS_STAND_IN,
+        add_controls,
+        append_inactive,
+    )
+
+    viewer = make_napari_viewer(show=True)
+    container = viewer.window._qt_viewer.controls
+    first, second = (napari_image(name) for name in ("first", "second"))
+    assert append_inactive(viewer, first, controls_later=True)
+    assert append_inactive(viewer, second, controls_later=True)
+    assert container.widgets[first].objectName() == CONTROLS_STAND_IN
+    count = container.count()
+    viewer.layers.selection.active = first
+    assert container.currentWidget() is container.widgets[first]
+    viewer.layers.remove(second)  # its stand-in goes with it
+    assert second not in container.widgets and container.count() == count - 1
+    add_controls(viewer, [first, second])  # the removed one: nothing to make
+    controls = container.widgets[first]
+    assert controls.objectName() != CONTROLS_STAND_IN
+    assert container.currentWidget() is controls  # the selected layer shows its controls
+    viewer.layers.selection.active = None
+    viewer.layers.selection.active = first
+    assert container.currentWidget() is controls
+    # without controls_later: napari makes them in the insertion, as ever
+    third = napari_image("third")
+    assert not append_inactive(viewer, third)
+    assert container.widgets[third].objectName() != CONTROLS_STAND_IN
+
+
+def napari_image(name: str):
+    from napari.layers import Image
+
+    return Image(np.zeros((8, 8), np.float32), name=name)

@@ -23,7 +23,14 @@ from ..display import contrast_limits
 from ..geometry.grid import OutputGrid
 from ..progress import ProgressCallback
 from .geometry_layers import geometry_layers
-from .layout import SHOW_STEP_MS, append_inactive, canvas_updates, hide_for_now, show_in
+from .layout import (
+    SHOW_STEP_MS,
+    add_controls,
+    append_inactive,
+    canvas_updates,
+    hide_for_now,
+    show_in,
+)
 from .ortho_run import multiscale_layer
 from .product_layers import band_layers
 from .world import geo_image_kwargs, reproject_onto
@@ -194,6 +201,7 @@ class SampleLoader:
         self.error: BaseException | None = None
         self.label = f"MERIS sample {name} (generating...)"
         self._hidden: list[Any] = []  # the visible layers, shown one per frame at the end
+        self._no_controls: list[Any] = []  # appended, napari's controls still to make
         self._bar = progress(total=100, desc=f"MERIS sample {name}")
         self._timer = QTimer()
         self._timer.timeout.connect(self._poll)
@@ -251,8 +259,14 @@ class SampleLoader:
         from qtpy.QtCore import QTimer
 
         try:
+            if self._no_controls:  # the controls of the layer appended last turn, in a turn alone
+                add_controls(self.viewer, [self._no_controls.pop()])
+                QTimer.singleShot(1, self._step)
+                return
             if self.layers:  # inactive: the layer controls do not switch at every turn
-                append_inactive(self.viewer, self.layers.pop(0))
+                layer = self.layers.pop(0)
+                if append_inactive(self.viewer, layer, controls_later=True):
+                    self._no_controls.append(layer)
                 QTimer.singleShot(1, self._step)  # timers and paints due run in between
                 return
             for layer in self._placeholders():
@@ -284,6 +298,8 @@ class SampleLoader:
         QTimer.singleShot(SHOW_STEP_MS, self._show_next)
 
     def _finish(self) -> None:
+        add_controls(self.viewer, self._no_controls)
+        self._no_controls = []
         canvas_updates(self.viewer, True)
         hidden, self._hidden = self._hidden, []
         show_in(self.viewer, hidden)  # an error part-way: what is in shows at once

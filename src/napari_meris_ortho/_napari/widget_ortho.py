@@ -45,11 +45,13 @@ from ..options import PARALLAX_CHOICES, Elevation, Parallax, Sampling, SearchMet
 from .layout import (
     SHOW_STEP_MS,
     StatusLabel,
+    add_controls,
     append_inactive,
     canvas_updates,
     frame_extent,
     hide_for_now,
     prepare_dash_patterns,
+    scene_graph_paused,
     show_in,
 )
 from .legend import prepare_glyphs, show_legends
@@ -266,6 +268,7 @@ class OrthorectifyWidget(Container):
         self._queued, self._summary = 0, ""
         self._hidden: list[Any] = []  # a run's layers waiting to be shown (``_done``)
         self._batch_open = False  # napari's batch of layer removals (``_removals``)
+        self._controls_missing: list[Any] = []  # appended, controls not made yet
         #: what the queued changes have done so far: (index, layer) removed, layers appended;
         #: a Cancel in the middle undoes them (``_undo_changes``)
         self._removed: list[tuple[int, Any]] = []
@@ -499,7 +502,11 @@ class OrthorectifyWidget(Container):
         # shaders at its first draw (software GL under Xvfb: 0.05-0.15 s each), so one frame
         # with all of them is the longest stall of a run
         shown = hide_for_now(layers)
-        self._queue = [*removals, *((self._append, layer) for layer in layers),
+        # each layer's controls in the turn after its insertion (``append_inactive``)
+        self._queue = [*removals,
+                       *(step for layer in layers
+                         for step in ((self._append, layer), (self._add_controls, layer))),
+                       (self._scene_graph, False),
                        *((self._activate, layer) for layer in layers[-1:]),
                        (self._frame_result, shown), (self._canvas_updates, True),
                        *(step for layer in shown
@@ -514,8 +521,20 @@ class OrthorectifyWidget(Container):
     def _canvas_updates(self, enabled: bool) -> None:
         canvas_updates(self.viewer, enabled)
 
+    def _add_controls(self, layer: Any = None) -> None:
+        """napari's controls of ``layer`` (None: of every appended layer still without them:
+        before any is selected or removed)."""
+        todo = self._controls_missing if layer is None else [layer]
+        add_controls(self.viewer, todo)
+        self._controls_missing = [x for x in self._controls_missing if x not in todo]
+
+    def _scene_graph(self, paused: Any) -> None:
+        scene_graph_paused(self.viewer, bool(paused))
+
     def _append(self, layer: Any) -> None:
-        append_inactive(self.viewer, layer)
+        self._scene_graph(True)  # rebuilt once, after the last (``_scene_graph(False)``)
+        if append_inactive(self.viewer, layer, controls_later=True):
+            self._controls_missing.append(layer)
         self._appended.append(layer)
 
     def _show(self, layer: Any) -> None:
@@ -561,6 +580,7 @@ class OrthorectifyWidget(Container):
         """Cancel while a run's layers go in: take out the new layers appended so far and put
         back the ones they replaced, where they were: the viewer is as before the run, not
         half replaced. Returns the changes undone."""
+        self._add_controls()  # napari removes a layer's controls with it
         undone = 0
         for layer in reversed(self._appended):
             if layer in self.viewer.layers:
@@ -648,8 +668,10 @@ class OrthorectifyWidget(Container):
             self._end()
 
     def _end(self) -> None:
+        self._add_controls()  # before the user selects or removes a layer
         self._removed, self._appended = [], []  # the replaced layers may go now
         self._removals(False)  # a batch left open by Cancel
+        self._scene_graph(False)
         self._canvas_updates(True)
         self._show_hidden()
         self.run_button.enabled, self.cancel_button.enabled = True, False
