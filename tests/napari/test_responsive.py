@@ -564,6 +564,7 @@ def test_a_layer_selected_or_removed_before_its_controls_are_made(make_napari_vi
         CONTROLS_STAND_IN,
         add_controls,
         append_inactive,
+        make_controls,
     )
 
     viewer = make_napari_viewer(show=True)
@@ -577,9 +578,14 @@ def test_a_layer_selected_or_removed_before_its_controls_are_made(make_napari_vi
     assert container.currentWidget() is container.widgets[first]
     viewer.layers.remove(second)  # its stand-in goes with it
     assert second not in container.widgets and container.count() == count - 1
+    # made in one turn, put in napari's stack in a later one (Qt styles them there)
+    make_controls(viewer, first)
+    made = container.widgets[first].controls
+    assert container.widgets[first].objectName() == CONTROLS_STAND_IN
+    assert container.indexOf(made) == -1
     add_controls(viewer, [first, second])  # the removed one: nothing to make
     controls = container.widgets[first]
-    assert controls.objectName() != CONTROLS_STAND_IN
+    assert controls is made and container.indexOf(made) >= 0
     assert container.currentWidget() is controls  # the selected layer shows its controls
     viewer.layers.selection.active = None
     viewer.layers.selection.active = first

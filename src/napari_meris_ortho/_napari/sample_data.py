@@ -29,6 +29,7 @@ from .layout import (
     append_inactive,
     canvas_updates,
     hide_for_now,
+    make_controls,
     show_in,
 )
 from .ortho_run import multiscale_layer
@@ -202,6 +203,7 @@ class SampleLoader:
         self.label = f"MERIS sample {name} (generating...)"
         self._hidden: list[Any] = []  # the visible layers, shown one per frame at the end
         self._no_controls: list[Any] = []  # appended, napari's controls still to make
+        self._controls_made = False
         self._bar = progress(total=100, desc=f"MERIS sample {name}")
         self._timer = QTimer()
         self._timer.timeout.connect(self._poll)
@@ -259,8 +261,13 @@ class SampleLoader:
         from qtpy.QtCore import QTimer
 
         try:
-            if self._no_controls:  # the controls of the layer appended last turn, in a turn alone
-                add_controls(self.viewer, [self._no_controls.pop()])
+            if self._no_controls:  # the controls of the layer appended last: made in a turn,
+                layer = self._no_controls[0]  # put in napari's stack in the next
+                if self._controls_made:
+                    add_controls(self.viewer, [self._no_controls.pop(0)])
+                else:
+                    make_controls(self.viewer, layer)
+                self._controls_made = not self._controls_made
                 QTimer.singleShot(1, self._step)
                 return
             if self.layers:  # inactive: the layer controls do not switch at every turn

@@ -50,6 +50,7 @@ from .layout import (
     canvas_updates,
     frame_extent,
     hide_for_now,
+    make_controls,
     prepare_dash_patterns,
     scene_graph_paused,
     show_in,
@@ -505,7 +506,8 @@ class OrthorectifyWidget(Container):
         # each layer's controls in the turn after its insertion (``append_inactive``)
         self._queue = [*removals,
                        *(step for layer in layers
-                         for step in ((self._append, layer), (self._add_controls, layer))),
+                         for step in ((self._append, layer), (self._make_controls, layer),
+                                      (self._add_controls, layer))),
                        (self._scene_graph, False),
                        *((self._activate, layer) for layer in layers[-1:]),
                        (self._frame_result, shown), (self._canvas_updates, True),
@@ -520,6 +522,9 @@ class OrthorectifyWidget(Container):
 
     def _canvas_updates(self, enabled: bool) -> None:
         canvas_updates(self.viewer, enabled)
+
+    def _make_controls(self, layer: Any) -> None:
+        make_controls(self.viewer, layer)
 
     def _add_controls(self, layer: Any = None) -> None:
         """napari's controls of ``layer`` (None: of every appended layer still without them:
