@@ -554,6 +554,11 @@ def test_a_layers_controls_are_made_in_a_turn_of_their_own(make_napari_viewer, q
     assert not canvas._pause_scene_graph
     orders = [canvas.layer_to_visual[layer].order for layer in viewer.layers]
     assert orders == sorted(orders) and len(set(orders)) == len(orders), orders
+    labels = [layer for layer in viewer.layers if type(layer).__name__ == "Labels"]
+    assert labels  # the elevation source; its overlays built in a turn of their own
+    for layer in labels:
+        built = {type(o).__name__ for o in canvas._layer_overlay_to_visual[layer]}
+        assert {"LabelsPolygonOverlay", "LabelsBrushStrokeOverlay"} <= built, built
 
 
 def test_a_layer_selected_or_removed_before_its_controls_are_made(make_napari_viewer):

@@ -141,6 +141,18 @@ def scene_graph_paused(viewer: Any, paused: bool) -> None:
             canvas._update_scenegraph()
 
 
+def build_overlays(viewer: Any, layer: Any) -> None:
+    """Have napari build the canvas overlays of ``layer`` now, in a turn of their own, while the
+    scene graph is held (``scene_graph_paused``): a labels layer's polygon and brush overlays
+    took 0.08-0.14 s of the rebuild's turn (fr-alps, software GL). No-op without them."""
+    window = getattr(getattr(viewer, "__wrapped__", viewer), "window", None)
+    canvas = getattr(getattr(window, "_qt_viewer", None), "canvas", None)
+    update = getattr(canvas, "_update_layer_overlays", None)
+    if callable(update) and layer in getattr(canvas, "layer_to_visual", {}):
+        with contextlib.suppress(RuntimeError):  # the Qt objects are already deleted
+            update(layer)
+
+
 def _controls_container(viewer: Any) -> Any:
     """napari's stack of layer controls, if the window has made it (None otherwise)."""
     window = getattr(getattr(viewer, "__wrapped__", viewer), "window", None)

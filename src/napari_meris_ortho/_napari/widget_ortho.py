@@ -47,6 +47,7 @@ from .layout import (
     StatusLabel,
     add_controls,
     append_inactive,
+    build_overlays,
     canvas_updates,
     frame_extent,
     hide_for_now,
@@ -508,6 +509,9 @@ class OrthorectifyWidget(Container):
                        *(step for layer in layers
                          for step in ((self._append, layer), (self._make_controls, layer),
                                       (self._add_controls, layer))),
+                       # a labels layer's overlays, not in the scene graph's one rebuild
+                       *((self._build_overlays, layer) for layer in layers
+                         if type(layer).__name__ == "Labels"),
                        (self._scene_graph, False),
                        *((self._activate, layer) for layer in layers[-1:]),
                        (self._frame_result, shown), (self._canvas_updates, True),
@@ -522,6 +526,9 @@ class OrthorectifyWidget(Container):
 
     def _canvas_updates(self, enabled: bool) -> None:
         canvas_updates(self.viewer, enabled)
+
+    def _build_overlays(self, layer: Any) -> None:
+        build_overlays(self.viewer, layer)
 
     def _make_controls(self, layer: Any) -> None:
         make_controls(self.viewer, layer)
