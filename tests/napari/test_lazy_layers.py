@@ -167,3 +167,40 @@ def _cog(tmp_path):
     counts = ((rows * 7 + cols * 3) % 5000 + 1).astype(np.uint16)
     return write_cog(tmp_path / "cog.tif", [counts], grid, count=1, scales=[0.01],
                      offsets=[0.0], halve=overview_level)
+
+
+def test_an_n1_is_drawn_before_its_layers_controls_are_made(make_napari_viewer, qtbot, tiny_n1,
+                                                             monkeypatch):
+    """Opening an N1 inserts three layers in one napari call; their controls (and Qt's styling
+    of them) were 0.1-0.2 s each of the time to the first pixels. The reader leaves them to the
+    turns after the opening: a stand-in frame holds each place, the controls follow, and a
+    layer inserted afterwards gets its own at once again."""
+    from napari._qt.layer_controls import qt_layer_controls_container as qlc
+
+    from napari_meris_ortho._napari._qt.insertion import CONTROLS_STAND_IN
+
+    viewer = make_napari_viewer(show=True)
+    container = viewer.window._qt_viewer.controls
+    made: list[str] = []
+    create = qlc.create_qt_layer_controls
+
+    def spy(layer):
+        made.append(layer.name)
+        return create(layer)
+
+    monkeypatch.setattr(qlc, "create_qt_layer_controls", spy)
+    layers = viewer.open(tiny_n1, plugin="napari-meris-ortho")
+    assert len(layers) == 3 and not made
+    assert all(container.widgets[x].objectName() == CONTROLS_STAND_IN for x in layers)
+    active = viewer.layers.selection.active
+    assert container.currentWidget() is container.widgets[active]
+    viewer.screenshot(canvas_only=True)  # drawn with stand-ins in the controls stack
+    qtbot.waitUntil(lambda: len(made) == 3, timeout=5000)
+    qtbot.wait(50)
+    assert sorted(made) == sorted(x.name for x in layers)
+    assert not any(container.widgets[x].objectName() == CONTROLS_STAND_IN for x in layers)
+    assert container.currentWidget() is container.widgets[active]
+    extra = viewer.add_image(np.zeros((4, 4), np.float32), name="extra")
+    assert made[-1] == "extra" and container.widgets[extra].objectName() != CONTROLS_STAND_IN
+    viewer.layers.clear()  # every stand-in is gone, no controls left behind
+    assert container.widgets == {}

@@ -144,7 +144,7 @@ def test_a_run_shows_its_layers_one_per_frame(make_napari_viewer, qtbot, tiny_n1
     """vispy builds a new visual's shaders at its first draw: a frame that draws every new layer
     of a run at once was the longest stall of a run (0.26-0.63 s measured on fr-alps, loaded).
     The run's visible layers are shown one at a time, each in a frame of its own, once all are
-    in (the canvas draws nothing while they go in: ``layout.canvas_updates``)."""
+    in (the canvas draws nothing while they go in: ``insertion.canvas_updates``)."""
     viewer = make_napari_viewer(show=True)
     widget = OrthorectifyWidget(viewer)
     widget.products.value = [tiny_n1]
@@ -478,12 +478,12 @@ def test_freeze_undone_when_a_held_layer_goes_from_the_docked_widget(make_napari
 
 def test_a_docked_widget_holds_the_canvas_without_napari_privates(make_napari_viewer):
     """Docked, the widget holds napari's public-only proxy of the viewer. Holding the canvas
-    still through it (``layout.canvas_updates``, at every run) reached ``Window._qt_viewer``
+    still through it (``insertion.canvas_updates``, at every run) reached ``Window._qt_viewer``
     through the proxy: a FutureWarning at each run, and no hold at all once napari 0.10 blocks
     such access (then Mesa's crash between insertions is back)."""
     import warnings
 
-    from napari_meris_ortho._napari.layout import canvas_updates
+    from napari_meris_ortho._napari._qt.insertion import canvas_updates
 
     viewer = make_napari_viewer(show=True)
     _, widget = viewer.window.add_plugin_dock_widget("napari-meris-ortho", "Orthorectify")
@@ -506,7 +506,7 @@ def test_a_layers_controls_are_made_in_a_turn_of_their_own(make_napari_viewer, q
     stand-in is left, and the scene graph held during the insertions is rebuilt in order."""
     from napari._qt.layer_controls import qt_layer_controls_container as qlc
 
-    from napari_meris_ortho._napari.layout import CONTROLS_STAND_IN
+    from napari_meris_ortho._napari._qt.insertion import CONTROLS_STAND_IN
 
     viewer = make_napari_viewer(show=True)
     _, widget = viewer.window.add_plugin_dock_widget("napari-meris-ortho", "Orthorectify")
@@ -565,7 +565,7 @@ def test_a_layer_selected_or_removed_before_its_controls_are_made(make_napari_vi
     """In the turn between a layer's insertion and its controls, napari finds the stand-in:
     selecting the layer shows it (then its controls once made), removing the layer removes it
     (napari looked the controls up and failed with a KeyError without one)."""
-    from napari_meris_ortho._napari.layout import (
+    from napari_meris_ortho._napari._qt.insertion import (
         CONTROLS_STAND_IN,
         add_controls,
         append_inactive,

@@ -11,7 +11,7 @@ from __future__ import annotations
 import weakref
 from typing import Any
 
-from .layout import draw_now
+from ._qt.insertion import draw_now
 
 _WATCHED: weakref.WeakSet[Any] = weakref.WeakSet()
 #: viewers whose text overlay shows a legend of ours

@@ -36,6 +36,7 @@ from ..pyramid import (
     level_factors,
     selection_radiance,
 )
+from ._qt.insertion import defer_controls
 from .product_layers import QUICKLOOK_BANDS
 from .status import BAND_AXIS
 from .world import geo_image_kwargs, place_on_frame, viewer_frame
@@ -84,6 +85,8 @@ def read_store(path: str | list[str]) -> list[LayerData]:
     extent = data_extent(layers)
     if empty and extent is not None:  # napari frames the whole grid: frame what it holds
         frame_later(viewer, *extent)
+    if viewer is not None:  # the first pixels before the layers' controls
+        defer_controls(viewer, len(layers))
     return layers
 
 
@@ -137,6 +140,9 @@ def read_layers(path: str | list[str]) -> list[LayerData]:
             layers.extend(new)
             if frame is None and new:
                 frame = OutputGrid.from_transform(**_frame_args(new[0][1]))
+    viewer = _current_viewer()
+    if viewer is not None:  # the first pixels before the layers' controls
+        defer_controls(viewer, len(layers))
     return layers
 
 

@@ -22,8 +22,7 @@ import numpy as np
 from ..display import contrast_limits
 from ..geometry.grid import OutputGrid
 from ..progress import ProgressCallback
-from .geometry_layers import geometry_layers
-from .layout import (
+from ._qt.insertion import (
     SHOW_STEP_MS,
     add_controls,
     append_inactive,
@@ -32,6 +31,7 @@ from .layout import (
     make_controls,
     show_in,
 )
+from .geometry_layers import geometry_layers
 from .ortho_run import multiscale_layer
 from .product_layers import band_layers
 from .world import geo_image_kwargs, reproject_onto
@@ -244,7 +244,7 @@ class SampleLoader:
             self._rename(f"MERIS sample {self.name} failed: {self.error}")
             _LOADERS.discard(self)
             raise self.error
-        # shown one per frame once all are in (``layout.SHOW_STEP_MS``), as a run's layers
+        # shown one per frame once all are in (``insertion.SHOW_STEP_MS``), as a run's layers
         self._hidden = hide_for_now(self.layers or [])
         canvas_updates(self.viewer, False)
         self._step()

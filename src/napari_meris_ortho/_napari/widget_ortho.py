@@ -42,20 +42,19 @@ from magicgui.widgets import (
 from .._process import unit_registry_from_disk
 from ..errors import MerisOrthoError
 from ..options import PARALLAX_CHOICES, Elevation, Parallax, Sampling, SearchMethod, choices
-from .layout import (
+from ._qt.insertion import (
     SHOW_STEP_MS,
-    StatusLabel,
     add_controls,
     append_inactive,
     build_overlays,
     canvas_updates,
-    frame_extent,
     hide_for_now,
     make_controls,
     prepare_dash_patterns,
     scene_graph_paused,
     show_in,
 )
+from .layout import StatusLabel, frame_extent
 from .legend import prepare_glyphs, show_legends
 from .memory import freeze_long_lived, thaw, trim_after_removals
 from .ortho_run import (

@@ -1,0 +1,286 @@
+"""How a run's, a sample's and a reader's layers go into a live napari viewer without a long
+turn of the Qt event loop (issue 24, item 1): the canvas held still while they go in
+(``canvas_updates``), one layer per turn without switching the layer controls to it
+(``append_inactive``), napari's controls of a layer made and styled in later turns
+(``controls_later``, ``make_controls``, ``add_controls``, ``defer_controls``), napari's scene
+graph rebuilt once (``scene_graph_paused``, ``build_overlays``), new layers shown one per frame
+(``hide_for_now``, ``show_in``).
+
+Some of this leans on napari's Qt internals (its canvas, its controls stack, its scene graph
+switch); each is checked before use, and a napari without it gets napari's plain insertion.
+"""
+
+from __future__ import annotations
+
+import contextlib
+from typing import Any
+
+#: ms between showing two new layers (a run's, a sample's), one per frame: vispy builds a new
+#: visual's shaders at its first draw, so a frame drawing them all was the longest stall. Each
+#: is drawn in the turn after the one that shows it (canvas updates off while it is shown)
+SHOW_STEP_MS = 40
+
+
+def hide_for_now(layers: list[Any]) -> list[Any]:
+    """Hide the visible ones of ``layers`` (shown one per frame later); returns them."""
+    shown = [layer for layer in layers if layer.visible]
+    for layer in shown:
+        layer.visible = False
+    return shown
+
+
+def show_in(viewer: Any, layers: list[Any]) -> None:
+    """Show those of ``layers`` that are in the viewer."""
+    for layer in layers:
+        if layer in viewer.layers:
+            layer.visible = True
+
+
+def prepare_dash_patterns() -> None:
+    """vispy's line dash patterns built now (it keeps them): every labels layer's polygon
+    overlay builds them, 0.08 s in the session's first labels layer insertion (measured)."""
+    with contextlib.suppress(ImportError):  # a vispy without it: nothing to prepare
+        from vispy.visuals.line.dash_atlas import DashAtlas
+
+        DashAtlas()
+
+
+def _canvas(viewer: Any) -> Any:
+    """The canvas's Qt widget (None without a Qt window)."""
+    window = getattr(getattr(viewer, "__wrapped__", viewer), "window", None)  # not the proxy
+    return getattr(getattr(getattr(window, "_qt_viewer", None), "canvas", None), "native", None)
+
+
+def draw_now(viewer: Any) -> None:
+    """Draw the canvas at once, if it is shown."""
+    native = _canvas(viewer)
+    if native is not None and native.isVisible():
+        native.repaint()
+
+
+def canvas_updates(viewer: Any, enabled: bool) -> None:
+    """Stop (and restart) the canvas repainting while a run's or a sample's layers go in one per
+    event-loop turn: a draw between two insertions crashed Mesa's software GL under Xvfb
+    (segmentation fault in glDrawArrays); the rest of the window (progress bar, Cancel, the
+    layer list) keeps responding. No-op without a Qt window."""
+    native = _canvas(viewer)
+    if native is None:
+        return
+    with contextlib.suppress(RuntimeError):  # the Qt object is already deleted
+        native.setUpdatesEnabled(enabled)
+        if enabled:
+            native.update()
+
+
+def scene_graph_paused(viewer: Any, paused: bool) -> None:
+    """Hold (``paused``) or rebuild napari's scene graph while a run's layers go in, one per
+    turn: every insertion otherwise rebuilds it for all the layers of the viewer (their order,
+    their overlays, a pass of the canvas's draw hook): 0.01-0.02 s per image layer, 0.07-0.08 s
+    for a labels layer, whose polygon overlay is built there (measured, software GL). The
+    rebuild of ``paused=False`` then takes a turn of its own. napari's own switch (the one its
+    batched layer changes use, without their garbage collection); no-op without it."""
+    window = getattr(getattr(viewer, "__wrapped__", viewer), "window", None)
+    canvas = getattr(getattr(window, "_qt_viewer", None), "canvas", None)
+    if canvas is None or not isinstance(getattr(canvas, "_pause_scene_graph", None), bool):
+        return
+    if canvas._pause_scene_graph == paused:
+        return
+    canvas._pause_scene_graph = paused
+    if not paused:
+        with contextlib.suppress(RuntimeError):  # the Qt objects are already deleted
+            canvas._update_scenegraph()
+
+
+def build_overlays(viewer: Any, layer: Any) -> None:
+    """Have napari build the canvas overlays of ``layer`` now, in a turn of their own, while the
+    scene graph is held (``scene_graph_paused``): a labels layer's polygon and brush overlays
+    took 0.08-0.14 s of the rebuild's turn (fr-alps, software GL). No-op without them."""
+    window = getattr(getattr(viewer, "__wrapped__", viewer), "window", None)
+    canvas = getattr(getattr(window, "_qt_viewer", None), "canvas", None)
+    update = getattr(canvas, "_update_layer_overlays", None)
+    if callable(update) and layer in getattr(canvas, "layer_to_visual", {}):
+        with contextlib.suppress(RuntimeError):  # the Qt objects are already deleted
+            update(layer)
+
+
+def _controls_container(viewer: Any) -> Any:
+    """napari's stack of layer controls, if the window has made it (None otherwise)."""
+    window = getattr(getattr(viewer, "__wrapped__", viewer), "window", None)
+    container = getattr(getattr(window, "_qt_viewer", None), "_controls", None)
+    ok = callable(getattr(container, "_add", None)) and isinstance(
+        getattr(container, "widgets", None), dict)
+    return container if ok else None
+
+
+#: object name of the empty frame that holds a layer's place in napari's controls stack until
+#: ``add_controls`` makes its controls
+CONTROLS_STAND_IN = "meris_ortho_controls_stand_in"
+
+
+def append_inactive(viewer: Any, layer: Any, controls_later: bool = False) -> bool:
+    """Append ``layer`` to the viewer without making it the active layer: activating (the
+    controls switch to it, the list updates its selection) is a third of an insertion's time,
+    paid at each turn of a run's insertions; the caller activates one layer at the end.
+    napari's own switch (``_activate_on_insert``); without it (a future napari), activated.
+
+    ``controls_later``: napari's controls of the layer are not made in this insertion but by
+    :func:`add_controls`, in a turn of their own (making them and Qt's styling of their
+    widgets were 0.1-0.2 s of the 0.2-0.3 s an insertion's turn took, measured on fr-alps
+    under software GL); an empty frame holds their place meanwhile (napari finds it if the
+    layer is selected or removed first). Returns whether they are still to be made."""
+    layers = getattr(viewer, "__wrapped__", viewer).layers  # the plugin's public-only proxy
+    layers = getattr(layers, "__wrapped__", layers)
+    container = _controls_container(viewer) if controls_later else None
+    previous = getattr(layers, "_activate_on_insert", True)
+    layers._activate_on_insert = False
+    try:
+        if container is None:
+            layers.append(layer)
+            return False
+        with layers.events.inserted.blocker(container._add):
+            layers.append(layer)
+    finally:
+        layers._activate_on_insert = previous
+    if layer in container.widgets or layer not in layers:
+        return False
+    _put_stand_in(container, layer)
+    return True
+
+
+#: ms after a reader's last layer went in before their controls are made, and again while
+#: napari's opening still runs (its progress bar processes events, painting the first frame)
+CONTROLS_AFTER_OPEN_MS = 50
+#: ms after a reader returned when its deferral ends anyway (napari inserted fewer layers)
+CONTROLS_FALLBACK_MS = 2000
+
+
+def defer_controls(viewer: Any, count: int) -> None:
+    """Leave napari's controls of the next ``count`` layers inserted into ``viewer`` (those a
+    reader returns, which napari inserts right after, in the same call) to later turns, as
+    ``append_inactive(controls_later=True)`` does: a stand-in frame at their insertion, the
+    controls made and put in napari's stack two turns per layer once the opening has returned.
+    The canvas shows the layers first: making the controls and Qt's styling of them were
+    0.1-0.2 s per layer of an N1's opening under software GL. A layer selected or removed
+    meanwhile finds its stand-in. No-op without napari's controls stack or Qt."""
+    container = _controls_container(viewer)
+    if container is None or count < 1:
+        return
+    try:
+        from qtpy.QtCore import QTimer
+    except ImportError:
+        return
+    events = getattr(getattr(viewer, "__wrapped__", viewer).layers, "events", None)
+    inserted = getattr(events, "inserted", None)
+    if inserted is None:
+        return
+    pending: list[Any] = []
+    state = {"blocked": True}
+
+    def stop() -> None:
+        if state["blocked"]:
+            state["blocked"] = False
+            inserted.unblock(container._add)
+            inserted.disconnect(stand_in)
+
+    def stand_in(event: Any) -> None:
+        layer = event.value
+        if layer not in container.widgets:
+            _put_stand_in(container, layer)
+            pending.append(layer)
+        if len(pending) >= count:
+            stop()
+            QTimer.singleShot(CONTROLS_AFTER_OPEN_MS, next_step)
+
+    def next_step(made: bool = False) -> None:
+        if not pending:
+            return
+        if _in_viewer_open():  # napari processes events before its opening returns
+            QTimer.singleShot(CONTROLS_AFTER_OPEN_MS, lambda: next_step(made))
+            return
+        if made:
+            add_controls(viewer, [pending.pop(0)])
+        else:
+            make_controls(viewer, pending[0])
+        QTimer.singleShot(1, lambda: next_step(not made))
+
+    def fallback() -> None:  # fewer layers came (an error): napari makes any others' itself
+        if state["blocked"]:
+            stop()
+            next_step()
+
+    inserted.block(container._add)
+    inserted.connect(stand_in)
+    QTimer.singleShot(CONTROLS_FALLBACK_MS, fallback)
+
+
+def _in_viewer_open() -> bool:
+    """Whether this runs inside napari's ``ViewerModel.open`` (its progress bar processes the
+    Qt events before the opening returns)."""
+    import sys
+
+    frame: Any = sys._getframe(1)
+    while frame is not None:
+        code = frame.f_code
+        if code.co_name == "open" and code.co_filename.endswith("viewer_model.py"):
+            return True
+        frame = frame.f_back
+    return False
+
+
+def _put_stand_in(container: Any, layer: Any) -> None:
+    """An empty frame in napari's controls stack in place of ``layer``'s controls."""
+    from qtpy.QtWidgets import QFrame
+
+    stand_in = QFrame()
+    stand_in.setObjectName(CONTROLS_STAND_IN)
+    container.addWidget(stand_in)
+    container.widgets[layer] = stand_in
+
+
+def make_controls(viewer: Any, layer: Any) -> None:
+    """Make napari's controls of ``layer`` (appended with ``controls_later``) without putting
+    them in the controls stack yet (:func:`add_controls` does, in a later turn): making them
+    and Qt's styling of their widgets once in the stack were 0.06-0.08 s and 0.06-0.1 s of one
+    turn (fr-alps, software GL)."""
+    container = _controls_container(viewer)
+    stand_in = None if container is None else container.widgets.get(layer)
+    if (stand_in is None or stand_in.objectName() != CONTROLS_STAND_IN
+            or layer not in viewer.layers or getattr(stand_in, "controls", None) is not None):
+        return
+    try:
+        from napari._qt.layer_controls.qt_layer_controls_container import (
+            create_qt_layer_controls,
+        )
+    except ImportError:  # a napari without it: add_controls makes them
+        return
+    stand_in.controls = create_qt_layer_controls(layer)
+
+
+def add_controls(viewer: Any, layers: Any) -> None:
+    """Put napari's controls of those of ``layers`` that ``append_inactive`` appended with
+    ``controls_later`` in place of their stand-in (made by :func:`make_controls` or now), as
+    napari's own insertion would."""
+    from types import SimpleNamespace
+
+    container = _controls_container(viewer)
+    if container is None:
+        return
+    for layer in layers:
+        stand_in = container.widgets.get(layer)
+        if (layer not in viewer.layers or stand_in is None
+                or stand_in.objectName() != CONTROLS_STAND_IN):
+            continue
+        shown = container.currentWidget() is stand_in
+        made = getattr(stand_in, "controls", None)
+        del container.widgets[layer]
+        container.removeWidget(stand_in)
+        stand_in.controls = None
+        stand_in.deleteLater()
+        if made is None:
+            container._add(SimpleNamespace(value=layer))
+        else:  # what napari's insertion does with the controls it makes
+            made.ndisplay = viewer.dims.ndisplay
+            container.addWidget(made)
+            container.widgets[layer] = made
+        if shown and layer in container.widgets:
+            container.setCurrentWidget(container.widgets[layer])
