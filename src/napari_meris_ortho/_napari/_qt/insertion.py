@@ -45,10 +45,16 @@ def prepare_dash_patterns() -> None:
         DashAtlas()
 
 
+def _qt_viewer(viewer: Any) -> Any:
+    """napari's QtViewer of ``viewer`` (None without a Qt window), reached through the viewer,
+    not the plugin's public-only proxy of it."""
+    window = getattr(getattr(viewer, "__wrapped__", viewer), "window", None)
+    return getattr(window, "_qt_viewer", None)
+
+
 def _canvas(viewer: Any) -> Any:
     """The canvas's Qt widget (None without a Qt window)."""
-    window = getattr(getattr(viewer, "__wrapped__", viewer), "window", None)  # not the proxy
-    return getattr(getattr(getattr(window, "_qt_viewer", None), "canvas", None), "native", None)
+    return getattr(getattr(_qt_viewer(viewer), "canvas", None), "native", None)
 
 
 def draw_now(viewer: Any) -> None:
@@ -79,8 +85,7 @@ def scene_graph_paused(viewer: Any, paused: bool) -> None:
     for a labels layer, whose polygon overlay is built there (measured, software GL). The
     rebuild of ``paused=False`` then takes a turn of its own. napari's own switch (the one its
     batched layer changes use, without their garbage collection); no-op without it."""
-    window = getattr(getattr(viewer, "__wrapped__", viewer), "window", None)
-    canvas = getattr(getattr(window, "_qt_viewer", None), "canvas", None)
+    canvas = getattr(_qt_viewer(viewer), "canvas", None)
     if canvas is None or not isinstance(getattr(canvas, "_pause_scene_graph", None), bool):
         return
     if canvas._pause_scene_graph == paused:
@@ -95,8 +100,7 @@ def build_overlays(viewer: Any, layer: Any) -> None:
     """Have napari build the canvas overlays of ``layer`` now, in a turn of their own, while the
     scene graph is held (``scene_graph_paused``): a labels layer's polygon and brush overlays
     took 0.08-0.14 s of the rebuild's turn (fr-alps, software GL). No-op without them."""
-    window = getattr(getattr(viewer, "__wrapped__", viewer), "window", None)
-    canvas = getattr(getattr(window, "_qt_viewer", None), "canvas", None)
+    canvas = getattr(_qt_viewer(viewer), "canvas", None)
     update = getattr(canvas, "_update_layer_overlays", None)
     if callable(update) and layer in getattr(canvas, "layer_to_visual", {}):
         with contextlib.suppress(RuntimeError):  # the Qt objects are already deleted
@@ -105,8 +109,7 @@ def build_overlays(viewer: Any, layer: Any) -> None:
 
 def _controls_container(viewer: Any) -> Any:
     """napari's stack of layer controls, if the window has made it (None otherwise)."""
-    window = getattr(getattr(viewer, "__wrapped__", viewer), "window", None)
-    container = getattr(getattr(window, "_qt_viewer", None), "_controls", None)
+    container = getattr(_qt_viewer(viewer), "_controls", None)
     ok = callable(getattr(container, "_add", None)) and isinstance(
         getattr(container, "widgets", None), dict)
     return container if ok else None
