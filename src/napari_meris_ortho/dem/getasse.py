@@ -120,6 +120,11 @@ def _float_order(raw: np.ndarray) -> str:
     return best
 
 
+def _tile_key(lat0: int, lon0: int) -> tuple[int, int]:
+    """(row, column) of the 15-degree tile whose south-west corner is ``lat0``, ``lon0``."""
+    return (lat0 + 90) // GETASSE_TILE_DEG, (lon0 + 180) // GETASSE_TILE_DEG
+
+
 class GetasseSource(DemSource):
     """GETASSE30 tiles of a directory (both variants, plain or zipped); global 30" lattice with
     rows from South to North (row r at lat -90 + (r + 0.5)/120)."""
@@ -150,8 +155,7 @@ class GetasseSource(DemSource):
         if lat0 % GETASSE_TILE_DEG or lon0 % GETASSE_TILE_DEG or not (
                 -90 <= lat0 < 90 and -180 <= lon0 < 180):
             raise DemError(f"{f}: not a 15-degree GETASSE30 tile name")
-        key = ((lat0 + 90) // GETASSE_TILE_DEG, (lon0 + 180) // GETASSE_TILE_DEG)
-        self.tiles.setdefault(key, _GetasseTile(f, member))
+        self.tiles.setdefault(_tile_key(lat0, lon0), _GetasseTile(f, member))
 
     def missing_tiles(self, bounds: tuple[float, float, float, float]) -> list[str]:
         """The 15-degree tiles under ``bounds`` the directory lacks (GETASSE30 covers the
@@ -164,8 +168,7 @@ class GetasseSource(DemSource):
         for lat0 in range(lat_lo, lat_hi, step):
             for k in range(int(math.floor(lon_min / step)), int(math.ceil(lon_max / step))):
                 lon0 = (k * step + 180) % 360 - 180
-                key = ((lat0 + 90) // step, (lon0 + 180) // step)
-                if key not in self.tiles:
+                if _tile_key(lat0, lon0) not in self.tiles:
                     out.append(getasse_tile_name(lat0, lon0))
         return out
 

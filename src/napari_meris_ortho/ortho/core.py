@@ -92,7 +92,7 @@ def _check_dem_coverage(stack: Any, boundary: Any) -> dict[str, list[str]]:
         check = getattr(src, "check_covers", None)
         if check is not None:
             check(bounds)
-        missing = src.missing_tiles(bounds) if hasattr(src, "missing_tiles") else []
+        missing = src.missing_tiles(bounds)
         if missing:
             gaps[str(getattr(src, "name", None) or getattr(src, "path", f"dem{k}"))] = missing
     return gaps

@@ -132,8 +132,8 @@ def _prune(root: Path, keep: int) -> st.Pruned:
     """``store.prune`` of the store ``root``, logged; the caller holds its lock."""
     pruned = st.prune(st.open_repository(root), keep)
     log.debug("%s: kept %d commit(s), expired %d, deleted %d object(s), %.1f MB",
-             root, pruned.kept, pruned.expired, pruned.files_deleted,
-             pruned.bytes_deleted / 1e6)
+              root, pruned.kept, pruned.expired, pruned.files_deleted,
+              pruned.bytes_deleted / 1e6)
     return pruned
 
 
