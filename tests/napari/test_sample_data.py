@@ -120,6 +120,11 @@ def test_sample_from_the_menu_loads_in_the_background(make_napari_viewer, qtbot,
     names = [layer.name for layer in viewer.layers]
     assert "reference b7" in names and "orthorectified b7" in names
     assert not any(name.startswith("MERIS sample") for name in names)  # placeholder gone
+    # each layer's controls came in turns after its insertion, in place of a stand-in
+    from napari_meris_ortho._napari._qt.insertion import CONTROLS_STAND_IN
+
+    stack = viewer.window._qt_viewer.controls
+    assert all(stack.widgets[x].objectName() != CONTROLS_STAND_IN for x in viewer.layers)
     assert took[0] < 1.0  # main: the whole simulation and both mappings (11 s)
     assert float(np.diff(stamps).max()) < MAX_GAP_S
 

@@ -24,11 +24,10 @@ from ..geometry.grid import OutputGrid
 from ..progress import ProgressCallback
 from ._qt.insertion import (
     SHOW_STEP_MS,
-    add_controls,
     append_inactive,
     canvas_updates,
+    controls_in_turns,
     hide_for_now,
-    make_controls,
     show_in,
 )
 from .geometry_layers import geometry_layers
@@ -202,8 +201,6 @@ class SampleLoader:
         self.error: BaseException | None = None
         self.label = f"MERIS sample {name} (generating...)"
         self._hidden: list[Any] = []  # the visible layers, shown one per frame at the end
-        self._no_controls: list[Any] = []  # appended, napari's controls still to make
-        self._controls_made = False
         self._bar = progress(total=100, desc=f"MERIS sample {name}")
         self._timer = QTimer()
         self._timer.timeout.connect(self._poll)
@@ -261,20 +258,12 @@ class SampleLoader:
         from qtpy.QtCore import QTimer
 
         try:
-            if self._no_controls:  # the controls of the layer appended last: made in a turn,
-                layer = self._no_controls[0]  # put in napari's stack in the next
-                if self._controls_made:
-                    add_controls(self.viewer, [self._no_controls.pop(0)])
-                else:
-                    make_controls(self.viewer, layer)
-                self._controls_made = not self._controls_made
-                QTimer.singleShot(1, self._step)
-                return
             if self.layers:  # inactive: the layer controls do not switch at every turn
                 layer = self.layers.pop(0)
                 if append_inactive(self.viewer, layer, controls_later=True):
-                    self._no_controls.append(layer)
-                QTimer.singleShot(1, self._step)  # timers and paints due run in between
+                    controls_in_turns(self.viewer, [layer], then=self._step)  # a turn each
+                else:
+                    QTimer.singleShot(1, self._step)  # timers and paints due run in between
                 return
             for layer in self._placeholders():
                 self.viewer.layers.remove(layer)
@@ -305,8 +294,6 @@ class SampleLoader:
         QTimer.singleShot(SHOW_STEP_MS, self._show_next)
 
     def _finish(self) -> None:
-        add_controls(self.viewer, self._no_controls)
-        self._no_controls = []
         canvas_updates(self.viewer, True)
         hidden, self._hidden = self._hidden, []
         show_in(self.viewer, hidden)  # an error part-way: what is in shows at once

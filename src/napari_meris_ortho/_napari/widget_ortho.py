@@ -269,7 +269,6 @@ class OrthorectifyWidget(Container):
         self._queued, self._summary = 0, ""
         self._hidden: list[Any] = []  # a run's layers waiting to be shown (``_done``)
         self._batch_open = False  # napari's batch of layer removals (``_removals``)
-        self._controls_missing: list[Any] = []  # appended, controls not made yet
         #: what the queued changes have done so far: (index, layer) removed, layers appended;
         #: a Cancel in the middle undoes them (``_undo_changes``)
         self._removed: list[tuple[int, Any]] = []
@@ -533,19 +532,16 @@ class OrthorectifyWidget(Container):
         make_controls(self.viewer, layer)
 
     def _add_controls(self, layer: Any = None) -> None:
-        """napari's controls of ``layer`` (None: of every appended layer still without them:
-        before any is selected or removed)."""
-        todo = self._controls_missing if layer is None else [layer]
-        add_controls(self.viewer, todo)
-        self._controls_missing = [x for x in self._controls_missing if x not in todo]
+        """napari's controls of ``layer`` (None: of every layer appended so far that still has
+        a stand-in: before any is selected or removed)."""
+        add_controls(self.viewer, self._appended if layer is None else [layer])
 
     def _scene_graph(self, paused: Any) -> None:
         scene_graph_paused(self.viewer, bool(paused))
 
     def _append(self, layer: Any) -> None:
         self._scene_graph(True)  # rebuilt once, after the last (``_scene_graph(False)``)
-        if append_inactive(self.viewer, layer, controls_later=True):
-            self._controls_missing.append(layer)
+        append_inactive(self.viewer, layer, controls_later=True)
         self._appended.append(layer)
 
     def _show(self, layer: Any) -> None:

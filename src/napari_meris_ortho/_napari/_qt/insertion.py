@@ -192,28 +192,41 @@ def defer_controls(viewer: Any, count: int) -> None:
             pending.append(layer)
         if len(pending) >= count:
             stop()
-            QTimer.singleShot(CONTROLS_AFTER_OPEN_MS, next_step)
+            QTimer.singleShot(CONTROLS_AFTER_OPEN_MS, lambda: controls_in_turns(viewer, pending))
 
-    def next_step(made: bool = False) -> None:
+    def fallback() -> None:  # fewer layers came (an error): napari makes any others' itself
+        if state["blocked"]:
+            stop()
+            controls_in_turns(viewer, pending)
+
+    inserted.block(container._add)
+    inserted.connect(stand_in)
+    QTimer.singleShot(CONTROLS_FALLBACK_MS, fallback)
+
+
+def controls_in_turns(viewer: Any, layers: list[Any], then: Any = None) -> None:
+    """Make napari's controls of ``layers`` (appended with a stand-in) and put them in its
+    stack, each in a turn of its own from the next one on (``make_controls``,
+    ``add_controls``), never inside napari's opening; then call ``then()``."""
+    from qtpy.QtCore import QTimer
+
+    pending = list(layers)
+
+    def step(made: bool = False) -> None:
         if not pending:
+            if then is not None:
+                then()
             return
         if _in_viewer_open():  # napari processes events before its opening returns
-            QTimer.singleShot(CONTROLS_AFTER_OPEN_MS, lambda: next_step(made))
+            QTimer.singleShot(CONTROLS_AFTER_OPEN_MS, lambda: step(made))
             return
         if made:
             add_controls(viewer, [pending.pop(0)])
         else:
             make_controls(viewer, pending[0])
-        QTimer.singleShot(1, lambda: next_step(not made))
+        QTimer.singleShot(1, lambda: step(not made))
 
-    def fallback() -> None:  # fewer layers came (an error): napari makes any others' itself
-        if state["blocked"]:
-            stop()
-            next_step()
-
-    inserted.block(container._add)
-    inserted.connect(stand_in)
-    QTimer.singleShot(CONTROLS_FALLBACK_MS, fallback)
+    QTimer.singleShot(1, step)  # not in the caller's turn (an insertion's)
 
 
 def _in_viewer_open() -> bool:
