@@ -204,3 +204,29 @@ def test_an_n1_is_drawn_before_its_layers_controls_are_made(make_napari_viewer, 
     assert made[-1] == "extra" and container.widgets[extra].objectName() != CONTROLS_STAND_IN
     viewer.layers.clear()  # every stand-in is gone, no controls left behind
     assert container.widgets == {}
+
+
+def test_an_n1s_flags_overlays_are_built_after_its_first_frame(make_napari_viewer, qtbot,
+                                                              tiny_n1):
+    """napari builds a labels layer's polygon and brush overlays at its insertion (0.07-0.08 s
+    of an N1's opening, 0.3 s at the session's first). The reader holds napari's scene graph
+    for its hidden flags layer, the last one: the first frame is drawn without them, and they
+    are built (and the flags layer joins the scene) in the turns after the opening."""
+    viewer = make_napari_viewer(show=True)
+    canvas = viewer.window._qt_viewer.canvas
+    radiance, rgb, flags = viewer.open(tiny_n1, plugin="napari-meris-ortho")
+    assert not canvas._layer_overlay_to_visual.get(flags)
+    assert canvas._pause_scene_graph
+    assert canvas.layer_to_visual[rgb].node.parent is canvas.view.scene  # in the first frame
+    assert canvas.layer_to_visual[flags].node.parent is None
+    viewer.screenshot(canvas_only=True)
+    qtbot.waitUntil(lambda: not canvas._pause_scene_graph, timeout=5000)
+    built = canvas._layer_overlay_to_visual[flags]
+    assert {type(o).__name__ for o in built} == {"LabelsPolygonOverlay",
+                                                "LabelsBrushStrokeOverlay"}
+    assert canvas.layer_to_visual[flags].node.parent is canvas.view.scene
+    flags.visible = True  # the scene graph follows the layers again
+    flags.mode = "polygon"
+    assert built[flags._overlays["polygon"]].node.visible
+    extra = viewer.add_labels(np.zeros((4, 4), np.uint8), name="extra")
+    assert len(canvas._layer_overlay_to_visual[extra]) == 2

@@ -86,7 +86,7 @@ def read_store(path: str | list[str]) -> list[LayerData]:
     if empty and extent is not None:  # napari frames the whole grid: frame what it holds
         frame_later(viewer, *extent)
     if viewer is not None:  # the first pixels before the layers' controls
-        defer_controls(viewer, len(layers))
+        defer_controls(viewer, [kind for _, _, kind in layers])
     return layers
 
 
@@ -142,7 +142,7 @@ def read_layers(path: str | list[str]) -> list[LayerData]:
                 frame = OutputGrid.from_transform(**_frame_args(new[0][1]))
     viewer = _current_viewer()
     if viewer is not None:  # the first pixels before the layers' controls
-        defer_controls(viewer, len(layers))
+        defer_controls(viewer, [kind for _, _, kind in layers])
     return layers
 
 

@@ -3,7 +3,8 @@ turn of the Qt event loop (issue 24, item 1): the canvas held still while they g
 (``canvas_updates``), one layer per turn without switching the layer controls to it
 (``append_inactive``), napari's controls of a layer made and styled in later turns
 (``controls_later``, ``make_controls``, ``add_controls``, ``defer_controls``), napari's scene
-graph rebuilt once (``scene_graph_paused``, ``build_overlays``), new layers shown one per frame
+graph rebuilt once and a labels layer's overlays built in a turn of their own
+(``scene_graph_paused``, ``build_overlays``), new layers shown one per frame
 (``hide_for_now``, ``show_in``).
 
 Some of this leans on napari's Qt internals (its canvas, its controls stack, its scene graph
@@ -13,6 +14,8 @@ switch); each is checked before use, and a napari without it gets napari's plain
 from __future__ import annotations
 
 import contextlib
+from collections.abc import Callable, Sequence
+from functools import partial
 from typing import Any
 
 #: ms between showing two new layers (a run's, a sample's), one per frame: vispy builds a new
@@ -157,14 +160,24 @@ CONTROLS_AFTER_OPEN_MS = 50
 CONTROLS_FALLBACK_MS = 2000
 
 
-def defer_controls(viewer: Any, count: int) -> None:
-    """Leave napari's controls of the next ``count`` layers inserted into ``viewer`` (those a
-    reader returns, which napari inserts right after, in the same call) to later turns, as
+def defer_controls(viewer: Any, kinds: Sequence[str]) -> None:
+    """Leave napari's controls of the next ``len(kinds)`` layers inserted into ``viewer`` (those
+    a reader returns, which napari inserts right after, in the same call; ``kinds``: their
+    napari layer types, in that order) to later turns, as
     ``append_inactive(controls_later=True)`` does: a stand-in frame at their insertion, the
     controls made and put in napari's stack two turns per layer once the opening has returned.
     The canvas shows the layers first: making the controls and Qt's styling of them were
     0.1-0.2 s per layer of an N1's opening under software GL. A layer selected or removed
-    meanwhile finds its stand-in. No-op without napari's controls stack or Qt."""
+    meanwhile finds its stand-in.
+
+    From the first labels layer on, napari's scene graph is held (``scene_graph_paused``): its
+    insertion would build the labels' polygon and brush overlays, 0.07-0.08 s of an N1's
+    opening and 0.3 s at the session's first (measured, fr-alps, software GL). They are built
+    after the controls, in a turn of their own (``build_overlays``, after one for vispy's dash
+    patterns, 0.17 s of the session's first), and the scene graph rebuilt in the next; layers
+    inserted after a labels layer are not in the first frame (the readers put their hidden
+    labels last). No-op without napari's controls stack or Qt."""
+    count = len(kinds)
     container = _controls_container(viewer)
     if container is None or count < 1:
         return
@@ -177,7 +190,10 @@ def defer_controls(viewer: Any, count: int) -> None:
     if inserted is None:
         return
     pending: list[Any] = []
-    state = {"blocked": True}
+    labels = [k for k, kind in enumerate(kinds) if kind == "labels"]
+    held = labels[0] if labels else count  # the first insertion with the scene graph held
+    inserted_labels: list[Any] = []
+    state = {"blocked": True, "seen": 0}
 
     def stop() -> None:
         if state["blocked"]:
@@ -185,48 +201,66 @@ def defer_controls(viewer: Any, count: int) -> None:
             inserted.unblock(container._add)
             inserted.disconnect(stand_in)
 
+    def then() -> None:  # vispy's dash patterns, each labels layer's overlays, then the
+        if held < count:  # scene graph, a turn each
+            in_turns([prepare_dash_patterns,
+                      *(partial(build_overlays, viewer, layer) for layer in inserted_labels),
+                      partial(scene_graph_paused, viewer, False)])
+
     def stand_in(event: Any) -> None:
         layer = event.value
+        if state["seen"] in labels:
+            inserted_labels.append(layer)
+        state["seen"] += 1
+        if state["seen"] == held < count:  # the next one is a labels layer
+            scene_graph_paused(viewer, True)
         if layer not in container.widgets:
             _put_stand_in(container, layer)
             pending.append(layer)
         if len(pending) >= count:
             stop()
-            QTimer.singleShot(CONTROLS_AFTER_OPEN_MS, lambda: controls_in_turns(viewer, pending))
+            QTimer.singleShot(CONTROLS_AFTER_OPEN_MS,
+                              lambda: controls_in_turns(viewer, pending, then))
 
     def fallback() -> None:  # fewer layers came (an error): napari makes any others' itself
         if state["blocked"]:
             stop()
-            controls_in_turns(viewer, pending)
+            controls_in_turns(viewer, pending, then)
 
+    if held == 0:
+        scene_graph_paused(viewer, True)
     inserted.block(container._add)
     inserted.connect(stand_in)
     QTimer.singleShot(CONTROLS_FALLBACK_MS, fallback)
+
+
+def in_turns(steps: list[Callable[[], Any]]) -> None:
+    """Call each of ``steps`` in a turn of the Qt event loop of its own, from the next one on,
+    never inside napari's opening."""
+    from qtpy.QtCore import QTimer
+
+    pending = list(steps)
+
+    def step() -> None:
+        if not pending:
+            return
+        if _in_viewer_open():  # napari processes events before its opening returns
+            QTimer.singleShot(CONTROLS_AFTER_OPEN_MS, step)
+            return
+        pending.pop(0)()
+        QTimer.singleShot(1, step)
+
+    QTimer.singleShot(1, step)
 
 
 def controls_in_turns(viewer: Any, layers: list[Any], then: Any = None) -> None:
     """Make napari's controls of ``layers`` (appended with a stand-in) and put them in its
     stack, each in a turn of its own from the next one on (``make_controls``,
     ``add_controls``), never inside napari's opening; then call ``then()``."""
-    from qtpy.QtCore import QTimer
-
-    pending = list(layers)
-
-    def step(made: bool = False) -> None:
-        if not pending:
-            if then is not None:
-                then()
-            return
-        if _in_viewer_open():  # napari processes events before its opening returns
-            QTimer.singleShot(CONTROLS_AFTER_OPEN_MS, lambda: step(made))
-            return
-        if made:
-            add_controls(viewer, [pending.pop(0)])
-        else:
-            make_controls(viewer, pending[0])
-        QTimer.singleShot(1, lambda: step(not made))
-
-    QTimer.singleShot(1, step)  # not in the caller's turn (an insertion's)
+    steps: list[Callable[[], Any]] = []
+    for layer in layers:
+        steps += [partial(make_controls, viewer, layer), partial(add_controls, viewer, [layer])]
+    in_turns(steps if then is None else [*steps, then])
 
 
 def _in_viewer_open() -> bool:
