@@ -95,6 +95,37 @@ def test_parallax_vectors_legend(mapped):
     assert 0 < vectors.edge_width <= spacing / 4
 
 
+def test_parallax_vector_spacing_is_automatic_unless_chosen(mapped):
+    """The widget's default spacing (``auto``) puts about 60 vectors across the larger side of
+    the output grid (one every 8 px at least): one every 16 px drew 22k overlapping arrows on
+    fr-alps, which napari sliced and drew at every change (0.1-0.13 s a turn)."""
+    from napari_meris_ortho._napari.geometry_layers import geometry_layers, vector_step_for
+    from napari_meris_ortho.geometry.grid import OutputGrid
+
+    viewer, widget = mapped
+    assert widget.vector_step.value == 0
+    assert widget.vector_step.native.specialValueText() == "auto"
+    vectors = viewer.layers[f"parallax ×10 · {STAMP}"]
+    rgb = viewer.layers[f"ortho RGB 7-5-2 · {STAMP}"]
+    shape = (rgb.data[0] if rgb.multiscale else rgb.data).shape[:2]
+    assert vectors.metadata["step"] == max(8, max(shape) // 60)
+
+    fr_alps = OutputGrid("EPSG:32632", 300_000.0, 5_200_000.0, 300.0, 300.0, 2950, 2720)
+    assert vector_step_for(fr_alps) == 49
+    assert vector_step_for(OutputGrid("EPSG:32632", 0.0, 0.0, 300.0, 300.0, 300, 200)) == 8
+    n = 12
+    lat, lon = np.mgrid[46.0:45.0:n * 1j, 7.0:9.0:n * 1j]
+    shift = np.full((fr_alps.height, fr_alps.width), 100.0)
+    for step, expected in ((0, 49), (16, 16)):
+        layers = geometry_layers({"latitude": lat, "longitude": lon}, fr_alps,
+                                 diagnostics={"shift_east_m": shift, "shift_north_m": shift},
+                                 step=step)
+        parallax = layers[-1]
+        assert parallax[1]["metadata"]["step"] == expected
+        assert len(parallax[0]) == len(range(expected // 2, 2950, expected)) * len(
+            range(expected // 2, 2720, expected))
+
+
 def test_elevation_source_legend(mapped, tiny_dem):
     viewer, _ = mapped
     source = viewer.layers[f"elevation source · {STAMP}"]

@@ -72,7 +72,9 @@ class RunSettings:
     input_store: Path | None = None
     geometry: bool = True
     exaggeration: float = 10.0
-    vector_step: int = 16
+    #: one parallax vector every this many output pixels; 0: about 60 across the grid
+    #: (``geometry_layers.vector_step_for``)
+    vector_step: int = 0
 
     @property
     def pixel(self) -> bool:

@@ -129,8 +129,7 @@ def sample_layers(sample: SampleScene) -> list[LayerData]:
     layers += band_layers(sample.orthorectified, frame, "orthorectified",
                           {"elevation": "dem"}, sample.valid)
     layers += geometry_layers(sample.tie_points, frame, "", sample.diagnostics,
-                              valid=sample.valid, exaggeration=10.0,
-                              step=max(8, max(frame.width, frame.height) // 60))
+                              valid=sample.valid, exaggeration=10.0)
     return [multiscale_layer(layer) for layer in layers]  # big rasters as pyramids, as a run's
 
 
