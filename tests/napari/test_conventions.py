@@ -96,7 +96,7 @@ def test_parallax_vectors_legend(mapped):
 
 
 def test_parallax_vector_spacing_is_automatic_unless_chosen(mapped):
-    """The widget's default spacing (``auto``) puts about 60 vectors across the larger side of
+    """The widget's default spacing (0: automatic) puts about 60 vectors across the larger side of
     the output grid (one every 8 px at least): one every 16 px drew 22k overlapping arrows on
     fr-alps, which napari sliced and drew at every change (0.1-0.13 s a turn)."""
     from napari_meris_ortho._napari.geometry_layers import geometry_layers, vector_step_for
@@ -104,7 +104,7 @@ def test_parallax_vector_spacing_is_automatic_unless_chosen(mapped):
 
     viewer, widget = mapped
     assert widget.vector_step.value == 0
-    assert widget.vector_step.native.specialValueText() == "auto"
+    assert widget.vector_step.label == "vector every (px, 0 = auto)"
     vectors = viewer.layers[f"parallax ×10 · {STAMP}"]
     rgb = viewer.layers[f"ortho RGB 7-5-2 · {STAMP}"]
     shape = (rgb.data[0] if rgb.multiscale else rgb.data).shape[:2]

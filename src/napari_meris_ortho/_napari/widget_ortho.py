@@ -237,10 +237,9 @@ class OrthorectifyWidget(Container):
                                          "iterations and elevation source")
         self.exaggeration = FloatSpinBox(label="parallax exaggeration", value=10.0, min=0.1,
                                          max=1000.0, tooltip="length factor of the vectors")
-        self.vector_step = SpinBox(label="vector every (px)", value=0, min=0, max=512,
-                                   tooltip="one parallax vector every this many pixels; "
-                                           "auto: about 60 across the output grid")
-        self.vector_step.native.setSpecialValueText("auto")  # shown for 0
+        self.vector_step = SpinBox(label="vector every (px, 0 = auto)", value=0, min=0,
+                                   max=512, tooltip="one parallax vector every this many "
+                                   "pixels; 0: about 60 across the output grid")
         self.output = FileEdit(label="output (optional)", mode=FileDialogMode.OPTIONAL_FILE,
                                nullable=True,
                                tooltip="GeoTIFF (mapping) or synthesis directory to write")
