@@ -116,7 +116,7 @@ def _pixel_centres(frame: OutputGrid, step: int
 
 
 def parallax_vectors(frame: OutputGrid, shift_east: np.ndarray, shift_north: np.ndarray,
-                     height: np.ndarray | None = None, *, step: int = 16,
+                     height: np.ndarray | None = None, *, step: int,
                      exaggeration: float = 1.0, valid: np.ndarray | None = None
                      ) -> tuple[np.ndarray, np.ndarray]:
     """Parallax shift vectors on a regular subsample of output points (eq. 2, section 2.4).
@@ -169,7 +169,7 @@ def parallax_name(exaggeration: float) -> str:
 
 
 def parallax_layer_data(frame: OutputGrid, shift_east: np.ndarray, shift_north: np.ndarray,
-                        height: np.ndarray | None = None, *, step: int = 16,
+                        height: np.ndarray | None = None, *, step: int,
                         exaggeration: float = 10.0, valid: np.ndarray | None = None,
                         name: str | None = None) -> tuple[np.ndarray, dict, str]:
     """A Vectors layer tuple of the parallax shifts, one every ``step`` pixels, coloured by
