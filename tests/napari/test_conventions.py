@@ -98,7 +98,7 @@ def test_parallax_vectors_legend(mapped):
 def test_parallax_vector_spacing_is_automatic_unless_chosen(mapped):
     """The widget's default spacing (0: automatic) puts about 60 vectors across the larger side of
     the output grid (one every 8 px at least): one every 16 px drew 22k overlapping arrows on
-    fr-alps, which napari sliced and drew at every change (0.1-0.13 s a turn)."""
+    fr-alps, which napari sliced and drew at every change (0.10-0.16 s a turn)."""
     from napari_meris_ortho._napari.geometry_layers import geometry_layers, vector_step_for
     from napari_meris_ortho.geometry.grid import OutputGrid
 

@@ -159,7 +159,7 @@ def vector_step_for(frame: OutputGrid) -> int:
     stays readable in the view that frames the result (fr-alps: one every 49 px, 2.4k vectors,
     where one every 16 px drew 22k arrows, overlapping at ten times their length), and napari
     slices and draws every vector of the layer at each change: showing and first drawing 22k
-    took 0.1-0.13 s of a turn each (measured, software GL)."""
+    took 0.10-0.16 s of a turn each (measured, software GL)."""
     return max(MIN_VECTOR_STEP, max(frame.width, frame.height) // VECTORS_ACROSS)
 
 
