@@ -576,6 +576,60 @@ def test_compact_layers_round_trip_within_half_a_count(products, tmp_path, sampl
         assert (stored[~inside] == 0).all()
 
 
+@pytest.mark.parametrize("sampling", ["nearest", "bilinear"])
+def test_a_products_own_counts_are_merged_as_they_are(products, sampling) -> None:
+    """At the nearest pixel, a standard product's counts already are the compact store's (its
+    scales are Appendix A's): the tile task takes them as they are (``counts_as_stored``), and
+    its state is, array for array, the one made through float32 radiances and back. Bilinear
+    values and a product of other scales go through the radiances."""
+    from dataclasses import replace
+
+    from napari_meris_ortho.engine.synthesis import counts_state, segment_counts_state
+    from napari_meris_ortho.ortho import precompute
+    from napari_meris_ortho.products.open import read_product
+    from napari_meris_ortho.synthesis.run import _Sampled, counts_as_stored
+
+    product = read_product(products["cloudy1"])
+    antecedents = precompute(product, GRID, bands=[5, 7, 13], elevation="tiepoints",
+                             sampling=sampling, hold_bands=True)
+    radiances = antecedents.result().bands
+    scales = {b: float(product.scaling.radiance[b - 1]) for b in (5, 7, 13)}
+    spec = _spec(sampling)
+    assert counts_as_stored(spec, scales) == (sampling == "nearest")
+    assert not counts_as_stored(spec, {**scales, 5: scales[5] * 1.5})
+    assert not counts_as_stored(replace(spec, compact=False), scales)
+    sampled = _Sampled.of(antecedents, spec)
+    assert sampled.counts == (sampling == "nearest")
+    valid = sampled.validated(spec)
+    assert valid.sum() > 50_000
+    red, nir = (sampled.radiance(b, (0, GRID.height, 0, GRID.width)) for b in (7, 13))
+    np.testing.assert_array_equal(red, radiances[7])
+    np.testing.assert_array_equal(nir, radiances[13])
+    if sampling != "nearest":
+        return
+    counts = antecedents.counts([5, 7])
+    fast = counts_state([counts[0], counts[1]], (0, 0), valid, 3, red, nir)
+    slow = segment_counts_state([radiances[5], radiances[7]], (0, 0),
+                                [st.count_divisor(st.BAND_SCALES[b]) for b in (5, 7)],
+                                valid, 3, radiances[7], radiances[13])
+    for name in ("bands", "count", "winner", "ndvi"):
+        assert np.array_equal(getattr(fast, name), getattr(slow, name)), name
+    assert fast.bands.dtype == np.uint16 and fast.bands[0][valid].min() > 0
+    assert (fast.bands[:, ~valid] == 0).all() and (fast.winner[valid] == 3).all()
+
+
+def _spec(sampling: str):
+    """The task description of a maximum-NDVI synthesis of band 5 on GRID."""
+    from napari_meris_ortho.options import OrthoOptions
+    from napari_meris_ortho.synthesis.run import Spec
+
+    options = OrthoOptions.of(None, n_dems=0, bands=[5, 7, 13], elevation="tiepoints",
+                              sampling=sampling)
+    return Spec(grid=(), bands=(5,), algorithm="max-ndvi", dems=(), options=options,
+                reject_bright=False, tile=256, names=("band_05", "ndvi", "count", "product"),
+                overviews=(2,))
+
+
 def test_stored_tile_is_read_while_its_first_piece_is_computed(products, tmp_path,
                                                                monkeypatch) -> None:
     """A tile task starts reading its stored tile before its first piece is orthorectified

@@ -6,10 +6,13 @@ import numpy as np
 import pytest
 
 from napari_meris_ortho.engine.synthesis import (
+    CHUNK_CHANGED,
+    CHUNK_NOT_EMPTY,
     FLAG_BRIGHT,
     FLAG_GLINT_RISK,
     FLAG_INVALID,
     TileState,
+    chunk_changes,
     combine,
     ndvi_decode,
     ndvi_encode,
@@ -167,3 +170,36 @@ def test_maximum_ndvi_keeps_greenest_pixel_all_bands() -> None:
         assert out.bands[:, 0, 0].tolist() == [10.0, 30.0, 5.0]
         assert out.ndvi.tolist() == [[49152, 49152]] and out.winner.tolist() == [[1, 1]]
         assert out.count.tolist() == [[2, 2]]
+
+
+@pytest.mark.parametrize("dtype", [np.uint16, np.int32, np.float32])
+def test_chunk_changes_are_array_equal_and_any_per_block(dtype) -> None:
+    """Per block of a tile (edge blocks cut short, overview views with strides): changed is
+    ``not np.array_equal`` (NaN differs from itself), filled is ``block.any()``."""
+    rng = np.random.default_rng(11)
+    old = rng.integers(0, 3, (300, 260)).astype(dtype)
+    new = old.copy()
+    new[5, 7] += 1  # block (0, 0): changed
+    new[64:128, 64:128] = 0  # block (1, 1): changed, left empty
+    old[64:128, 128:192] = 0
+    new[64:128, 128:192] = 0  # block (1, 2): the same, empty
+    new[299, 259] += 2  # the cut corner block (4, 4)
+    if dtype == np.float32:
+        new[200, 3] = old[200, 3] = np.nan  # block (3, 0): NaN != NaN
+    for view in (slice(None), slice(None, None, 2)):
+        a, b = new[view, view], old[view, view]
+        marks = chunk_changes(a, b, 64)
+        want = np.zeros_like(marks)
+        for i in range(marks.shape[0]):
+            for j in range(marks.shape[1]):
+                x, y = a[64 * i:64 * i + 64, 64 * j:64 * j + 64], b[64 * i:64 * i + 64,
+                                                                    64 * j:64 * j + 64]
+                want[i, j] = ((0 if np.array_equal(x, y) else CHUNK_CHANGED)
+                              | (CHUNK_NOT_EMPTY if x.any() else 0))
+        np.testing.assert_array_equal(marks, want)
+    marks = chunk_changes(new, old, 64)
+    assert marks.shape == (5, 5)
+    assert marks[0, 0] == CHUNK_CHANGED | CHUNK_NOT_EMPTY
+    assert marks[1, 1] == CHUNK_CHANGED and marks[1, 2] == 0
+    assert marks[4, 4] & CHUNK_CHANGED and not marks[2, 2] & CHUNK_CHANGED
+    assert bool(marks[3, 0] & CHUNK_CHANGED) == (dtype == np.float32)

@@ -185,6 +185,18 @@ class TileState:
                          None if self.ndvi is None else self.ndvi.copy())
 
 
+def _state_with(bands: np.ndarray, valid: np.ndarray, index: int, red: np.ndarray | None,
+                nir: np.ndarray | None) -> TileState:
+    """One product's state of its ``bands`` (already 0 outside ``valid``): count 1 and winner
+    ``index`` where valid, with the 16-bit NDVI of ``red``/``nir`` if given."""
+    winner = np.where(valid, np.int32(index), np.int32(0))
+    state = TileState(bands, valid.astype(np.uint16), winner)
+    if red is not None and nir is not None:
+        state.ndvi = _ndvi_codes(np.ascontiguousarray(red, np.float32),
+                                 np.ascontiguousarray(nir, np.float32), valid)
+    return state
+
+
 def segment_counts_state(planes: list[np.ndarray], origin: tuple[int, int],
                          divisors: list[float], valid: np.ndarray, index: int,
                          red: np.ndarray | None = None, nir: np.ndarray | None = None
@@ -197,12 +209,32 @@ def segment_counts_state(planes: list[np.ndarray], origin: tuple[int, int],
     bands = np.empty((len(planes), *valid.shape), np.uint16)
     for k, plane in enumerate(planes):
         _count_plane(bands[k], plane, valid, int(r0), int(c0), float(divisors[k]))
-    winner = np.where(valid, np.int32(index), np.int32(0))
-    state = TileState(bands, valid.astype(np.uint16), winner)
-    if red is not None and nir is not None:
-        state.ndvi = _ndvi_codes(np.ascontiguousarray(red, np.float32),
-                                 np.ascontiguousarray(nir, np.float32), valid)
-    return state
+    return _state_with(bands, valid, index, red, nir)
+
+
+@njit(cache=True, parallel=True)
+def _masked_plane(out: np.ndarray, plane: np.ndarray, valid: np.ndarray, r0: int,
+                  c0: int) -> None:
+    """``out`` = ``plane[r0:, c0:]`` where ``valid``, 0 elsewhere."""
+    rows, cols = out.shape
+    for i in prange(rows):
+        for j in range(cols):
+            out[i, j] = plane[r0 + i, c0 + j] if valid[i, j] else 0
+
+
+def counts_state(planes: list[np.ndarray], origin: tuple[int, int], valid: np.ndarray,
+                 index: int, red: np.ndarray | None = None, nir: np.ndarray | None = None
+                 ) -> TileState:
+    """``segment_counts_state`` of ``planes`` that already are the store's uint16 counts (a
+    product's own counts at the nearest pixel, of the store's scales): the same state, with no
+    pass through radiances (count x scale / scale gives the count back: an error of at most
+    65535 x 2**-24 count)."""
+    valid = np.ascontiguousarray(valid, dtype=np.bool_)
+    r0, c0 = origin
+    bands = np.empty((len(planes), *valid.shape), np.uint16)
+    for k, plane in enumerate(planes):
+        _masked_plane(bands[k], plane, valid, int(r0), int(c0))
+    return _state_with(bands, valid, index, red, nir)
 
 
 def segment_state(segment: np.ndarray, valid: np.ndarray, index: int,
@@ -303,3 +335,35 @@ def count_winners(winner: np.ndarray, n: int) -> np.ndarray:
             if 0 <= w < n:
                 counts[w] += 1
     return counts
+
+
+#: ``chunk_changes`` bits of a block: a value differs from the old one; a value is not 0
+CHUNK_CHANGED = 1
+CHUNK_NOT_EMPTY = 2
+
+
+@njit(cache=True, nogil=True)
+def chunk_changes(new: np.ndarray, old: np.ndarray, chunk: int) -> np.ndarray:
+    """Per ``chunk`` x ``chunk`` block of the 2-D ``new`` against ``old`` (same shape, any
+    strides): ``CHUNK_CHANGED`` where a value differs (NaN differs from itself, as in
+    ``np.array_equal``), plus ``CHUNK_NOT_EMPTY`` where ``new`` holds a value other than 0 (a
+    chunk of fill values only is not stored). One pass, each block left at its first answer to
+    both, without the GIL (a store's writes run beside the orthorectification)."""
+    rows, cols = new.shape
+    out = np.zeros(((rows + chunk - 1) // chunk, (cols + chunk - 1) // chunk), np.uint8)
+    for bi in range(out.shape[0]):
+        for bj in range(out.shape[1]):
+            changed = False
+            filled = False
+            for i in range(bi * chunk, min(rows, (bi + 1) * chunk)):
+                for j in range(bj * chunk, min(cols, (bj + 1) * chunk)):
+                    a = new[i, j]
+                    if a != 0:
+                        filled = True
+                    if a != old[i, j]:
+                        changed = True
+                if changed and filled:
+                    break
+            out[bi, bj] = (CHUNK_CHANGED if changed else 0) | (CHUNK_NOT_EMPTY if filled
+                                                                else 0)
+    return out

@@ -337,42 +337,103 @@ def segment_task(spec: Spec, index: int, path: str, window: Window,
     """Orthorectify product ``path`` on ``window`` of the grid: its contribution (cropped to
     its validated pixels); ``extent``: the product's whole window of the grid (default
     ``window``). Errors come back as text (exceptions may not survive pickling)."""
-    from ..engine.synthesis import segment_counts_state, segment_state, validated_pixels
+    from ..engine.synthesis import counts_state, segment_counts_state, segment_state
 
     try:
         segment = _segment(spec, path, window if extent is None else extent)
-        result = segment.precompute(_grid(spec).window(*window), allow_empty=True,
-                                    hold_bands=True).result()
+        antecedents = segment.precompute(_grid(spec).window(*window), allow_empty=True,
+                                         hold_bands=True)
+        sampled = _Sampled.of(antecedents, spec)
         _release_pages(segment.prod)
     except DemError as exc:
         return Piece(index, window, None, dem_error=message_of(exc))
     except (MerisOrthoError, OSError, ValueError) as exc:
         return Piece(index, window, None, error=message_of(exc))
-    inside = np.ascontiguousarray(result.valid, dtype=np.bool_)
-    valid = validated_pixels(inside, np.ascontiguousarray(result.flags, dtype=np.uint8),
-                             spec.reject_bright)
-    _no_data_out(result, spec, valid)
-    if spec.compact:
-        _quantize(result, spec, _product(path))
-    piece = Piece(index, window, None, int(inside.sum()), int(valid.sum()))
+    valid = sampled.validated(spec)
+    piece = Piece(index, window, None, int(sampled.inside.sum()), int(valid.sum()))
     rows, cols = np.flatnonzero(valid.any(axis=1)), np.flatnonzero(valid.any(axis=0))
     if rows.size == 0:
         return piece
     r0, r1, c0, c1 = int(rows[0]), int(rows[-1]) + 1, int(cols[0]), int(cols[-1]) + 1
     red = nir = None
     if spec.algorithm == "max-ndvi":
-        red = result.bands[NDVI_RED_BAND][r0:r1, c0:c1]
-        nir = result.bands[NDVI_NIR_BAND][r0:r1, c0:c1]
-    if spec.compact:  # the store's counts: half the bytes to ship and hold until the merge
+        red = sampled.radiance(NDVI_RED_BAND, (r0, r1, c0, c1))
+        nir = sampled.radiance(NDVI_NIR_BAND, (r0, r1, c0, c1))
+    planes = [sampled.bands[b] for b in spec.bands]
+    if sampled.counts:  # the store's counts already: copied where valid
+        piece.state = counts_state(planes, (r0, c0), valid[r0:r1, c0:c1], index, red, nir)
+    elif spec.compact:  # the store's counts: half the bytes to ship and hold until the merge
         piece.state = segment_counts_state(
-            [result.bands[b] for b in spec.bands], (r0, c0),
-            [st.count_divisor(st.BAND_SCALES[b]) for b in spec.bands], valid[r0:r1, c0:c1],
-            index, red, nir)
+            planes, (r0, c0), [st.count_divisor(st.BAND_SCALES[b]) for b in spec.bands],
+            valid[r0:r1, c0:c1], index, red, nir)
     else:
-        segment = np.stack([result.bands[b][r0:r1, c0:c1] for b in spec.bands])
+        segment = np.stack([p[r0:r1, c0:c1] for p in planes])
         piece.state = segment_state(segment, valid[r0:r1, c0:c1], index, red, nir)
     piece.window = (window[0] + r0, window[0] + r1, window[2] + c0, window[2] + c1)
     return piece
+
+
+@dataclass
+class _Sampled:
+    """A product sampled at the antecedents of a tile: ``bands`` (the bands the merge needs) as
+    float32 radiances, or, with ``counts``, as the product's own uint16 counts when those are
+    already the store's (``counts_as_stored``); ``inside``: points with an antecedent."""
+
+    bands: dict[int, np.ndarray]
+    counts: bool
+    inside: np.ndarray
+    flags: np.ndarray
+    saturated: np.ndarray | None
+    scales: dict[int, float]
+
+    @classmethod
+    def of(cls, antecedents: Any, spec: Spec) -> _Sampled:
+        prod = antecedents.prod
+        scales = {b: float(prod.scaling.radiance[b - 1]) for b in spec.needed}
+        counts = counts_as_stored(spec, scales)
+        if counts:
+            values = antecedents.counts(spec.needed)
+            bands = {b: values[k] for k, b in enumerate(spec.needed)}
+        else:
+            result = antecedents.result()
+            bands = result.bands
+            if spec.compact:
+                _quantize(bands, spec)
+        return cls(bands, counts, np.ascontiguousarray(antecedents.valid, dtype=np.bool_),
+                   np.ascontiguousarray(antecedents.flags(), dtype=np.uint8),
+                   antecedents.saturated(), scales)
+
+    def validated(self, spec: Spec) -> np.ndarray:
+        """The pixels the merge takes (``validated_pixels``); saturated pixels of a band
+        (``saturated_Mnn``, .SEN3) are no data (0) for that band; the maximum-NDVI rule takes
+        only pixels with both NDVI bands (a fill there is no data)."""
+        from ..engine.synthesis import validated_pixels
+
+        valid = validated_pixels(self.inside, self.flags, spec.reject_bright)
+        if self.saturated is not None:
+            for b in set(spec.needed) & set(self.bands):
+                hit = (self.saturated & np.uint16(1 << (b - 1))) != 0
+                if hit.any():
+                    self.bands[b][hit] = 0
+        if spec.algorithm == "max-ndvi":
+            valid &= (self.bands[NDVI_RED_BAND] > 0) & (self.bands[NDVI_NIR_BAND] > 0)
+        return valid
+
+    def radiance(self, band: int, box: Window) -> np.ndarray:
+        """float32 radiances of ``band`` in ``box`` (rows r0:r1, columns c0:c1): counts times
+        the product's scale in float32, the numbers of the product's radiances."""
+        r0, r1, c0, c1 = box
+        values = self.bands[band][r0:r1, c0:c1]
+        return st.decode_band(values, self.scales[band]) if self.counts else values
+
+
+def counts_as_stored(spec: Spec, scales: dict[int, float]) -> bool:
+    """Whether a product's counts at the nearest pixel are the compact store's counts: its
+    scale of every stored band is the store's (Appendix A factor; both as float32)."""
+    from ..options import Sampling
+
+    return (spec.compact and spec.options.sampling is Sampling.NEAREST
+            and all(np.float32(scales[b]) == np.float32(st.BAND_SCALES[b]) for b in spec.bands))
 
 
 def _release_pages(product: Any) -> None:
@@ -385,29 +446,10 @@ def _release_pages(product: Any) -> None:
         release()
 
 
-def _quantize(result: Any, spec: Spec, product: Any) -> None:
-    """The radiances of ``result`` as a compact store holds them (``store.quantized``). A band
-    sampled at the nearest pixel of a product whose scale is the store's (Appendix A factor)
-    is already count x scale: left as it is (the same values, one pass less)."""
-    from ..options import Sampling
-
-    nearest = spec.options.sampling is Sampling.NEAREST
+def _quantize(bands: dict[int, np.ndarray], spec: Spec) -> None:
+    """The radiances of ``bands`` as a compact store holds them (``store.quantized``)."""
     for b in spec.bands:
-        scale = st.BAND_SCALES[b]
-        if not (nearest and np.float32(product.scaling.radiance[b - 1]) == np.float32(scale)):
-            result.bands[b] = st.quantized(result.bands[b], scale)
-
-
-def _no_data_out(result: Any, spec: Spec, valid: np.ndarray) -> None:
-    """Saturated pixels of a band (``saturated_Mnn``, .SEN3) are no data (0) for that band;
-    the maximum-NDVI rule takes only pixels with both NDVI bands (a fill there is no data)."""
-    if result.saturated is not None:
-        for b in {*spec.bands, NDVI_RED_BAND, NDVI_NIR_BAND} & set(result.bands):
-            hit = (result.saturated & np.uint16(1 << (b - 1))) != 0
-            if hit.any():
-                result.bands[b][hit] = 0.0
-    if spec.algorithm == "max-ndvi":
-        valid &= (result.bands[NDVI_RED_BAND] > 0) & (result.bands[NDVI_NIR_BAND] > 0)
+        bands[b] = st.quantized(bands[b], st.BAND_SCALES[b])
 
 
 def tile_job(fork: Any, spec: Spec, window: Window, jobs: Sequence[Job], rank: np.ndarray,

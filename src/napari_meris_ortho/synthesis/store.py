@@ -507,14 +507,20 @@ def native_dtype(array: Any) -> np.dtype[Any]:
 
 
 def changed_chunks(new: np.ndarray, old: np.ndarray, chunk: int
-                   ) -> Iterator[tuple[int, int, int, int]]:
-    """``(row0, row1, col0, col1)`` (relative to the arrays, which start on a chunk corner) of
-    every ``chunk`` x ``chunk`` block where ``new`` differs from ``old``."""
-    for i in range(0, new.shape[0], chunk):
-        for j in range(0, new.shape[1], chunk):
-            a, b = new[i:i + chunk, j:j + chunk], old[i:i + chunk, j:j + chunk]
-            if not np.array_equal(a, b):
-                yield i, i + a.shape[0], j, j + a.shape[1]
+                   ) -> Iterator[tuple[int, int, int, int, bool]]:
+    """``(row0, row1, col0, col1, filled)`` (relative to the arrays, which start on a chunk
+    corner) of every ``chunk`` x ``chunk`` block where ``new`` differs from ``old``; ``filled``:
+    the block holds a value other than the fill value 0 (``engine.synthesis.chunk_changes``,
+    one pass without the GIL)."""
+    from ..engine.synthesis import CHUNK_CHANGED, CHUNK_NOT_EMPTY, chunk_changes
+
+    if new.shape != old.shape:
+        raise ValueError(f"new {new.shape} and old {old.shape} values differ in shape")
+    marks = chunk_changes(new, old, int(chunk))
+    for bi, bj in zip(*np.nonzero(marks & CHUNK_CHANGED), strict=True):
+        i, j = int(bi) * chunk, int(bj) * chunk
+        yield (i, min(i + chunk, new.shape[0]), j, min(j + chunk, new.shape[1]),
+               bool(marks[bi, bj] & CHUNK_NOT_EMPTY))
 
 
 def layer_codec(array: Any) -> str:
@@ -590,10 +596,10 @@ def write_tile(store: Any, window: Window, arrays: dict[str, np.ndarray],
     r0, _, c0, _ = window
     prototype = default_buffer_prototype()
 
-    async def put(array: Any, encoder: Any, index: tuple[int, int], block: np.ndarray
-                  ) -> None:
+    async def put(array: Any, encoder: Any, index: tuple[int, int], block: np.ndarray,
+                  filled: bool) -> None:
         key = f"{array.store_path.path}/{array.metadata.encode_chunk_key(index)}"
-        if not block.any():  # fill values only: no chunk, as zarr writes it
+        if not filled:  # fill values only: no chunk, as zarr writes it
             await store.delete(key)
             return
         shape = tuple(int(c) for c in array.chunks)
@@ -612,10 +618,10 @@ def write_tile(store: Any, window: Window, arrays: dict[str, np.ndarray],
         encoder = _chunk_encoder(array)
         if encoder is None:
             writes = [array.setitem((slice(top + i0, top + i1), slice(left + j0, left + j1)),
-                                    new[i0:i1, j0:j1]) for i0, i1, j0, j1 in blocks]
+                                    new[i0:i1, j0:j1]) for i0, i1, j0, j1, _ in blocks]
         else:
             writes = [put(array, encoder, ((top + i0) // chunk, (left + j0) // chunk),
-                          new[i0:i1, j0:j1]) for i0, i1, j0, j1 in blocks]
+                          new[i0:i1, j0:j1], filled) for i0, i1, j0, j1, filled in blocks]
         await gather_all(*writes)
         return len(writes)
 
