@@ -17,13 +17,13 @@ import warnings
 from collections import OrderedDict
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field, replace
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from ..engine.synthesis import NDVI_NIR_BAND, NDVI_RED_BAND, TileState
 from ..errors import DemError, MerisOrthoError, OptionsError, OutputError
-from ..options import OrthoOptions, StoreCodec
+from ..options import OrthoOptions, Sampling, StoreCodec
 from ..progress import ProgressCallback
 from . import store as st
 from .reading import SynthesisStore
@@ -48,6 +48,9 @@ from .tiling import (
     tile_of,
     tiles,
 )
+
+if TYPE_CHECKING:
+    from ..ortho.antecedents import Antecedents
 
 log = logging.getLogger("napari_meris_ortho.synthesis")
 
@@ -387,7 +390,7 @@ class _Sampled:
     scales: dict[int, float]
 
     @classmethod
-    def of(cls, antecedents: Any, spec: Spec) -> _Sampled:
+    def of(cls, antecedents: Antecedents, spec: Spec) -> _Sampled:
         prod = antecedents.prod
         scales = {b: float(prod.scaling.radiance[b - 1]) for b in spec.needed}
         counts = counts_as_stored(spec, scales)
@@ -430,8 +433,6 @@ class _Sampled:
 def counts_as_stored(spec: Spec, scales: dict[int, float]) -> bool:
     """Whether a product's counts at the nearest pixel are the compact store's counts: its
     scale of every stored band is the store's (Appendix A factor; both as float32)."""
-    from ..options import Sampling
-
     return (spec.compact and spec.options.sampling is Sampling.NEAREST
             and all(np.float32(scales[b]) == np.float32(st.BAND_SCALES[b]) for b in spec.bands))
 
