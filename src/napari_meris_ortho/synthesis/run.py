@@ -264,9 +264,10 @@ def _needed(bands: Sequence[int], algorithm: str) -> tuple[int, ...]:
 @dataclass
 class Piece:
     """One product's contribution to one tile (``state`` covers ``window``; None: nothing).
-    In a compact store (``Spec.compact``) the state's bands are the store's uint16 counts
-    (``engine.synthesis.count_of`` of radiances already quantized to them: exact), merged as counts
-    by ``tile_task`` (``_state_of``)."""
+    In a compact store (``Spec.compact``) the state's bands are the store's uint16 counts: the
+    product's own at the nearest pixel (``counts_as_stored``), else ``engine.synthesis.count_of``
+    of radiances already quantized to them (exact); merged as counts by ``tile_task``
+    (``_state_of``)."""
 
     index: int
     window: Window
