@@ -25,7 +25,7 @@ from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from .errors import OptionsError, OutputError
+from .errors import MerisOrthoError, OptionsError, OutputError
 
 _KINDS = {
     stat.S_IFDIR: "a directory",
@@ -40,18 +40,20 @@ def _kind(mode: int) -> str:
     return _KINDS.get(stat.S_IFMT(mode), "not a regular file")
 
 
-def check_input_file(path: str | os.PathLike[str], what: str) -> Path:
+def check_input_file(path: str | os.PathLike[str], what: str,
+                     error: type[MerisOrthoError] = OptionsError) -> Path:
     """An input file that exists and is a regular file (a FIFO would block its reader
-    forever; symlinks followed); OptionsError naming ``what`` otherwise."""
+    forever; symlinks followed); ``error`` (OptionsError, DemError...) naming ``what``
+    otherwise."""
     p = Path(path)
     try:
         mode = p.stat().st_mode
     except FileNotFoundError:
-        raise OptionsError(f"{p}: {what} not found") from None
+        raise error(f"{p}: {what} not found") from None
     except OSError as exc:
-        raise OptionsError(f"{p}: cannot read the {what} ({exc.strerror or exc})") from None
+        raise error(f"{p}: cannot read the {what} ({exc.strerror or exc})") from None
     if not stat.S_ISREG(mode):
-        raise OptionsError(f"{p}: the {what} is {_kind(mode)}, not a regular file")
+        raise error(f"{p}: the {what} is {_kind(mode)}, not a regular file")
     return p
 
 

@@ -41,7 +41,7 @@ def test_fifo_dem_is_refused_without_hanging(tmp_path, name):
 def test_fifo_header_of_an_srtm_tile_is_refused(tmp_path):
     (tmp_path / "tile.DEM").write_bytes(bytes(8))
     os.mkfifo(tmp_path / "tile.HDR")
-    with pytest.raises(DemError, match="tile.HDR: not a regular file"):
+    with pytest.raises(DemError, match="tile.HDR: the DEM header is a FIFO, not a regular file"):
         open_dem(tmp_path / "tile.DEM")
 
 

@@ -6,10 +6,8 @@ for ``engine.terrain``); the one check that a DEM path is a regular file."""
 from __future__ import annotations
 
 import logging
-import stat
 from collections.abc import Callable
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -193,11 +191,3 @@ class DemSource:
         """Release open files (memmaps, datasets) and prepared posts."""
         self._posts = None
 
-def check_regular(p: Path) -> None:
-    """A DEM file must be a regular file (a FIFO would block the reader forever)."""
-    try:
-        mode = p.stat().st_mode
-    except OSError as exc:
-        raise DemError(f"{p}: cannot read DEM ({exc.strerror or exc})") from None
-    if not stat.S_ISREG(mode):
-        raise DemError(f"{p}: not a regular file")

@@ -7,14 +7,15 @@ from pathlib import Path
 
 import numpy as np
 
+from .._atomic import check_input_file
 from ..errors import DemError
-from .base import DemSource, check_regular
+from .base import DemSource
 from .geoid import EGM96
 
 
 # ---------------------------------------------------------------------- SRTM30 / GTOPO30
 def _read_hdr(path: Path) -> dict[str, str]:
-    check_regular(path)
+    check_input_file(path, "DEM header", DemError)
     try:
         text = path.read_text(errors="replace")
     except OSError as exc:
@@ -54,7 +55,7 @@ class SrtmTile(DemSource):
         if nbits != 16 or self.xdim <= 0 or self.ydim <= 0:
             raise DemError(f"{hdr}: unsupported header (NBITS {nbits}, XDIM/YDIM must be > 0)")
         self.dtype = np.dtype(f"{order}{'i' if signed else 'u'}2")
-        check_regular(dem)
+        check_input_file(dem, "DEM", DemError)
         try:
             size = dem.stat().st_size
         except OSError as exc:

@@ -48,8 +48,9 @@ from typing import Any
 
 import numpy as np
 
+from .._atomic import check_input_file
 from ..errors import DemError
-from .base import DemSource, LatticeWindow, check_regular
+from .base import DemSource, LatticeWindow
 from .geoid import ELLIPSOID, GEOIDS, geoid_grid_path, resolve_datum, split_datum
 from .getasse import _TILE_RE, _ZIP_RE, GetasseSource
 from .raster import RasterSource
@@ -242,7 +243,7 @@ def _open_path(p: Path) -> DemSource:
         raise DemError(f"{p}: DEM not found")
     if p.is_dir():
         return _open_directory(p)
-    check_regular(p)
+    check_input_file(p, "DEM", DemError)
     if _TILE_RE.match(p.name) or _ZIP_RE.match(p.name):
         return GetasseSource(p.parent, files=[p])
     if p.suffix.upper() in (".DEM", ".HDR"):
