@@ -331,6 +331,13 @@ def open_layers(store: Any, names: Sequence[str], levels: Sequence[int]) -> dict
     return {key: zarr.Array(array) for key, array in zip(keys, _sync(opened()), strict=True)}
 
 
+def undecodable(what: str, exc: BaseException) -> OutputError:
+    """The error of a layer or chunk of the store that does not decode (zarr's codecs or ours:
+    "Zstd decompression error"): the store is damaged."""
+    return OutputError(f"the synthesis store: {what} does not decode ({exc}): the store is "
+                       "damaged")
+
+
 def read_window(store: Any, names: Sequence[str], window: Window, level: int = 1
                 ) -> dict[str, np.ndarray]:
     """Arrays ``names`` over ``window`` (rows/columns of the full grid; at overview ``level``
@@ -343,8 +350,7 @@ def read_window(store: Any, names: Sequence[str], window: Window, level: int = 1
             with store_errors():
                 values = np.asarray(array[r0:r1, c0:c1])
         except (RuntimeError, ValueError) as exc:  # zarr's codecs: "Zstd decompression error"
-            raise OutputError(f"the synthesis store: layer {n} does not decode ({exc}): "
-                              "the store is damaged") from None
+            raise undecodable(f"layer {n}", exc) from None
         scale = stored_scale(array)
         out[n] = values if scale is None else decode_band(values, scale)
     return out
@@ -476,8 +482,7 @@ def read_tile(store: Any, names: Sequence[str], window: Window, layout: str = ""
         try:
             raw = await asyncio.to_thread(codec.decode, data.to_bytes())
         except (RuntimeError, ValueError) as exc:  # numcodecs: "Zstd decompression error"
-            raise OutputError(f"the synthesis store: chunk {key} does not decode ({exc}): "
-                              "the store is damaged") from None
+            raise undecodable(f"chunk {key}", exc) from None
         block = np.frombuffer(raw, dtype).reshape(rows, cols)
         part = out[i - r0:i - r0 + rows, j - c0:j - c0 + cols]
         part[...] = block[:part.shape[0], :part.shape[1]]
