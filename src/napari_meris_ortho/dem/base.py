@@ -1,7 +1,8 @@
 """What every DEM source is (handbook section 3.1, Appendix C ``TimMersynGetAltitudeFromDem``):
 ``DemSource`` (``sample(lon, lat, method)`` -> ellipsoidal heights, NaN outside or on a no-data
 post; ``prepare`` reads a footprint's window once) and ``LatticeWindow`` (that window as plain data
-for ``engine.terrain``); the one check that a DEM path is a regular file."""
+for ``engine.terrain``). A DEM path is checked to be a regular file by
+``_atomic.check_input_file`` (with ``DemError``), as every input file is."""
 
 from __future__ import annotations
 
@@ -190,4 +191,3 @@ class DemSource:
     def close(self) -> None:
         """Release open files (memmaps, datasets) and prepared posts."""
         self._posts = None
-
