@@ -584,7 +584,7 @@ def test_a_products_own_counts_are_merged_as_they_are(products, sampling) -> Non
     values and a product of other scales go through the radiances."""
     from dataclasses import replace
 
-    from napari_meris_ortho.engine.synthesis import counts_state, segment_counts_state
+    from napari_meris_ortho.engine.synthesis import segment_counts_state
     from napari_meris_ortho.ortho import precompute
     from napari_meris_ortho.products.open import read_product
     from napari_meris_ortho.synthesis.run import _Sampled, counts_as_stored
@@ -608,7 +608,7 @@ def test_a_products_own_counts_are_merged_as_they_are(products, sampling) -> Non
     if sampling != "nearest":
         return
     counts = antecedents.counts([5, 7])
-    fast = counts_state([counts[0], counts[1]], (0, 0), valid, 3, red, nir)
+    fast = segment_counts_state([counts[0], counts[1]], (0, 0), None, valid, 3, red, nir)
     slow = segment_counts_state([radiances[5], radiances[7]], (0, 0),
                                 [st.count_divisor(st.BAND_SCALES[b]) for b in (5, 7)],
                                 valid, 3, radiances[7], radiances[13])

@@ -185,33 +185,6 @@ class TileState:
                          None if self.ndvi is None else self.ndvi.copy())
 
 
-def _state_with(bands: np.ndarray, valid: np.ndarray, index: int, red: np.ndarray | None,
-                nir: np.ndarray | None) -> TileState:
-    """One product's state of its ``bands`` (already 0 outside ``valid``): count 1 and winner
-    ``index`` where valid, with the 16-bit NDVI of ``red``/``nir`` if given."""
-    winner = np.where(valid, np.int32(index), np.int32(0))
-    state = TileState(bands, valid.astype(np.uint16), winner)
-    if red is not None and nir is not None:
-        state.ndvi = _ndvi_codes(np.ascontiguousarray(red, np.float32),
-                                 np.ascontiguousarray(nir, np.float32), valid)
-    return state
-
-
-def segment_counts_state(planes: list[np.ndarray], origin: tuple[int, int],
-                         divisors: list[float], valid: np.ndarray, index: int,
-                         red: np.ndarray | None = None, nir: np.ndarray | None = None
-                         ) -> TileState:
-    """``segment_state`` of the window of ``planes`` (rows, cols radiances; window of the
-    shape of ``valid`` from ``origin``) with its bands as the 16-bit counts of ``divisors``
-    (``count_of``): one pass per band, no float32 copy of the window."""
-    valid = np.ascontiguousarray(valid, dtype=np.bool_)
-    r0, c0 = origin
-    bands = np.empty((len(planes), *valid.shape), np.uint16)
-    for k, plane in enumerate(planes):
-        _count_plane(bands[k], plane, valid, int(r0), int(c0), float(divisors[k]))
-    return _state_with(bands, valid, index, red, nir)
-
-
 @njit(cache=True, parallel=True)
 def _masked_plane(out: np.ndarray, plane: np.ndarray, valid: np.ndarray, r0: int,
                   c0: int) -> None:
@@ -222,19 +195,31 @@ def _masked_plane(out: np.ndarray, plane: np.ndarray, valid: np.ndarray, r0: int
             out[i, j] = plane[r0 + i, c0 + j] if valid[i, j] else 0
 
 
-def counts_state(planes: list[np.ndarray], origin: tuple[int, int], valid: np.ndarray,
-                 index: int, red: np.ndarray | None = None, nir: np.ndarray | None = None
-                 ) -> TileState:
-    """``segment_counts_state`` of ``planes`` that already are the store's uint16 counts (a
-    product's own counts at the nearest pixel, of the store's scales): the same state, with no
-    pass through radiances (count x scale / scale gives the count back: an error of at most
-    65535 x 2**-24 count)."""
+def segment_counts_state(planes: list[np.ndarray], origin: tuple[int, int],
+                         divisors: list[float] | None, valid: np.ndarray, index: int,
+                         red: np.ndarray | None = None, nir: np.ndarray | None = None
+                         ) -> TileState:
+    """``segment_state`` of the window of ``planes`` (window of the shape of ``valid`` from
+    ``origin``) with its bands as 16-bit counts: of radiances, the counts of ``divisors``
+    (``count_of``); with ``divisors`` None, ``planes`` already are the store's uint16 counts
+    (a product's own at the nearest pixel, of the store's scales), copied where valid: the
+    same state, since count x scale / scale gives the count back (an error of at most
+    65535 x 2**-24 count). One pass per band, no float32 copy of the window; count 1 and
+    winner ``index`` where valid, and the 16-bit NDVI of ``red``/``nir`` if given."""
     valid = np.ascontiguousarray(valid, dtype=np.bool_)
     r0, c0 = origin
     bands = np.empty((len(planes), *valid.shape), np.uint16)
     for k, plane in enumerate(planes):
-        _masked_plane(bands[k], plane, valid, int(r0), int(c0))
-    return _state_with(bands, valid, index, red, nir)
+        if divisors is None:
+            _masked_plane(bands[k], plane, valid, int(r0), int(c0))
+        else:
+            _count_plane(bands[k], plane, valid, int(r0), int(c0), float(divisors[k]))
+    winner = np.where(valid, np.int32(index), np.int32(0))
+    state = TileState(bands, valid.astype(np.uint16), winner)
+    if red is not None and nir is not None:
+        state.ndvi = _ndvi_codes(np.ascontiguousarray(red, np.float32),
+                                 np.ascontiguousarray(nir, np.float32), valid)
+    return state
 
 
 def segment_state(segment: np.ndarray, valid: np.ndarray, index: int,

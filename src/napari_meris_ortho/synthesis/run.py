@@ -341,7 +341,7 @@ def segment_task(spec: Spec, index: int, path: str, window: Window,
     """Orthorectify product ``path`` on ``window`` of the grid: its contribution (cropped to
     its validated pixels); ``extent``: the product's whole window of the grid (default
     ``window``). Errors come back as text (exceptions may not survive pickling)."""
-    from ..engine.synthesis import counts_state, segment_counts_state, segment_state
+    from ..engine.synthesis import segment_counts_state, segment_state
 
     try:
         segment = _segment(spec, path, window if extent is None else extent)
@@ -364,12 +364,11 @@ def segment_task(spec: Spec, index: int, path: str, window: Window,
         red = sampled.radiance(NDVI_RED_BAND, (r0, r1, c0, c1))
         nir = sampled.radiance(NDVI_NIR_BAND, (r0, r1, c0, c1))
     planes = [sampled.bands[b] for b in spec.bands]
-    if sampled.counts:  # the store's counts already: copied where valid
-        piece.state = counts_state(planes, (r0, c0), valid[r0:r1, c0:c1], index, red, nir)
-    elif spec.compact:  # the store's counts: half the bytes to ship and hold until the merge
-        piece.state = segment_counts_state(
-            planes, (r0, c0), [st.count_divisor(st.BAND_SCALES[b]) for b in spec.bands],
-            valid[r0:r1, c0:c1], index, red, nir)
+    if spec.compact:  # the store's counts: half the bytes to ship and hold until the merge
+        divisors = (None if sampled.counts  # already the store's counts: copied where valid
+                    else [st.count_divisor(st.BAND_SCALES[b]) for b in spec.bands])
+        piece.state = segment_counts_state(planes, (r0, c0), divisors, valid[r0:r1, c0:c1],
+                                           index, red, nir)
     else:
         segment = np.stack([p[r0:r1, c0:c1] for p in planes])
         piece.state = segment_state(segment, valid[r0:r1, c0:c1], index, red, nir)
