@@ -3,7 +3,9 @@ live as long as napari kept out of Python's full garbage collections (issue 24, 
 
 glibc keeps the freed small-object heap for reuse: four fr-alps runs, every layer removed, left
 861 MB resident against 625 MB before, 671 MB once ``malloc_trim`` had returned it (measured).
-``trim_after_removals`` calls it a second after the last removal, in a thread (no-op off glibc).
+``trim_after_removals`` calls it a second after the last removal, in a thread (no-op off glibc),
+and has glibc hand big blocks back as they are freed (``_process.return_freed_memory``): the
+heap of the thread that made a run's arrays is out of ``malloc_trim``'s reach.
 ``freeze_long_lived`` keeps napari's own collection after a removal short (its docstring).
 """
 
@@ -13,15 +15,17 @@ import gc
 import weakref
 from typing import Any
 
-from .._process import schedule_trim
+from .._process import return_freed_memory, schedule_trim
 
 _WATCHED: weakref.WeakSet[Any] = weakref.WeakSet()
 
 
 def trim_after_removals(viewer: Any) -> None:
-    """Trim the heap after layers leave ``viewer`` (idempotent)."""
+    """Big blocks handed back when freed, the heap trimmed after layers leave ``viewer``
+    (idempotent)."""
     if viewer is None or viewer in _WATCHED:
         return
+    return_freed_memory()
     _WATCHED.add(viewer)
     viewer.layers.events.removed.connect(lambda _event=None: schedule_trim())
 
