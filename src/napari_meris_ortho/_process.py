@@ -68,8 +68,9 @@ def _keep_freed_memory() -> None:
 
 
 #: a long-lived process (the viewer): blocks from this size up are mapped on their own, heaps are
-#: trimmed past twice it (``return_freed_memory``)
-VIEWER_MMAP_THRESHOLD = 2**20
+#: trimmed past twice it (``return_freed_memory``); with 1 MiB, smaller blocks (tiles, small
+#: levels) still kept 21-37 MB in 3 of 15 measurements
+VIEWER_MMAP_THRESHOLD = 2**18
 
 
 def return_freed_memory() -> bool:
@@ -78,8 +79,10 @@ def return_freed_memory() -> bool:
     every heap trimmed past twice that. glibc's default raises both thresholds as big blocks are
     freed (up to 32 and 64 MiB); a run's arrays then came from its worker thread's heap, whose
     free top ``malloc_trim`` leaves alone: four fr-alps runs, all layers removed, kept 57 MB
-    resident (+13 %) in half the sessions (measured). False off glibc or with the tuning off.
-    The opposite of ``_keep_freed_memory`` (the command's short process)."""
+    resident (+13 %) in half the sessions, +3-4 % in every session with this (measured). The
+    cost: a run's arrays come from fresh pages each time (a 3-band fr-alps run in the worker,
+    0.1-0.3 s more). False off glibc or with the tuning off. The opposite of
+    ``_keep_freed_memory`` (the command's short process)."""
     if not enabled():
         return False
     with contextlib.suppress(OSError, AttributeError, ValueError):

@@ -168,11 +168,12 @@ def _current_frame() -> OutputGrid | None:
     if viewer is None:
         return None
     from .._process import unit_registry_from_disk
-    from .memory import freeze_at_first_read
+    from .memory import freeze_at_first_read, trim_after_removals
     from .status import show_map_coordinates
 
     unit_registry_from_disk()  # before napari makes the first layer, and frozen with it
     freeze_at_first_read(viewer)
+    trim_after_removals(viewer)  # what a removed product's or store's layers held goes back
     show_map_coordinates(viewer)
     return viewer_frame(viewer.layers)
 
