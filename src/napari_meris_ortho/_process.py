@@ -80,8 +80,8 @@ def return_freed_memory() -> bool:
     freed (up to 32 and 64 MiB); a run's arrays then came from its worker thread's heap, whose
     free top ``malloc_trim`` leaves alone: four fr-alps runs, all layers removed, kept 57 MB
     resident (+13 %) in half the sessions, +3-4 % in every session with this (measured). The
-    cost: a run's arrays come from fresh pages each time (a 3-band fr-alps run in the worker,
-    0.1-0.3 s more). False off glibc or with the tuning off. The opposite of
+    cost: a run's arrays come from fresh pages each time (the job of a 3-band fr-alps run, in
+    the worker: 0.2-0.36 s more of 2.5 s). False off glibc or with the tuning off. The opposite of
     ``_keep_freed_memory`` (the command's short process)."""
     if not enabled():
         return False
