@@ -57,14 +57,22 @@ def tune_process() -> None:
     _keep_freed_memory()
 
 
-def _keep_freed_memory() -> None:
-    """glibc's malloc: arrays up to 1 GiB from the heap, no trimming; no-op off glibc."""
+def _malloc_thresholds(mmap_threshold: int, trim_threshold: int) -> bool:
+    """glibc's ``mallopt``: blocks from ``mmap_threshold`` up mapped on their own, a heap
+    trimmed past ``trim_threshold`` free at its top (fixed: glibc no longer moves them). False
+    off glibc or when glibc refuses a value."""
     with contextlib.suppress(OSError, AttributeError, ValueError):
         if not (os.confstr("CS_GNU_LIBC_VERSION") or "").startswith("glibc"):
-            return
+            return False
         libc = ctypes.CDLL(None)
-        libc.mallopt(_M_MMAP_THRESHOLD, 2 ** 30)
-        libc.mallopt(_M_TRIM_THRESHOLD, 2 ** 31 - 1)
+        return bool(libc.mallopt(_M_MMAP_THRESHOLD, mmap_threshold)
+                    and libc.mallopt(_M_TRIM_THRESHOLD, trim_threshold))
+    return False
+
+
+def _keep_freed_memory() -> None:
+    """glibc's malloc: arrays up to 1 GiB from the heap, no trimming; no-op off glibc."""
+    _malloc_thresholds(2 ** 30, 2 ** 31 - 1)
 
 
 #: a long-lived process (the viewer): blocks from this size up are mapped on their own, heaps are
@@ -83,15 +91,7 @@ def return_freed_memory() -> bool:
     cost: a run's arrays come from fresh pages each time (the job of a 3-band fr-alps run, in
     the worker: 0.2-0.36 s more of 2.5 s). False off glibc or with the tuning off. The opposite of
     ``_keep_freed_memory`` (the command's short process)."""
-    if not enabled():
-        return False
-    with contextlib.suppress(OSError, AttributeError, ValueError):
-        if not (os.confstr("CS_GNU_LIBC_VERSION") or "").startswith("glibc"):
-            return False
-        libc = ctypes.CDLL(None)
-        return bool(libc.mallopt(_M_MMAP_THRESHOLD, VIEWER_MMAP_THRESHOLD)
-                    and libc.mallopt(_M_TRIM_THRESHOLD, 2 * VIEWER_MMAP_THRESHOLD))
-    return False
+    return enabled() and _malloc_thresholds(VIEWER_MMAP_THRESHOLD, 2 * VIEWER_MMAP_THRESHOLD)
 
 
 def malloc_trim() -> bool:
