@@ -194,6 +194,7 @@ def test_shared_grid_and_height_options_refused_alike(products, tmp_path, capsys
         (["--crs", "EPSG:999999"], "unknown CRS"),
         (["--dem", str(tmp_path / "d.tif"), "--elevation", "none"],
          "DEMs are only used with elevation 'dem'"),
+        (["--elevation", "dem"], "--elevation dem needs a DEM: name one with --dem PATH"),
         (["--ul", "14", "46", "--lr", "13", "47", "--pixel-size", "0.01"], "upper-left"),
     ]
     for extra, message in cases:

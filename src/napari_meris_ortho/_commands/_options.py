@@ -42,10 +42,11 @@ DEM_ENTRY_HELP = (
 
 
 def add_height_options(p: Any, dem_help: str, elevation_help: str) -> None:
-    """``--dem`` (repeatable) and ``--elevation none|tiepoints|dem`` (default dem)."""
+    """``--dem`` (repeatable) and ``--elevation none|tiepoints|dem`` (default dem; given
+    without a default value, so that ``ortho_options`` tells an explicit ``dem`` apart)."""
     p.add_argument("--dem", action="append", default=[], metavar="PATH[:DATUM]",
                    help=f"{dem_help}. {DEM_ENTRY_HELP}")
-    p.add_argument("--elevation", choices=choices(Elevation), default="dem", help=elevation_help)
+    p.add_argument("--elevation", choices=choices(Elevation), default=None, help=elevation_help)
 
 
 def add_sampling_option(p: Any, help: str) -> None:
@@ -98,8 +99,16 @@ def _pixel_count(text: str) -> int:
 def ortho_options(args: argparse.Namespace, **values: Any) -> OrthoOptions:
     """The checked ``OrthoOptions`` of ``--elevation``, ``--sampling``, ``--bands``, the
     ``--dem`` list and ``values`` (``OrthoOptions.of``: DEMs only with elevation dem, as MERSYN
-    refuses -dem with -ort NO)."""
-    return OrthoOptions.of(n_dems=len(args.dem), elevation=args.elevation,
+    refuses -dem with -ort NO). ``--elevation dem`` given without a ``--dem`` is refused: the
+    user asked for DEM heights and named none (left out, the default takes the DEMs given, or
+    with none the tie-point heights, as MERSYN)."""
+    elevation = args.elevation
+    if elevation is None:
+        elevation = Elevation.DEM.value
+    elif elevation == Elevation.DEM.value and not args.dem:
+        raise OptionsError("--elevation dem needs a DEM: name one with --dem PATH (or choose "
+                           "--elevation tiepoints)")
+    return OrthoOptions.of(n_dems=len(args.dem), elevation=elevation,
                            sampling=args.sampling, bands=args.bands, **values)
 
 

@@ -48,8 +48,9 @@ def register(subparsers: Any) -> None:
                    "copied to --out first); grid and bands come from it")
     add_height_options(
         p, dem_help="DEM (repeatable; the first holding a point wins)",
-        elevation_help="heights: the DEMs then the tie points (default), tie points only, "
-        "or none (no orthorectification)")
+        elevation_help="heights: the DEMs then the tie points (default; with no --dem, the "
+        "tie points), tie points only, or none (no orthorectification); dem given explicitly "
+        "needs a --dem")
     add_sampling_option(p, "resampling of the radiances (MERSYN: nearest)")
     p.add_argument("--geolocation", choices=choices(Geolocation), default=None,
                    help="location model: tie points (bilinear, ecef; default) or pixel, the "
