@@ -77,6 +77,20 @@ def test_half_of_a_float_getasse_tile_is_not_read_as_int16(tmp_path):
         dem.sample(17.0, 50.0)
 
 
+def test_half_of_a_mostly_sea_float_getasse_tile_is_not_read_as_int16(tmp_path):
+    """A float32 tile of sea (0) with a patch of land, cut at half its size (the BEAM int16
+    size): the zero posts read as plausible int16 heights and hid the patch's implausible
+    ones (2.5 % of the samples; 5 % refused): read as int16, every height was 0."""
+    lat0, lon0 = 45, 0
+    heights = np.zeros((1800, 1800), np.float32)
+    heights[200:400, 500:700] = 850.25 + np.arange(200, dtype=np.float32)  # land, first half
+    raw = heights.astype("<f4").tobytes()
+    (tmp_path / getasse_tile_name(lat0, lon0)).write_bytes(raw[: len(raw) // 2])
+    dem = open_dem(tmp_path)
+    with pytest.raises(DemError, match="not a BEAM int16 GETASSE30 tile"):
+        dem.sample(1.0, 46.0)
+
+
 def test_map_warns_about_a_dem_that_gives_no_height(tmp_path, caplog):
     prod = make_product(tmp_path / "p.N1", height=130, width=321, lon0=15.0, nadir_col=-800.0)
     tp = read_product(prod).tie_points

@@ -94,9 +94,11 @@ class _GetasseTile:
 
 def _check_int16_heights(raw: np.ndarray, label: str) -> None:
     """A tile of the BEAM int16 size must hold int16 heights: half of a float32 tile read as
-    int16 gives the exponent halves of the floats (|v| mostly > 9000 m) and is refused."""
+    int16 gives the exponent halves of the floats (|v| mostly > 9000 m) and is refused. Zero
+    posts (sea) read the same either way and are left out of the count: half of a mostly-sea
+    float32 tile (a scene's patch of land in it) passed as int16, with every height 0."""
     v = raw[: raw.size // 2 * 2].view(">i2")[::499].astype(np.int64)
-    v = v[(v != -32768) & (v != 32767)]
+    v = v[(v != -32768) & (v != 32767) & (v != 0)]
     bad = np.sum((v < MIN_TERRAIN_M) | (v > MAX_TERRAIN_M))
     if v.size and bad > 0.05 * v.size:
         raise DemError(f"{label}: {100 * bad / v.size:.0f}% of the sampled posts are outside "
