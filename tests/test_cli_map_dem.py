@@ -15,7 +15,7 @@ from napari_meris_ortho.cli import main
 from napari_meris_ortho.dem import geoid
 from napari_meris_ortho.dem.copernicus import tile_name
 from napari_meris_ortho.products.n1 import read_product
-from ortho_samples import make_product, terrain
+from ortho_samples import make_dem, make_product, terrain
 
 
 @pytest.fixture(scope="module")
@@ -104,3 +104,59 @@ def test_help_tells_the_dem_entries_and_the_handbook_search(capsys):
     assert "--dem PATH[:DATUM]" in out and "Copernicus GLO-30/90" in out
     assert "DATUM: egm96 or egm2008 (heights above that geoid) or ellipsoid" in out
     assert "the outer half pixel and, on high relief, terrain within one parallax shift" in out
+
+
+@pytest.mark.parametrize(("cut", "reason"), [
+    (0.5, "Read error"),  # in the heights: the tile opens, its read fails
+    (500, 'IO error during reading of "GeoPixelScale"'),  # in the header: half its tags
+])
+def test_a_copernicus_tile_cut_short_is_one_message(files, tmp_path, capsys, caplog, recwarn,
+                                                    cut, reason):
+    """A tile that ends early (an interrupted download): one line naming the tile, that it is
+    damaged or cut short and GDAL's root reason. Before, a tile cut in its data said "(Read
+    failed. See previous exception for details.)", and one cut in its header printed five GDAL
+    warnings and rasterio's NotGeoreferencedWarning before "not a Copernicus DEM tile of its
+    name (origin 0.000000, 0.000000 ...)"."""
+    import shutil
+
+    _, prod, tiles, _ = files
+    cut_tiles = tmp_path / "tiles"
+    shutil.copytree(tiles, cut_tiles)
+    for tile in cut_tiles.iterdir():
+        size = tile.stat().st_size
+        os.truncate(tile, int(size * cut) if cut < 1 else int(cut))
+    caplog.set_level(logging.WARNING)
+    out = tmp_path / "o.tif"
+    assert main(["map", str(prod), "-o", str(out), "--dem", f"{cut_tiles}:egm96",
+                 "--bands", "7"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("meris-ortho: error:"), err
+    assert "cannot read Copernicus tile, the file is damaged or cut short" in err[0], err[0]
+    assert reason in err[0] and "See previous exception" not in err[0], err[0]
+    assert not [r for r in caplog.records if "CPLE_" in r.getMessage()]
+    assert not [w for w in recwarn if "NotGeoreferenced" in w.category.__name__]
+    assert not out.exists()
+
+
+def test_a_cog_dem_cut_in_its_heights_is_one_message(files, tmp_path, capsys):
+    """A GeoTIFF DEM in COG layout (header first) cut short opens, then its read fails:
+    "damaged or cut short" and GDAL's root reason, not rasterio's "Read failed"."""
+    _, prod, _, _ = files
+    tp = read_product(prod).tie_points
+    box = (tp["longitude"].min() - 0.3, tp["latitude"].min() - 0.3,
+           tp["longitude"].max() + 0.3, tp["latitude"].max() + 0.3)  # fmt: skip
+    with rasterio.open(make_dem(tmp_path / "strips.tif", *box)) as src:
+        profile, data = src.profile, src.read()
+    profile = {k: v for k, v in profile.items()
+               if k not in ("blockxsize", "blockysize", "tiled", "interleave")}
+    dem = tmp_path / "dem.tif"
+    with rasterio.open(dem, "w", **{**profile, "driver": "COG"}) as dst:
+        dst.write(data)
+    os.truncate(dem, dem.stat().st_size * 2 // 3)
+    out = tmp_path / "o.tif"
+    assert main(["map", str(prod), "-o", str(out), "--dem", f"{dem}:ellipsoid",
+                 "--bands", "7"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "cannot read DEM, the file is damaged or cut short" in err[0], err
+    assert "Read error" in err[0] and "See previous exception" not in err[0], err[0]
+    assert not out.exists()

@@ -6,8 +6,11 @@ for ``engine.terrain``). A DEM path is checked to be a regular file by
 
 from __future__ import annotations
 
+import contextlib
 import logging
-from collections.abc import Callable
+import threading
+import warnings
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from typing import Any
 
@@ -24,6 +27,73 @@ log = logging.getLogger(__name__)
 
 METHODS = tuple(choices(Sampling))
 _CHUNK = 1 << 18
+
+
+# ---------------------------------------------------------------------- GDAL's messages
+def gdal_reason(exc: BaseException) -> str:
+    """The root of GDAL's chain of errors behind ``exc``: rasterio's "Read failed. See
+    previous exception for details." says nothing by itself; its causes say what failed
+    ("TIFFReadEncodedStrip:Read error at scanline ...; got 2034 bytes, expected 4800")."""
+    reasons: list[str] = []
+    seen: set[int] = set()
+    cause: BaseException | None = exc
+    while cause is not None and id(cause) not in seen:
+        seen.add(id(cause))
+        text = " ".join(str(cause).split())
+        if text and "see previous exception" not in text.lower():
+            reasons.append(text)
+        cause = cause.__cause__ or cause.__context__
+    return reasons[-1] if reasons else type(exc).__name__
+
+
+class _Collected(logging.Filter):
+    """Keeps rasterio's log records of GDAL warnings ("CPLE_AppDefined in ...: IO error during
+    reading of GeoPixelScale") from the threads collecting them (``gdal_complaints``)."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.lists: dict[int, list[str]] = {}
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        said = self.lists.get(threading.get_ident())
+        if said is None:
+            return True
+        said.append(record.getMessage())
+        return False
+
+
+_COLLECTED = _Collected()
+logging.getLogger("rasterio._env").addFilter(_COLLECTED)
+
+
+@contextlib.contextmanager
+def gdal_complaints() -> Iterator[list[str]]:
+    """GDAL's warnings while this thread opens a DEM file, collected instead of printed: a
+    file cut short in its header opens with half its tags and no georeferencing (five
+    "IO error during reading" lines and rasterio's NotGeoreferencedWarning), and the caller
+    then says in one message what they mean."""
+    said: list[str] = []
+    _COLLECTED.lists[threading.get_ident()] = said
+    try:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            yield said
+        said.extend(str(w.message) for w in caught)
+    finally:
+        _COLLECTED.lists.pop(threading.get_ident(), None)
+
+
+#: words of GDAL's warnings about a file that ends early or cannot be read in part
+_READ_FAILURES = ("io error", "read error", "read failed", "truncat")
+
+
+def read_failure(said: list[str]) -> str | None:
+    """The first of GDAL's collected warnings (``gdal_complaints``) saying that part of the
+    file could not be read, without its "CPLE_AppDefined in NAME:" prefix; None if none."""
+    for message in said:
+        if any(word in message.lower() for word in _READ_FAILURES):
+            return message.split(": ", 1)[-1] if message.startswith("CPLE_") else message
+    return None
 
 
 # ---------------------------------------------------------------------- interpolation

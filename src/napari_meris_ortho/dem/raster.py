@@ -12,7 +12,7 @@ import pyproj
 
 from ..errors import DemError
 from ..geometry.grid import pixel_limit
-from .base import DemSource, LatticeWindow, _plausible
+from .base import DemSource, LatticeWindow, _plausible, gdal_complaints, gdal_reason, read_failure
 from .geoid import EGM96, EGM2008, ELLIPSOID, crs_datum
 
 _WGS84 = pyproj.CRS.from_epsg(4326)
@@ -58,10 +58,16 @@ class RasterSource(DemSource):
 
         self.name = str(path)
         self._band = band
-        try:
-            self._ds = rasterio.open(path)
-        except (RasterioError, OSError) as exc:
-            raise DemError(f"{path}: cannot read DEM ({exc})") from exc
+        with gdal_complaints() as said:
+            try:
+                self._ds = rasterio.open(path)
+            except (RasterioError, OSError) as exc:
+                raise DemError(f"{path}: cannot read DEM ({gdal_reason(exc)})") from exc
+        failure = read_failure(said)
+        if failure:  # GDAL read half a header: no georeferencing, tags missing
+            self._ds.close()
+            raise DemError(f"{path}: cannot read DEM, the file is damaged or cut short "
+                           f"({failure})")
         ds = self._ds
         t = ds.transform
         if not (all(np.isfinite(tuple(t)[:6])) and abs(t.determinant) > 0):
@@ -131,7 +137,8 @@ class RasterSource(DemSource):
                 data = self._ds.read(self._band, window=Window(c0, r0, c1 - c0, r1 - r0),
                                      out_dtype=np.float32 if direct else None)
         except (RasterioError, OSError) as exc:
-            raise DemError(f"{self.name}: cannot read DEM ({exc})") from exc
+            raise DemError(f"{self.name}: cannot read DEM, the file is damaged or cut short "
+                           f"({gdal_reason(exc)})") from exc
         if direct:  # exact conversion: no data compares the same before and after it
             if self._nodata is not None and not np.isnan(self._nodata):
                 np.putmask(data, data == self._nodata, np.float32(np.nan))
