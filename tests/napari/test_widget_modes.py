@@ -79,6 +79,7 @@ def test_synthesis_update_from_the_widget(make_napari_viewer, qtbot, tiny_n1, tm
     widget.algorithm.value = "min-radiance"
     widget.output.value = store
     assert widget.mode.value == "new synthesis (min-radiance) of 2 products"
+    assert not widget.keep.native.isHidden() and widget.keep.value == 0  # synthesis: shown
     _run(widget, qtbot)
 
     widget.products.value = [third]
@@ -93,6 +94,7 @@ def test_synthesis_update_from_the_widget(make_napari_viewer, qtbot, tiny_n1, tm
     widget.output.value = None
     _run(widget, qtbot)
     assert "updated synthesis (min-radiance) of 1 product" in widget.status.value
+    assert "kept the store's newest" not in widget.status.value  # keep 0: every commit
     synthesis = open_synthesis(store)
     assert len(synthesis.history()) == 2
     names = set(synthesis.product_names().values())
@@ -115,6 +117,55 @@ def test_synthesis_update_from_the_widget(make_napari_viewer, qtbot, tiny_n1, tm
     assert widget.start() is None
     assert widget.status.value == f"input synthesis {tmp_path}: not a synthesis store"
     assert len(open_synthesis(store).history()) == 2  # nothing written
+
+
+def test_a_synthesis_run_keeps_the_newest_commits(make_napari_viewer, qtbot, tiny_n1,
+                                                  tmp_path):
+    """The widget's "keep commits" (the CLI's ``synthesize --keep``): after the update's commit
+    the store keeps its newest N commits and frees what only older ones held; the field shows
+    for syntheses only; a negative count is refused before Run."""
+    second = _copy(tiny_n1, tmp_path / "MER_FR__1PTWO.N1", dt.datetime(2003, 9, 24, 9, 41), 0.9)
+    third = _copy(tiny_n1, tmp_path / "MER_FR__1PTHREE.N1", dt.datetime(2003, 9, 27, 9, 46),
+                  0.5)
+    store = tmp_path / "store"
+    viewer = make_napari_viewer()
+    widget = _widget(viewer)
+    widget.elevation.value = "tiepoints"
+    widget.geometry.value = False
+    widget.bands.value = "7"
+    widget.products.value = [tiny_n1]
+    assert widget.keep.native.isHidden()  # mapping: nothing to keep
+    widget.algorithm.value = "min-radiance"
+    assert not widget.keep.native.isHidden()
+    widget.output.value = store
+    _run(widget, qtbot)
+    for product in (second, third):
+        widget.products.value = [product]
+        widget.output.value = None
+        widget.input_store.value = store
+        _run(widget, qtbot)
+    assert len(open_synthesis(store).history()) == 3
+    before = open_synthesis(store).read("count")
+    fourth = _copy(tiny_n1, tmp_path / "MER_FR__1PFOUR.N1", dt.datetime(2003, 9, 30, 9, 51), 0.7)
+    widget.products.value = [fourth]
+    widget.keep.value = 1
+    _run(widget, qtbot)
+    assert "kept the store's newest 1 commit," in widget.status.value, widget.status.value
+    freed = float(widget.status.value.split("commit, ")[1].split(" MB freed")[0])
+    assert freed >= 0.0  # a tiny store: kilobytes
+    synthesis = open_synthesis(store)
+    assert len(synthesis.history()) == 1  # the update's commit, older ones expired
+    assert len(set(synthesis.product_names().values())) == 4
+    np.testing.assert_array_equal(np.asarray(synthesis.read("count")), np.asarray(before) + (
+        np.asarray(before) > 0))  # the fourth product sees what the others saw: count + 1
+    settings = widget.settings()
+    settings.keep = -1
+    try:
+        settings.check()
+    except Exception as exc:  # OptionsError, as every bad choice
+        assert "keep must be a number of commits" in str(exc)
+    else:
+        raise AssertionError("a negative keep was accepted")
 
 
 def test_mode_label_and_remembered_selection(make_napari_viewer, tiny_n1, tiny_dem):

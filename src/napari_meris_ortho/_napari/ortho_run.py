@@ -70,6 +70,9 @@ class RunSettings:
     #: an existing synthesis store to update (CLI ``synthesize --input``): the products are
     #: merged into it (or into a copy at ``output``), its grid and bands kept
     input_store: Path | None = None
+    #: a synthesis run keeps the newest this many commits of its store afterwards and frees
+    #: what only older ones held (CLI ``synthesize --keep``); 0: every commit is kept
+    keep: int = 0
     geometry: bool = True
     exaggeration: float = 10.0
     #: one parallax vector every this many output pixels; 0: about 60 across the grid
@@ -123,6 +126,8 @@ class RunSettings:
         if not self.pixel and self.elevation == Elevation.DEM and not self.dems:
             raise OptionsError("elevation 'dem' needs a DEM: add one, or choose elevation "
                                "'tiepoints' (the product's tie-point heights) or 'none'")
+        if isinstance(self.keep, bool) or not isinstance(self.keep, int) or self.keep < 0:
+            raise OptionsError(f"keep must be a number of commits (0: all), not {self.keep!r}")
         if self.input_store is not None:
             from ..synthesis.reading import is_synthesis, open_synthesis
 
@@ -185,6 +190,8 @@ class OrthoRun:
     skipped: list[str] = field(default_factory=list)  # "name: reason" of skipped products
     #: what the user should know (a DEM that gave no height), as the CLI warns
     warnings: list[str] = field(default_factory=list)
+    #: commits kept and megabytes freed by a synthesis run's pruning (``RunSettings.keep``)
+    pruned: tuple[int, float] | None = None
 
     def release(self) -> None:
         """Drop the arrays of every item (bands, diagnostics, masks, extra layers) once they are
@@ -208,6 +215,10 @@ class OrthoRun:
             text += f"; skipped {'; '.join(self.skipped)}"
         if self.written:
             text += f"; wrote {', '.join(str(p) for p in self.written)}"
+        if self.pruned is not None:
+            kept, freed = self.pruned
+            commits = f"{kept} commit{'s' if kept != 1 else ''}"
+            text += f"; kept the store's newest {commits}, {freed:.1f} MB freed"
         return text
 
 
@@ -304,7 +315,8 @@ def _run_synthesis(options: RunSettings, progress: ProgressCallback | None) -> O
     try:
         result = synthesize(
             [p.path for p in products], out, algorithm=algorithm, input=options.input_store,
-            progress=progress, dems=options.dem_list, options=options.options(), **grid_options)
+            progress=progress, dems=options.dem_list, options=options.options(),
+            keep=options.keep if options.keep and not temporary else None, **grid_options)
         skipped += [f"{Path(r.path).name}: {r.error}" for r in result.failed]
         skipped += [f"{Path(r.path).name}: already in the synthesis" for r in result.skipped]
         skipped += [f"{Path(r.path).name}: outside the synthesis grid" for r in result.outside]
@@ -317,7 +329,9 @@ def _run_synthesis(options: RunSettings, progress: ProgressCallback | None) -> O
         if temporary:
             shutil.rmtree(out.parent, ignore_errors=True)
     items = [item] + [_item(p, grid=item["grid"]) for p in products if str(p.path) in merged]
-    return OrthoRun(items, options, [] if temporary else [out], skipped)
+    pruned = (None if result.pruned is None
+              else (result.pruned.kept, result.pruned.bytes_deleted / 1e6))
+    return OrthoRun(items, options, [] if temporary else [out], skipped, pruned=pruned)
 
 
 def _synthesis_item(path: Path, products: list[Any]) -> dict[str, Any]:

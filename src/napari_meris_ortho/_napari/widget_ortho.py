@@ -209,6 +209,11 @@ class OrthorectifyWidget(Container):
                                     tooltip="an existing synthesis store to update with the "
                                             "products (its grid and bands are kept); output "
                                             "empty: updated in place, else into a copy there")
+        self.keep = SpinBox(label="keep commits (0 = all)", value=0, min=0, max=1_000_000,
+                            visible=False,
+                            tooltip="a synthesis run then keeps the newest this many commits "
+                                    "of its store and frees what only older ones held "
+                                    "(CLI synthesize --keep); 0: keep every commit")
         self.mode = StatusLabel(value="", label="Run will",
                                 tooltip="what Run does with the current choices")
         self.parallax = ComboBox(label="parallax", choices=choices(PARALLAX_CHOICES),
@@ -252,7 +257,7 @@ class OrthorectifyWidget(Container):
         super().__init__(widgets=[
             self.products, self.dem_kind, self.dem_path, self.dem_add, self.dem_list,
             dem_buttons, self.elevation, self.geolocation, self.algorithm, self.input_store,
-            self.parallax, self.search, self.sampling, self.crs, self.epsg,
+            self.keep, self.parallax, self.search, self.sampling, self.crs, self.epsg,
             self.pixel_size, self.bands, self.geometry, self.exaggeration, self.vector_step,
             self.output, self.mode, self.run_button, self.cancel_button, self.progress_bar,
             self.status,
@@ -383,8 +388,10 @@ class OrthorectifyWidget(Container):
     def _show_mode(self, _value: Any = None) -> None:
         """Name what Run will do (mapping, new synthesis or update of a store) before Run."""
         products, output, store = self._paths()
-        self.mode.value = RunSettings(products=products, algorithm=self.algorithm.value,
-                                      output=output, input_store=store).mode()
+        settings = RunSettings(products=products, algorithm=self.algorithm.value,
+                               output=output, input_store=store)
+        self.mode.value = settings.mode()
+        self.keep.visible = settings.synthesis  # pruning a store's commits: syntheses only
 
     def settings(self) -> RunSettings:
         """The widget's values as checked RunSettings (raises OptionsError on bad input)."""
@@ -393,7 +400,7 @@ class OrthorectifyWidget(Container):
             products=products, dems=self.dems,
             elevation=self.elevation.value, geolocation=self.geolocation.value,
             algorithm=self.algorithm.value, parallax=self.parallax.value,
-            search=self.search.value, input_store=store,
+            search=self.search.value, input_store=store, keep=int(self.keep.value),
             sampling=self.sampling.value, crs=self.crs.value, epsg=int(self.epsg.value),
             pixel_size_m=float(self.pixel_size.value), bands=parse_bands(self.bands.value),
             output=output, geometry=self.geometry.value,
