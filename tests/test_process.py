@@ -82,7 +82,11 @@ def test_a_viewer_gets_back_the_blocks_a_worker_thread_made():
            for mode in ("viewer", "control")}
     assert out["viewer"]["viewer"] is True
     assert out["viewer"]["returned_mb"] > 38
-    assert out["control"]["returned_mb"] < 10  # the case the viewer's setting is for
+    # the case the viewer's setting is for: without it, at least one band stays. 0 MB came back
+    # in one sitting, 20 MB in another: the thread's heap kept its 40 MiB (malloc_info) and
+    # malloc_trim handed back the pages of one band's free block inside it, not merged into the
+    # heap's top (which it never hands back)
+    assert out["viewer"]["returned_mb"] - out["control"]["returned_mb"] > 15
 
 
 def test_numba_private_hooks_are_still_there():
