@@ -164,11 +164,16 @@ def test_viewer_shows_a_decimated_level_of_the_sen3(make_napari_viewer, pair):
     assert all(layer.multiscale for layer in layers)
     rgb = next(layer for layer in layers if layer.name.startswith("RGB"))
     radiance = next(layer for layer in layers if layer.name.startswith("radiance"))
-    assert rgb.data_level > 0 and radiance.data_level > 0
+    assert rgb.data_level > 0
     shown = rgb._slice.image.raw
     assert shown.shape[0] * shown.shape[1] <= H * W / 4
     np.testing.assert_array_equal(shown, np.asarray(rgb.data[rgb.data_level])[
         tuple(slice(lo, hi + 1) for lo, hi in rgb.corner_pixels.T)])
+    # the radiances open hidden under the quick-look: shown as a user shows them
+    assert not radiance.visible
+    rgb.visible, radiance.visible = False, True
+    viewer.screenshot(canvas_only=True)
+    assert radiance.data_level > 0
     for b in (3, 7, 12):
         viewer.dims.set_current_step(0, b - 1)
         viewer.screenshot(canvas_only=True)

@@ -52,6 +52,9 @@ def test_n1_reader_layers(n1_path):
 
     layers = read_layers(str(n1_path))
     assert [t for _, _, t in layers] == ["image", "image", "labels"]
+    # only the RGB quick-look is drawn at first: the radiance stack under it (the RGB is opaque)
+    # and the flags open hidden
+    assert [kw.get("visible", True) for _, kw, _ in layers] == [False, True, False]
     # multiscale (2241 columns: levels of 2241, 1121 and 561 columns), level 0 read here
     assert all(kw["multiscale"] for _, kw, _ in layers)
     assert [level.shape for level in layers[0][0]] == [(15, H, W), (15, 35, 1121), (15, 18, 561)]
