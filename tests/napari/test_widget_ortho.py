@@ -326,3 +326,30 @@ def test_cancel_while_the_layers_go_in_leaves_the_viewer_as_before(make_napari_v
     assert [layer.visible for layer in viewer.layers] == visible
     assert widget._removed == [] and widget._appended == []
     assert widget.run_button.enabled
+
+
+def test_hidden_layers_get_their_thumbnails(make_napari_viewer, qtbot, tiny_n1):
+    """napari makes a thumbnail when it slices a layer, and slices visible layers only (and
+    empties an image layer's slice when it inserts it): a run's single bands and diagnostics,
+    and an opened product's radiances, all hidden, showed black squares in the layer list.
+    They are now sliced once, shown and hidden again in a turn of their own each: after the
+    run has ended, after the product's first pixels. Not the labels layers (napari's first
+    slicing of one builds its colour textures: 0.28-0.30 s after a session's first open)."""
+    viewer = make_napari_viewer(show=True)
+    layers = viewer.open(tiny_n1, plugin="napari-meris-ortho")
+    radiance = next(x for x in layers if x.name.startswith("radiance"))
+    assert not radiance.visible and not radiance.thumbnail[..., :3].any()  # not sliced yet
+    qtbot.waitUntil(lambda: radiance.thumbnail[..., :3].any(), timeout=5000)
+    assert not radiance.visible
+    widget = OrthorectifyWidget(viewer)
+    widget.products.value = [tiny_n1]
+    widget.elevation.value = "tiepoints"
+    _run(widget, qtbot)
+    hidden = [viewer.layers[f"{name}{STAMP}"] for name in
+              ("ortho b2", "ortho b5", "ortho b7", "iterations", "elevation")]
+    assert not any(x.visible for x in hidden)
+    qtbot.waitUntil(lambda: all(x.thumbnail[..., :3].any() for x in hidden), timeout=5000)
+    assert not any(x.visible for x in hidden)
+    # a band's thumbnail is its image, not a flat square
+    thumb = viewer.layers[f"ortho b7{STAMP}"].thumbnail[..., 0]
+    assert len(np.unique(thumb)) > 10

@@ -53,6 +53,7 @@ from ._qt.insertion import (
     prepare_dash_patterns,
     scene_graph_paused,
     show_in,
+    thumbnails_later,
 )
 from .layout import StatusLabel, frame_extent
 from .legend import prepare_glyphs, show_legends
@@ -644,7 +645,10 @@ class OrthorectifyWidget(Container):
             return
         self.progress_bar.value = self.progress_bar.max
         self.status.value = self._summary
+        # the thumbnails of the run's hidden images (single bands, diagnostics), after its end
+        hidden = [x for x in self._appended if type(x).__name__ == "Image" and not x.visible]
         self._end()
+        thumbnails_later(self.viewer, hidden)
 
     def _frame_result(self, layers: list[Any]) -> None:
         """Point the camera at the run's visible ``layers`` (the result, not the whole

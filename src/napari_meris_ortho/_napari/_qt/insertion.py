@@ -39,6 +39,34 @@ def show_in(viewer: Any, layers: list[Any]) -> None:
             layer.visible = True
 
 
+def thumbnail_while_hidden(layer: Any) -> None:
+    """Have napari make the thumbnail of a hidden ``layer``: napari makes a thumbnail when it
+    slices a layer, and it slices visible layers only, so a layer that comes hidden (a run's
+    single bands under its RGB, its diagnostics; a product's radiances under its quick-look)
+    showed a black square in the layer list. Shown and hidden again at once, it is sliced once
+    (a multiscale layer at the level napari picks: 0.04-0.05 s for fr-alps' radiances, measured)
+    and keeps its thumbnail; no frame draws it in between. No-op for a visible layer. In a
+    viewer: napari empties an image layer's slice, and so its thumbnail, when it inserts it."""
+    if layer.visible:
+        return
+    layer.visible = True
+    layer.visible = False
+
+
+def thumbnails_later(viewer: Any, layers: Sequence[Any]) -> None:
+    """``thumbnail_while_hidden`` for ``layers`` (layers, or names of the viewer's layers) still
+    in the viewer, one per turn of the event loop once napari's opening is over (a reader's
+    layers: after their first pixels; a run's: after it has ended)."""
+    def step(which: Any) -> None:
+        found = (next((x for x in viewer.layers if x.name == which), None)
+                 if isinstance(which, str) else which if which in viewer.layers else None)
+        if found is not None:
+            thumbnail_while_hidden(found)
+
+    if layers:
+        in_turns([partial(step, which) for which in layers])
+
+
 def prepare_dash_patterns() -> None:
     """vispy's line dash patterns built now (it keeps them): every labels layer's polygon
     overlay builds them, 0.08 s in the session's first labels layer insertion (measured)."""
