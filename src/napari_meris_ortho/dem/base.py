@@ -67,11 +67,11 @@ logging.getLogger("rasterio._env").addFilter(_COLLECTED)
 
 
 @contextlib.contextmanager
-def gdal_complaints() -> Iterator[list[str]]:
+def _gdal_complaints() -> Iterator[list[str]]:
     """GDAL's warnings while this thread opens a DEM file, collected instead of printed: a
     file cut short in its header opens with half its tags and no georeferencing (five
-    "IO error during reading" lines and rasterio's NotGeoreferencedWarning), and the caller
-    then says in one message what they mean."""
+    "IO error during reading" lines and rasterio's NotGeoreferencedWarning), and
+    ``open_raster`` then says in one message what they mean."""
     said: list[str] = []
     _COLLECTED.lists[threading.get_ident()] = said
     try:
@@ -87,13 +87,38 @@ def gdal_complaints() -> Iterator[list[str]]:
 _READ_FAILURES = ("io error", "read error", "read failed", "truncat")
 
 
-def read_failure(said: list[str]) -> str | None:
-    """The first of GDAL's collected warnings (``gdal_complaints``) saying that part of the
+def _read_failure(said: list[str]) -> str | None:
+    """The first of GDAL's collected warnings (``_gdal_complaints``) saying that part of the
     file could not be read, without its "CPLE_AppDefined in NAME:" prefix; None if none."""
     for message in said:
         if any(word in message.lower() for word in _READ_FAILURES):
             return message.split(": ", 1)[-1] if message.startswith("CPLE_") else message
     return None
+
+
+def cut_short(path: Any, what: str, reason: str) -> DemError:
+    """The error of a DEM file (``what``: "DEM", "Copernicus tile") GDAL could read only in
+    part: "PATH: cannot read WHAT, the file is damaged or cut short (REASON)"."""
+    return DemError(f"{path}: cannot read {what}, the file is damaged or cut short ({reason})")
+
+
+def open_raster(path: Any, what: str) -> Any:
+    """``rasterio.open`` of a DEM file (``what``: "DEM", "Copernicus tile"), in one message
+    when it fails: "cannot read WHAT (GDAL's root reason)", or ``cut_short`` when GDAL could
+    read only part of its header (its warnings collected, not printed)."""
+    import rasterio
+    from rasterio.errors import RasterioError
+
+    with _gdal_complaints() as said:
+        try:
+            ds = rasterio.open(path)
+        except (RasterioError, OSError) as exc:
+            raise DemError(f"{path}: cannot read {what} ({gdal_reason(exc)})") from exc
+    failure = _read_failure(said)
+    if failure:  # GDAL read half a header: no georeferencing, tags missing
+        ds.close()
+        raise cut_short(path, what, failure)
+    return ds
 
 
 # ---------------------------------------------------------------------- interpolation

@@ -25,7 +25,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import DemError
-from .base import DemSource, gdal_complaints, gdal_reason, read_failure
+from .base import DemSource, cut_short, gdal_reason, open_raster
 from .geoid import EGM2008, to_ellipsoid
 
 NAME_RE = re.compile(r"^Copernicus_DSM(?:_COG)?_(10|30)_([NS])(\d{2})_00_([EW])(\d{3})_00_DEM"
@@ -91,15 +91,7 @@ class _Tile:
         self._window: tuple[int, int, np.ndarray] | None = None
 
     def _open(self) -> Any:
-        import rasterio
-        from rasterio.errors import RasterioError
-
-        with gdal_complaints() as said:
-            try:
-                ds = rasterio.open(self.path)
-            except (RasterioError, OSError) as exc:
-                raise DemError(f"{self.path}: cannot read Copernicus tile "
-                               f"({gdal_reason(exc)})") from exc
+        ds = open_raster(self.path, "Copernicus tile")
         t = ds.transform
         ok = (abs(t.a - self.dx) < 1e-3 * self.dx and abs(-t.e - self.dy) < 1e-3 * self.dy
               and abs(t.c - (self.lon0 - 0.5 * self.dx)) < 0.01 * self.dx
@@ -107,10 +99,6 @@ class _Tile:
               and ds.width >= round(1 / self.dx) and ds.height >= round(1 / self.dy))
         if not ok:
             ds.close()
-            failure = read_failure(said)
-            if failure:  # GDAL read half a header
-                raise DemError(f"{self.path}: cannot read Copernicus tile, the file is damaged "
-                               f"or cut short ({failure})")
             raise DemError(f"{self.path}: not a Copernicus DEM tile of its name (origin "
                            f"{t.c:.6f}, {t.f:.6f}, post {t.a:.7f} x {-t.e:.7f} deg, "
                            f"{ds.width} x {ds.height})")
@@ -129,8 +117,7 @@ class _Tile:
             try:
                 data = self._ds.read(1, window=Window(c0, r0, c1 - c0, r1 - r0))
             except (RasterioError, OSError) as exc:
-                raise DemError(f"{self.path}: cannot read Copernicus tile, the file is damaged "
-                               f"or cut short ({gdal_reason(exc)})") from exc
+                raise cut_short(self.path, "Copernicus tile", gdal_reason(exc)) from exc
             data = data.astype(np.float64)
             nodata = self._ds.nodata
             if nodata is not None:

@@ -12,7 +12,7 @@ import pyproj
 
 from ..errors import DemError
 from ..geometry.grid import pixel_limit
-from .base import DemSource, LatticeWindow, _plausible, gdal_complaints, gdal_reason, read_failure
+from .base import DemSource, LatticeWindow, _plausible, cut_short, gdal_reason, open_raster
 from .geoid import EGM96, EGM2008, ELLIPSOID, crs_datum
 
 _WGS84 = pyproj.CRS.from_epsg(4326)
@@ -53,21 +53,9 @@ class RasterSource(DemSource):
     """Any raster GDAL opens (GeoTIFF...), any CRS; posts at pixel centres; nodata honoured."""
 
     def __init__(self, path: str | Path, band: int = 1) -> None:
-        import rasterio
-        from rasterio.errors import RasterioError
-
         self.name = str(path)
         self._band = band
-        with gdal_complaints() as said:
-            try:
-                self._ds = rasterio.open(path)
-            except (RasterioError, OSError) as exc:
-                raise DemError(f"{path}: cannot read DEM ({gdal_reason(exc)})") from exc
-        failure = read_failure(said)
-        if failure:  # GDAL read half a header: no georeferencing, tags missing
-            self._ds.close()
-            raise DemError(f"{path}: cannot read DEM, the file is damaged or cut short "
-                           f"({failure})")
+        self._ds = open_raster(path, "DEM")
         ds = self._ds
         t = ds.transform
         if not (all(np.isfinite(tuple(t)[:6])) and abs(t.determinant) > 0):
@@ -137,8 +125,7 @@ class RasterSource(DemSource):
                 data = self._ds.read(self._band, window=Window(c0, r0, c1 - c0, r1 - r0),
                                      out_dtype=np.float32 if direct else None)
         except (RasterioError, OSError) as exc:
-            raise DemError(f"{self.name}: cannot read DEM, the file is damaged or cut short "
-                           f"({gdal_reason(exc)})") from exc
+            raise cut_short(self.name, "DEM", gdal_reason(exc)) from exc
         if direct:  # exact conversion: no data compares the same before and after it
             if self._nodata is not None and not np.isnan(self._nodata):
                 np.putmask(data, data == self._nodata, np.float32(np.nan))
