@@ -646,7 +646,8 @@ class OrthorectifyWidget(Container):
         self.progress_bar.value = self.progress_bar.max
         self.status.value = self._summary
         # the thumbnails of the run's hidden images (single bands, diagnostics), after its end
-        hidden = [x for x in self._appended if type(x).__name__ == "Image" and not x.visible]
+        hidden = [x.name for x in self._appended
+                  if type(x).__name__ == "Image" and not x.visible]
         self._end()
         thumbnails_later(self.viewer, hidden)
 

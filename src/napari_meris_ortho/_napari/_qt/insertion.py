@@ -53,18 +53,17 @@ def thumbnail_while_hidden(layer: Any) -> None:
     layer.visible = False
 
 
-def thumbnails_later(viewer: Any, layers: Sequence[Any]) -> None:
-    """``thumbnail_while_hidden`` for ``layers`` (layers, or names of the viewer's layers) still
-    in the viewer, one per turn of the event loop once napari's opening is over (a reader's
-    layers: after their first pixels; a run's: after it has ended)."""
-    def step(which: Any) -> None:
-        found = (next((x for x in viewer.layers if x.name == which), None)
-                 if isinstance(which, str) else which if which in viewer.layers else None)
-        if found is not None:
-            thumbnail_while_hidden(found)
+def thumbnails_later(viewer: Any, names: Sequence[str]) -> None:
+    """``thumbnail_while_hidden`` for the viewer's layers of these ``names``, one per turn of
+    the event loop once napari's opening is over (a reader's layers: after their first pixels;
+    a run's: after it has ended)."""
+    def step(name: str) -> None:
+        layer = next((x for x in viewer.layers if x.name == name), None)
+        if layer is not None:
+            thumbnail_while_hidden(layer)
 
-    if layers:
-        in_turns([partial(step, which) for which in layers])
+    if names:
+        in_turns([partial(step, name) for name in names])
 
 
 def prepare_dash_patterns() -> None:
