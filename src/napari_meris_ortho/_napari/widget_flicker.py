@@ -28,6 +28,7 @@ from .._atomic import atomic_path
 from ..errors import MerisOrthoError, OptionsError
 from ..geometry.grid import OutputGrid
 from ..pyramid import full_resolution
+from ._qt.insertion import start_after_paint
 from .layout import StatusLabel, compact_combo
 from .settings import remember
 from .world import layer_frame, layer_scale, layer_translate, reproject_onto, world_axes
@@ -410,7 +411,7 @@ class FlickerWidget(Container):
             _progress={"desc": "Disparity"},
             _connect={"returned": lambda result: self._show_disparity(result, a, frame),
                       "errored": self._disparity_failed, "finished": self._disparity_done})
-        self.disparity_worker.start()
+        start_after_paint(self.disparity_worker, lambda: getattr(self, "_closed", True))
         return self.disparity_worker
 
     def _disparity_failed(self, exc: BaseException) -> None:

@@ -53,6 +53,7 @@ from ._qt.insertion import (
     prepare_dash_patterns,
     scene_graph_paused,
     show_in,
+    start_after_paint,
     thumbnails_later,
 )
 from .layout import StatusLabel, frame_extent
@@ -451,7 +452,7 @@ class OrthorectifyWidget(Container):
             "returned": self._done, "errored": self._failed, "finished": self._finished})
         self.run_button.enabled, self.cancel_button.enabled = False, True
         self.status.value = "running..."
-        self.worker.start()
+        start_after_paint(self.worker, lambda: self._closed)
         return self.worker
 
     @property

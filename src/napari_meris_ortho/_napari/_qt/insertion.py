@@ -280,6 +280,24 @@ def in_turns(steps: list[Callable[[], Any]]) -> None:
     QTimer.singleShot(1, step)
 
 
+#: ms between a worker's start being asked and the worker starting: the widget's "running"
+#: state (buttons, status, progress bar) is painted first, without a job thread holding the GIL
+#: for its first imports and numba's kernels (the first run's longest stall, 0.19-0.21 s)
+START_AFTER_PAINT_MS = 30
+
+
+def start_after_paint(worker: Any, cancelled: Callable[[], bool]) -> None:
+    """Start ``worker`` (a napari thread worker) once the widget that asked for it has been
+    painted, unless ``cancelled()`` says its widget has gone by then."""
+    from qtpy.QtCore import QTimer
+
+    def start() -> None:
+        if not cancelled():
+            worker.start()
+
+    QTimer.singleShot(START_AFTER_PAINT_MS, start)
+
+
 def controls_in_turns(viewer: Any, layers: list[Any], then: Any = None) -> None:
     """Make napari's controls of ``layers`` (appended with a stand-in) and put them in its
     stack, each in a turn of its own from the next one on (``make_controls``,
