@@ -282,7 +282,7 @@ def in_turns(steps: list[Callable[[], Any]]) -> None:
 
 #: ms between a worker's start being asked and the worker starting: the widget's "running"
 #: state (buttons, status, progress bar) is painted first, without a job thread holding the GIL
-#: for its first imports and numba's kernels (the first run's longest stall, 0.19-0.21 s)
+#: for its first imports and numba's kernels (a first run's longest stall, 0.14-0.20 s)
 START_AFTER_PAINT_MS = 30
 
 
