@@ -142,6 +142,35 @@ def test_cog_opens_on_its_own_overviews(make_napari_viewer, tmp_path):
     assert np.asarray(layer.data[1][:20]).max() == 0  # background stays 0, not nodata x scale
 
 
+def test_a_cog_of_gdals_cog_driver_opens_with_its_odd_overviews(make_napari_viewer, tmp_path):
+    """GDAL's COG driver rounds an overview's size down (627 lines: 313, 156), the pyramid's
+    levels are ceil(n / f) (314, 157): the last line and column of a level repeat the
+    overview's last ones. Before, a view reaching them failed ("cannot reshape array")."""
+    import rasterio.shutil
+    from rasterio.transform import from_origin
+
+    h, w = 627, 1068
+    values = (np.arange(h * w, dtype=np.float32).reshape(h, w) % 977.0) + 1.0
+    plain = tmp_path / "plain.tif"
+    with rasterio.open(plain, "w", driver="GTiff", width=w, height=h, count=1, dtype="float32",
+                       crs="EPSG:4326", transform=from_origin(11.9, 47.0, 0.0025, 0.0025),
+                       tiled=True, blockxsize=256, blockysize=256) as ds:
+        ds.write(values, 1)
+    path = tmp_path / "cog.tif"
+    rasterio.shutil.copy(plain, path, driver="COG", blocksize=256, overview_resampling="nearest")
+    with rasterio.open(path, overview_level=0) as ds:
+        overview = ds.read(1)
+    assert overview.shape == (313, 534)  # rounded down: the case of this test
+    viewer = make_napari_viewer(show=True)
+    (layer,) = viewer.open(str(path), plugin="napari-meris-ortho")
+    viewer.screenshot(canvas_only=True)
+    level = np.asarray(layer.data[1])
+    assert level.shape == (314, 534)
+    np.testing.assert_array_equal(level[:313], overview)
+    np.testing.assert_array_equal(level[313], overview[312])  # the last line repeated
+    np.testing.assert_array_equal(np.asarray(layer.data[0][620:, 1000:]), values[620:, 1000:])
+
+
 def test_multiscale_layer_saves_its_full_resolution(make_napari_viewer, tmp_path):
     """File > Save Selected Layers on a multiscale layer writes level 0 (the plugin's writer;
     np.asarray of napari's multiscale data would not even be an image)."""

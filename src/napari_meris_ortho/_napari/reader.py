@@ -273,13 +273,27 @@ class _GeoTiffWindows:
         with opened as ds:
             window = Window(cols.start // f, rows.start // f,
                             (cols[-1] - cols.start) // f + 1, (rows[-1] - rows.start) // f + 1)
-            data = ds.read(self.band, window=window)[None]
+            data = _read_within(ds.read, self.band, window, ds.height, ds.width)[None]
             if self.scale is not None:  # an overview does not carry the band's scale
-                mask = ds.read_masks(self.band, window=window)[None] == 0
+                mask = _read_within(ds.read_masks, self.band, window, ds.height,
+                                    ds.width)[None] == 0
                 data = _to_physical(data, mask, [self.scale[0]], [self.scale[1]])
         step = rows.step // f, cols.step // f
         out = data[0, ::step[0], ::step[1]]
         return out[tuple(0 if isinstance(s, int) else slice(None) for s in sel)]
+
+
+def _read_within(read: Any, band: int, window: Any, height: int, width: int) -> np.ndarray:
+    """``read(band, window=window)`` with the window's shape where it runs past the raster by
+    a line or a column, the last ones repeated: the pyramid's levels are ``ceil(n / f)`` long,
+    GDAL's COG driver rounds an overview's size down (627 lines: 313, 156)."""
+    from rasterio.windows import Window
+
+    row, col = min(window.row_off, height - 1), min(window.col_off, width - 1)
+    inside = Window(col, row, min(window.width, width - col), min(window.height, height - row))
+    data = read(band, window=inside)
+    short = (window.height - data.shape[0], window.width - data.shape[1])
+    return np.pad(data, ((0, short[0]), (0, short[1])), mode="edge") if any(short) else data
 
 
 def _physical(ds: Any) -> np.ndarray:
