@@ -35,3 +35,47 @@ def test_writer_refuses_a_layer_without_georeference(make_napari_viewer, tmp_pat
     with pytest.raises(Exception, match="georeference"):
         viewer.layers.save(str(out), selected=True, plugin="napari-meris-ortho")
     assert not out.exists()
+
+
+def _geotiff(path, data, nodata):
+    transform = Affine(260.0, 0, 402_000.0, 0, -260.0, 5_101_000.0)
+    with rasterio.open(path, "w", driver="GTiff", width=data.shape[1], height=data.shape[0],
+                       count=1, dtype=data.dtype.name, crs="EPSG:32632", transform=transform,
+                       nodata=nodata) as ds:
+        ds.write(data[None])
+    return path
+
+
+def test_writer_refuses_the_file_a_layer_reads_from(make_napari_viewer, tmp_path):
+    """napari's lazy layers read their file as the view moves: saving another layer over it
+    replaced the file under them and the viewer aborted at its next draw."""
+    big = _geotiff(tmp_path / "big.tif", np.ones((30, 40), np.float32), None)
+    small = _geotiff(tmp_path / "small.tif", np.full((10, 12), 7, np.float32), None)
+    viewer = make_napari_viewer()
+    viewer.open(str(big), plugin="napari-meris-ortho")
+    (layer,) = viewer.open(str(small), plugin="napari-meris-ortho")
+    viewer.layers.selection = {layer}
+    before = big.read_bytes()
+    for target in (big, small):
+        with pytest.raises(Exception, match="reads from this file"):
+            viewer.layers.save(str(target), selected=True, plugin="napari-meris-ortho")
+    assert big.read_bytes() == before
+    out = tmp_path / "copy.tif"
+    viewer.layers.save(str(out), selected=True, plugin="napari-meris-ortho")
+    assert out.exists()
+
+
+def test_writer_keeps_the_layers_nodata(make_napari_viewer, tmp_path):
+    """A GeoTIFF's no-data value goes back out with its layer; before, every layer was written
+    with nodata 0, so -9999 pixels became data and a real 0 became no data."""
+    data = np.arange(1, 1 + 30 * 40, dtype=np.float32).reshape(30, 40)
+    data[:5] = -9999.0
+    data[10, 10] = 0.0
+    viewer = make_napari_viewer()
+    viewer.open(str(_geotiff(tmp_path / "src.tif", data, -9999.0)), plugin="napari-meris-ortho")
+    out = tmp_path / "saved.tif"
+    viewer.layers.save(str(out), selected=True, plugin="napari-meris-ortho")
+    with rasterio.open(out) as ds:
+        assert ds.nodata == -9999.0
+        mask = ds.read_masks(1)
+    assert (mask[:5] == 0).all() and mask[10, 10] == 255 and (mask[5:] == 255).all()

@@ -205,7 +205,10 @@ def geotiff_layers(path: str | Path, frame: OutputGrid | None = None) -> list[La
             source = OutputGrid.from_transform(ds.crs, tuple(ds.transform), (ds.height, ds.width))
             names = [d or f"band {i + 1}" for i, d in enumerate(ds.descriptions)]
             tags = ds.tags()
-            nodata = ds.nodata
+            scaled = _scaled(ds)
+            # what the layer's no-data pixels hold: 0 where counts are read as radiances
+            # (``_to_physical``), else the file's own value
+            nodata = 0.0 if scaled and ds.nodata is not None else ds.nodata
             lazy = (frame is None or source.same_grid(frame)) and len(
                 level_factors(ds.height, ds.width)) > 1
             bands: list[Any] = geotiff_levels(path, ds) if lazy else []
@@ -215,7 +218,9 @@ def geotiff_layers(path: str | Path, frame: OutputGrid | None = None) -> list[La
     grid = source
     if data is not None:
         is_mask = data.dtype.kind in "iu" and data.dtype.itemsize == 1
-        placed, grid = place_on_frame(data, source, frame, nearest=is_mask)
+        fill = 0.0 if nodata is None else nodata
+        placed, grid = place_on_frame(data, source, frame, nearest=is_mask, nodata=fill)
+        nodata = fill if grid is not source else nodata
         bands = list(placed)
     layers = []
     for k, band_name in enumerate(names):
@@ -239,7 +244,7 @@ def geotiff_levels(path: Path, ds: Any) -> list[list[LazyArray]]:
     resolution when it has none); bands with a scale as physical values (``_physical``)."""
     overviews = ds.overviews(1)
     factors = [1, *overviews] if overviews else level_factors(ds.height, ds.width)
-    physical = not (all(s == 1.0 for s in ds.scales) and all(o == 0.0 for o in ds.offsets))
+    physical = _scaled(ds)
     dtype = np.float32 if physical else np.dtype(ds.dtypes[0])
     out = []
     for k in range(ds.count):
@@ -296,11 +301,16 @@ def _read_within(read: Any, band: int, window: Any, height: int, width: int) -> 
     return np.pad(data, ((0, short[0]), (0, short[1])), mode="edge") if any(short) else data
 
 
+def _scaled(ds: Any) -> bool:
+    """True when a band of the GeoTIFF has a GDAL scale or offset (read as physical values)."""
+    return not (all(s == 1.0 for s in ds.scales) and all(o == 0.0 for o in ds.offsets))
+
+
 def _physical(ds: Any) -> np.ndarray:
     """All bands; bands with a GDAL scale/offset (our uint16 counts) as float32 physical
     values (counts x scale + offset, nodata stays 0)."""
     data = ds.read()
-    if all(s == 1.0 for s in ds.scales) and all(o == 0.0 for o in ds.offsets):
+    if not _scaled(ds):
         return data
     return _to_physical(data, ds.read_masks() == 0, ds.scales, ds.offsets)
 

@@ -176,15 +176,17 @@ def reproject_onto(data: np.ndarray, source: OutputGrid, target: OutputGrid, *,
 
 
 def place_on_frame(data: np.ndarray, source: OutputGrid, frame: OutputGrid | None,
-                   *, nearest: bool = False) -> tuple[np.ndarray, OutputGrid]:
+                   *, nearest: bool = False, nodata: float = 0.0
+                   ) -> tuple[np.ndarray, OutputGrid]:
     """Data and grid of a raster placed in the world frame.
 
     Same CRS and pixel size: kept as is (scale/translate place it). Another CRS or pixel size:
-    reprojected onto the frame's grid.
+    reprojected onto the frame's grid (``nodata``: the value of its no-data pixels, and of the
+    frame's pixels it does not cover).
     """
     if frame is None or source.same_grid(frame):
         return data, source
-    return reproject_onto(data, source, frame, nearest=nearest), frame
+    return reproject_onto(data, source, frame, nearest=nearest, nodata=nodata), frame
 
 
 def tie_point_affine(tie_points: Mapping[str, np.ndarray], lines_per_tie_point: int,
