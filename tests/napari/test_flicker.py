@@ -84,6 +84,21 @@ def test_removing_a_layer_stops_flicker(make_napari_viewer, qtbot):
     assert b.visible
 
 
+def test_the_layer_left_gets_its_visibility_back(make_napari_viewer, qtbot):
+    """A layer removed while its pair flickers: the other one is shown again as it was before
+    the flicker, whichever frame the flicker was on (before, it could stay hidden)."""
+    viewer = make_napari_viewer()
+    a, b = _two_layers(viewer)
+    widget = FlickerWidget(viewer)
+    widget.layer_a.value, widget.layer_b.value = a, b
+    widget.start()
+    widget.step()  # the frame that shows B, A hidden
+    assert not a.visible and b.visible
+    viewer.layers.remove(b)
+    assert not widget.running
+    assert a.visible
+
+
 def test_gif_has_alternating_frames(make_napari_viewer, tmp_path):
     viewer = make_napari_viewer()
     a, b = _two_layers(viewer)

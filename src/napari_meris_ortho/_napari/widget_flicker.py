@@ -213,7 +213,8 @@ class FlickerWidget(Container):
         remember("flicker", {"rate": self.rate, "cycles": self.cycles})
         self._timer = self._make_timer()
         self._showing_a = True
-        self._saved_visibility: tuple[bool, bool] | None = None
+        #: the flickered layers and their visibility before the flicker (``stop`` restores it)
+        self._saved_visibility: list[tuple[Any, bool]] | None = None
         self.disparity_worker: Any = None
         self.start_button.changed.connect(self.start)
         self.stop_button.changed.connect(self.stop)
@@ -303,7 +304,7 @@ class FlickerWidget(Container):
             self.status.value = str(exc)
             return
         if not self.running:
-            self._saved_visibility = (a.visible, b.visible)
+            self._saved_visibility = [(a, a.visible), (b, b.visible)]
         self._showing_a = False
         self.step()
         self._set_interval()
@@ -311,10 +312,12 @@ class FlickerWidget(Container):
         self.status.value = f"flickering {a.name} / {b.name} at {self.rate.value:g} Hz"
 
     def stop(self, _value: Any = None) -> None:
-        """Stop the flicker and restore the layers' visibility."""
+        """Stop the flicker and restore the visibility of the flickered layers still in the
+        viewer (one removed while it flickered: the other one's)."""
         self._timer.stop()
-        if self._saved_visibility is not None and self._pair_present():
-            self.layer_a.value.visible, self.layer_b.value.visible = self._saved_visibility
+        for layer, visible in self._saved_visibility or []:
+            if layer in self.viewer.layers:
+                layer.visible = visible
         self._saved_visibility = None
         self.status.value = "stopped"
 
