@@ -95,3 +95,15 @@ def test_an_rgb_layer_is_named_as_the_reason(make_napari_viewer, shifted_pair):
     assert widget.start_disparity() is None
     assert widget.disparity_label.value == ("'an RGB' is an RGB composite: the disparity "
                                             "compares two single bands (choose a grey band layer)")
+
+
+def test_a_labels_layer_is_named_as_the_reason(make_napari_viewer, shifted_pair):
+    """QA of stop 49: a labels layer (flags, elevation source) was correlated as if it were
+    radiances and gave "no candidate point above the confidence threshold"."""
+    viewer = make_napari_viewer()
+    widget, a, _ = _flicker(viewer, *shifted_pair)
+    labels = viewer.add_labels(np.ones(a.data.shape, np.uint8), name="flags",
+                               scale=a.scale, translate=a.translate, metadata=dict(a.metadata))
+    widget.layer_b.value = labels
+    assert widget.start_disparity() is None
+    assert widget.disparity_label.value.startswith("'flags' is a labels layer")

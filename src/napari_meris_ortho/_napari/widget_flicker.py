@@ -365,10 +365,16 @@ class FlickerWidget(Container):
         """Layer A, its grid and the arguments of ``analysis.disparity`` (GUI thread): layer B
         is reprojected onto layer A's grid when they differ."""
         a, b = self._pair()
+        from napari.layers import Labels
+
         for layer in (a, b):
             if getattr(layer, "rgb", False) or getattr(layer, "multichannel", False):
                 raise OptionsError(f"{layer.name!r} is an RGB composite: the disparity "
                                    "compares two single bands (choose a grey band layer)")
+            if isinstance(layer, Labels):
+                raise OptionsError(f"{layer.name!r} is a labels layer (classes, not "
+                                   "radiances): the disparity compares two single bands "
+                                   "(choose a grey band layer)")
         frame_a, frame_b = layer_frame(a), layer_frame(b)
         image_a, image_b = (np.asarray(full_resolution(layer.data), np.float32)
                             for layer in (a, b))
@@ -411,7 +417,6 @@ class FlickerWidget(Container):
         image_a, image_b = args.pop("a"), args.pop("b")
         self.disparity_worker = create_worker(
             disparity, image_a, image_b, **args, _start_thread=False,
-            _progress={"desc": "Disparity"},
             _connect={"returned": lambda result: self._show_disparity(result, a, frame),
                       "errored": self._disparity_failed, "finished": self._disparity_done})
         start_after_paint(self.disparity_worker, lambda: getattr(self, "_closed", True))
