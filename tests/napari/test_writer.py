@@ -79,3 +79,24 @@ def test_writer_keeps_the_layers_nodata(make_napari_viewer, tmp_path):
         assert ds.nodata == -9999.0
         mask = ds.read_masks(1)
     assert (mask[:5] == 0).all() and mask[10, 10] == 255 and (mask[5:] == 255).all()
+
+
+def test_a_geocoded_labels_layer_is_saved_with_its_classes(make_napari_viewer, tmp_path):
+    """A run's "elevation source" or a synthesis's winning product is a labels layer: saved as
+    a GeoTIFF of its classes, 0 (napari's background) as no data. Before, napari offered no
+    writer of ours for labels."""
+    src = _geotiff(tmp_path / "band.tif", np.ones((30, 40), np.float32), None)
+    viewer = make_napari_viewer()
+    (band,) = viewer.open(str(src), plugin="napari-meris-ortho")
+    classes = np.zeros((30, 40), np.uint8)
+    classes[5:20, 10:30] = 2
+    classes[20:, :] = 3
+    labels = viewer.add_labels(classes, name="elevation source", scale=band.scale,
+                               translate=band.translate, metadata={"geo": band.metadata["geo"]})
+    viewer.layers.selection = {labels}
+    out = tmp_path / "source.tif"
+    viewer.layers.save(str(out), selected=True, plugin="napari-meris-ortho")
+    with rasterio.open(out) as ds, rasterio.open(src) as ref:
+        assert ds.crs == ref.crs and ds.transform == ref.transform
+        assert ds.dtypes[0] == "uint8" and ds.nodata == 0
+        np.testing.assert_array_equal(ds.read(1), classes)

@@ -1,4 +1,6 @@
-"""npe2 writer: a geocoded image layer saved as a GeoTIFF with its CRS and transform.
+"""npe2 writer: a geocoded image or labels layer (elevation source, a synthesis's winning
+product; its class 0, napari's background, as no data) saved as a GeoTIFF with its CRS and
+transform.
 
 The georeference is the layer's ``metadata["geo"]`` (``world`` module doc); the file is written
 through ``output.geotiff.write_geotiff`` (temporary name, then rename), with the layer's own
@@ -28,7 +30,8 @@ class _Meta:
 
 
 def write_geotiff_layer(path: str, data: Any, meta: dict[str, Any]) -> list[str]:
-    """npe2 single-layer writer: ``data`` of an image layer as a GeoTIFF at ``path``."""
+    """npe2 single-layer writer: ``data`` of an image or labels layer as a GeoTIFF at
+    ``path``."""
     from ..output.geotiff import meris_band_description, write_geotiff
 
     name = meta.get("name", "layer")
