@@ -146,3 +146,63 @@ def test_dem_off_the_earth_is_one_message(tmp_path, capsys, monkeypatch, crs, me
     assert sorted(p.name for p in tmp_path.iterdir()) == ["dem.tif", "p.N1"]
     with pytest.raises(DemError, match="not tied to the Earth|not on the Earth"):
         open_dem(dem)
+
+
+def test_a_dem_masked_by_a_mask_band_has_no_data_there(tmp_path):
+    """GDAL and QGIS write no data as an internal mask band (0 under it), not as a nodata
+    value: the masked posts were read as 0 m heights, silently (QA of stop 49)."""
+    z = np.full((4, 6), 1500.0, np.float32)
+    z[1:3, 2:4] = 0.0  # under the mask
+    path = tmp_path / "masked.tif"
+    with rasterio.Env(GDAL_TIFF_INTERNAL_MASK=True):
+        with rasterio.open(path, "w", driver="GTiff", width=6, height=4, count=1,
+                           dtype="float32", crs="EPSG:4326",
+                           transform=from_origin(10.0, 50.0, 1.0, 1.0)) as ds:
+            ds.write(z, 1)
+            mask = np.full((4, 6), 255, np.uint8)
+            mask[1:3, 2:4] = 0
+            ds.write_mask(mask)
+    with rasterio.open(path) as ds:
+        assert ds.nodata is None and ds.read_masks(1)[1, 2] == 0  # a mask, not a value
+    dem = open_dem(f"{path}:ellipsoid")
+    lon, lat = np.array([10.5, 12.5, 13.5, 15.5]), np.array([49.5, 48.5, 47.5, 46.5])
+    np.testing.assert_array_equal(dem.sample(lon, lat, method="nearest"),
+                                  [1500.0, np.nan, np.nan, 1500.0])
+
+
+def test_a_copernicus_tile_given_as_a_file_is_above_the_geoid(tmp_path, caplog):
+    """A Copernicus tile named as a file (not its directory) was taken as ellipsoidal with the
+    "does not say its vertical datum" warning (46 m off): its name says EGM2008."""
+    z = np.full((12, 12), 800.0, np.float32)
+    path = write_tif(tmp_path / "Copernicus_DSM_COG_30_N46_00_E013_00_DEM.tif", z,
+                     from_origin(13.0, 47.0, 1 / 12, 1 / 12))
+    with caplog.at_level(logging.WARNING):
+        dem = open_dem(path)
+    assert "does not say its vertical datum" not in caplog.text
+    h = dem.sample(np.array([13.5]), np.array([46.5]), method="nearest")[0]
+    assert 840.0 < h < 860.0  # 800 m above the geoid: about 848 m above the ellipsoid here
+
+
+def test_a_dem_in_a_national_height_datum_is_above_the_geoid(tmp_path, caplog):
+    """EPSG:3035 + EVRF2007 height, as European DEMs are tagged: "does not say its vertical
+    datum" and ellipsoidal heights before (-31 m mean, radiances off by up to 188); now the
+    heights are above the geoid, and the warning names the datum."""
+    from rasterio.crs import CRS
+
+    z = np.full((10, 10), 1000.0, np.float32)
+    transform = from_origin(4_500_000.0, 2_600_000.0, 1000.0, 1000.0)
+    path = write_tif(tmp_path / "evrf.tif", z, transform,
+                     crs=CRS.from_user_input("EPSG:3035+5621"))
+    with caplog.at_level(logging.WARNING):
+        dem = open_dem(path)
+    assert "EVRF2007 height" in caplog.text
+    assert "does not say its vertical datum" not in caplog.text
+    lon, lat = pyproj_lonlat(4_505_000.0, 2_595_000.0)
+    h = dem.sample(np.array([lon]), np.array([lat]), method="nearest")[0]
+    assert 1040.0 < h < 1060.0  # the geoid is 40-60 m above the ellipsoid in Europe
+
+
+def pyproj_lonlat(x, y):
+    import pyproj
+
+    return pyproj.Transformer.from_crs("EPSG:3035", "EPSG:4326", always_xy=True).transform(x, y)

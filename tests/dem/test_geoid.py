@@ -13,6 +13,7 @@ from napari_meris_ortho.dem.geoid import (
     ELLIPSOID,
     crs_datum,
     geoid_undulation,
+    other_height_datum,
     split_datum,
     to_ellipsoid,
 )
@@ -57,6 +58,12 @@ def test_vertical_crs_gives_the_datum():
     assert crs_datum("EPSG:4326+3855") == EGM2008  # resolved to EGM96 only when its grid is missing
     assert crs_datum("EPSG:4979") == ELLIPSOID
     assert crs_datum("EPSG:4326") is None and crs_datum("EPSG:32632") is None
+    # a national height datum (EVRF2007, NAVD88) lies within metres of the geoid, not 47 m
+    # away as the ellipsoid: before, it was "no vertical datum" and the heights ellipsoidal
+    assert crs_datum("EPSG:3035+5621") == EGM2008
+    assert other_height_datum("EPSG:3035+5621") == "EVRF2007 height"
+    assert crs_datum("EPSG:4269+5703") == EGM2008
+    assert other_height_datum("EPSG:4326+5773") is None and other_height_datum("EPSG:4326") is None
 
 
 def test_missing_grid_is_one_clear_error(monkeypatch, tmp_path):

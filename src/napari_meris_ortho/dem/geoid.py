@@ -283,8 +283,9 @@ def split_datum(entry: str | os.PathLike[str]) -> tuple[str, str | None]:
 
 def crs_datum(crs: Any) -> str | None:
     """Vertical datum of a raster's CRS: a compound CRS with EGM96 / EGM2008 height -> egm96 /
-    egm2008,
-    a 3-D geographic CRS (EPSG:4979) -> ellipsoid; None when the CRS says nothing."""
+    egm2008, another gravity-related height (a national datum: EVRF2007, NAVD88...) -> egm2008
+    (with a warning, ``other_height_datum``), a 3-D geographic CRS (EPSG:4979) -> ellipsoid;
+    None when the CRS says nothing."""
     import pyproj
 
     try:
@@ -298,12 +299,31 @@ def crs_datum(crs: Any) -> str | None:
                 return EGM2008
             if "EGM96" in name:
                 return EGM96
-            return None
+            return EGM2008 if other_height_datum(c) else None
     if c.is_geographic and len(c.axis_info) == 3:
         return ELLIPSOID
     return None
 
 
+def other_height_datum(crs: Any) -> str | None:
+    """The name of a compound CRS's vertical CRS when its heights are gravity-related but not
+    EGM96 or EGM2008 ones (a national datum: "EVRF2007 height", "NAVD88 height"); such a datum
+    lies within a few metres of EGM2008, the ellipsoid 40-50 m away in Europe. None otherwise."""
+    import pyproj
+
+    try:
+        c = pyproj.CRS.from_user_input(crs)
+    except pyproj.exceptions.CRSError:
+        return None
+    for sub in c.sub_crs_list:
+        if sub.is_vertical:
+            name = sub.name.upper()
+            if any(k in name for k in ("EGM2008", "EGM08", "EGM96", "ELLIPSOID")):
+                return None
+            return str(sub.name)
+    return None
+
+
 __all__ = ["DATUMS", "EGM96", "EGM2008", "ELLIPSOID", "GEOIDS", "GEOID_GRID", "crs_datum",
-           "find_geoid_grid", "geoid_grid_path", "geoid_undulation", "resolve_datum",
-           "split_datum", "to_ellipsoid"]
+           "find_geoid_grid", "geoid_grid_path", "geoid_undulation", "other_height_datum",
+           "resolve_datum", "split_datum", "to_ellipsoid"]

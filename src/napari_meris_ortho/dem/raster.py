@@ -4,6 +4,7 @@ vertical datum from its CRS or ``VERTICAL_DATUM`` tag."""
 
 from __future__ import annotations
 
+import logging
 from pathlib import Path
 from typing import Any
 
@@ -13,7 +14,10 @@ import pyproj
 from ..errors import DemError
 from ..geometry.grid import pixel_limit
 from .base import DemSource, LatticeWindow, _plausible, cut_short, gdal_reason, open_raster
-from .geoid import EGM96, EGM2008, ELLIPSOID, crs_datum
+from .copernicus import NAME_RE
+from .geoid import EGM96, EGM2008, ELLIPSOID, crs_datum, other_height_datum
+
+log = logging.getLogger(__name__)
 
 _WGS84 = pyproj.CRS.from_epsg(4326)
 
@@ -53,6 +57,8 @@ class RasterSource(DemSource):
     """Any raster GDAL opens (GeoTIFF...), any CRS; posts at pixel centres; nodata honoured."""
 
     def __init__(self, path: str | Path, band: int = 1) -> None:
+        from rasterio.enums import MaskFlags
+
         self.name = str(path)
         self._band = band
         self._ds = open_raster(path, "DEM")
@@ -77,6 +83,10 @@ class RasterSource(DemSource):
         self.datum = _raster_datum(ds, self.crs)
         self._inv = ~ds.transform
         self._nodata = ds.nodatavals[band - 1]
+        #: a mask band (GDAL's internal mask, an alpha band) says which posts are no data,
+        #: whatever their values (0 under the mask, as GDAL and QGIS write it)
+        self._masked = bool({MaskFlags.per_dataset, MaskFlags.alpha}
+                            & set(ds.mask_flag_enums[band - 1]))
         self._scale = float((ds.scales or (1.0,))[band - 1] or 1.0)
         self._offset = float((ds.offsets or (0.0,))[band - 1] or 0.0)
         self._geographic = self.crs.is_geographic
@@ -120,19 +130,26 @@ class RasterSource(DemSource):
         raw = np.dtype(self._ds.dtypes[self._band - 1])
         scaled = self._scale != 1.0 or self._offset != 0.0
         direct = not scaled and raw.kind in "iuf" and np.can_cast(raw, np.float32, "safe")
+        window = Window(c0, r0, c1 - c0, r1 - r0)
         try:
             with rasterio.Env(GDAL_NUM_THREADS="ALL_CPUS"):  # float32 straight from GDAL
-                data = self._ds.read(self._band, window=Window(c0, r0, c1 - c0, r1 - r0),
+                data = self._ds.read(self._band, window=window,
                                      out_dtype=np.float32 if direct else None)
+                masked = (self._ds.read_masks(self._band, window=window) == 0
+                          if self._masked else None)
         except (RasterioError, OSError) as exc:
             raise cut_short(self.name, "DEM", gdal_reason(exc)) from exc
         if direct:  # exact conversion: no data compares the same before and after it
             if self._nodata is not None and not np.isnan(self._nodata):
                 np.putmask(data, data == self._nodata, np.float32(np.nan))
+            if masked is not None:
+                data[masked] = np.nan
             return data
         nodata = np.isnan(data) if data.dtype.kind == "f" else np.zeros(data.shape, bool)
         if self._nodata is not None:
             nodata |= data == self._nodata
+        if masked is not None:
+            nodata |= masked
         dtype = np.result_type(data.dtype, np.float32)
         if scaled:
             data = data * self._scale + self._offset
@@ -231,13 +248,25 @@ class RasterSource(DemSource):
         self._ds.close()
 
 
+_WARNED: set[str] = set()
+
+
 def _raster_datum(ds: Any, crs: pyproj.CRS) -> str | None:
-    """Vertical datum of a GDAL raster: its ``VERTICAL_DATUM`` tag, its vertical CRS, or a
-    Copernicus VRT (EGM2008); None when unknown."""
+    """Vertical datum of a GDAL raster: its ``VERTICAL_DATUM`` tag, its vertical CRS (another
+    gravity-related datum than EGM96/EGM2008 as EGM2008, with a warning), a Copernicus tile by
+    its name or a Copernicus VRT (EGM2008); None when unknown."""
     tag = str(ds.tags().get("VERTICAL_DATUM", "")).lower()
     if tag in (EGM96, EGM2008, ELLIPSOID):
         return tag
     datum = crs_datum(crs)
+    other = other_height_datum(crs)
+    if other is not None and ds.name not in _WARNED:
+        _WARNED.add(ds.name)
+        log.warning("%s: heights in %s are taken as EGM2008 geoid heights (a national height "
+                    "datum lies within a few metres of the geoid); write %s:egm96 or "
+                    "%s:ellipsoid to say otherwise", ds.name, other, ds.name, ds.name)
+    if datum is None and NAME_RE.match(Path(ds.name).name):
+        return EGM2008
     if datum is None and str(ds.name).lower().endswith(".vrt"):
         try:
             if "Copernicus_DSM" in Path(ds.name).read_text(errors="replace"):
