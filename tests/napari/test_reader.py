@@ -139,16 +139,27 @@ def test_geotiff_other_crs_reprojected_onto_frame(tmp_path):
     from napari_meris_ortho._napari.reader import geotiff_layers
 
     (data, kw, _), = geotiff_layers(path, frame)
-    assert data.shape == (40, 50)
-    assert kw["scale"] == layer_scale(frame) and kw["translate"] == layer_translate(frame)
-    assert kw["metadata"]["reprojected"]
+    assert kw["scale"] == layer_scale(frame) and kw["metadata"]["reprojected"]
+    # on the frame's pixels, but the whole reference (3 x 2 degrees), not cut to the frame's
+    # 50 x 40 km (QA of stop 49: a second raster was cut to the first layer's extent)
+    offset = (np.array(kw["translate"]) - np.array(layer_translate(frame))) / np.array(
+        layer_scale(frame))
+    np.testing.assert_allclose(offset, np.round(offset), atol=1e-6)
+    assert data.shape[0] > 200 and data.shape[1] > 200
+    assert (data > 0).mean() > 0.7
     # check one pixel centre: its lon gives the expected column value of the reference
     from pyproj import Transformer
 
     x, y = 300_000.0 + 10.5 * 1000.0, 5_000_000.0 - 20.5 * 1000.0
     lon, lat = Transformer.from_crs("EPSG:32632", "EPSG:4326", always_xy=True).transform(x, y)
     expected = np.floor((lon - lon0) / 0.01) + 1
-    assert data[20, 10] == pytest.approx(expected, abs=1.0)
+    row, col = (int(v) for v in np.round([20 - offset[0], 10 - offset[1]]))
+    assert data[row, col] == pytest.approx(expected, abs=1.0)
+    # a raster beside the frame, not over it, is all there
+    east = _write_tif(tmp_path / "east.tif", np.full((20, 20), 5.0, np.float32), "EPSG:4326",
+                      Affine(0.01, 0, 9.5, 0, -0.01, 45.0))
+    (data, kw, _), = geotiff_layers(east, frame)
+    assert (data == 5.0).sum() > 0.7 * data.size
 
 
 def test_geotiff_same_crs_other_pixel_size_overlays(tmp_path):
@@ -202,9 +213,13 @@ def test_reader_in_viewer_reprojects_onto_first_geocoded_layer(make_napari_viewe
                      Affine(0.01, 0, 6.0, 0, -0.01, 45.3))
     viewer.open(str(base), plugin="napari-meris-ortho")
     (layer,) = viewer.open(str(ref), plugin="napari-meris-ortho")
-    assert layer.data.shape == (30, 40)
-    np.testing.assert_allclose(layer.scale, viewer.layers["base"].scale)
-    np.testing.assert_allclose(layer.translate, viewer.layers["base"].translate)
+    base_layer = viewer.layers["base"]
+    np.testing.assert_allclose(layer.scale, base_layer.scale)
     assert layer.metadata["reprojected"]
-    # lon 6..8, lat 44.3..45.3 covers the whole UTM frame (lon 6.4..7.0, lat 44.8..45.1)
-    assert np.all(layer.data == pytest.approx(7.0))
+    # lon 6..8, lat 44.3..45.3 on the base's 1 km pixels: all of it (about 160 x 115 km), not
+    # only the base's 40 x 30 km; the base's pixels are whole pixels of it
+    assert layer.data.shape[0] > 110 and layer.data.shape[1] > 155
+    offset = (np.array(base_layer.translate) - np.array(layer.translate)) / layer.scale
+    np.testing.assert_allclose(offset, np.round(offset), atol=1e-6)
+    r, c = (int(v) for v in np.round(offset))
+    assert np.all(np.asarray(layer.data)[r:r + 30, c:c + 40] == pytest.approx(7.0))

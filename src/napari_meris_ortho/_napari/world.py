@@ -153,6 +153,11 @@ def geo_image_kwargs(frame: OutputGrid, **extra: Any) -> dict[str, Any]:
             "metadata": metadata, **world_axes(frame.crs), **extra}
 
 
+#: how much bigger than the frame and the raster a raster reprojected into the world's
+#: pixels may get (a world-wide raster opened over a 260 m frame: the frame's extent instead)
+COVER_LIMIT = 4
+
+
 def reproject_onto(data: np.ndarray, source: OutputGrid, target: OutputGrid, *,
                    nearest: bool = False, nodata: float = 0.0) -> np.ndarray:
     """Reproject a (rows, cols) or (bands, rows, cols) raster onto ``target``'s grid (rasterio)."""
@@ -181,12 +186,18 @@ def place_on_frame(data: np.ndarray, source: OutputGrid, frame: OutputGrid | Non
     """Data and grid of a raster placed in the world frame.
 
     Same CRS and pixel size: kept as is (scale/translate place it). Another CRS or pixel size:
-    reprojected onto the frame's grid (``nodata``: the value of its no-data pixels, and of the
-    frame's pixels it does not cover).
+    reprojected onto the frame's pixels that cover it (``OutputGrid.lattice_cover``: the whole
+    raster, also beyond the frame's extent; the frame's own extent when that cover would be
+    more than ``COVER_LIMIT`` times the frame's and the raster's pixels); ``nodata``: the value
+    of its no-data pixels, and of the pixels it does not cover.
     """
     if frame is None or source.same_grid(frame):
         return data, source
-    return reproject_onto(data, source, frame, nearest=nearest, nodata=nodata), frame
+    target = frame.lattice_cover(source)
+    limit = COVER_LIMIT * max(frame.width * frame.height, source.width * source.height)
+    if target.width * target.height > limit:
+        target = frame
+    return reproject_onto(data, source, target, nearest=nearest, nodata=nodata), target
 
 
 def tie_point_affine(tie_points: Mapping[str, np.ndarray], lines_per_tie_point: int,

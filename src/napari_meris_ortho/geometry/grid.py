@@ -317,6 +317,19 @@ class OutputGrid:
         return OutputGrid(self.crs, self.x0 + col0 * self.dx, self.y0 - row0 * self.dy,
                           self.dx, self.dy, col1 - col0, row1 - row0, tolerance=self.tolerance)
 
+    def lattice_cover(self, other: OutputGrid) -> OutputGrid:
+        """The grid in this grid's CRS, pixel size and pixel lattice (its pixels are this
+        grid's, extended beyond its edges) that covers ``other``'s extent."""
+        tr = pyproj.Transformer.from_crs(other.crs, self.crs, always_xy=True)
+        xmin, ymin, xmax, ymax = tr.transform_bounds(*other.bounds, densify_pts=21)
+        col0 = math.floor((xmin - self.x0) / self.dx + 1e-9)
+        col1 = math.ceil((xmax - self.x0) / self.dx - 1e-9)
+        row0 = math.floor((self.y0 - ymax) / self.dy + 1e-9)
+        row1 = math.ceil((self.y0 - ymin) / self.dy - 1e-9)
+        return OutputGrid(self.crs, self.x0 + col0 * self.dx, self.y0 - row0 * self.dy,
+                          self.dx, self.dy, max(col1 - col0, 1), max(row1 - row0, 1),
+                          tolerance=self.tolerance)
+
     # ------------------------------------------------------------------ properties
     @property
     def transform(self) -> Affine:
