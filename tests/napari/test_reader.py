@@ -223,3 +223,55 @@ def test_reader_in_viewer_reprojects_onto_first_geocoded_layer(make_napari_viewe
     np.testing.assert_allclose(offset, np.round(offset), atol=1e-6)
     r, c = (int(v) for v in np.round(offset))
     assert np.all(np.asarray(layer.data)[r:r + 30, c:c + 40] == pytest.approx(7.0))
+
+
+def _rgb_tif(path, rgb, alpha=None, overviews=()):
+    from rasterio.enums import ColorInterp, Resampling
+
+    count = 3 if alpha is None else 4
+    with rasterio.open(path, "w", driver="GTiff", width=rgb.shape[1], height=rgb.shape[0],
+                       count=count, dtype="uint8", crs="EPSG:32632", photometric="RGB",
+                       transform=Affine(260.0, 0, 400_000.0, 0, -260.0, 5_100_000.0)) as ds:
+        ds.write(np.moveaxis(rgb, -1, 0), [1, 2, 3])
+        if alpha is not None:
+            ds.write(alpha, 4)
+            ds.colorinterp = [ColorInterp.red, ColorInterp.green, ColorInterp.blue,
+                              ColorInterp.alpha]
+    if overviews:
+        with rasterio.open(path, "r+") as ds:
+            ds.build_overviews(list(overviews), Resampling.nearest)
+    return path
+
+
+@pytest.mark.parametrize("big", [False, True])
+def test_an_rgb_geotiff_opens_as_one_rgb_layer(make_napari_viewer, tmp_path, big):
+    """A true-colour reference image (PHOTOMETRIC=RGB, with or without alpha), as GDAL, QGIS or
+    a satellite's TCI write it, is one RGB layer, transparent where its alpha is 0; before, it
+    opened as three (four) grey layers, the alpha band an opaque one on top (QA of stop 49).
+    A big one reads its levels on demand, from its overviews."""
+    h, w = (2600, 2200) if big else (60, 80)
+    rows, cols = np.mgrid[0:h, 0:w]
+    rgb = np.stack([(rows % 256), (cols % 256), ((rows + cols) % 256)], -1).astype(np.uint8)
+    alpha = np.full((h, w), 255, np.uint8)
+    alpha[: h // 10] = 0
+    path = _rgb_tif(tmp_path / "tci.tif", rgb, alpha, overviews=(2, 4, 8) if big else ())
+    viewer = make_napari_viewer()
+    (layer,) = viewer.open(str(path), plugin="napari-meris-ortho")
+    assert layer.rgb and layer.multiscale == big
+    full = layer.data[0] if big else layer.data
+    assert full.shape == (h, w, 4)
+    np.testing.assert_array_equal(np.asarray(full[h // 2:h // 2 + 5, 100:110]),
+                                  np.dstack([rgb, alpha])[h // 2:h // 2 + 5, 100:110])
+    if big:
+        with rasterio.open(path, overview_level=0) as ds:
+            overview = np.moveaxis(ds.read(), 0, -1)
+        np.testing.assert_array_equal(np.asarray(layer.data[1]), overview)
+    np.testing.assert_allclose(layer.scale, [260.0, 260.0])
+    # without alpha: three channels
+    (plain,) = viewer.open(str(_rgb_tif(tmp_path / "rgb.tif", rgb[:50, :60])),
+                           plugin="napari-meris-ortho")
+    assert plain.rgb and np.asarray(full_res(plain)).shape[-1] == 3
+
+
+def full_res(layer):
+    return layer.data[0] if layer.multiscale else layer.data

@@ -33,6 +33,7 @@ from ..pyramid import (
     Selection,
     WholeBands,
     as_index,
+    as_slice,
     level_factors,
     selection_radiance,
 )
@@ -211,8 +212,12 @@ def geotiff_layers(path: str | Path, frame: OutputGrid | None = None) -> list[La
             nodata = 0.0 if scaled and ds.nodata is not None else ds.nodata
             lazy = (frame is None or source.same_grid(frame)) and len(
                 level_factors(ds.height, ds.width)) > 1
-            bands: list[Any] = geotiff_levels(path, ds) if lazy else []
+            rgb = is_rgb(ds)
+            bands: list[Any] = [] if not lazy else (
+                [geotiff_rgb_levels(path, ds)] if rgb else geotiff_levels(path, ds))
             data = None if lazy else _physical(ds)
+            if rgb:  # one layer (transparent where its alpha is 0)
+                names, nodata = ["rgb"], None
     except RasterioIOError as exc:
         raise MerisOrthoError(f"{path}: cannot read GeoTIFF ({exc})") from None
     grid = source
@@ -221,7 +226,7 @@ def geotiff_layers(path: str | Path, frame: OutputGrid | None = None) -> list[La
         fill = 0.0 if nodata is None else nodata
         placed, grid = place_on_frame(data, source, frame, nearest=is_mask, nodata=fill)
         nodata = fill if grid is not source else nodata
-        bands = list(placed)
+        bands = [np.moveaxis(placed, 0, -1)] if rgb else list(placed)
     layers = []
     for k, band_name in enumerate(names):
         band = bands[k]
@@ -229,9 +234,13 @@ def geotiff_layers(path: str | Path, frame: OutputGrid | None = None) -> list[La
                 "source_crs": source.crs, "reprojected": grid is not source}
         name = path.stem if len(names) == 1 else f"{path.stem} {band_name}"
         kwargs = geo_image_kwargs(grid, name=name, metadata=meta)
-        coarsest = np.asarray(band[-1]) if lazy else band  # contrast of the coarsest level
-        kwargs["contrast_limits"] = _contrast_limits(coarsest, nodata)
-        kwargs["colormap"] = "gray"
+        if rgb:
+            kwargs["rgb"] = True
+            meta.pop("band")
+        else:
+            coarsest = np.asarray(band[-1]) if lazy else band  # contrast of the coarsest level
+            kwargs["contrast_limits"] = _contrast_limits(coarsest, nodata)
+            kwargs["colormap"] = "gray"
         if lazy:
             kwargs["multiscale"] = True
         layers.append((band, kwargs, "image"))
@@ -255,12 +264,34 @@ def geotiff_levels(path: Path, ds: Any) -> list[list[LazyArray]]:
     return out
 
 
+def geotiff_rgb_levels(path: Path, ds: Any) -> list[LazyArray]:
+    """The levels of a big RGB(A) GeoTIFF (``is_rgb``) as (rows, columns, channels) arrays
+    read on demand, like ``geotiff_levels``."""
+    overviews = ds.overviews(1)
+    factors = [1, *overviews] if overviews else level_factors(ds.height, ds.width)
+    read = _GeoTiffWindows(path, list(range(1, ds.count + 1)), [1, *overviews], None)
+    rgb = LazyArray(read, (ds.height, ds.width, ds.count), np.uint8)
+    return [rgb[::f, ::f] for f in factors]
+
+
+def is_rgb(ds: Any) -> bool:
+    """True for a colour composite: 3 or 4 bytes bands that GDAL says are red, green, blue
+    (and alpha), as GDAL, QGIS or a satellite's true-colour image (TCI) write it."""
+    from rasterio.enums import ColorInterp
+
+    ci = tuple(ds.colorinterp)
+    return (ds.count in (3, 4) and all(d == "uint8" for d in ds.dtypes)
+            and ci[:3] == (ColorInterp.red, ColorInterp.green, ColorInterp.blue)
+            and (ds.count == 3 or ci[3] == ColorInterp.alpha))
+
+
 class _GeoTiffWindows:
     """``read`` of a GeoTIFF band (``LazyArray``): a selection whose step is an overview's
     factor reads that overview's window, any other reads the full-resolution window; with
-    ``scale`` (the band's GDAL scale and offset) physical values (``_to_physical``)."""
+    ``scale`` (the band's GDAL scale and offset) physical values (``_to_physical``). With a
+    list of bands (an RGB composite), selections are (rows, columns, channels)."""
 
-    def __init__(self, path: Path, band: int, factors: list[int],
+    def __init__(self, path: Path, band: int | list[int], factors: list[int],
                  scale: tuple[float, float] | None) -> None:
         self.path, self.band, self.factors, self.scale = path, band, factors, scale
 
@@ -268,7 +299,7 @@ class _GeoTiffWindows:
         import rasterio
         from rasterio.windows import Window
 
-        rows, cols = (range(s, s + 1) if isinstance(s, int) else s for s in sel)
+        rows, cols = (range(s, s + 1) if isinstance(s, int) else s for s in sel[:2])
         f = rows.step if rows.step == cols.step else 1
         if f not in self.factors or rows.start % f or cols.start % f:
             f = 1
@@ -284,11 +315,15 @@ class _GeoTiffWindows:
                                     ds.width)[None] == 0
                 data = _to_physical(data, mask, [self.scale[0]], [self.scale[1]])
         step = rows.step // f, cols.step // f
-        out = data[0, ::step[0], ::step[1]]
-        return out[tuple(0 if isinstance(s, int) else slice(None) for s in sel)]
+        spatial = tuple(0 if isinstance(x, int) else slice(None) for x in sel[:2])
+        if isinstance(self.band, int):
+            return data[0, ::step[0], ::step[1]][spatial]
+        channels = sel[2] if isinstance(sel[2], int) else as_slice(sel[2])
+        return np.moveaxis(data[0, :, ::step[0], ::step[1]], 0, -1)[..., channels][spatial]
 
 
-def _read_within(read: Any, band: int, window: Any, height: int, width: int) -> np.ndarray:
+def _read_within(read: Any, band: int | list[int], window: Any, height: int, width: int
+                 ) -> np.ndarray:
     """``read(band, window=window)`` with the window's shape where it runs past the raster by
     a line or a column, the last ones repeated: the pyramid's levels are ``ceil(n / f)`` long,
     GDAL's COG driver rounds an overview's size down (627 lines: 313, 156)."""
@@ -297,8 +332,10 @@ def _read_within(read: Any, band: int, window: Any, height: int, width: int) -> 
     row, col = min(window.row_off, height - 1), min(window.col_off, width - 1)
     inside = Window(col, row, min(window.width, width - col), min(window.height, height - row))
     data = read(band, window=inside)
-    short = (window.height - data.shape[0], window.width - data.shape[1])
-    return np.pad(data, ((0, short[0]), (0, short[1])), mode="edge") if any(short) else data
+    short = (window.height - data.shape[-2], window.width - data.shape[-1])
+    if not any(short):
+        return data
+    return np.pad(data, [(0, 0)] * (data.ndim - 2) + [(0, short[0]), (0, short[1])], mode="edge")
 
 
 def _scaled(ds: Any) -> bool:
