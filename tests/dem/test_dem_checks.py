@@ -206,3 +206,19 @@ def pyproj_lonlat(x, y):
     import pyproj
 
     return pyproj.Transformer.from_crs("EPSG:3035", "EPSG:4326", always_xy=True).transform(x, y)
+
+
+def test_a_dem_with_ground_control_points_only_says_so(tmp_path):
+    """``gdal_translate -gcp`` makes a raster with a CRS on its ground control points and no
+    geotransform: "the DEM has no coordinate reference system" was wrong (QA of stop 49)."""
+    from rasterio.control import GroundControlPoint
+    from rasterio.crs import CRS
+
+    points = [GroundControlPoint(r, c, 10.0 + c / 10, 46.0 - r / 10)
+              for r, c in ((0, 0), (0, 6), (4, 0), (4, 6))]
+    path = tmp_path / "gcp.tif"
+    with rasterio.open(path, "w", driver="GTiff", width=6, height=4, count=1, dtype="float32",
+                       gcps=points, crs=CRS.from_epsg(4326)) as ds:
+        ds.write(np.full((4, 6), 500.0, np.float32), 1)
+    with pytest.raises(DemError, match="ground control points only"):
+        open_dem(path)

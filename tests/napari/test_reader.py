@@ -275,3 +275,40 @@ def test_an_rgb_geotiff_opens_as_one_rgb_layer(make_napari_viewer, tmp_path, big
 
 def full_res(layer):
     return layer.data[0] if layer.multiscale else layer.data
+
+
+def test_south_up_rotated_and_gcp_geotiffs_open_north_up(make_napari_viewer, tmp_path):
+    """A south-up raster (positive y pixel size), a rotated geotransform and ground control
+    points only (``gdal_translate -gcp``) are valid GDAL georeferencing: each opens north-up,
+    warped by GDAL (nearest: the south-up pixels exactly, flipped). Before: "raster is not
+    north-up", or "refused the file" with no reason (QA of stop 49)."""
+    from rasterio.control import GroundControlPoint
+    from rasterio.crs import CRS
+
+    z = np.arange(1, 1 + 40 * 50, dtype=np.float32).reshape(40, 50)
+    south = _write_tif(tmp_path / "south.tif", z, "EPSG:4326",
+                       Affine(0.01, 0, 10.0, 0, 0.01, 45.6))
+    rotated = _write_tif(tmp_path / "rotated.tif", z, "EPSG:32632",
+                         Affine(100.0, 20.0, 400_000.0, 20.0, -100.0, 5_000_000.0))
+    gcp = tmp_path / "gcp.tif"
+    points = [GroundControlPoint(r, c, 10.0 + c / 100, 46.0 - r / 100)
+              for r, c in ((0, 0), (0, 50), (40, 0), (40, 50))]
+    with rasterio.open(gcp, "w", driver="GTiff", width=50, height=40, count=1, dtype="float32",
+                       gcps=points, crs=CRS.from_epsg(4326)) as ds:
+        ds.write(z, 1)
+    viewer = make_napari_viewer()
+    north = _write_tif(tmp_path / "north.tif", z[::-1], "EPSG:4326",
+                       Affine(0.01, 0, 10.0, 0, -0.01, 46.0))  # the same raster, north-up
+    (twin,) = viewer.open(str(north), plugin="napari-meris-ortho")
+    (layer,) = viewer.open(str(south), plugin="napari-meris-ortho")
+    np.testing.assert_array_equal(np.asarray(layer.data), z[::-1])
+    np.testing.assert_allclose(layer.translate, twin.translate, atol=1e-9)
+    np.testing.assert_allclose(layer.scale, twin.scale, rtol=1e-9)
+    viewer.layers.clear()
+    (layer,) = viewer.open(str(gcp), plugin="napari-meris-ortho")
+    np.testing.assert_array_equal(np.asarray(layer.data), z)
+    viewer.layers.clear()
+    (layer,) = viewer.open(str(rotated), plugin="napari-meris-ortho")
+    data = np.asarray(layer.data)
+    assert data.shape[0] > 40 and data.shape[1] > 50  # the rotated raster's north-up envelope
+    assert set(np.unique(data[data > 0])) <= set(z.ravel())  # nearest: its own values

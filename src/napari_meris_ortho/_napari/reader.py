@@ -18,7 +18,8 @@ own overviews, read window by window.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+import contextlib
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -122,8 +123,8 @@ def _readable(path: Path) -> bool:
         from rasterio.errors import RasterioError
 
         try:
-            with rasterio.open(path) as ds:
-                return ds.crs is not None
+            with rasterio.open(path) as ds:  # a CRS, or ground control points in one
+                return ds.crs is not None or bool(ds.gcps[0]) and ds.gcps[1] is not None
         except (RasterioError, OSError):
             return False
     return False
@@ -199,19 +200,19 @@ def geotiff_layers(path: str | Path, frame: OutputGrid | None = None) -> list[La
 
     path = Path(path)
     try:
-        with rasterio.open(path) as ds:
+        with rasterio.open(path) as opened, _north_up(opened) as ds:
             if ds.crs is None:
                 raise MerisOrthoError(f"{path}: GeoTIFF has no CRS (not geocoded)")
             _check_size(path, ds)
             source = OutputGrid.from_transform(ds.crs, tuple(ds.transform), (ds.height, ds.width))
-            names = [d or f"band {i + 1}" for i, d in enumerate(ds.descriptions)]
-            tags = ds.tags()
+            names = [d or f"band {i + 1}" for i, d in enumerate(opened.descriptions)]
+            tags = opened.tags()
             scaled = _scaled(ds)
             # what the layer's no-data pixels hold: 0 where counts are read as radiances
             # (``_to_physical``), else the file's own value
             nodata = 0.0 if scaled and ds.nodata is not None else ds.nodata
-            lazy = (frame is None or source.same_grid(frame)) and len(
-                level_factors(ds.height, ds.width)) > 1
+            lazy = (ds is opened and (frame is None or source.same_grid(frame))
+                    and len(level_factors(ds.height, ds.width)) > 1)
             rgb = is_rgb(ds)
             bands: list[Any] = [] if not lazy else (
                 [geotiff_rgb_levels(path, ds)] if rgb else geotiff_levels(path, ds))
@@ -262,6 +263,26 @@ def geotiff_levels(path: Path, ds: Any) -> list[list[LazyArray]]:
         band = LazyArray(read, (ds.height, ds.width), dtype)
         out.append([band[::f, ::f] for f in factors])
     return out
+
+
+@contextlib.contextmanager
+def _north_up(ds: Any) -> Iterator[Any]:
+    """The dataset itself when it is north-up; a south-up or rotated one, or one georeferenced
+    by ground control points only, warped by GDAL onto a north-up grid (``WarpedVRT``,
+    nearest: a south-up raster's pixels exactly, flipped)."""
+    from rasterio.enums import Resampling
+    from rasterio.vrt import WarpedVRT
+
+    t = ds.transform
+    gcps, gcp_crs = ds.gcps
+    if ds.crs is None and gcps and gcp_crs is not None:
+        with WarpedVRT(ds, src_crs=gcp_crs, resampling=Resampling.nearest) as vrt:
+            yield vrt
+    elif ds.crs is not None and (t.b != 0.0 or t.d != 0.0 or t.e > 0.0):
+        with WarpedVRT(ds, resampling=Resampling.nearest) as vrt:
+            yield vrt
+    else:
+        yield ds
 
 
 def geotiff_rgb_levels(path: Path, ds: Any) -> list[LazyArray]:

@@ -67,6 +67,9 @@ class RasterSource(DemSource):
         if not (all(np.isfinite(tuple(t)[:6])) and abs(t.determinant) > 0):
             raise DemError(f"{path}: invalid georeferencing: pixel size {t.a:g} x {t.e:g} "
                            f"(transform {tuple(t)[:6]})")
+        if ds.crs is None and ds.gcps[0]:
+            raise DemError(f"{path}: the DEM is georeferenced by ground control points only "
+                           "(no geotransform): warp it onto a grid first (gdalwarp)")
         if ds.crs is None:
             raise DemError(f"{path}: the DEM has no coordinate reference system")
         if not 1 <= band <= ds.count:
