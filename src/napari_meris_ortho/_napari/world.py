@@ -33,6 +33,7 @@ from typing import Any
 
 import numpy as np
 
+from ..errors import OptionsError
 from ..geometry.grid import OutputGrid, crs_wkt, lonlat_to_crs
 
 GEO_KEY = "geo"
@@ -193,7 +194,10 @@ def place_on_frame(data: np.ndarray, source: OutputGrid, frame: OutputGrid | Non
     """
     if frame is None or source.same_grid(frame):
         return data, source
-    target = frame.lattice_cover(source)
+    try:
+        target = frame.lattice_cover(source)
+    except OptionsError:  # no finite extent in the frame's CRS (a polar raster in UTM...)
+        target = frame
     limit = COVER_LIMIT * max(frame.width * frame.height, source.width * source.height)
     if target.width * target.height > limit:
         target = frame

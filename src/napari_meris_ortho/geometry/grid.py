@@ -319,9 +319,15 @@ class OutputGrid:
 
     def lattice_cover(self, other: OutputGrid) -> OutputGrid:
         """The grid in this grid's CRS, pixel size and pixel lattice (its pixels are this
-        grid's, extended beyond its edges) that covers ``other``'s extent."""
+        grid's, extended beyond its edges) that covers ``other``'s extent. Raises OptionsError
+        when that extent has no finite bounds in this grid's CRS."""
         tr = pyproj.Transformer.from_crs(other.crs, self.crs, always_xy=True)
-        xmin, ymin, xmax, ymax = tr.transform_bounds(*other.bounds, densify_pts=21)
+        try:
+            xmin, ymin, xmax, ymax = tr.transform_bounds(*other.bounds, densify_pts=21)
+        except pyproj.exceptions.ProjError as exc:
+            raise OptionsError(f"{other!r} has no extent in {self.crs.name!r} ({exc})") from None
+        if not all(math.isfinite(v) for v in (xmin, ymin, xmax, ymax)):
+            raise OptionsError(f"{other!r} has no finite extent in {self.crs.name!r}")
         col0 = math.floor((xmin - self.x0) / self.dx + 1e-9)
         col1 = math.ceil((xmax - self.x0) / self.dx - 1e-9)
         row0 = math.floor((self.y0 - ymax) / self.dy + 1e-9)
