@@ -312,3 +312,17 @@ def test_south_up_rotated_and_gcp_geotiffs_open_north_up(make_napari_viewer, tmp
     data = np.asarray(layer.data)
     assert data.shape[0] > 40 and data.shape[1] > 50  # the rotated raster's north-up envelope
     assert set(np.unique(data[data > 0])) <= set(z.ravel())  # nearest: its own values
+
+
+def test_longitudes_beyond_180_land_beside_the_same_ground(tmp_path):
+    """A geographic raster in longitudes 190..193 opened into a world at -170..-167 (the same
+    ground) lay 360 degrees away (QA of stop 49); it now overlays that ground."""
+    from napari_meris_ortho._napari.reader import geotiff_layers
+
+    frame = OutputGrid.from_transform("EPSG:4326", (0.01, 0, -170.0, 0, -0.01, 10.0), (300, 300))
+    path = _write_tif(tmp_path / "lon360.tif", np.full((200, 200), 3.0, np.float32),
+                      "EPSG:4326", Affine(0.02, 0, 190.5, 0, -0.02, 9.5))
+    (data, kw, _), = geotiff_layers(path, frame)
+    lon0 = kw["translate"][1]  # the raster's west edge, 190.5 = -169.5 degrees
+    assert -170.0 <= lon0 <= -169.0, lon0
+    assert (np.asarray(data) == 3.0).mean() > 0.9

@@ -190,10 +190,17 @@ def place_on_frame(data: np.ndarray, source: OutputGrid, frame: OutputGrid | Non
     reprojected onto the frame's pixels that cover it (``OutputGrid.lattice_cover``: the whole
     raster, also beyond the frame's extent; the frame's own extent when that cover would be
     more than ``COVER_LIMIT`` times the frame's and the raster's pixels); ``nodata``: the value
-    of its no-data pixels, and of the pixels it does not cover.
+    of its no-data pixels, and of the pixels it does not cover. Both geographic: the raster's
+    longitudes are taken on the frame's side (190..193 beside a frame at -170: -170..-167).
     """
     if frame is None or source.same_grid(frame):
         return data, source
+    if frame.is_geographic and source.is_geographic:
+        apart = sum(frame.bounds[::2]) / 2 - sum(source.bounds[::2]) / 2
+        turns = round(apart / 360.0)
+        if turns:
+            source = OutputGrid(source.crs, source.x0 + 360.0 * turns, source.y0, source.dx,
+                                source.dy, source.width, source.height)
     try:
         target = frame.lattice_cover(source)
     except OptionsError:  # no finite extent in the frame's CRS (a polar raster in UTM...)
