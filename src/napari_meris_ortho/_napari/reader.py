@@ -18,8 +18,7 @@ own overviews, read window by window.
 
 from __future__ import annotations
 
-import contextlib
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -34,8 +33,13 @@ from ..pyramid import (
     Selection,
     WholeBands,
     as_index,
-    as_slice,
+    geotiff_levels,
+    geotiff_rgb_levels,
+    has_scale,
+    is_rgb,
     level_factors,
+    north_up,
+    physical_bands,
     selection_radiance,
 )
 from ._qt.insertion import defer_controls, thumbnails_later
@@ -200,14 +204,14 @@ def geotiff_layers(path: str | Path, frame: OutputGrid | None = None) -> list[La
 
     path = Path(path)
     try:
-        with rasterio.open(path) as opened, _north_up(opened) as ds:
+        with rasterio.open(path) as opened, north_up(opened) as ds:
             if ds.crs is None:
                 raise MerisOrthoError(f"{path}: GeoTIFF has no CRS (not geocoded)")
             _check_size(path, ds)
             source = OutputGrid.from_transform(ds.crs, tuple(ds.transform), (ds.height, ds.width))
             names = [d or f"band {i + 1}" for i, d in enumerate(opened.descriptions)]
             tags = opened.tags()
-            scaled = _scaled(ds)
+            scaled = has_scale(ds)
             # what the layer's no-data pixels hold: 0 where counts are read as radiances
             # (``_to_physical``), else the file's own value
             nodata = 0.0 if scaled and ds.nodata is not None else ds.nodata
@@ -216,7 +220,7 @@ def geotiff_layers(path: str | Path, frame: OutputGrid | None = None) -> list[La
             rgb = is_rgb(ds)
             bands: list[Any] = [] if not lazy else (
                 [geotiff_rgb_levels(path, ds)] if rgb else geotiff_levels(path, ds))
-            data = None if lazy else _physical(ds)
+            data = None if lazy else physical_bands(ds)
             if rgb:  # one layer (transparent where its alpha is 0)
                 names, nodata = ["rgb"], None
     except RasterioIOError as exc:
@@ -246,140 +250,6 @@ def geotiff_layers(path: str | Path, frame: OutputGrid | None = None) -> list[La
             kwargs["multiscale"] = True
         layers.append((band, kwargs, "image"))
     return layers
-
-
-def geotiff_levels(path: Path, ds: Any) -> list[list[LazyArray]]:
-    """Per band the levels of a big GeoTIFF, read on demand (``pyramid``): full resolution and
-    the file's own overviews (a COG's; 2, 4, ... to ``MAX_LEVEL_SIDE`` decimated from the full
-    resolution when it has none); bands with a scale as physical values (``_physical``)."""
-    overviews = ds.overviews(1)
-    factors = [1, *overviews] if overviews else level_factors(ds.height, ds.width)
-    physical = _scaled(ds)
-    dtype = np.float32 if physical else np.dtype(ds.dtypes[0])
-    out = []
-    for k in range(ds.count):
-        scale = (ds.scales[k], ds.offsets[k]) if physical else None
-        read = _GeoTiffWindows(path, k + 1, [1, *overviews], scale)
-        band = LazyArray(read, (ds.height, ds.width), dtype)
-        out.append([band[::f, ::f] for f in factors])
-    return out
-
-
-@contextlib.contextmanager
-def _north_up(ds: Any) -> Iterator[Any]:
-    """The dataset itself when it is north-up; a south-up or rotated one, or one georeferenced
-    by ground control points only, warped by GDAL onto a north-up grid (``WarpedVRT``,
-    nearest: a south-up raster's pixels exactly, flipped)."""
-    from rasterio.enums import Resampling
-    from rasterio.vrt import WarpedVRT
-
-    t = ds.transform
-    gcps, gcp_crs = ds.gcps
-    if ds.crs is None and gcps and gcp_crs is not None:
-        with WarpedVRT(ds, src_crs=gcp_crs, resampling=Resampling.nearest) as vrt:
-            yield vrt
-    elif ds.crs is not None and (t.b != 0.0 or t.d != 0.0 or t.e > 0.0):
-        with WarpedVRT(ds, resampling=Resampling.nearest) as vrt:
-            yield vrt
-    else:
-        yield ds
-
-
-def geotiff_rgb_levels(path: Path, ds: Any) -> list[LazyArray]:
-    """The levels of a big RGB(A) GeoTIFF (``is_rgb``) as (rows, columns, channels) arrays
-    read on demand, like ``geotiff_levels``."""
-    overviews = ds.overviews(1)
-    factors = [1, *overviews] if overviews else level_factors(ds.height, ds.width)
-    read = _GeoTiffWindows(path, list(range(1, ds.count + 1)), [1, *overviews], None)
-    rgb = LazyArray(read, (ds.height, ds.width, ds.count), np.uint8)
-    return [rgb[::f, ::f] for f in factors]
-
-
-def is_rgb(ds: Any) -> bool:
-    """True for a colour composite: 3 or 4 bytes bands that GDAL says are red, green, blue
-    (and alpha), as GDAL, QGIS or a satellite's true-colour image (TCI) write it."""
-    from rasterio.enums import ColorInterp
-
-    ci = tuple(ds.colorinterp)
-    return (ds.count in (3, 4) and all(d == "uint8" for d in ds.dtypes)
-            and ci[:3] == (ColorInterp.red, ColorInterp.green, ColorInterp.blue)
-            and (ds.count == 3 or ci[3] == ColorInterp.alpha))
-
-
-class _GeoTiffWindows:
-    """``read`` of a GeoTIFF band (``LazyArray``): a selection whose step is an overview's
-    factor reads that overview's window, any other reads the full-resolution window; with
-    ``scale`` (the band's GDAL scale and offset) physical values (``_to_physical``). With a
-    list of bands (an RGB composite), selections are (rows, columns, channels)."""
-
-    def __init__(self, path: Path, band: int | list[int], factors: list[int],
-                 scale: tuple[float, float] | None) -> None:
-        self.path, self.band, self.factors, self.scale = path, band, factors, scale
-
-    def __call__(self, sel: Selection) -> np.ndarray:
-        import rasterio
-        from rasterio.windows import Window
-
-        rows, cols = (range(s, s + 1) if isinstance(s, int) else s for s in sel[:2])
-        f = rows.step if rows.step == cols.step else 1
-        if f not in self.factors or rows.start % f or cols.start % f:
-            f = 1
-        level = self.factors.index(f) - 1
-        opened = rasterio.open(self.path, overview_level=level) if level >= 0 else (
-            rasterio.open(self.path))
-        with opened as ds:
-            window = Window(cols.start // f, rows.start // f,
-                            (cols[-1] - cols.start) // f + 1, (rows[-1] - rows.start) // f + 1)
-            data = _read_within(ds.read, self.band, window, ds.height, ds.width)[None]
-            if self.scale is not None:  # an overview does not carry the band's scale
-                mask = _read_within(ds.read_masks, self.band, window, ds.height,
-                                    ds.width)[None] == 0
-                data = _to_physical(data, mask, [self.scale[0]], [self.scale[1]])
-        step = rows.step // f, cols.step // f
-        spatial = tuple(0 if isinstance(x, int) else slice(None) for x in sel[:2])
-        if isinstance(self.band, int):
-            return data[0, ::step[0], ::step[1]][spatial]
-        channels = sel[2] if isinstance(sel[2], int) else as_slice(sel[2])
-        return np.moveaxis(data[0, :, ::step[0], ::step[1]], 0, -1)[..., channels][spatial]
-
-
-def _read_within(read: Any, band: int | list[int], window: Any, height: int, width: int
-                 ) -> np.ndarray:
-    """``read(band, window=window)`` with the window's shape where it runs past the raster by
-    a line or a column, the last ones repeated: the pyramid's levels are ``ceil(n / f)`` long,
-    GDAL's COG driver rounds an overview's size down (627 lines: 313, 156)."""
-    from rasterio.windows import Window
-
-    row, col = min(window.row_off, height - 1), min(window.col_off, width - 1)
-    inside = Window(col, row, min(window.width, width - col), min(window.height, height - row))
-    data = read(band, window=inside)
-    short = (window.height - data.shape[-2], window.width - data.shape[-1])
-    if not any(short):
-        return data
-    return np.pad(data, [(0, 0)] * (data.ndim - 2) + [(0, short[0]), (0, short[1])], mode="edge")
-
-
-def _scaled(ds: Any) -> bool:
-    """True when a band of the GeoTIFF has a GDAL scale or offset (read as physical values)."""
-    return not (all(s == 1.0 for s in ds.scales) and all(o == 0.0 for o in ds.offsets))
-
-
-def _physical(ds: Any) -> np.ndarray:
-    """All bands; bands with a GDAL scale/offset (our uint16 counts) as float32 physical
-    values (counts x scale + offset, nodata stays 0)."""
-    data = ds.read()
-    if not _scaled(ds):
-        return data
-    return _to_physical(data, ds.read_masks() == 0, ds.scales, ds.offsets)
-
-
-def _to_physical(data: np.ndarray, nodata: np.ndarray, scales: Any, offsets: Any
-                 ) -> np.ndarray:
-    """(bands, rows, cols) counts x scale + offset as float32, ``nodata`` pixels 0."""
-    out = data.astype(np.float32) * np.asarray(scales, np.float32)[:, None, None]
-    out += np.asarray(offsets, np.float32)[:, None, None]
-    out[nodata] = 0
-    return out
 
 
 def _check_size(path: Path, ds: Any) -> None:
