@@ -281,25 +281,38 @@ def split_datum(entry: str | os.PathLike[str]) -> tuple[str, str | None]:
     return path, suffix.lower()
 
 
-def crs_datum(crs: Any) -> str | None:
-    """Vertical datum of a raster's CRS: a compound CRS with EGM96 / EGM2008 height -> egm96 /
-    egm2008, another gravity-related height (a national datum: EVRF2007, NAVD88...) -> egm2008
-    (with a warning, ``other_height_datum``), a 3-D geographic CRS (EPSG:4979) -> ellipsoid;
-    None when the CRS says nothing."""
+#: vertical CRS names of the global models and the ellipsoid (anything else gravity-related is a
+#: national height datum, ``other_height_datum``)
+_GLOBAL_HEIGHTS = ("EGM2008", "EGM08", "EGM96", "ELLIPSOID")
+
+
+def _vertical_crs(crs: Any) -> tuple[Any, Any]:
+    """``crs`` parsed and its vertical sub-CRS (None when it has none); (None, None) when
+    pyproj cannot parse it."""
     import pyproj
 
     try:
         c = pyproj.CRS.from_user_input(crs)
     except pyproj.exceptions.CRSError:
+        return None, None
+    return c, next((sub for sub in c.sub_crs_list if sub.is_vertical), None)
+
+
+def crs_datum(crs: Any) -> str | None:
+    """Vertical datum of a raster's CRS: a compound CRS with EGM96 / EGM2008 height -> egm96 /
+    egm2008, another gravity-related height (a national datum: EVRF2007, NAVD88...) -> egm2008
+    (with a warning, ``other_height_datum``), a 3-D geographic CRS (EPSG:4979) -> ellipsoid;
+    None when the CRS says nothing."""
+    c, vertical = _vertical_crs(crs)
+    if c is None:
         return None
-    for sub in c.sub_crs_list:
-        if sub.is_vertical:
-            name = sub.name.upper()
-            if "EGM2008" in name or "EGM08" in name:
-                return EGM2008
-            if "EGM96" in name:
-                return EGM96
-            return EGM2008 if other_height_datum(c) else None
+    if vertical is not None:
+        name = vertical.name.upper()
+        if "EGM2008" in name or "EGM08" in name:
+            return EGM2008
+        if "EGM96" in name:
+            return EGM96
+        return EGM2008 if _national(name) else None
     if c.is_geographic and len(c.axis_info) == 3:
         return ELLIPSOID
     return None
@@ -309,19 +322,13 @@ def other_height_datum(crs: Any) -> str | None:
     """The name of a compound CRS's vertical CRS when its heights are gravity-related but not
     EGM96 or EGM2008 ones (a national datum: "EVRF2007 height", "NAVD88 height"); such a datum
     lies within a few metres of EGM2008, the ellipsoid 40-50 m away in Europe. None otherwise."""
-    import pyproj
+    _, vertical = _vertical_crs(crs)
+    return str(vertical.name) if vertical is not None and _national(vertical.name.upper()) else None
 
-    try:
-        c = pyproj.CRS.from_user_input(crs)
-    except pyproj.exceptions.CRSError:
-        return None
-    for sub in c.sub_crs_list:
-        if sub.is_vertical:
-            name = sub.name.upper()
-            if any(k in name for k in ("EGM2008", "EGM08", "EGM96", "ELLIPSOID")):
-                return None
-            return str(sub.name)
-    return None
+
+def _national(name: str) -> bool:
+    """A vertical CRS name (upper case) that is none of ``_GLOBAL_HEIGHTS``."""
+    return not any(k in name for k in _GLOBAL_HEIGHTS)
 
 
 __all__ = ["DATUMS", "EGM96", "EGM2008", "ELLIPSOID", "GEOIDS", "GEOID_GRID", "crs_datum",

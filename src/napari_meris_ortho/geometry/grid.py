@@ -321,8 +321,8 @@ class OutputGrid:
         """The grid in this grid's CRS, pixel size and pixel lattice (its pixels are this
         grid's, extended beyond its edges) that covers ``other``'s extent. Raises OptionsError
         when that extent has no finite bounds in this grid's CRS."""
-        tr = pyproj.Transformer.from_crs(other.crs, self.crs, always_xy=True)
         try:
+            tr = pyproj.Transformer.from_crs(other.crs, self.crs, always_xy=True)
             xmin, ymin, xmax, ymax = tr.transform_bounds(*other.bounds, densify_pts=21)
         except pyproj.exceptions.ProjError as exc:
             raise OptionsError(f"{other!r} has no extent in {self.crs.name!r} ({exc})") from None
