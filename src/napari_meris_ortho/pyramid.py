@@ -213,6 +213,13 @@ def geotiff_levels(path: Path, ds: Any) -> list[list[LazyArray]]:
     return out
 
 
+def gcps_only(ds: Any) -> bool:
+    """True for a raster georeferenced by ground control points (in a CRS) and no geotransform,
+    as ``gdal_translate -gcp`` writes it."""
+    gcps, gcp_crs = ds.gcps
+    return ds.crs is None and bool(gcps) and gcp_crs is not None
+
+
 @contextlib.contextmanager
 def north_up(ds: Any) -> Iterator[Any]:
     """The dataset itself when it is north-up; a south-up or rotated one, or one georeferenced
@@ -222,9 +229,8 @@ def north_up(ds: Any) -> Iterator[Any]:
     from rasterio.vrt import WarpedVRT
 
     t = ds.transform
-    gcps, gcp_crs = ds.gcps
-    if ds.crs is None and gcps and gcp_crs is not None:
-        with WarpedVRT(ds, src_crs=gcp_crs, resampling=Resampling.nearest) as vrt:
+    if gcps_only(ds):
+        with WarpedVRT(ds, src_crs=ds.gcps[1], resampling=Resampling.nearest) as vrt:
             yield vrt
     elif ds.crs is not None and (t.b != 0.0 or t.d != 0.0 or t.e > 0.0):
         with WarpedVRT(ds, resampling=Resampling.nearest) as vrt:

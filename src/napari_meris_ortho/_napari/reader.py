@@ -33,6 +33,7 @@ from ..pyramid import (
     Selection,
     WholeBands,
     as_index,
+    gcps_only,
     geotiff_levels,
     geotiff_rgb_levels,
     has_scale,
@@ -45,7 +46,7 @@ from ..pyramid import (
 from ._qt.insertion import defer_controls, thumbnails_later
 from .product_layers import QUICKLOOK_BANDS
 from .status import BAND_AXIS
-from .world import geo_image_kwargs, place_on_frame, viewer_frame
+from .world import current_viewer, geo_image_kwargs, place_on_frame, viewer_frame
 
 if TYPE_CHECKING:
     from ..products.protocol import MerisProduct
@@ -84,7 +85,7 @@ def read_store(path: str | list[str]) -> list[LayerData]:
     from .layout import frame_later
     from .synthesis_layers import data_extent, store_layers
 
-    viewer = _current_viewer()
+    viewer = current_viewer()
     empty = viewer is not None and not len(viewer.layers)
     _current_frame()  # map coordinates and the band slider's names in the status bar
     layers = store_layers(path[0] if isinstance(path, list) else path)
@@ -127,8 +128,8 @@ def _readable(path: Path) -> bool:
         from rasterio.errors import RasterioError
 
         try:
-            with rasterio.open(path) as ds:  # a CRS, or ground control points in one
-                return ds.crs is not None or bool(ds.gcps[0]) and ds.gcps[1] is not None
+            with rasterio.open(path) as ds:
+                return ds.crs is not None or gcps_only(ds)
         except (RasterioError, OSError):
             return False
     return False
@@ -147,7 +148,7 @@ def read_layers(path: str | list[str]) -> list[LayerData]:
             layers.extend(new)
             if frame is None and new:
                 frame = OutputGrid.from_transform(**_frame_args(new[0][1]))
-    viewer = _current_viewer()
+    viewer = current_viewer()
     if viewer is not None:  # the first pixels before the layers' controls
         defer_controls(viewer, [kind for _, _, kind in layers])
         thumbnails_later(viewer, _hidden_names(layers))
@@ -167,20 +168,10 @@ def _frame_args(kwargs: dict[str, Any]) -> dict[str, Any]:
     return {"crs": geo["crs"], "transform": geo["transform"], "shape": geo["shape"]}
 
 
-def _current_viewer() -> Any:
-    """The current napari viewer; None without one (no Qt app: plain reading)."""
-    try:
-        import napari
-
-        return napari.current_viewer()
-    except Exception:
-        return None
-
-
 def _current_frame() -> OutputGrid | None:
     """The world frame of the current napari viewer (None without viewer or geocoded layer);
     the viewer's status bar then shows map coordinates (``status``)."""
-    viewer = _current_viewer()
+    viewer = current_viewer()
     if viewer is None:
         return None
     from .._process import unit_registry_from_disk

@@ -33,7 +33,7 @@ from ._qt.insertion import (
 from .geometry_layers import geometry_layers
 from .ortho_run import multiscale_layer
 from .product_layers import band_layers
-from .world import geo_image_kwargs, reproject_onto
+from .world import current_viewer, geo_image_kwargs, reproject_onto
 
 SAMPLE_BANDS = (2, 5, 7)
 REFERENCE_BAND = 7
@@ -151,7 +151,7 @@ def _make(name: str) -> list[LayerData]:
     from a script or a test (no event loop running yet) the layers are built here."""
     from .status import show_map_coordinates
 
-    viewer = _current_viewer()
+    viewer = current_viewer()
     show_map_coordinates(viewer)
     if viewer is not None and _event_loop_running():
         return [SampleLoader(name, viewer).placeholder()]
@@ -327,15 +327,6 @@ def _simulate_main(name: str) -> None:
     from ..simulate.scene import generate_scene
 
     generate_scene(name, progress=lambda done, total: print(done, total, flush=True))
-
-
-def _current_viewer() -> Any:
-    try:
-        import napari
-
-        return napari.current_viewer()
-    except Exception:  # no Qt application
-        return None
 
 
 def make_sample_alps() -> list[LayerData]:

@@ -86,6 +86,16 @@ def world_crs(layer: Any) -> Any:
     return geo["crs"] if geo else None
 
 
+def current_viewer() -> Any:
+    """napari's current viewer; None without one (no Qt application: plain reading)."""
+    try:
+        import napari
+
+        return napari.current_viewer()
+    except Exception:  # no Qt application
+        return None
+
+
 def viewer_frame(layers: Iterable[Any]) -> OutputGrid | None:
     """The world frame of a viewer: the world grid of its first (bottom-most) layer in one."""
     for layer in layers:

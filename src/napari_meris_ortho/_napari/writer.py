@@ -19,7 +19,7 @@ import numpy as np
 from .._atomic import same_file
 from ..errors import OutputError
 from ..pyramid import full_resolution
-from .world import layer_frame
+from .world import current_viewer, layer_frame
 
 
 class _Meta:
@@ -56,9 +56,7 @@ def write_geotiff_layer(path: str, data: Any, meta: dict[str, Any]) -> list[str]
 
 def _layers_reading(path: str) -> list[str]:
     """Names of the current viewer's layers whose source is the file ``path``."""
-    import napari
-
-    viewer = napari.current_viewer()
+    viewer = current_viewer()
     if viewer is None:
         return []
     names = []
