@@ -24,6 +24,8 @@ def test_parallax_legend_on_the_canvas(make_napari_viewer, qtbot, tiny_n1, tiny_
     heights = np.asarray(vectors.features["height"])
     assert (lo, hi) == (heights.min(), heights.max()) and hi - lo > 500  # the DEM's relief
     overlay = viewer.canvas.overlays.text
+    # a run started as the widget opens: its legend waits for the glyphs' preparation
+    qtbot.waitUntil(lambda: overlay.text.startswith("parallax"), timeout=10_000)
     assert overlay.visible
     assert overlay.text == (f"parallax ×10{STAMP}: colour = height, purple {lo:.0f} m → "
                             f"yellow {hi:.0f} m")
@@ -48,13 +50,25 @@ def test_warm_up_dem_states_its_datum(tmp_path, caplog):
     assert not [r for r in caplog.records if "vertical datum" in r.getMessage()], caplog.text
 
 
+def _overlay_font(viewer):
+    """vispy's font of the canvas text overlay, as napari's canvas holds it."""
+    visuals = viewer.window._qt_viewer.canvas._viewer_overlay_to_visual
+    visual = visuals[viewer.canvas.overlays.text][0]
+    return visual.node._font_manager.get_font(visual.node.face)
+
+
 def test_legend_glyphs_are_rendered_before_a_run(make_napari_viewer, qtbot):
-    """The widget has the canvas render the legend's characters beforehand, a few per turn and
-    invisibly: the first legend of a session no longer renders them (0.2-0.6 s under software
-    GL) in the frame that shows the run's layers. The overlay is left hidden and empty."""
+    """The widget has the overlay's font render the legend's characters beforehand, a few per
+    turn: the first legend of a session no longer renders them (0.2-0.6 s under software GL)
+    in the frame that shows the run's layers. No frame is drawn for them but the overlay's
+    first (its shaders, in the widget's opening: transparent text) and its last (the overlay
+    hidden and emptied): each turn drew the canvas, 0.13-0.16 s over a run's layers."""
+    from qtpy.QtCore import QEvent, QObject
+
     from napari_meris_ortho._napari.legend import GLYPHS
 
     viewer = make_napari_viewer(show=True)
+    qtbot.wait(100)
     overlay = viewer.canvas.overlays.text
     seen: list[tuple[str, float]] = []
 
@@ -63,12 +77,50 @@ def test_legend_glyphs_are_rendered_before_a_run(make_napari_viewer, qtbot):
         seen.append((overlay.text, 1.0 if color is None else float(np.asarray(color)[3])))
 
     overlay.events.text.connect(record)
+    paints: list[float] = []
+
+    class Paints(QObject):
+        def eventFilter(self, obj, event):  # Qt calls it by this name
+            if event.type() == QEvent.Type.Paint:
+                paints.append(1.0)
+            return False
+
+    counter = Paints()
+    native = viewer.window._qt_viewer.canvas.native
+    native.installEventFilter(counter)
     viewer.window.add_plugin_dock_widget("napari-meris-ortho", "Orthorectify")
     qtbot.waitUntil(lambda: bool(seen) and seen[-1][0] == "", timeout=10_000)
+    qtbot.wait(100)
+    native.removeEventFilter(counter)
     assert not overlay.visible and overlay.text == ""
-    shown = "".join(text for text, _ in seen)
-    assert set(GLYPHS) <= set(shown)
     assert all(alpha == 0.0 for text, alpha in seen if text)  # never visible text
-    visual = viewer.window._qt_viewer.canvas._viewer_overlay_to_visual[overlay][0]
-    font = visual.node._font_manager.get_font(visual.node.face)
+    font = _overlay_font(viewer)
     assert set(GLYPHS) - {" "} <= set(font._glyphs)
+    assert len(paints) <= 4, len(paints)  # 24 turns of glyphs drew 24 frames before
+
+
+def test_legend_glyphs_wait_while_a_run_runs(make_napari_viewer, qtbot, tiny_n1, tiny_dem):
+    """A run started as the widget opens: the glyphs' preparation waits while it runs (its
+    job's thread held the GIL for most of a glyph's rendering: 0.07-0.11 s turns against
+    0.01-0.03 s, fr-alps), and the run's legend shows once they are ready."""
+    from qtpy.QtCore import QTimer
+
+    viewer = make_napari_viewer(show=True)
+    _, widget = viewer.window.add_plugin_dock_widget("napari-meris-ortho", "Orthorectify")
+    font = _overlay_font(viewer)
+    widget.products.value = [tiny_n1]
+    widget.add_dem(tiny_dem)
+    widget.bands.value = "7"
+    samples: list[tuple[bool, int]] = []
+    timer = QTimer()
+    timer.timeout.connect(lambda: samples.append((widget.running, len(font._glyphs))))
+    timer.start(5)
+    assert widget.start() is not None, widget.status.value
+    qtbot.waitUntil(lambda: not widget.running, timeout=60_000)
+    overlay = viewer.canvas.overlays.text
+    qtbot.waitUntil(lambda: overlay.text.startswith("parallax"), timeout=10_000)
+    timer.stop()
+    during = {count for running, count in samples if running}
+    assert len(during) == 1, sorted(during)  # not one glyph rendered while the run ran
+    assert len(font._glyphs) > max(during)  # the rest came after it
+    assert overlay.visible and overlay.color[-1] == 1.0  # seen

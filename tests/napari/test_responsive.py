@@ -605,3 +605,42 @@ def napari_image(name: str):
     from napari.layers import Image
 
     return Image(np.zeros((8, 8), np.float32), name=name)
+
+
+def test_a_hidden_layers_thumbnail_draws_no_frame(make_napari_viewer, qtbot):
+    """A run's hidden bands get their thumbnails shown and hidden again at once: each of the
+    two changes rebuilt the canvas's scene graph and the canvas redrew (0.04 s and 0.08 s a
+    thumbnail after a fr-alps run). Now neither; the layer's pixels are on the canvas when it
+    is shown."""
+    from qtpy.QtCore import QEvent, QObject
+
+    from napari_meris_ortho._napari._qt.insertion import thumbnail_while_hidden
+
+    viewer = make_napari_viewer(show=True)
+    ramp = np.tile(np.linspace(0.0, 1.0, 64, dtype=np.float32), (64, 1))
+    layer = viewer.add_image(ramp, name="band", visible=False, contrast_limits=(0.0, 1.0))
+    qtbot.wait(200)
+    assert not layer.thumbnail[..., :3].any()  # never sliced
+    paints: list[int] = []
+
+    class Paints(QObject):
+        def eventFilter(self, obj, event):  # Qt calls it by this name
+            if event.type() == QEvent.Type.Paint:
+                paints.append(1)
+            return False
+
+    counter = Paints()
+    native = viewer.window._qt_viewer.canvas.native
+    native.installEventFilter(counter)
+    changes: list[object] = []
+    layer.events.visible.connect(changes.append)
+    thumbnail_while_hidden(layer)
+    qtbot.wait(200)
+    native.removeEventFilter(counter)
+    assert layer.thumbnail[..., :3].any() and not layer.visible
+    assert not changes and not paints, (len(changes), len(paints))
+    layer.visible = True
+    shot = viewer.screenshot(canvas_only=True)[..., 0].astype(float)
+    row = shot[shot.shape[0] // 2]
+    lit = row[row > 0]
+    assert lit.size > 10 and lit[-5:].mean() > lit[:5].mean() + 100  # the ramp, drawn

@@ -9,13 +9,17 @@ napari's canvas text overlay while such a layer is visible, one line per visible
 from __future__ import annotations
 
 import weakref
+from collections.abc import Callable
 from typing import Any
 
-from ._qt.insertion import draw_now
+from ._qt.insertion import draw_now, text_overlay_font
 
 _WATCHED: weakref.WeakSet[Any] = weakref.WeakSet()
 #: viewers whose text overlay shows a legend of ours
 _SHOWING: weakref.WeakSet[Any] = weakref.WeakSet()
+#: viewers whose canvas still renders the legend's glyphs (``prepare_glyphs``): their legend
+#: waits for it
+_PREPARING: weakref.WeakSet[Any] = weakref.WeakSet()
 #: the ends of napari's viridis colormap, in words
 VIRIDIS_ENDS = ("purple", "yellow")
 
@@ -32,7 +36,9 @@ def legend_line(layer: Any) -> str | None:
 
 def update_legend(viewer: Any) -> None:
     """Show the legends of the visible parallax layers in the canvas text overlay (hide it when
-    there is none and it shows ours)."""
+    there is none and it shows ours); after the glyphs are ready (``prepare_glyphs``)."""
+    if viewer in _PREPARING:
+        return  # shown at the end of the preparation
     lines = [line for layer in viewer.layers if layer.visible
              for line in [legend_line(layer)] if line is not None]
     overlay = viewer.canvas.overlays.text
@@ -51,22 +57,26 @@ def update_legend(viewer: Any) -> None:
 #: the characters of a legend line (``legend_line``: "parallax ×10 · 2003-09-21 09:23: colour =
 #: height, purple 412 m → yellow 2391 m")
 GLYPHS = "0123456789 abcdefghijklmnopqrstuvwxyz:=,.-×·→"
-#: glyphs rendered per turn of the event loop (about 10-30 ms each under software GL)
+#: glyphs rendered per turn of the event loop (10-20 ms each, measured)
 GLYPHS_PER_TURN = 2
 
 
-def prepare_glyphs(viewer: Any, step_ms: int = 40) -> None:
-    """Have the canvas render the legend's glyphs beforehand, invisibly (transparent text), so
-    that the first legend of a run does not render them all in the frame that shows the run
-    (vispy renders each new character into its atlas at its first draw: 0.2-0.6 s for a legend
-    line under software GL). The overlay's first draw (its shaders and nine glyphs vispy always
-    renders: 0.15-0.2 s) is made at once, within the widget's opening, not in a turn of a run
-    started right after; then a few glyphs per turn. Stops when a legend is shown; no-op when
-    the overlay is in use or nothing is drawn."""
+def prepare_glyphs(viewer: Any, step_ms: int = 40,
+                   paused: Callable[[], bool] | None = None) -> None:
+    """Have the canvas render the legend's glyphs beforehand, so that the first legend of a
+    run does not render them all in the frame that shows the run (vispy renders each new
+    character into its atlas at its first draw: 0.2-0.6 s for a legend line under software
+    GL). The overlay's first draw (its shaders and nine glyphs vispy always renders:
+    0.15-0.2 s), with transparent text, is made at once, within the widget's opening, not in a
+    turn of a run started right after; then a few glyphs per turn into the overlay's font
+    (``text_overlay_font``), no frame drawn (each turn drew the canvas: 0.07-0.11 s in a
+    run's job, 0.13-0.16 s over a run's layers, measured on fr-alps), none while ``paused()``
+    (a run). A legend asked for meanwhile shows at the end. Stops when the overlay is in use
+    by another; no-op when it is in use or nothing is drawn."""
     from qtpy.QtCore import QTimer
 
     overlay = viewer.canvas.overlays.text
-    if overlay.visible or viewer in _SHOWING:
+    if overlay.visible or viewer in _SHOWING or viewer in _PREPARING:
         return
     ref = weakref.ref(viewer)
     chunks = [GLYPHS[k:k + GLYPHS_PER_TURN] for k in range(0, len(GLYPHS), GLYPHS_PER_TURN)]
@@ -74,19 +84,32 @@ def prepare_glyphs(viewer: Any, step_ms: int = 40) -> None:
 
     def step() -> None:
         alive = ref()
-        if alive is None or alive in _SHOWING:
+        if alive is None:
+            return
+        if paused is not None and paused():
+            QTimer.singleShot(step_ms, step)
             return
         text = alive.canvas.overlays.text
         if state["text"] is not None and text.text != state["text"]:
-            return  # someone else uses the overlay
+            _PREPARING.discard(alive)  # someone else uses the overlay
+            return
         if not chunks:
             text.text, text.visible, text.color = "", False, "white"
+            _PREPARING.discard(alive)
+            update_legend(alive)  # one asked for meanwhile
             return
-        state["text"] = chunks.pop(0)
-        text.color, text.font_size = (0.0, 0.0, 0.0, 0.0), 10  # before the text: never seen
-        text.text, text.visible = state["text"], True
+        chunk = chunks.pop(0)
+        font = None if state["text"] is None else text_overlay_font(alive)
+        if font is not None:
+            for char in chunk:
+                font[char]  # vispy renders the glyph when it is first indexed
+        else:  # the first step, drawn now; or no font within reach: drawn by the canvas
+            state["text"] = chunk
+            text.color, text.font_size = (0.0, 0.0, 0.0, 0.0), 10  # before the text: unseen
+            text.text, text.visible = chunk, True
         QTimer.singleShot(step_ms, step)
 
+    _PREPARING.add(viewer)
     step()
     draw_now(viewer)
 

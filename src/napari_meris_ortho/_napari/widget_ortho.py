@@ -20,6 +20,7 @@ from __future__ import annotations
 import contextlib
 import gc
 import threading
+import weakref
 from collections.abc import Collection
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -309,7 +310,8 @@ class OrthorectifyWidget(Container):
         self.native.destroyed.connect(self._shutdown)
         show_map_coordinates(viewer)
         show_legends(viewer)
-        prepare_glyphs(viewer)
+        this = weakref.ref(self)  # not kept alive by the preparation's timer
+        prepare_glyphs(viewer, paused=lambda: (w := this()) is not None and w._paused_glyphs())
         prepare_dash_patterns()
         trim_after_removals(viewer)
         _import_engine()
@@ -531,6 +533,10 @@ class OrthorectifyWidget(Container):
         self._summary = run.summary()
         self._canvas_updates(False)
         self._schedule_step()
+
+    def _paused_glyphs(self) -> bool:
+        """The legend's glyphs wait while a run runs (its job, then its layers going in)."""
+        return self.running and not self._closed
 
     def _canvas_updates(self, enabled: bool) -> None:
         canvas_updates(self.viewer, enabled)

@@ -46,24 +46,32 @@ def thumbnail_while_hidden(layer: Any) -> None:
     showed a black square in the layer list. Shown and hidden again at once, it is sliced once
     (a multiscale layer at the level napari picks: 0.04-0.05 s for fr-alps' radiances, measured)
     and keeps its thumbnail; no frame draws it in between. No-op for a visible layer. In a
-    viewer: napari empties an image layer's slice, and so its thumbnail, when it inserts it."""
+    viewer: napari empties an image layer's slice, and so its thumbnail, when it inserts it.
+
+    The layer's ``visible`` and ``set_data`` events are held meanwhile: its visibility is the
+    same after as before, and the canvas rebuilt its scene graph at each of the two changes
+    and redrew (0.04 s and 0.08 s a thumbnail after a fr-alps run, measured, software GL);
+    its vispy layer gets the slice when the layer is shown (napari slices it again then)."""
     if layer.visible:
         return
-    layer.visible = True
-    layer.visible = False
+    events = layer.events
+    with events.visible.blocker(), events.set_data.blocker():
+        layer.visible = True
+        layer.visible = False
 
 
 def thumbnails_later(viewer: Any, names: Sequence[str]) -> None:
     """``thumbnail_while_hidden`` for the viewer's layers of these ``names``, one per turn of
     the event loop once napari's opening is over (a reader's layers: after their first pixels;
-    a run's: after it has ended)."""
+    a run's: after it has ended), the first ``SHOW_STEP_MS`` after the call: not in the turn
+    of the paint the caller's last change brings."""
     def step(name: str) -> None:
         layer = next((x for x in viewer.layers if x.name == name), None)
         if layer is not None:
             thumbnail_while_hidden(layer)
 
     if names:
-        in_turns([partial(step, name) for name in names])
+        in_turns([partial(step, name) for name in names], first_ms=SHOW_STEP_MS)
 
 
 def prepare_dash_patterns() -> None:
@@ -85,6 +93,19 @@ def _qt_viewer(viewer: Any) -> Any:
 def _canvas(viewer: Any) -> Any:
     """The canvas's Qt widget (None without a Qt window)."""
     return getattr(getattr(_qt_viewer(viewer), "canvas", None), "native", None)
+
+
+def text_overlay_font(viewer: Any) -> Any:
+    """vispy's font of the canvas text overlay once the canvas has made its visual (None
+    before, or without napari's Qt internals): indexing it by a character renders the glyph
+    into the font's atlas, without drawing a frame."""
+    canvas = getattr(_qt_viewer(viewer), "canvas", None)
+    visuals = getattr(canvas, "_viewer_overlay_to_visual", {}).get(viewer.canvas.overlays.text)
+    node = getattr(visuals[0], "node", None) if visuals else None
+    manager = getattr(node, "_font_manager", None)
+    if manager is None or not callable(getattr(manager, "get_font", None)):
+        return None
+    return manager.get_font(node.face)
 
 
 def draw_now(viewer: Any) -> None:
@@ -261,9 +282,9 @@ def defer_controls(viewer: Any, kinds: Sequence[str]) -> None:
     QTimer.singleShot(CONTROLS_FALLBACK_MS, fallback)
 
 
-def in_turns(steps: list[Callable[[], Any]]) -> None:
-    """Call each of ``steps`` in a turn of the Qt event loop of its own, from the next one on,
-    never inside napari's opening."""
+def in_turns(steps: list[Callable[[], Any]], first_ms: int = 1) -> None:
+    """Call each of ``steps`` in a turn of the Qt event loop of its own, from the next one on
+    (the first ``first_ms`` from now), never inside napari's opening."""
     from qtpy.QtCore import QTimer
 
     pending = list(steps)
@@ -277,7 +298,7 @@ def in_turns(steps: list[Callable[[], Any]]) -> None:
         pending.pop(0)()
         QTimer.singleShot(1, step)
 
-    QTimer.singleShot(1, step)
+    QTimer.singleShot(first_ms, step)
 
 
 #: ms between a worker's start being asked and the worker starting: the widget's "running"
