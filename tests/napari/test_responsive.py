@@ -224,6 +224,29 @@ def test_a_labels_layer_after_the_widget_builds_no_dash_pattern(make_napari_view
     assert _make_pattern.cache_info().misses == built
 
 
+def test_an_n1_opening_builds_the_dash_patterns_one_per_turn(make_napari_viewer, qtbot, tiny_n1):
+    """An N1 opens with hidden labels (its flags): their insertion waits for vispy's dash
+    patterns, which were built in one turn (0.18-0.21 s after a session's first opening of
+    fr-alps, measured). Now one pattern per turn, and a labels layer then builds none."""
+    from qtpy.QtCore import QTimer
+    from vispy.visuals.line.dash_atlas import _make_pattern
+
+    _make_pattern.cache_clear()
+    viewer = make_napari_viewer(show=True)
+    turns: list[int] = []
+    timer = QTimer()
+    timer.timeout.connect(lambda: turns.append(_make_pattern.cache_info().misses))
+    timer.start(0)
+    viewer.open(tiny_n1, plugin="napari-meris-ortho")
+    qtbot.waitUntil(lambda: _make_pattern.cache_info().misses >= 10, timeout=10_000)
+    qtbot.wait(200)
+    timer.stop()
+    built = _make_pattern.cache_info().misses
+    assert max(np.diff(turns)) == 1, sorted(set(np.diff(turns)))  # never two in one turn
+    viewer.add_labels(np.zeros((16, 16), np.uint8), name="elevation source")
+    assert _make_pattern.cache_info().misses == built
+
+
 def test_the_legend_overlay_is_first_drawn_within_the_widget_opening(make_napari_viewer, qtbot):
     """The text overlay's first draw (its shaders and the nine glyphs vispy always renders,
     0.15-0.2 s) came 40 ms after the widget opened: the longest stall of a run started right
@@ -644,3 +667,35 @@ def test_a_hidden_layers_thumbnail_draws_no_frame(make_napari_viewer, qtbot):
     row = shot[shot.shape[0] // 2]
     lit = row[row > 0]
     assert lit.size > 10 and lit[-5:].mean() > lit[:5].mean() + 100  # the ramp, drawn
+
+
+def test_a_layers_controls_are_styled_before_they_go_in(make_napari_viewer, qtbot):
+    """Putting a layer's controls in napari's stack had Qt apply napari's style sheet to each
+    of their widgets there (0.045 s of the 0.05 s it took): they are now styled in a turn of
+    their own (``polish_controls``), as children of their stand-in; those of a layer removed
+    before they go in go with the stand-in."""
+    from qtpy.QtCore import Qt
+    from qtpy.QtWidgets import QWidget
+
+    from napari_meris_ortho._napari._qt import insertion
+
+    viewer = make_napari_viewer(show=True)
+    container = viewer.window._qt_viewer.controls
+    kept, removed = napari_image("kept"), napari_image("gone")
+    made = {}
+    for layer in (kept, removed):
+        assert insertion.append_inactive(viewer, layer, controls_later=True)
+        insertion.make_controls(viewer, layer)
+        made[layer.name] = container.widgets[layer].controls
+        tree = [made[layer.name], *made[layer.name].findChildren(QWidget)]
+        assert not all(w.testAttribute(Qt.WidgetAttribute.WA_WState_Polished) for w in tree)
+        insertion.polish_controls(viewer, layer)
+        assert all(w.testAttribute(Qt.WidgetAttribute.WA_WState_Polished) for w in tree)
+    insertion.add_controls(viewer, [kept])
+    assert container.widgets[kept] is made["kept"]
+    viewer.layers.selection.active = kept
+    assert container.currentWidget() is made["kept"]
+    destroyed: list[bool] = []
+    made["gone"].destroyed.connect(lambda *_: destroyed.append(True))
+    viewer.layers.remove(removed)
+    qtbot.waitUntil(lambda: bool(destroyed), timeout=2000)

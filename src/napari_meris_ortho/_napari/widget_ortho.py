@@ -51,6 +51,7 @@ from ._qt.insertion import (
     canvas_updates,
     hide_for_now,
     make_controls,
+    polish_controls,
     prepare_dash_patterns,
     scene_graph_paused,
     show_in,
@@ -518,6 +519,7 @@ class OrthorectifyWidget(Container):
         self._queue = [*removals,
                        *(step for layer in layers
                          for step in ((self._append, layer), (self._make_controls, layer),
+                                      (self._polish_controls, layer),
                                       (self._add_controls, layer))),
                        # a labels layer's overlays, not in the scene graph's one rebuild
                        *((self._build_overlays, layer) for layer in layers
@@ -546,6 +548,9 @@ class OrthorectifyWidget(Container):
 
     def _make_controls(self, layer: Any) -> None:
         make_controls(self.viewer, layer)
+
+    def _polish_controls(self, layer: Any) -> None:
+        polish_controls(self.viewer, layer)
 
     def _add_controls(self, layer: Any = None) -> None:
         """napari's controls of ``layer`` (None: of every layer appended so far that still has
