@@ -95,7 +95,7 @@ def dash_pattern_steps() -> list[Callable[[], Any]]:
         return [dash_atlas.DashAtlas]
     asked: list[tuple[Any, ...]] = []
 
-    class Recorder(dash_atlas.DashAtlas):  # type: ignore[misc]
+    class Recorder(dash_atlas.DashAtlas):
         def make_pattern(self, pattern: Any, caps: Any = (1, 1)) -> Any:
             asked.append((self._data.shape[1], pattern, caps))
             return 0.0, 1.0
@@ -122,9 +122,9 @@ def text_overlay_font(viewer: Any) -> Any:
     into the font's atlas, without drawing a frame."""
     canvas = getattr(_qt_viewer(viewer), "canvas", None)
     visuals = getattr(canvas, "_viewer_overlay_to_visual", {}).get(viewer.canvas.overlays.text)
-    node = getattr(visuals[0], "node", None) if visuals else None
-    manager = getattr(node, "_font_manager", None)
-    if manager is None or not callable(getattr(manager, "get_font", None)):
+    node: Any = getattr(visuals[0], "node", None) if visuals else None
+    manager: Any = getattr(node, "_font_manager", None)
+    if node is None or not callable(getattr(manager, "get_font", None)):
         return None
     return manager.get_font(node.face)
 
