@@ -572,7 +572,7 @@ def test_a_layers_controls_are_made_in_a_turn_of_their_own(make_napari_viewer, q
         controls = container.widgets[layer]
         assert type(controls).__name__.endswith("Controls"), type(controls)
         viewer.layers.selection.active = layer
-        assert container.currentWidget() is controls
+        assert container.currentWidget() is controls and controls.isVisible()
     canvas = viewer.window._qt_viewer.canvas
     assert not canvas._pause_scene_graph
     orders = [canvas.layer_to_visual[layer].order for layer in viewer.layers]
@@ -695,6 +695,7 @@ def test_a_layers_controls_are_styled_before_they_go_in(make_napari_viewer, qtbo
     assert container.widgets[kept] is made["kept"]
     viewer.layers.selection.active = kept
     assert container.currentWidget() is made["kept"]
+    qtbot.waitUntil(lambda: made["kept"].isVisible(), timeout=2000)  # shown, styled
     destroyed: list[bool] = []
     made["gone"].destroyed.connect(lambda *_: destroyed.append(True))
     viewer.layers.remove(removed)

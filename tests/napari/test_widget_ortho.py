@@ -341,6 +341,11 @@ def test_hidden_layers_get_their_thumbnails(make_napari_viewer, qtbot, tiny_n1):
     assert not radiance.visible and not radiance.thumbnail[..., :3].any()  # not sliced yet
     qtbot.waitUntil(lambda: radiance.thumbnail[..., :3].any(), timeout=5000)
     assert not radiance.visible
+    # opened again: napari renames the copy ("... [1]"), whose thumbnail is made too
+    copy = next(x for x in viewer.open(tiny_n1, plugin="napari-meris-ortho")
+                if x.name.startswith("radiance"))
+    assert copy.name.endswith(" [1]") and not copy.thumbnail[..., :3].any()
+    qtbot.waitUntil(lambda: copy.thumbnail[..., :3].any(), timeout=5000)
     widget = OrthorectifyWidget(viewer)
     widget.products.value = [tiny_n1]
     widget.elevation.value = "tiepoints"

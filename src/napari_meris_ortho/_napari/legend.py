@@ -12,6 +12,8 @@ import weakref
 from collections.abc import Callable
 from typing import Any
 
+import numpy as np
+
 from ._qt.insertion import draw_now, text_overlay_font
 
 _WATCHED: weakref.WeakSet[Any] = weakref.WeakSet()
@@ -81,6 +83,16 @@ def prepare_glyphs(viewer: Any, step_ms: int = 40,
     ref = weakref.ref(viewer)
     chunks = [GLYPHS[k:k + GLYPHS_PER_TURN] for k in range(0, len(GLYPHS), GLYPHS_PER_TURN)]
     state: dict[str, str | None] = {"text": None}
+    # the overlay's colour and box as they were: the first draw's text is transparent and
+    # unboxed (napari's box, a grey square, showed for the whole of a run that paused it)
+    before = {"color": overlay.color, "box": getattr(overlay, "box", None)}
+
+    def restore(text: Any) -> None:
+        """The colour and box back, unless someone set them meanwhile."""
+        if text.color is not None and float(np.asarray(text.color)[-1]) == 0.0:
+            text.color = before["color"]
+        if before["box"] is not None and text.box is False:
+            text.box = before["box"]
 
     def step() -> None:
         alive = ref()
@@ -91,10 +103,12 @@ def prepare_glyphs(viewer: Any, step_ms: int = 40,
             return
         text = alive.canvas.overlays.text
         if state["text"] is not None and text.text != state["text"]:
-            _PREPARING.discard(alive)  # someone else uses the overlay
+            restore(text)  # someone else uses the overlay: their text is seen
+            _PREPARING.discard(alive)
             return
         if not chunks:
-            text.text, text.visible, text.color = "", False, "white"
+            text.text, text.visible = "", False
+            restore(text)
             _PREPARING.discard(alive)
             update_legend(alive)  # one asked for meanwhile
             return
@@ -106,6 +120,8 @@ def prepare_glyphs(viewer: Any, step_ms: int = 40,
         else:  # the first step, drawn now; or no font within reach: drawn by the canvas
             state["text"] = chunk
             text.color, text.font_size = (0.0, 0.0, 0.0, 0.0), 10  # before the text: unseen
+            if before["box"] is not None:
+                text.box = False
             text.text, text.visible = chunk, True
         QTimer.singleShot(step_ms, step)
 

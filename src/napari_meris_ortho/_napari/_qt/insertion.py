@@ -65,13 +65,23 @@ def thumbnails_later(viewer: Any, names: Sequence[str]) -> None:
     the event loop once napari's opening is over (a reader's layers: after their first pixels;
     a run's: after it has ended), the first ``SHOW_STEP_MS`` after the call: not in the turn
     of the paint the caller's last change brings."""
-    def step(name: str) -> None:
-        layer = next((x for x in viewer.layers if x.name == name), None)
+    def step(name: str) -> None:  # the newest of that name: napari renames a second copy
+        layer = next((x for x in reversed(viewer.layers) if _named(x.name, name)), None)
         if layer is not None:
             thumbnail_while_hidden(layer)
 
     if names:
         in_turns([partial(step, name) for name in names], first_ms=SHOW_STEP_MS)
+
+
+def _named(name: str, asked: str) -> bool:
+    """Whether a layer named ``name`` is the layer a reader named ``asked``: the same, or as
+    napari renames a layer whose name is taken ("radiance [1]")."""
+    if name == asked:
+        return True
+    tail = name[len(asked):]
+    return name.startswith(asked) and tail.startswith(" [") and tail[2:-1].isdigit() \
+        and tail.endswith("]")
 
 
 def prepare_dash_patterns() -> None:
