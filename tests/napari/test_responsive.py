@@ -363,6 +363,27 @@ def test_a_runs_removed_layers_are_collected(make_napari_viewer, qtbot, tiny_n1)
         assert alive == [], alive
 
 
+def test_an_opened_products_removed_layers_are_collected(make_napari_viewer, qtbot, tiny_n1):
+    """An N1's layers, opened then removed, stayed alive (QA of stop 50): the timer's callable
+    that hands their controls to later turns kept the list of them, and PyQt frees a single
+    shot's callable only later. The layers now leave that list as they go to their turns."""
+    import gc
+    import weakref
+
+    viewer = make_napari_viewer(show=True)
+    for _ in range(2):
+        viewer.open(tiny_n1, plugin="napari-meris-ortho")
+        qtbot.wait(2500)  # the controls, overlays and thumbnails made in later turns
+        refs = [weakref.ref(layer) for layer in viewer.layers]
+        assert len(refs) == 3
+        viewer.layers.clear()
+        qtbot.wait(300)
+        gc.unfreeze()  # the plugin's freeze of what napari holds at its first read
+        gc.collect()
+        alive = [r().name for r in refs if r() is not None]
+        assert alive == [], alive
+
+
 def test_removing_layers_hands_the_heap_back(make_napari_viewer, qtbot):
     """Once layers leave the viewer the widget has glibc return the freed heap to the system
     (``memory.trim_after_removals``), in a thread of its own a second after the last removal:

@@ -83,16 +83,15 @@ def prepare_glyphs(viewer: Any, step_ms: int = 40,
     ref = weakref.ref(viewer)
     chunks = [GLYPHS[k:k + GLYPHS_PER_TURN] for k in range(0, len(GLYPHS), GLYPHS_PER_TURN)]
     state: dict[str, str | None] = {"text": None}
-    # the overlay's colour and box as they were: the first draw's text is transparent and
-    # unboxed (napari's box, a grey square, showed for the whole of a run that paused it)
-    before = {"color": overlay.color, "box": getattr(overlay, "box", None)}
+    # the overlay's colour as it was: the first draw's text is transparent (napari's box
+    # behind it is not: a transparent box colour still drew it, and turning the box off and
+    # on again crashed Mesa's software GL in a later draw)
+    color = overlay.color
 
     def restore(text: Any) -> None:
-        """The colour and box back, unless someone set them meanwhile."""
+        """The colour back, unless someone set it meanwhile."""
         if text.color is not None and float(np.asarray(text.color)[-1]) == 0.0:
-            text.color = before["color"]
-        if before["box"] is not None and text.box is False:
-            text.box = before["box"]
+            text.color = color
 
     def step() -> None:
         alive = ref()
@@ -120,8 +119,6 @@ def prepare_glyphs(viewer: Any, step_ms: int = 40,
         else:  # the first step, drawn now; or no font within reach: drawn by the canvas
             state["text"] = chunk
             text.color, text.font_size = (0.0, 0.0, 0.0, 0.0), 10  # before the text: unseen
-            if before["box"] is not None:
-                text.box = False
             text.text, text.visible = chunk, True
         QTimer.singleShot(step_ms, step)
 

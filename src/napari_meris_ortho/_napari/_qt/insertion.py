@@ -281,10 +281,17 @@ def defer_controls(viewer: Any, kinds: Sequence[str]) -> None:
             inserted.disconnect(stand_in)
 
     def then() -> None:  # vispy's dash patterns, each labels layer's overlays, then the
-        if held < count:  # scene graph, a turn each
+        built = inserted_labels[:]  # scene graph, a turn each
+        inserted_labels.clear()
+        if held < count:
             in_turns([*dash_pattern_steps(),
-                      *(partial(build_overlays, viewer, layer) for layer in inserted_labels),
+                      *(partial(build_overlays, viewer, layer) for layer in built),
                       partial(scene_graph_paused, viewer, False)])
+
+    def hand_over() -> None:  # the layers leave these closures as they go to their turns: a
+        layers = pending[:]   # timer's callable outlives its call (PyQt frees it later; the
+        pending.clear()       # layers of an N1 opened, then removed, stayed alive)
+        controls_in_turns(viewer, layers, then)
 
     def stand_in(event: Any) -> None:
         layer = event.value
@@ -298,13 +305,12 @@ def defer_controls(viewer: Any, kinds: Sequence[str]) -> None:
             pending.append(layer)
         if len(pending) >= count:
             stop()
-            QTimer.singleShot(CONTROLS_AFTER_OPEN_MS,
-                              lambda: controls_in_turns(viewer, pending, then))
+            QTimer.singleShot(CONTROLS_AFTER_OPEN_MS, hand_over)
 
     def fallback() -> None:  # fewer layers came (an error): napari makes any others' itself
         if state["blocked"]:
             stop()
-            controls_in_turns(viewer, pending, then)
+            hand_over()
 
     if held == 0:
         scene_graph_paused(viewer, True)
