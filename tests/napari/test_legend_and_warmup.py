@@ -8,6 +8,8 @@ import logging
 
 import numpy as np
 
+from qt_paints import paints_of
+
 STAMP = " · 2003-09-21 09:23"
 
 
@@ -63,8 +65,6 @@ def test_legend_glyphs_are_rendered_before_a_run(make_napari_viewer, qtbot):
     in the frame that shows the run's layers. No frame is drawn for them but the overlay's
     first (its shaders, in the widget's opening: transparent text) and its last (the overlay
     hidden and emptied): each turn drew the canvas, 0.13-0.16 s over a run's layers."""
-    from qtpy.QtCore import QEvent, QObject
-
     from napari_meris_ortho._napari.legend import GLYPHS
 
     viewer = make_napari_viewer(show=True)
@@ -78,21 +78,10 @@ def test_legend_glyphs_are_rendered_before_a_run(make_napari_viewer, qtbot):
         seen.append((overlay.text, 1.0 if color is None else float(np.asarray(color)[3])))
 
     overlay.events.text.connect(record)
-    paints: list[float] = []
-
-    class Paints(QObject):
-        def eventFilter(self, obj, event):  # Qt calls it by this name
-            if event.type() == QEvent.Type.Paint:
-                paints.append(1.0)
-            return False
-
-    counter = Paints()
-    native = viewer.window._qt_viewer.canvas.native
-    native.installEventFilter(counter)
-    viewer.window.add_plugin_dock_widget("napari-meris-ortho", "Orthorectify")
-    qtbot.waitUntil(lambda: bool(seen) and seen[-1][0] == "", timeout=10_000)
-    qtbot.wait(100)
-    native.removeEventFilter(counter)
+    with paints_of(viewer.window._qt_viewer.canvas.native) as paints:
+        viewer.window.add_plugin_dock_widget("napari-meris-ortho", "Orthorectify")
+        qtbot.waitUntil(lambda: bool(seen) and seen[-1][0] == "", timeout=10_000)
+        qtbot.wait(100)
     assert not overlay.visible and overlay.text == ""
     assert all(alpha == 0.0 for text, alpha in seen if text)  # never visible text
     assert np.array_equal(np.asarray(overlay.color), color)  # napari's own colour back

@@ -20,6 +20,7 @@ from qtpy.QtCore import QTimer
 
 from napari_meris_ortho._napari.widget_ortho import OrthorectifyWidget
 from napari_meris_ortho.simulate.scene import generate_scene
+from qt_paints import paints_of
 
 #: longest event-loop gap allowed during a run: one napari layer insertion or napari's one
 #: garbage collection after the replaced layers went, with room for a loaded 2-core machine
@@ -251,25 +252,13 @@ def test_the_legend_overlay_is_first_drawn_within_the_widget_opening(make_napari
     """The text overlay's first draw (its shaders and the nine glyphs vispy always renders,
     0.15-0.2 s) came 40 ms after the widget opened: the longest stall of a run started right
     away (0.19-0.22 s, fr-alps). It is now drawn before the widget's constructor returns."""
-    from qtpy.QtCore import QEvent, QObject
-
     viewer = make_napari_viewer(show=True)
     qtbot.wait(100)
     native = viewer.window._qt_viewer.canvas.native
-    paints: list[str] = []
-
-    class Paints(QObject):
-        def eventFilter(self, obj, event):  # Qt calls it by this name
-            if event.type() == QEvent.Type.Paint:
-                paints.append(viewer.canvas.overlays.text.text)
-            return False
-
-    counter = Paints()
-    native.installEventFilter(counter)
-    OrthorectifyWidget(viewer)
-    opened = list(paints)
-    qtbot.wait(100)
-    native.removeEventFilter(counter)
+    with paints_of(native, lambda: viewer.canvas.overlays.text.text) as paints:
+        OrthorectifyWidget(viewer)
+        opened = list(paints)
+        qtbot.wait(100)
     assert opened and opened[-1], opened  # drawn with the first glyphs, before any event turn
     assert not viewer.canvas.overlays.text.color[-1]  # transparent: never seen
 
@@ -656,8 +645,6 @@ def test_a_hidden_layers_thumbnail_draws_no_frame(make_napari_viewer, qtbot):
     two changes rebuilt the canvas's scene graph and the canvas redrew (0.04 s and 0.08 s a
     thumbnail after a fr-alps run). Now neither; the layer's pixels are on the canvas when it
     is shown."""
-    from qtpy.QtCore import QEvent, QObject
-
     from napari_meris_ortho._napari._qt.insertion import thumbnail_while_hidden
 
     viewer = make_napari_viewer(show=True)
@@ -665,22 +652,11 @@ def test_a_hidden_layers_thumbnail_draws_no_frame(make_napari_viewer, qtbot):
     layer = viewer.add_image(ramp, name="band", visible=False, contrast_limits=(0.0, 1.0))
     qtbot.wait(200)
     assert not layer.thumbnail[..., :3].any()  # never sliced
-    paints: list[int] = []
-
-    class Paints(QObject):
-        def eventFilter(self, obj, event):  # Qt calls it by this name
-            if event.type() == QEvent.Type.Paint:
-                paints.append(1)
-            return False
-
-    counter = Paints()
-    native = viewer.window._qt_viewer.canvas.native
-    native.installEventFilter(counter)
     changes: list[object] = []
     layer.events.visible.connect(changes.append)
-    thumbnail_while_hidden(layer)
-    qtbot.wait(200)
-    native.removeEventFilter(counter)
+    with paints_of(viewer.window._qt_viewer.canvas.native) as paints:
+        thumbnail_while_hidden(layer)
+        qtbot.wait(200)
     assert layer.thumbnail[..., :3].any() and not layer.visible
     assert not changes and not paints, (len(changes), len(paints))
     layer.visible = True

@@ -18,6 +18,7 @@ from napari_meris_ortho.engine.boundary import segment_boundary
 from napari_meris_ortho.errors import OptionsError
 from napari_meris_ortho.geometry.grid import OutputGrid, default_grid
 from napari_meris_ortho.products.n1 import read_product
+from qt_paints import paints_of
 
 STAMP = " · 2003-09-21 09:23"  # first line time of the tiny product
 
@@ -366,25 +367,20 @@ def test_the_running_state_is_painted_before_the_job_starts(make_napari_viewer, 
     run's job loads its modules and numba's kernels holding the GIL, and the paint waited for
     it (the first run's longest stall, 0.19-0.21 s on fr-alps). A widget closed before its job
     starts starts none."""
-    from qtpy.QtCore import QEvent, QObject
 
     viewer = make_napari_viewer(show=True)
     widget = OrthorectifyWidget(viewer)
     viewer.window.add_dock_widget(widget)
     widget.products.value = [tiny_n1]
     widget.elevation.value = "tiepoints"
-    painted: list[tuple[str, bool]] = []
 
-    class Paints(QObject):
-        def eventFilter(self, obj, event):
-            if event.type() == QEvent.Type.Paint and widget._job is not None:
-                painted.append((widget.status.value, widget._job.thread.ident is not None))
-            return False
+    def state() -> tuple[str, bool] | None:  # the status painted, and whether the job runs
+        job = widget._job
+        return None if job is None else (widget.status.value, job.thread.ident is not None)
 
-    paints = Paints()
-    widget.status.native.installEventFilter(paints)
-    _run(widget, qtbot)
-    widget.status.native.removeEventFilter(paints)
+    with paints_of(widget.status.native, state) as seen:
+        _run(widget, qtbot)
+    painted = [paint for paint in seen if paint is not None]
     running = [started for text, started in painted if text == "running..."]
     assert running and not running[0], painted
     assert widget.status.value.startswith("done"), widget.status.value
