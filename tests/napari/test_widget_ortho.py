@@ -251,6 +251,49 @@ def test_cancel_stops_the_worker(make_napari_viewer, qtbot, tiny_n1):
     assert len(viewer.layers) == 0
 
 
+def test_closing_the_dock_mid_run_cancels_the_job(make_napari_viewer, qtbot, tiny_n1):
+    """QA of stop 50: closing the Orthorectify dock (its title bar's close button: napari
+    takes the widget out of the window) while a run ran let the job go on with nothing on
+    screen to follow or cancel it, and its layers came in later. Now it is cancelled as if
+    Cancel had been pressed."""
+    viewer = make_napari_viewer(show=True)
+    dock, widget = viewer.window.add_plugin_dock_widget("napari-meris-ortho", "Orthorectify")
+    widget.products.value = [tiny_n1] * 40
+    widget.elevation.value = "tiepoints"
+    widget.bands.value = "all"
+    assert widget.start() is not None, widget.status.value
+    thread = widget._job.thread
+    qtbot.waitUntil(lambda: widget.progress_state[0] > 0, timeout=60_000)
+    done, total = widget.progress_state
+    assert done < total
+    viewer.window.remove_dock_widget(dock)
+    qtbot.waitUntil(lambda: not thread.is_alive(), timeout=5_000)
+    qtbot.wait(300)  # a (wrongly) finished job's layers would go in now
+    assert widget.progress_state[0] < total
+    assert len(viewer.layers) == 0
+    assert not widget.running
+
+
+def test_closing_the_dock_while_the_layers_go_in_leaves_the_viewer_as_before(
+        make_napari_viewer, qtbot, tiny_n1):
+    """Closed between a rerun's layer changes, the widget undoes them as Cancel does: the
+    viewer keeps its layers and its canvas repaints (it does not while layers go in)."""
+    viewer = make_napari_viewer(show=True)
+    dock, widget = viewer.window.add_plugin_dock_widget("napari-meris-ortho", "Orthorectify")
+    widget.products.value = [tiny_n1]
+    widget.elevation.value = "tiepoints"
+    _run(widget, qtbot)
+    before = list(viewer.layers)
+    assert widget.start() is not None
+    qtbot.waitUntil(lambda: len(widget._removed) >= 3, timeout=60_000)
+    canvas = viewer.window._qt_viewer.canvas.native
+    assert not canvas.updatesEnabled()  # in the middle of the insertions
+    viewer.window.remove_dock_widget(dock)
+    qtbot.waitUntil(lambda: not widget.running, timeout=10_000)
+    assert list(viewer.layers) == before
+    assert canvas.updatesEnabled()
+
+
 def test_parse_bands():
     assert parse_bands("7, 5,2") == (7, 5, 2)
     assert parse_bands("all") is None and parse_bands("") is None

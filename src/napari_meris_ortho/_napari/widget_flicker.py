@@ -22,12 +22,12 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from magicgui.types import FileDialogMode
 from magicgui.widgets import ComboBox, Container, FileEdit, FloatSpinBox, PushButton, SpinBox
-from qtpy.QtCore import QEvent, QObject
 
 from .._atomic import atomic_path
 from ..errors import MerisOrthoError, OptionsError
 from ..geometry.grid import OutputGrid
 from ..pyramid import full_resolution
+from ._qt.closing import OnClose
 from ._qt.insertion import start_after_paint
 from .layout import StatusLabel, compact_combo
 from .settings import remember
@@ -104,22 +104,6 @@ def show_viewer(viewer: Any) -> None:
     window = getattr(viewer, "window", None)
     if window is not None:
         window.show()
-
-
-class _OnClose(QObject):
-    """Calls back when its widget loses its parent (removed from the dock) or is destroyed
-    (viewer closed)."""
-
-    def __init__(self, widget: Any, callback: Any) -> None:
-        super().__init__()
-        self._callback = callback
-        widget.installEventFilter(self)
-        widget.destroyed.connect(lambda _=None: callback())
-
-    def eventFilter(self, obj: Any, event: Any) -> bool:
-        if event.type() == QEvent.Type.ParentChange and obj.parent() is None:
-            self._callback()
-        return False
 
 
 def layer_band(layer: Any) -> int | None:
@@ -225,7 +209,7 @@ class FlickerWidget(Container):
         viewer.layers.events.removed.connect(self._refresh_choices)
         viewer.bind_key(FLICKER_KEY, self._toggle_key, overwrite=True)
         _WIDGETS[id(viewer)] = self
-        self._closer = _OnClose(self.native, self.close_widget)
+        self._closer = OnClose(self.native, self.close_widget)
         self._default_pair()
 
     def close_widget(self) -> None:

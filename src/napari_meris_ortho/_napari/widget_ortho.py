@@ -43,6 +43,7 @@ from magicgui.widgets import (
 from .._process import unit_registry_from_disk
 from ..errors import MerisOrthoError
 from ..options import PARALLAX_CHOICES, Elevation, Parallax, Sampling, SearchMethod, choices
+from ._qt.closing import OnClose
 from ._qt.insertion import (
     SHOW_STEP_MS,
     add_controls,
@@ -309,6 +310,9 @@ class OrthorectifyWidget(Container):
         self.run_button.changed.connect(lambda _=None: self.start())
         self.cancel_button.changed.connect(lambda _=None: self.cancel())
         self.native.destroyed.connect(self._shutdown)
+        # the dock's close button takes the widget out of the window: a run is cancelled
+        # (as by Cancel: layer changes made are undone), not left to go on unseen
+        self._closer = OnClose(self.native, self._left_window, destroyed=False)
         show_map_coordinates(viewer)
         show_legends(viewer)
         this = weakref.ref(self)  # not kept alive by the preparation's timer
@@ -467,6 +471,10 @@ class OrthorectifyWidget(Container):
         """Ask the running worker to stop at its next progress report."""
         self._cancel.set()
         self.status.value = "cancelling..."
+
+    def _left_window(self) -> None:
+        if self.running and not self._closed:
+            self.cancel()
 
     def _shutdown(self, _obj: Any = None) -> None:
         """The widget is destroyed (viewer closed): cancel the job and wait for its thread,

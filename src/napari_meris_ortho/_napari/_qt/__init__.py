@@ -1,1 +1,1 @@
-"""The plugin's dealings with napari's Qt window (``insertion``)."""
+"""The plugin's dealings with napari's Qt window (``insertion``, ``closing``)."""
