@@ -127,6 +127,11 @@ def test_max_ndvi_layers(make_napari_viewer, qtbot, tiny_n1, second_n1):
     pick = both & (n1 > n2 + 1e-3)
     assert _agree(band7, one.bands[7], pick) > 0.999
     np.testing.assert_array_equal(_layer(viewer, "count").data[both], 2)
+    # QA of stop 51: the NDVI was 0 where no product is (opaque over the whole grid) and shown
+    # on top of the RGB; now NaN there (transparent) and hidden until asked for
+    outside = _layer(viewer, "count").data == 0
+    assert outside.any() and np.isnan(layer.data[outside]).all()
+    assert not layer.visible and [x.name for x in viewer.layers if x.visible] == [_layer(viewer, "b7").name]
 
 
 def test_one_product_one_result_and_bad_product_skipped(make_napari_viewer, qtbot, tiny_n1,

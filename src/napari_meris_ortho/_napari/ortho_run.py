@@ -349,9 +349,13 @@ def _synthesis_item(path: Path, products: list[Any]) -> dict[str, Any]:
     count = np.asarray(store.read("count", window))
     extra = []
     if algorithm == MergeRule.MAX_NDVI:
+        # NaN where no product is (napari draws it transparent; 0 is an NDVI), its overviews
+        # too; hidden: it would cover the RGB, the view a run opens on
         ndvi = np.asarray(store.ndvi(window), np.float32)
-        extra.append((np.nan_to_num(ndvi, nan=0.0), geo_image_kwargs(
+        levels = memory_levels(ndvi, np.nan)
+        extra.append((levels if len(levels) > 1 else ndvi, geo_image_kwargs(
             grid, name=f"{prefix} NDVI", colormap="RdYlGn", contrast_limits=(-1.0, 1.0),
+            visible=False, multiscale=len(levels) > 1,
             metadata={"units": "NDVI (band 13 - band 7) / (band 13 + band 7)"}), "image"))
     extra.append((count, geo_image_kwargs(
         grid, name=f"{prefix} count", colormap="viridis", visible=False,
