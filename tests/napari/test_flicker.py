@@ -116,6 +116,33 @@ def test_gif_has_alternating_frames(make_napari_viewer, tmp_path):
     assert not list(tmp_path.glob("*.part"))
 
 
+def test_images_covering_the_pair_are_hidden_while_it_flickers(make_napari_viewer, qtbot,
+                                                                tmp_path):
+    """QA of stop 51: a shown image above the pair (another band of the reference) hid layer A
+    whenever B was off, in the flicker and in its GIF. Such images are hidden meanwhile;
+    thin geometry stays; everything is as before once it stops."""
+    viewer = make_napari_viewer()
+    a, b = _two_layers(viewer)
+    cover = viewer.add_image(np.full((64, 64), 0.5, np.float32), name="cover",
+                             contrast_limits=(0, 1))
+    boundary = viewer.add_shapes([[[0, 0], [0, 63], [63, 63]]], shape_type="path",
+                                 name="boundary")
+    hidden_before = viewer.add_image(np.zeros((64, 64), np.float32), name="off", visible=False)
+    widget = FlickerWidget(viewer)
+    widget.layer_a.value, widget.layer_b.value = a, b
+    widget.start()
+    assert not cover.visible and boundary.visible and not hidden_before.visible
+    widget.step()
+    assert a.visible != b.visible and not cover.visible
+    widget.stop()
+    assert cover.visible and boundary.visible and not hidden_before.visible
+    assert a.visible and b.visible
+    out = export_flicker_gif(viewer, a, b, tmp_path / "covered.gif", rate=4.0, cycles=1)
+    gray = iio.imread(out, index=None)[..., :3].astype(float).mean(axis=-1)
+    assert (np.abs(gray[0] - gray[1]) > 200).mean() > 0.1  # A and B, not the grey cover
+    assert cover.visible
+
+
 def test_gif_export_rejects_bad_rate(make_napari_viewer, tmp_path):
     viewer = make_napari_viewer()
     a, b = _two_layers(viewer)

@@ -49,3 +49,42 @@ def test_without_reference_the_previous_product_then_the_uncorrected(make_napari
     viewer.add_image(img, name="ortho b5 · 2003-10-07 09:30", metadata={"band": 5,
                                                                           "path": "/b.N1"})
     assert default_pair(list(viewer.layers)) == (second, first)
+
+
+def test_a_reference_geotiff_pairs_by_its_meris_band(make_napari_viewer):
+    """QA of stop 51: the reader gave a GeoTIFF layer its place in the file as its band, so
+    "ortho b7" was paired with the reference's third band (13), not its band 7."""
+    viewer = make_napari_viewer()
+    reference = generate_scene("fr-small").reference_path  # bands 5, 7, 13
+    layers = viewer.open(reference, plugin="napari-meris-ortho")
+    assert [layer.metadata.get("band") for layer in layers] == [5, 7, 13]
+    assert [layer.metadata["file_band"] for layer in layers] == [1, 2, 3]
+    ortho = viewer.add_image(np.ones((8, 8), np.float32), name="ortho b7 · 2003-09-21 09:23",
+                             metadata={"band": 7, "path": "/a.N1"})
+    a, b = default_pair(list(viewer.layers))
+    assert a is ortho and b.name.endswith("band 7 radiance") and b in layers
+
+
+def test_meris_band_of_a_geotiff_band():
+    from napari_meris_ortho._napari.reader import meris_band_of
+
+    assert meris_band_of("MERIS band 7 (664.6 nm)") == 7
+    assert meris_band_of("band 13 radiance") == 13
+    assert meris_band_of("b2") == 2 and meris_band_of("B09") == 9
+    assert meris_band_of(None, {"meris_band": "11"}) == 11
+    assert meris_band_of("band 2", {"meris_band": "5"}) == 5  # the tag first
+    for description in (None, "", "height above WGS84", "band 16", "band 0", "bands", "rgb",
+                        "blue"):
+        assert meris_band_of(description) is None, description
+
+
+def test_a_synthesis_band_counts_as_orthorectified(make_napari_viewer):
+    """QA of stop 51: only layers named "ortho..." were, so a store's band 7 against the
+    reference got the reference's bands 13 and 7 as the pair."""
+    viewer = make_napari_viewer()
+    img = np.ones((8, 8), np.float32)
+    reference = [viewer.add_image(img, name=f"reference band {b} radiance",
+                                  metadata={"band": b}) for b in (5, 7, 13)]
+    store_b7 = viewer.add_image(img, name="syn band_07", metadata={"band": 7, "synthesis": "/s"})
+    viewer.add_image(img, name="syn count", metadata={"synthesis": "/s"})
+    assert default_pair(list(viewer.layers)) == (store_b7, reference[1])

@@ -8,6 +8,7 @@ import pytest
 
 from napari_meris_ortho._napari.reader import get_reader, read_store
 from napari_meris_ortho._napari.world import layer_scale
+from napari_meris_ortho.engine.synthesis import ndvi_decode
 from napari_meris_ortho.synthesis.api import synthesize
 from napari_meris_ortho.synthesis.reading import open_synthesis
 from test_synthesis import GRID, scene_product
@@ -49,8 +50,17 @@ def test_store_opens_as_multiscale_layers(store, tmp_path) -> None:
                                                                             (170, 270)]
         assert kwargs["scale"] == layer_scale(GRID)
         name = kwargs["name"].split()[-1]
-        np.testing.assert_array_equal(np.asarray(data[1][:]), synthesis.read(name, level=2))
-        np.testing.assert_array_equal(np.asarray(data[0][:]), synthesis.read(name))
+        # the NDVI decoded (QA of stop 51: napari showed its 16-bit codes), NaN = background
+        decode = ndvi_decode if name == "ndvi" else np.asarray
+        np.testing.assert_array_equal(np.asarray(data[1][:]),
+                                      decode(synthesis.read(name, level=2)))
+        np.testing.assert_array_equal(np.asarray(data[0][:]), decode(synthesis.read(name)))
+        if name == "ndvi":
+            values = np.asarray(data[0][:])
+            assert values.dtype == np.float32 and np.isnan(values).any()
+            assert -1 <= np.nanmin(values) < np.nanmax(values) <= 1
+            assert kwargs["contrast_limits"] == (-1.0, 1.0)
+            np.testing.assert_array_equal(data[0][0:5, 0:5], np.asarray(data[0])[0:5, 0:5])
         assert kind == ("labels" if name == "product" else "image")
         assert kwargs["visible"] is False  # under the radiance
 
@@ -65,6 +75,8 @@ def test_uneven_bands_open_as_a_layer_each(tmp_path) -> None:
     assert [kwargs["name"] for _, kwargs, _ in layers] == [
         f"uneven {n}" for n in ("band_02", "band_07", "band_13", "count", "product")]
     assert [kwargs["visible"] for _, kwargs, _ in layers] == [False, False, True, False, False]
+    # QA of stop 51: their MERIS band in the metadata (the flicker pairs them by it)
+    assert [kwargs["metadata"].get("band") for _, kwargs, _ in layers] == [2, 7, 13, None, None]
 
 
 def test_the_band_slider_names_the_meris_band(store, make_napari_viewer) -> None:

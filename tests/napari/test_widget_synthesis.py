@@ -131,7 +131,8 @@ def test_max_ndvi_layers(make_napari_viewer, qtbot, tiny_n1, second_n1):
     # on top of the RGB; now NaN there (transparent) and hidden until asked for
     outside = _layer(viewer, "count").data == 0
     assert outside.any() and np.isnan(layer.data[outside]).all()
-    assert not layer.visible and [x.name for x in viewer.layers if x.visible] == [_layer(viewer, "b7").name]
+    shown = [x.name for x in viewer.layers if x.visible]
+    assert not layer.visible and shown == [_layer(viewer, "b7").name]
 
 
 def test_one_product_one_result_and_bad_product_skipped(make_napari_viewer, qtbot, tiny_n1,

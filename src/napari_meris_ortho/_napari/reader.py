@@ -201,6 +201,8 @@ def geotiff_layers(path: str | Path, frame: OutputGrid | None = None) -> list[La
             _check_size(path, ds)
             source = OutputGrid.from_transform(ds.crs, tuple(ds.transform), (ds.height, ds.width))
             names = [d or f"band {i + 1}" for i, d in enumerate(opened.descriptions)]
+            meris_bands = [meris_band_of(d, opened.tags(i + 1))
+                           for i, d in enumerate(opened.descriptions)]
             tags = opened.tags()
             scaled = has_scale(ds)
             # what the layer's no-data pixels hold: 0 where counts are read as radiances
@@ -226,13 +228,16 @@ def geotiff_layers(path: str | Path, frame: OutputGrid | None = None) -> list[La
     layers = []
     for k, band_name in enumerate(names):
         band = bands[k]
-        meta = {"path": str(path), "tags": tags, "nodata": nodata, "band": k + 1,
+        # "band": the MERIS band (flicker pairs, the writer's description), when the file says
+        meta = {"path": str(path), "tags": tags, "nodata": nodata, "file_band": k + 1,
                 "source_crs": source.crs, "reprojected": grid is not source}
+        if not rgb and meris_bands[k] is not None:
+            meta["band"] = meris_bands[k]
         name = path.stem if len(names) == 1 else f"{path.stem} {band_name}"
         kwargs = geo_image_kwargs(grid, name=name, metadata=meta)
         if rgb:
             kwargs["rgb"] = True
-            meta.pop("band")
+            meta.pop("file_band")
         else:
             coarsest = np.asarray(band[-1]) if lazy else band  # contrast of the coarsest level
             kwargs["contrast_limits"] = _contrast_limits(coarsest, nodata)
@@ -241,6 +246,21 @@ def geotiff_layers(path: str | Path, frame: OutputGrid | None = None) -> list[La
             kwargs["multiscale"] = True
         layers.append((band, kwargs, "image"))
     return layers
+
+
+def meris_band_of(description: str | None, tags: dict[str, str] | None = None) -> int | None:
+    """The MERIS band (1-15) a GeoTIFF band holds: its ``meris_band`` tag (our writers), else
+    its description ("MERIS band 7 (664.6 nm)", "band 7 radiance", "b7"); None when neither
+    says (a band's place in the file is not a MERIS band)."""
+    import re
+
+    found = str((tags or {}).get("meris_band", "")).strip()
+    if not found.isdigit():
+        match = re.match(r"\s*(?:MERIS\s+)?(?:band\s*|b)(\d{1,2})\b", description or "",
+                         re.IGNORECASE)
+        found = match.group(1) if match else ""
+    band = int(found) if found.isdigit() else 0
+    return band if 1 <= band <= NUM_BANDS else None
 
 
 def _check_size(path: Path, ds: Any) -> None:

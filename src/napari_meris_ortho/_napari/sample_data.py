@@ -33,6 +33,7 @@ from ._qt.insertion import (
 from .geometry_layers import geometry_layers
 from .ortho_run import multiscale_layer
 from .product_layers import band_layers
+from .reader import meris_band_of
 from .world import current_viewer, geo_image_kwargs, reproject_onto
 
 SAMPLE_BANDS = (2, 5, 7)
@@ -98,12 +99,12 @@ def _raster_on_frame(path: Path, band: int, frame: OutputGrid) -> np.ndarray:
 
 
 def _reference_band_index(path: Path, band: int) -> int:
-    """1-based index of MERIS ``band`` in the reference GeoTIFF (descriptions 'band N ...')."""
+    """1-based index of MERIS ``band`` in the reference GeoTIFF (``meris_band_of``)."""
     import rasterio
 
     with rasterio.open(path) as ds:
         for i, d in enumerate(ds.descriptions):
-            if d and d.split()[:2] == ["band", str(band)]:
+            if meris_band_of(d, ds.tags(i + 1)) == band:
                 return i + 1
     return 1
 

@@ -42,7 +42,8 @@ def pyramids(store: SynthesisStore) -> dict[str, list[DecodedLayer]]:
                 c0 // level, min(-(-c1 // level), shape[1]))
 
     return {name: [DecodedLayer(arrays[name, level],
-                                at(level, tuple(arrays[name, level].shape)), known=True)
+                                at(level, tuple(arrays[name, level].shape)), known=True,
+                                ndvi=name == "ndvi")
                    for level in levels]
             for name in store.layers()}
 
@@ -78,7 +79,7 @@ def store_layers(path: str | Path, at: str | None = None) -> list[LayerData]:
             "data_window": None if box is None else list(box)}
     layers: list[LayerData] = []
     bands = store.bands
-    limits = coarse_limits({n: v for n, v in names.items() if n != "product"})
+    limits = coarse_limits({n: v for n, v in names.items() if n not in ("product", "ndvi")})
     steps = set(np.diff(bands).tolist())
     if len(steps) <= 1:
         step = steps.pop() if steps else 1
@@ -98,15 +99,19 @@ def store_layers(path: str | Path, at: str | None = None) -> list[LayerData]:
         layers.append((stack if len(stack) > 1 else stack[0], kwargs, "image"))
         names = {n: v for n, v in names.items() if n not in band_names}
     top = st.band_layer(bands[-1])
+    band_of = {st.band_layer(b): b for b in bands}
     for name, levels in names.items():
-        kwargs = geo_image_kwargs(grid, name=f"{stem} {name}", metadata=dict(meta),
+        extra = {"band": band_of[name]} if name in band_of else {}
+        kwargs = geo_image_kwargs(grid, name=f"{stem} {name}", metadata={**meta, **extra},
                                   multiscale=len(levels) > 1)
         if name == "product":
             layers.append((levels if len(levels) > 1 else levels[0],
                            {**kwargs, "features": product_features(store), "opacity": 0.5,
                             "visible": False}, "labels"))
             continue
-        kwargs.update(colormap="gray", visible=name == top, contrast_limits=limits[name])
+        ndvi = name == "ndvi"  # as the widget shows it
+        kwargs.update(colormap="RdYlGn" if ndvi else "gray", visible=name == top,
+                      contrast_limits=(-1.0, 1.0) if ndvi else limits[name])
         layers.append((levels if len(levels) > 1 else levels[0], kwargs, "image"))
     return layers
 

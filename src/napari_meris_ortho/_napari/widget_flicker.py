@@ -67,12 +67,24 @@ def toggle_flicker(viewer: napari.viewer.Viewer) -> None:
         widget.toggle()
 
 
+def covering(layers: Any, layer_a: Any, layer_b: Any) -> list[Any]:
+    """The shown images (and labels) above the lower of the pair, which would hide it: the
+    flicker hides them while it runs (geometry layers stay; they are thin)."""
+    from napari.layers import Image, Labels
+
+    items = list(layers)
+    lowest = min(items.index(layer_a), items.index(layer_b))
+    return [x for x in items[lowest + 1:] if x is not layer_a and x is not layer_b
+            and x.visible and isinstance(x, Image | Labels)]
+
+
 def export_flicker_gif(viewer: Any, layer_a: Any, layer_b: Any, path: str | Path, *,
                        rate: float = 2.0, cycles: int = 2) -> Path:
     """Write the flicker of two layers as an animated GIF (2 frames per cycle, ``1/rate`` s each).
 
     Frames are screenshots of the canvas with only ``layer_a`` then only ``layer_b`` shown
-    among the two (other layers unchanged), as the handbook's flicker animations.
+    among the two, as the handbook's flicker animations; the images that would cover them
+    (``covering``) hidden meanwhile, the other layers unchanged.
     """
     import imageio.v3 as iio
 
@@ -81,14 +93,19 @@ def export_flicker_gif(viewer: Any, layer_a: Any, layer_b: Any, path: str | Path
     if cycles < 1:
         raise OptionsError(f"flicker cycles must be at least 1, got {cycles}")
     show_viewer(viewer)
+    hidden = covering(viewer.layers, layer_a, layer_b)
     saved = (layer_a.visible, layer_b.visible)
     try:
+        for layer in hidden:
+            layer.visible = False
         frames = []
         for show_a in (True, False):
             layer_a.visible, layer_b.visible = show_a, not show_a
             frames.append(np.asarray(viewer.screenshot(canvas_only=True, flash=False))[..., :3])
     finally:
         layer_a.visible, layer_b.visible = saved
+        for layer in hidden:
+            layer.visible = True
     sequence = np.stack(frames * cycles)
     with atomic_path(path, suffix=".gif") as tmp:
         iio.imwrite(tmp, sequence, extension=".gif", duration=int(round(1000.0 / rate)), loop=0)
@@ -118,10 +135,12 @@ def layer_band(layer: Any) -> int | None:
 
 
 def is_ortho(layer: Any) -> bool:
-    """An orthorectified radiance band: "ortho b7 · ..." (widget), "orthorectified b7" (sample)."""
+    """An orthorectified radiance band: "ortho b7 · ..." (widget), "orthorectified b7" (sample),
+    a synthesis's band (the widget's or an opened store's: metadata "synthesis")."""
     from napari.layers import Image
 
-    return (isinstance(layer, Image) and not layer.rgb and str(layer.name).startswith("ortho")
+    ours = str(layer.name).startswith("ortho") or "synthesis" in (layer.metadata or {})
+    return (isinstance(layer, Image) and not layer.rgb and ours
             and layer_band(layer) is not None)
 
 
@@ -288,7 +307,11 @@ class FlickerWidget(Container):
             self.status.value = str(exc)
             return
         if not self.running:
-            self._saved_visibility = [(a, a.visible), (b, b.visible)]
+            hidden = covering(self.viewer.layers, a, b)
+            self._saved_visibility = [(a, a.visible), (b, b.visible),
+                                      *((x, True) for x in hidden)]
+            for layer in hidden:
+                layer.visible = False
         self._showing_a = False
         self.step()
         self._set_interval()
@@ -296,8 +319,8 @@ class FlickerWidget(Container):
         self.status.value = f"flickering {a.name} / {b.name} at {self.rate.value:g} Hz"
 
     def stop(self, _value: Any = None) -> None:
-        """Stop the flicker and restore the visibility of the flickered layers still in the
-        viewer (one removed while it flickered: the other one's)."""
+        """Stop the flicker and restore the visibility of the flickered layers, and of those it
+        hid, still in the viewer (one removed while it flickered: the other one's)."""
         self._timer.stop()
         for layer, visible in self._saved_visibility or []:
             if layer in self.viewer.layers:

@@ -156,19 +156,24 @@ class DecodedLayer:
     ``size``, ``__getitem__``, ``__array__``."""
 
     def __init__(self, array: Any, written: tuple[int, int, int, int] | None = None, *,
-                 known: bool = False) -> None:
+                 known: bool = False, ndvi: bool = False) -> None:
         self.array = array
         self.written = written
         self.known = known  # False: ``written`` unknown, every chunk asked for is read
         self.scale = st.stored_scale(array)
+        self.ndvi = ndvi  # the NDVI layer: decoded (Appendix C), NaN = background
         self.shape = tuple(int(n) for n in array.shape)
         self.ndim = len(self.shape)
         self.size = int(np.prod(self.shape))
-        self.dtype = np.dtype(np.float32) if self.scale is not None else np.dtype(
+        self.dtype = np.dtype(np.float32) if self.scale is not None or ndvi else np.dtype(
             st.native_dtype(array))
 
     def _read(self, key: Any) -> np.ndarray:
         values = np.asarray(self.array[key])
+        if self.ndvi:
+            from ..engine.synthesis import ndvi_decode
+
+            return ndvi_decode(values)
         return values if self.scale is None else st.decode_band(values, self.scale)
 
     def __getitem__(self, key: Any) -> np.ndarray:
@@ -176,7 +181,7 @@ class DecodedLayer:
         if box is None:
             return self._read(key)
         r0, r1, c0, c1 = box
-        out = np.zeros((r1 - r0, c1 - c0), self.dtype)
+        out = np.full((r1 - r0, c1 - c0), np.nan if self.ndvi else 0, self.dtype)
         if self.written is None:
             return out
         w0, w1, v0, v1 = self.written
