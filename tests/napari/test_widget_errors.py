@@ -72,3 +72,26 @@ def test_success_clears_an_old_error(make_napari_viewer, qtbot, tiny_n1, tiny_de
     assert widget.status.value.startswith("done"), widget.status.value
     assert "only used" not in widget.status.value
     assert np.count_nonzero(viewer.layers[-1].data) > 0
+
+
+def test_an_output_a_layer_reads_from_is_refused(make_napari_viewer, qtbot, tiny_n1, tmp_path):
+    """QA of stop 51: the widget wrote over a GeoTIFF the viewer showed (File > Save refuses
+    it: a lazy layer reads its file as the view moves). One message; the file is unchanged."""
+    viewer = make_napari_viewer()
+    widget = _ortho_widget(viewer)
+    widget.products.value = [tiny_n1]
+    widget.elevation.value = "none"
+    widget.bands.value = "7"
+    shown = tmp_path / "shown.tif"
+    widget.output.value = shown
+    _run(widget, qtbot)
+    assert widget.status.value.startswith("done"), widget.status.value
+    (layer,) = viewer.open(shown, plugin="napari-meris-ortho")
+    before = shown.read_bytes()
+    assert _run(widget, qtbot) is None
+    assert widget.status.value == (f"output {shown}: layer {layer.name!r} reads from this "
+                                   "file; choose another output")
+    assert shown.read_bytes() == before
+    viewer.layers.remove(layer)
+    assert _run(widget, qtbot) is not None  # once no layer reads it
+    assert widget.status.value.startswith("done"), widget.status.value

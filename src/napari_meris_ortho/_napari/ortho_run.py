@@ -141,10 +141,16 @@ class RunSettings:
         if self.output is not None and not self.synthesis:
             from ..ortho.writing import check_geotiff_name, check_outputs
 
-            n = len(self.products)
-            check_outputs({f"output {k + 1}": _output_path(self.output, k, n)
-                           for k in range(n)}, self.products, self.dem_list)
+            check_outputs({f"output {k + 1}": path for k, path in enumerate(self.map_outputs())},
+                          self.products, self.dem_list)
             check_geotiff_name("output", self.output)
+
+    def map_outputs(self) -> list[Path]:
+        """The GeoTIFFs a mapping run writes (one per product); none for a synthesis."""
+        if self.output is None or self.synthesis:
+            return []
+        n = len(self.products)
+        return [_output_path(self.output, k, n) for k in range(n)]
 
 
 #: "7,5,2" -> (7, 5, 2); "all" or "" -> None (all 15 bands); OptionsError otherwise

@@ -41,7 +41,7 @@ from magicgui.widgets import (
 )
 
 from .._process import unit_registry_from_disk
-from ..errors import MerisOrthoError
+from ..errors import MerisOrthoError, OptionsError
 from ..options import PARALLAX_CHOICES, Elevation, Parallax, Sampling, SearchMethod, choices
 from ._qt.closing import OnClose
 from ._qt.insertion import (
@@ -81,6 +81,7 @@ from .ortho_run import (
 from .settings import remember
 from .status import show_map_coordinates
 from .world import viewer_frame
+from .writer import layers_reading
 
 if TYPE_CHECKING:
     import napari
@@ -415,6 +416,11 @@ class OrthorectifyWidget(Container):
             output=output, geometry=self.geometry.value,
             exaggeration=float(self.exaggeration.value), vector_step=int(self.vector_step.value))
         options.check()
+        for path in options.map_outputs():  # as File > Save refuses it (``writer``)
+            readers = layers_reading(self.viewer, path)
+            if readers:
+                raise OptionsError(f"output {path}: layer {readers[0]!r} reads from this file; "
+                                   "choose another output")
         return options
 
     # ---------------------------------------------------------------- running

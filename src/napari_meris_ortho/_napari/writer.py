@@ -56,7 +56,11 @@ def write_geotiff_layer(path: str, data: Any, meta: dict[str, Any]) -> list[str]
 
 def _layers_reading(path: str) -> list[str]:
     """Names of the current viewer's layers whose source is the file ``path``."""
-    viewer = current_viewer()
+    return layers_reading(current_viewer(), path)
+
+
+def layers_reading(viewer: Any, path: Any) -> list[str]:
+    """Names of the layers of ``viewer`` (None: none) whose source is the file ``path``."""
     if viewer is None:
         return []
     names = []
