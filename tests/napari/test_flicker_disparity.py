@@ -59,6 +59,11 @@ def test_disparity_runs_in_a_worker(make_napari_viewer, qtbot, shifted_pair):
     assert np.median(world_dx) == pytest.approx(10 * 2 * PIXEL, rel=0.02)
     np.testing.assert_allclose(vectors.scale, a.scale)
     np.testing.assert_allclose(vectors.translate, a.translate)
+    # QA of stop 51: over the vectors the status bar gave raw world numbers (negative northing)
+    x, y = X0 + 10.5 * PIXEL, Y0 - 20.5 * PIXEL
+    coords = vectors.get_status((-y, x), view_direction=None, dims_displayed=[0, 1],
+                                world=True)["coords"]
+    assert f"E {x:.0f} m" in coords and f"N {y:.0f} m" in coords and "EPSG:32632" in coords
 
 
 def test_disparity_vectors_are_thin_on_screen(make_napari_viewer, qtbot, shifted_pair, tmp_path):

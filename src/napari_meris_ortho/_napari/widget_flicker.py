@@ -31,7 +31,15 @@ from ._qt.closing import OnClose
 from ._qt.insertion import start_after_paint
 from .layout import StatusLabel, compact_combo
 from .settings import remember
-from .world import layer_frame, layer_scale, layer_translate, reproject_onto, world_axes
+from .world import (
+    WORLD_KEY,
+    geo_metadata,
+    layer_frame,
+    layer_scale,
+    layer_translate,
+    reproject_onto,
+    world_axes,
+)
 
 if TYPE_CHECKING:
     import napari
@@ -462,9 +470,10 @@ class FlickerWidget(Container):
             "vector_style": "arrow",
             "metadata": {"exaggeration": DISPARITY_EXAGGERATION, "spacing_px": spacing},
         }
-        if frame is not None:
+        if frame is not None:  # in layer A's world: map coordinates in the status bar
             kwargs.update(scale=layer_scale(frame), translate=layer_translate(frame),
                           **world_axes(frame.crs))
+            kwargs["metadata"][WORLD_KEY] = geo_metadata(frame)
         self.viewer.add_vectors(vectors, **kwargs)
 
     def _disparity_clicked(self, _value: Any = None) -> None:
