@@ -150,8 +150,10 @@ def _make(name: str) -> list[LayerData]:
     """The sample's layers. From napari's running event loop (File > Open Sample) the scene is
     built in the background (``SampleLoader``) and a placeholder layer is returned at once;
     from a script or a test (no event loop running yet) the layers are built here."""
+    from .._process import unit_registry_from_disk
     from .status import show_map_coordinates
 
+    unit_registry_from_disk()  # napari's units, before its first layer (the placeholder)
     viewer = current_viewer()
     show_map_coordinates(viewer)
     if viewer is not None and _event_loop_running():
