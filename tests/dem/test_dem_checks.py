@@ -222,3 +222,14 @@ def test_a_dem_with_ground_control_points_only_says_so(tmp_path):
         ds.write(np.full((4, 6), 500.0, np.float32), 1)
     with pytest.raises(DemError, match="ground control points only"):
         open_dem(path)
+
+
+def test_an_n1_product_chosen_as_a_dem_is_named_as_such(tmp_path):
+    """QA of stop 51: GDAL opens an N1 (its Envisat driver, ground control points), and the
+    message told the user to warp it with gdalwarp; it is a product, not a DEM."""
+    n1 = make_product(tmp_path / "MER_FR__1PNTEST.N1", height=64)
+    with pytest.raises(DemError, match=r"an Envisat product \(N1\), not a DEM"):
+        open_dem(n1)
+    assert main(["map", str(n1), "-o", str(tmp_path / "out.tif"), "--elevation", "dem",
+                 "--dem", str(n1)]) == 2
+    assert not (tmp_path / "out.tif").exists()

@@ -67,6 +67,9 @@ class RasterSource(DemSource):
         if not (all(np.isfinite(tuple(t)[:6])) and abs(t.determinant) > 0):
             raise DemError(f"{path}: invalid georeferencing: pixel size {t.a:g} x {t.e:g} "
                            f"(transform {tuple(t)[:6]})")
+        if ds.driver == "ESAT":  # GDAL's Envisat driver: an N1 product picked as a DEM
+            raise DemError(f"{path}: an Envisat product (N1), not a DEM: choose it as a "
+                           "product; a DEM is a raster of heights (GeoTIFF, SRTM...)")
         if ds.crs is None and ds.gcps[0]:
             raise DemError(f"{path}: the DEM is georeferenced by ground control points only "
                            "(no geotransform): warp it onto a grid first (gdalwarp)")
