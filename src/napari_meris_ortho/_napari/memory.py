@@ -11,8 +11,10 @@ heap of the thread that made a run's arrays is out of ``malloc_trim``'s reach.
 
 from __future__ import annotations
 
+import contextlib
 import gc
 import weakref
+from collections.abc import Iterator
 from typing import Any
 
 from .._process import return_freed_memory, schedule_trim
@@ -80,3 +82,17 @@ def thaw() -> None:
 _first_read = [True]
 
 __all__ = ["freeze_at_first_read", "freeze_long_lived", "thaw", "trim_after_removals"]
+
+
+@contextlib.contextmanager
+def short_collections() -> Iterator[None]:
+    """For the block, the objects alive now out of napari's full collections (``gc.freeze``),
+    so that a layer's removal collects only what was made since; given back after, unless
+    objects were frozen before (``freeze_long_lived``: its ``thaw`` gives these back too)."""
+    frozen_before = gc.get_freeze_count()
+    gc.freeze()
+    try:
+        yield
+    finally:
+        if not frozen_before:
+            gc.unfreeze()

@@ -12,6 +12,7 @@ them pixel to pixel.
 
 from __future__ import annotations
 
+import gc
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -28,9 +29,11 @@ from ._qt.insertion import (
     canvas_updates,
     controls_in_turns,
     hide_for_now,
+    scene_graph_paused,
     show_in,
 )
 from .geometry_layers import geometry_layers
+from .memory import short_collections
 from .ortho_run import multiscale_layer
 from .product_layers import band_layers
 from .reader import meris_band_of
@@ -228,7 +231,14 @@ class SampleLoader:
             simulate_in_subprocess(self.name, lambda done, total: self._report(
                 done // 2, total))  # the simulator's kernels hold the GIL: another process
             data = sample_layers(build_sample(self.name, self._report))
-            self.layers = [Layer.create(d, kwargs, kind) for d, kwargs, kind in data]
+            enabled = gc.isenabled()
+            gc.disable()  # as a run's layers (``widget_ortho.build_layers``): Python's full
+            try:  # collection once, here, not in one of the insertion turns (0.19 s there)
+                self.layers = [Layer.create(d, kwargs, kind) for d, kwargs, kind in data]
+            finally:
+                if enabled:
+                    gc.enable()
+            gc.collect()
         except BaseException as exc:  # shown in the placeholder's name, logged by napari
             self.error = exc
 
@@ -246,6 +256,8 @@ class SampleLoader:
         # shown one per frame once all are in (``insertion.SHOW_STEP_MS``), as a run's layers
         self._hidden = hide_for_now(self.layers or [])
         canvas_updates(self.viewer, False)
+        # napari's scene graph rebuilt once, after the last insertion, in a turn of its own
+        scene_graph_paused(self.viewer, True)
         self._step()
 
     def _placeholders(self) -> list[Any]:
@@ -267,8 +279,13 @@ class SampleLoader:
                 else:
                     QTimer.singleShot(1, self._step)  # timers and paints due run in between
                 return
-            for layer in self._placeholders():
-                self.viewer.layers.remove(layer)
+            if self._graph_paused():
+                scene_graph_paused(self.viewer, False)
+                QTimer.singleShot(1, self._step)
+                return
+            with short_collections():  # napari's collection after a removal: 0.18 s, not
+                for layer in self._placeholders():  # with the sample's layers in it
+                    self.viewer.layers.remove(layer)
         except Exception:
             self.layers = None
             self._finish()
@@ -295,7 +312,12 @@ class SampleLoader:
         canvas_updates(self.viewer, True)
         QTimer.singleShot(SHOW_STEP_MS, self._show_next)
 
+    def _graph_paused(self) -> bool:
+        canvas = getattr(getattr(self.viewer.window, "_qt_viewer", None), "canvas", None)
+        return getattr(canvas, "_pause_scene_graph", False) is True
+
     def _finish(self) -> None:
+        scene_graph_paused(self.viewer, False)
         canvas_updates(self.viewer, True)
         hidden, self._hidden = self._hidden, []
         show_in(self.viewer, hidden)  # an error part-way: what is in shows at once
