@@ -29,6 +29,7 @@ from ._qt.insertion import (
     canvas_updates,
     controls_in_turns,
     hide_for_now,
+    scene_graph_is_paused,
     scene_graph_paused,
     show_in,
 )
@@ -279,7 +280,7 @@ class SampleLoader:
                 else:
                     QTimer.singleShot(1, self._step)  # timers and paints due run in between
                 return
-            if self._graph_paused():
+            if scene_graph_is_paused(self.viewer):
                 scene_graph_paused(self.viewer, False)
                 QTimer.singleShot(1, self._step)
                 return
@@ -311,10 +312,6 @@ class SampleLoader:
 
         canvas_updates(self.viewer, True)
         QTimer.singleShot(SHOW_STEP_MS, self._show_next)
-
-    def _graph_paused(self) -> bool:
-        canvas = getattr(getattr(self.viewer.window, "_qt_viewer", None), "canvas", None)
-        return getattr(canvas, "_pause_scene_graph", False) is True
 
     def _finish(self) -> None:
         scene_graph_paused(self.viewer, False)

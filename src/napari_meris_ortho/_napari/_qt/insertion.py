@@ -178,6 +178,12 @@ def scene_graph_paused(viewer: Any, paused: bool) -> None:
             canvas._update_scenegraph()
 
 
+def scene_graph_is_paused(viewer: Any) -> bool:
+    """True while ``scene_graph_paused`` holds napari's scene graph."""
+    canvas = getattr(_qt_viewer(viewer), "canvas", None)
+    return getattr(canvas, "_pause_scene_graph", False) is True
+
+
 def build_overlays(viewer: Any, layer: Any) -> None:
     """Have napari build the canvas overlays of ``layer`` now, in a turn of their own, while the
     scene graph is held (``scene_graph_paused``): a labels layer's polygon and brush overlays
