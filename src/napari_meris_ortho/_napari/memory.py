@@ -81,7 +81,8 @@ def thaw() -> None:
 
 _first_read = [True]
 
-__all__ = ["freeze_at_first_read", "freeze_long_lived", "thaw", "trim_after_removals"]
+__all__ = ["collections_paused", "freeze_at_first_read", "freeze_long_lived", "short_collections",
+           "thaw", "trim_after_removals"]
 
 
 @contextlib.contextmanager
@@ -96,3 +97,17 @@ def short_collections() -> Iterator[None]:
     finally:
         if not frozen_before:
             gc.unfreeze()
+
+
+@contextlib.contextmanager
+def collections_paused() -> Iterator[None]:
+    """Python's automatic collections off for the block (napari layers being made off the Qt
+    thread), as they were after: the caller then collects once, in its own thread, so that no
+    full collection falls in one of the layers' insertion turns on the Qt thread."""
+    enabled = gc.isenabled()
+    gc.disable()
+    try:
+        yield
+    finally:
+        if enabled:
+            gc.enable()

@@ -34,7 +34,7 @@ from ._qt.insertion import (
     show_in,
 )
 from .geometry_layers import geometry_layers
-from .memory import short_collections
+from .memory import collections_paused, short_collections
 from .ortho_run import multiscale_layer
 from .product_layers import band_layers
 from .reader import meris_band_of
@@ -232,13 +232,10 @@ class SampleLoader:
             simulate_in_subprocess(self.name, lambda done, total: self._report(
                 done // 2, total))  # the simulator's kernels hold the GIL: another process
             data = sample_layers(build_sample(self.name, self._report))
-            enabled = gc.isenabled()
-            gc.disable()  # as a run's layers (``widget_ortho.build_layers``): Python's full
-            try:  # collection once, here, not in one of the insertion turns (0.19 s there)
+            # as a run's layers: Python's full collection once, here, not in one of the
+            # insertion turns (0.19 s there)
+            with collections_paused():
                 self.layers = [Layer.create(d, kwargs, kind) for d, kwargs, kind in data]
-            finally:
-                if enabled:
-                    gc.enable()
             gc.collect()
         except BaseException as exc:  # shown in the placeholder's name, logged by napari
             self.error = exc

@@ -61,7 +61,7 @@ from ._qt.insertion import (
 )
 from .layout import StatusLabel, frame_extent
 from .legend import prepare_glyphs, show_legends
-from .memory import freeze_long_lived, thaw, trim_after_removals
+from .memory import collections_paused, freeze_long_lived, thaw, trim_after_removals
 from .ortho_run import (
     ALGORITHMS,
     CRS_EPSG,
@@ -157,17 +157,12 @@ def build_layers(options: RunSettings, report: Any, check: Any, world: Any,
 
     run = run_orthorectify(options, report)
     layers = []
-    enabled = gc.isenabled()
-    gc.disable()
-    try:
+    with collections_paused():
         for data, kwargs, kind in run_layers(run, world):
             check()
             layer = Layer.create(data, kwargs, kind)
             wrap_status(layer)  # here, not at its insertion on the Qt thread
             layers.append(layer)
-    finally:
-        if enabled:
-            gc.enable()
     run.release()
     if not any(layer.name in replacing for layer in layers):
         gc.collect()

@@ -39,7 +39,7 @@ def write_geotiff_layer(path: str, data: Any, meta: dict[str, Any]) -> list[str]
     if grid is None:
         raise OutputError(f"layer {name!r} has no georeference (metadata 'geo'): save it with "
                           "napari's own TIFF writer, or orthorectify it first")
-    readers = _layers_reading(path)
+    readers = layers_reading(current_viewer(), path)
     if readers:
         raise OutputError(f"{path}: layer {readers[0]!r} reads from this file; save under "
                           "another name")
@@ -52,11 +52,6 @@ def write_geotiff_layer(path: str, data: Any, meta: dict[str, Any]) -> list[str]
     nodata = 0 if meta.get("rgb") else info.get("nodata", 0)
     return [str(write_geotiff(path, bands, grid, nodata=nodata, descriptions=descriptions,
                               metadata={"layer": name}))]
-
-
-def _layers_reading(path: str) -> list[str]:
-    """Names of the current viewer's layers whose source is the file ``path``."""
-    return layers_reading(current_viewer(), path)
 
 
 def layers_reading(viewer: Any, path: Any) -> list[str]:
