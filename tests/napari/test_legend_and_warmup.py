@@ -59,6 +59,15 @@ def _overlay_font(viewer):
     return visual.node._font_manager.get_font(visual.node.face)
 
 
+def _glyphs_rendered(viewer) -> int:
+    """How many glyphs vispy has rendered into the overlay's font (0 before napari has made the
+    overlay's visual: at its first showing)."""
+    visuals = viewer.window._qt_viewer.canvas._viewer_overlay_to_visual
+    if viewer.canvas.overlays.text not in visuals:
+        return 0
+    return len(_overlay_font(viewer)._glyphs)
+
+
 def test_legend_glyphs_are_rendered_before_a_run(make_napari_viewer, qtbot):
     """The widget has the overlay's font render the legend's characters beforehand, a few per
     turn: the first legend of a session no longer renders them (0.2-0.6 s under software GL)
@@ -98,13 +107,12 @@ def test_legend_glyphs_wait_while_a_run_runs(make_napari_viewer, qtbot, tiny_n1,
 
     viewer = make_napari_viewer(show=True)
     _, widget = viewer.window.add_plugin_dock_widget("napari-meris-ortho", "Orthorectify")
-    font = _overlay_font(viewer)
     widget.products.value = [tiny_n1]
     widget.add_dem(tiny_dem)
     widget.bands.value = "7"
     samples: list[tuple[bool, int]] = []
     timer = QTimer()
-    timer.timeout.connect(lambda: samples.append((widget.running, len(font._glyphs))))
+    timer.timeout.connect(lambda: samples.append((widget.running, _glyphs_rendered(viewer))))
     timer.start(5)
     assert widget.start() is not None, widget.status.value
     qtbot.waitUntil(lambda: not widget.running, timeout=60_000)
@@ -113,7 +121,7 @@ def test_legend_glyphs_wait_while_a_run_runs(make_napari_viewer, qtbot, tiny_n1,
     timer.stop()
     during = {count for running, count in samples if running}
     assert len(during) == 1, sorted(during)  # not one glyph rendered while the run ran
-    assert len(font._glyphs) > max(during)  # the rest came after it
+    assert _glyphs_rendered(viewer) > max(during)  # the rest came after it
     assert overlay.visible and overlay.color[-1] == 1.0  # seen
 
 
@@ -124,7 +132,8 @@ def test_text_put_in_the_overlay_during_the_preparation_is_seen(make_napari_view
     overlay = viewer.canvas.overlays.text
     color = np.asarray(overlay.color).copy()  # napari's default: None
     viewer.window.add_plugin_dock_widget("napari-meris-ortho", "Orthorectify")
-    assert overlay.visible and float(np.asarray(overlay.color)[-1]) == 0.0  # preparing
+    qtbot.waitUntil(lambda: overlay.visible, timeout=2000)  # from the turn after the opening
+    assert float(np.asarray(overlay.color)[-1]) == 0.0  # preparing
     overlay.text, overlay.visible = "my annotation", True
     qtbot.wait(300)
     assert overlay.text == "my annotation" and overlay.visible

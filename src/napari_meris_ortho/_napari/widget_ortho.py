@@ -21,7 +21,7 @@ import contextlib
 import gc
 import threading
 import weakref
-from collections.abc import Collection
+from collections.abc import Callable, Collection
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -50,10 +50,11 @@ from ._qt.insertion import (
     append_inactive,
     build_overlays,
     canvas_updates,
+    dash_pattern_steps,
     hide_for_now,
+    in_turns,
     make_controls,
     polish_controls,
-    prepare_dash_patterns,
     scene_graph_paused,
     show_in,
     start_after_paint,
@@ -108,6 +109,20 @@ def _import_engine() -> None:
     from ..geometry import grid  # noqa: F401
     from ..products import n1  # noqa: F401
     from ..synthesis import api  # noqa: F401
+
+
+#: ms between two tries of the opening's ``freeze_long_lived`` while a run goes on
+FREEZE_RETRY_MS = 500
+
+
+def _while_open(widget: weakref.ref[OrthorectifyWidget],
+                method: Callable[[OrthorectifyWidget], Any]) -> Callable[[], None]:
+    """A step of the widget's opening: ``method(widget)`` unless the widget has gone."""
+    def step() -> None:
+        alive = widget()
+        if alive is not None and not alive._closed:
+            method(alive)
+    return step
 
 
 class _Job:
@@ -311,14 +326,16 @@ class OrthorectifyWidget(Container):
         self._closer = OnClose(self.native, self._left_window, destroyed=False)
         show_map_coordinates(viewer)
         show_legends(viewer)
-        this = weakref.ref(self)  # not kept alive by the preparation's timer
-        prepare_glyphs(viewer, paused=lambda: (w := this()) is not None and w._paused_glyphs())
-        prepare_dash_patterns()
         trim_after_removals(viewer)
         _import_engine()
         unit_registry_from_disk()  # napari's units, before its first layer
-        freeze_long_lived(viewer)  # the engine's modules included
-        warm_up_in_background()  # numba compiles while the user fills the form
+        # the rest in turns of the event loop of their own, from the next one on: the dock's
+        # opening was one turn of 0.39-0.49 s with them (warm disk cache, measured)
+        this = weakref.ref(self)  # not kept alive by the turns' timers
+        in_turns([_while_open(this, OrthorectifyWidget._prepare_glyphs),
+                  *dash_pattern_steps(),
+                  _while_open(this, OrthorectifyWidget._freeze_when_idle),
+                  _while_open(this, lambda _w: warm_up_in_background())])
 
     # ---------------------------------------------------------------- DEM list
     @property
@@ -544,6 +561,24 @@ class OrthorectifyWidget(Container):
         self._summary = run.summary()
         self._canvas_updates(False)
         self._schedule_step()
+
+    def _prepare_glyphs(self) -> None:
+        """The legend's glyphs rendered beforehand (``legend.prepare_glyphs``), not in a run."""
+        this = weakref.ref(self)
+        prepare_glyphs(self.viewer,
+                       paused=lambda: (w := this()) is not None and w._paused_glyphs())
+
+    def _freeze_when_idle(self) -> None:
+        """``freeze_long_lived`` (the engine's modules included), once no run is going on
+        (a run's objects are not long-lived)."""
+        if self.running:
+            from qtpy.QtCore import QTimer
+
+            this = weakref.ref(self)
+            QTimer.singleShot(FREEZE_RETRY_MS,
+                              _while_open(this, OrthorectifyWidget._freeze_when_idle))
+            return
+        freeze_long_lived(self.viewer)
 
     def _paused_glyphs(self) -> bool:
         """The legend's glyphs wait while a run runs (its job, then its layers going in)."""

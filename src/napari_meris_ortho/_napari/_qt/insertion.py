@@ -84,16 +84,10 @@ def _named(name: str, asked: str) -> bool:
         and tail.endswith("]")
 
 
-def prepare_dash_patterns() -> None:
-    """vispy's line dash patterns built now (it keeps them): every labels layer's polygon
-    overlay builds them, 0.08 s in the session's first labels layer insertion (measured)."""
-    for step in dash_pattern_steps():
-        step()
-
-
 def dash_pattern_steps() -> list[Callable[[], Any]]:
-    """vispy's line dash patterns, one call each (``prepare_dash_patterns``, in turns: all at
-    once were a turn of 0.18-0.21 s after an N1's first opening of a session, measured): vispy
+    """vispy's line dash patterns built beforehand, one call each (every labels layer's polygon
+    overlay builds them, 0.08 s in the session's first labels layer insertion; all at once
+    were a turn of 0.18-0.21 s after an N1's first opening of a session, measured): vispy
     keeps each pattern it makes; its atlas, made at every line visual, finds them made. The
     patterns are those its atlas asks for (recorded, not made); none without vispy's atlas."""
     try:
