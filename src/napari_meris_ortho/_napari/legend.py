@@ -69,12 +69,13 @@ def prepare_glyphs(viewer: Any, step_ms: int = 40,
     run does not render them all in the frame that shows the run (vispy renders each new
     character into its atlas at its first draw: 0.2-0.6 s for a legend line under software
     GL). The overlay's first draw (its shaders and nine glyphs vispy always renders:
-    0.15-0.2 s), with transparent text, is made at once, within the widget's opening, not in a
-    turn of a run started right after; then a few glyphs per turn into the overlay's font
-    (``text_overlay_font``), no frame drawn (each turn drew the canvas: 0.07-0.11 s in a
-    run's job, 0.13-0.16 s over a run's layers, measured on fr-alps), none while ``paused()``
-    (a run). A legend asked for meanwhile shows at the end. Stops when the overlay is in use
-    by another; no-op when it is in use or nothing is drawn."""
+    0.15-0.2 s), with transparent text, is made at once (the widget calls this in a turn of
+    its own right after its opening, before a user reaches Run); then a few glyphs per turn
+    into the overlay's font (``text_overlay_font``), no frame drawn (each turn drew the
+    canvas: 0.07-0.11 s in a run's job, 0.13-0.16 s over a run's layers, measured on
+    fr-alps), none while ``paused()`` (a run). A legend asked for meanwhile shows at the end.
+    Stops when the overlay is in use by another; no-op when it is in use or nothing is
+    drawn."""
     from qtpy.QtCore import QTimer
 
     overlay = viewer.canvas.overlays.text
