@@ -99,6 +99,9 @@ def test_sample_from_the_menu_loads_in_the_background(make_napari_viewer, qtbot,
     timer.timeout.connect(lambda: stamps.append(time.perf_counter()))
     timer.start(10)
     took: list[float] = []
+    from napari.utils.notifications import notification_manager
+
+    told = len(notification_manager.records)
 
     def open_sample() -> None:
         t0 = time.perf_counter()
@@ -134,6 +137,18 @@ def test_sample_from_the_menu_loads_in_the_background(make_napari_viewer, qtbot,
     # frozen out of the garbage collector after the placeholder's removal (when nothing was)
     assert viewer.window._qt_viewer.canvas._pause_scene_graph is False
     assert gc.get_freeze_count() == 0 or frozen_before > 0
+    # the camera on the sample, not on the 1-pixel placeholder napari framed (zoom ~900 on
+    # (0, 0): a black canvas); no "Inconsistent units" (the placeholder in pixels beside the
+    # sample in metres); the status bar no longer "generating..."
+    ref = viewer.layers["reference b7"]
+    (low, high) = np.asarray(ref.extent.world)[:, -2:]
+    assert np.all((low <= viewer.camera.center[-2:]) & (viewer.camera.center[-2:] <= high))
+    canvas = np.asarray(viewer.canvas.size, np.float64)
+    assert viewer.camera.zoom < 2 * np.min(canvas / (high - low))  # the whole sample in view
+    units = [str(n.message) for n in notification_manager.records[told:]
+             if "units" in str(n.message)]
+    assert not units, units
+    assert "generating" not in str(viewer.status)
 
 
 def test_sample_rasters_bigger_than_a_level_are_pyramids(monkeypatch):

@@ -74,6 +74,21 @@ def frame_extent(viewer: Any, low: Any, high: Any) -> None:
     viewer.camera.zoom = float(0.95 * np.min(canvas / size))
 
 
+def frame_layers(viewer: Any, layers: list[Any]) -> None:
+    """Point the camera at ``layers`` (not the whole viewer); nothing without layers."""
+    import numpy as np
+
+    if not layers:
+        return
+    if max(layer.ndim for layer in layers) == viewer.dims.ndim:
+        viewer.fit_to_view(layers=layers)
+        return
+    # 2-D layers over a band stack (an opened N1): napari 0.9's fit_to_view(layers=...)
+    # indexes their 2-D extent with the viewer's 3-D displayed axes; frame them directly
+    extents = np.array([np.asarray(layer.extent.world, np.float64)[:, -2:] for layer in layers])
+    frame_extent(viewer, extents[:, 0].min(axis=0), extents[:, 1].max(axis=0))
+
+
 def frame_later(viewer: Any, low: Any, high: Any) -> None:
     """:func:`frame_extent` at the next turn of the event loop: after napari has added the
     layers a reader returned (and reset its view to all of them). No-op without Qt."""

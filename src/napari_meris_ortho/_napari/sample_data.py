@@ -34,6 +34,7 @@ from ._qt.insertion import (
     show_in,
 )
 from .geometry_layers import geometry_layers
+from .layout import frame_layers
 from .memory import collections_paused, short_collections
 from .ortho_run import multiscale_layer
 from .product_layers import band_layers
@@ -207,6 +208,7 @@ class SampleLoader:
         self.error: BaseException | None = None
         self.label = f"MERIS sample {name} (generating...)"
         self._hidden: list[Any] = []  # the visible layers, shown one per frame at the end
+        self._sample: list[Any] = []  # all of the sample's layers
         self._bar = progress(total=100, desc=f"MERIS sample {name}")
         self._timer = QTimer()
         self._timer.timeout.connect(self._poll)
@@ -251,6 +253,12 @@ class SampleLoader:
             self._rename(f"MERIS sample {self.name} failed: {self.error}")
             _LOADERS.discard(self)
             raise self.error
+        # the placeholder out first: beside the sample's layers (metres) its pixels made napari
+        # drop the units of every layer (its "Inconsistent units" warning)
+        with short_collections():  # napari's collection after a removal: 0.18 s with the
+            for layer in self._placeholders():  # sample's layers in, not now
+                self.viewer.layers.remove(layer)
+        self._sample = list(self.layers or [])
         # shown one per frame once all are in (``insertion.SHOW_STEP_MS``), as a run's layers
         self._hidden = hide_for_now(self.layers or [])
         canvas_updates(self.viewer, False)
@@ -266,7 +274,7 @@ class SampleLoader:
             layer.name = text
 
     def _step(self) -> None:
-        """Add one layer, then come back on the next turn; remove the placeholder at the end."""
+        """Add one layer, then come back on the next turn."""
         from qtpy.QtCore import QTimer
 
         try:
@@ -281,9 +289,8 @@ class SampleLoader:
                 scene_graph_paused(self.viewer, False)
                 QTimer.singleShot(1, self._step)
                 return
-            with short_collections():  # napari's collection after a removal: 0.18 s, not
-                for layer in self._placeholders():  # with the sample's layers in it
-                    self.viewer.layers.remove(layer)
+            # the camera on the sample before its layers show (napari framed the placeholder)
+            frame_layers(self.viewer, [x for x in self._sample if x in self.viewer.layers])
         except Exception:
             self.layers = None
             self._finish()
@@ -315,6 +322,8 @@ class SampleLoader:
         canvas_updates(self.viewer, True)
         hidden, self._hidden = self._hidden, []
         show_in(self.viewer, hidden)  # an error part-way: what is in shows at once
+        # the status bar said the placeholder's "generating..." until the mouse moved
+        self.viewer.status = f"MERIS sample {self.name}: {len(self._sample)} layers"
         _LOADERS.discard(self)
 
 

@@ -25,7 +25,6 @@ from collections.abc import Callable, Collection
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-import numpy as np
 from magicgui.types import FileDialogMode
 from magicgui.widgets import (
     CheckBox,
@@ -60,7 +59,7 @@ from ._qt.insertion import (
     start_after_paint,
     thumbnails_later,
 )
-from .layout import StatusLabel, frame_extent
+from .layout import StatusLabel, frame_layers
 from .legend import prepare_glyphs, show_legends
 from .memory import collections_paused, freeze_long_lived, thaw, trim_after_removals
 from .ortho_run import (
@@ -710,17 +709,7 @@ class OrthorectifyWidget(Container):
     def _frame_result(self, layers: list[Any]) -> None:
         """Point the camera at the run's visible ``layers`` (the result, not the whole
         viewer), before the canvas draws them."""
-        shown = [layer for layer in layers if layer in self.viewer.layers]
-        if not shown:
-            return
-        if max(layer.ndim for layer in shown) == self.viewer.dims.ndim:
-            self.viewer.fit_to_view(layers=shown)
-            return
-        # 2-D results over a band stack (an opened N1): napari 0.9's fit_to_view(layers=...)
-        # indexes their 2-D extent with the viewer's 3-D displayed axes; frame them directly
-        extents = np.array([np.asarray(layer.extent.world, np.float64)[:, -2:]
-                            for layer in shown])
-        frame_extent(self.viewer, extents[:, 0].min(axis=0), extents[:, 1].max(axis=0))
+        frame_layers(self.viewer, [layer for layer in layers if layer in self.viewer.layers])
 
     def _failed(self, exc: BaseException) -> None:
         if self._closed:
