@@ -225,6 +225,58 @@ def test_reader_in_viewer_reprojects_onto_first_geocoded_layer(make_napari_viewe
     assert np.all(np.asarray(layer.data)[r:r + 30, c:c + 40] == pytest.approx(7.0))
 
 
+def test_a_geotiff_reprojected_onto_the_world_keeps_the_window_turning(make_napari_viewer,
+                                                                         tmp_path, qtbot):
+    """A GeoTIFF in another CRS than the viewer's world is reprojected inside napari's call of
+    the reader, on the Qt thread: the fr-alps reference onto its N1's UTM world froze the
+    window 2.3-3.2 s (measured). The warp now runs in a thread while the window's timers and
+    paints go on (``_qt.waiting.responsively``), and the bands come back as pyramids (napari
+    uploads the level that fits the canvas); ``viewer.open`` still returns the layers whole."""
+    import time
+
+    from qtpy.QtCore import QTimer
+
+    from napari_meris_ortho._napari import world
+
+    viewer = make_napari_viewer(show=True)
+    base = _write_tif(tmp_path / "base.tif", np.ones((30, 40), np.float32), "EPSG:32632",
+                      Affine(100.0, 0, 300_000.0, 0, -100.0, 5_000_000.0))
+    rows, cols = np.mgrid[0:1500, 0:3000]
+    ref = _write_tif(tmp_path / "ref.tif", (1.0 + rows + cols).astype(np.float32), "EPSG:4326",
+                     Affine(0.0008, 0, 6.0, 0, -0.0008, 45.3))
+    viewer.open(str(base), plugin="napari-meris-ortho")
+    qtbot.wait(100)
+    warps: list[tuple[float, float]] = []
+    reproject = world.reproject_onto
+
+    def timed(*args, **kwargs):  # when the warp ran, to count the timer's ticks meanwhile
+        t0 = time.perf_counter()
+        try:
+            return reproject(*args, **kwargs)
+        finally:
+            warps.append((t0, time.perf_counter()))
+
+    ticks: list[float] = []
+    timer = QTimer()
+    timer.timeout.connect(lambda: ticks.append(time.perf_counter()))
+    timer.start(10)
+    world.reproject_onto = timed
+    try:
+        (layer,) = viewer.open(str(ref), plugin="napari-meris-ortho")
+    finally:
+        world.reproject_onto = reproject
+        timer.stop()
+    ((start, end),) = warps
+    during = [t for t in ticks if start <= t <= end]
+    assert end - start > 0.05 and len(during) >= 0.5 * (end - start) / 0.01, (end - start,
+                                                                              len(during))
+    assert layer.multiscale and layer.metadata["reprojected"]
+    assert layer.data[0].shape[0] > 1024  # whole: about 120 x 200 km on 100 m pixels
+    assert layer.data[-1].shape[0] <= 1024
+    lo, hi = layer.contrast_limits
+    assert 1.0 < lo < hi < 4500.0
+
+
 def _rgb_tif(path, rgb, alpha=None, overviews=()):
     from rasterio.enums import ColorInterp, Resampling
 

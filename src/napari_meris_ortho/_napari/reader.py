@@ -39,11 +39,13 @@ from ..pyramid import (
     has_scale,
     is_rgb,
     level_factors,
+    memory_levels,
     north_up,
     physical_bands,
     selection_radiance,
 )
 from ._qt.insertion import defer_controls, thumbnails_later
+from ._qt.waiting import responsively
 from .product_layers import QUICKLOOK_BANDS
 from .status import BAND_AXIS
 from .world import current_viewer, geo_image_kwargs, place_on_frame, viewer_frame
@@ -213,18 +215,21 @@ def geotiff_layers(path: str | Path, frame: OutputGrid | None = None) -> list[La
             rgb = is_rgb(ds)
             bands: list[Any] = [] if not lazy else (
                 [geotiff_rgb_levels(path, ds)] if rgb else geotiff_levels(path, ds))
-            data = None if lazy else physical_bands(ds)
+            data = None if lazy else responsively(physical_bands, ds)  # read in a thread
             if rgb:  # one layer (transparent where its alpha is 0)
                 names, nodata = ["rgb"], None
     except RasterioIOError as exc:
         raise MerisOrthoError(f"{path}: cannot read GeoTIFF ({exc})") from None
     grid = source
+    limits: list[tuple[float, float]] | None = None
     if data is not None:
         is_mask = data.dtype.kind in "iu" and data.dtype.itemsize == 1
         fill = 0.0 if nodata is None else nodata
-        placed, grid = place_on_frame(data, source, frame, nearest=is_mask, nodata=fill)
+        # reprojected onto the world (GDAL's warp), levels and contrast limits made in a
+        # thread, the window kept turning
+        bands, grid, limits = responsively(_placed, data, source, frame, is_mask, fill, rgb,
+                                           nodata)
         nodata = fill if grid is not source else nodata
-        bands = [np.moveaxis(placed, 0, -1)] if rgb else list(placed)
     layers = []
     for k, band_name in enumerate(names):
         band = bands[k]
@@ -239,13 +244,34 @@ def geotiff_layers(path: str | Path, frame: OutputGrid | None = None) -> list[La
             kwargs["rgb"] = True
             meta.pop("file_band")
         else:
-            coarsest = np.asarray(band[-1]) if lazy else band  # contrast of the coarsest level
-            kwargs["contrast_limits"] = _contrast_limits(coarsest, nodata)
+            kwargs["contrast_limits"] = (  # of the coarsest level
+                _contrast_limits(np.asarray(band[-1]), nodata) if limits is None else limits[k])
             kwargs["colormap"] = "gray"
-        if lazy:
+        if lazy or isinstance(band, list):
             kwargs["multiscale"] = True
         layers.append((band, kwargs, "image"))
     return layers
+
+
+def _placed(data: np.ndarray, source: OutputGrid, frame: OutputGrid | None, nearest: bool,
+            fill: float, rgb: bool, nodata: float | None
+            ) -> tuple[list[Any], OutputGrid, list[tuple[float, float]] | None]:
+    """The bands of a raster placed on the world frame (``place_on_frame``), each as its
+    levels when bigger than one (``memory_levels``: napari uploads the level that fits the
+    canvas), an RGB(A) as one image; the bands' contrast limits (none for an RGB), leaving out
+    the value of the pixels placed from nothing (``fill``) or the file's ``nodata``."""
+    placed, grid = place_on_frame(data, source, frame, nearest=nearest, nodata=fill)
+    skip = fill if grid is not source else nodata
+    resampling = "nearest" if nearest else "average"
+
+    def pyramid(image: np.ndarray) -> Any:
+        levels = memory_levels(image, skip, resampling, rgb=rgb)
+        return levels if len(levels) > 1 else image
+
+    if rgb:
+        return [pyramid(np.moveaxis(placed, 0, -1))], grid, None
+    return ([pyramid(band) for band in placed], grid,
+            [_contrast_limits(band, skip) for band in placed])
 
 
 def meris_band_of(description: str | None, tags: dict[str, str] | None = None) -> int | None:

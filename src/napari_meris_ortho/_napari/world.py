@@ -28,6 +28,7 @@ that every layer shares one CRS and one unit (napari keeps its units and the sca
 
 from __future__ import annotations
 
+import os
 from collections.abc import Iterable, Mapping
 from typing import Any
 
@@ -187,6 +188,7 @@ def reproject_onto(data: np.ndarray, source: OutputGrid, target: OutputGrid, *,
             src_transform=source.transform, src_crs=RioCRS.from_wkt(crs_wkt(source.crs)),
             dst_transform=target.transform, dst_crs=RioCRS.from_wkt(crs_wkt(target.crs)),
             resampling=method, src_nodata=nodata, dst_nodata=nodata,
+            num_threads=os.cpu_count() or 1,  # GDAL's warp on every core
         )
     return out[0] if squeeze else out
 

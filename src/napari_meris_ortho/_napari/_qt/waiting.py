@@ -1,0 +1,64 @@
+"""Heavy work that napari makes the plugin do on the Qt thread (a reader's call inside
+``viewer.open``), done in a thread while the Qt event loop keeps turning (issue 24, item 1).
+
+napari calls a reader on its Qt thread and adds the layers it returns; a GeoTIFF in another
+CRS than the viewer's world is reprojected there (GDAL's warp: 2.2 s for the 3-band fr-alps
+reference onto its N1's UTM world, a 3.2 s stall, measured). ``responsively`` runs such work
+in a thread (GDAL's warp releases the GIL) and processes the window's events meanwhile: it
+repaints, timers and progress bars go on; the user's input waits until the work is done (it is
+kept, not lost), so nothing re-enters the reader in the middle. The caller still gets the
+result synchronously: ``viewer.open`` returns the finished layers, as before.
+"""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Callable
+from typing import Any, TypeVar
+
+T = TypeVar("T")
+
+#: ms the Qt thread waits for the work between two passes over the window's events
+TURN_MS = 10
+
+
+def _qt_thread_app() -> Any:
+    """The running QApplication, when this is its thread; else None."""
+    try:
+        from qtpy.QtCore import QThread
+        from qtpy.QtWidgets import QApplication
+    except ImportError:  # no Qt binding: nothing to keep turning
+        return None
+    app = QApplication.instance()
+    if app is None or QThread.currentThread() is not app.thread():
+        return None
+    return app
+
+
+def responsively(func: Callable[..., T], *args: Any, **kwargs: Any) -> T:
+    """``func(*args, **kwargs)``; on the Qt thread, run in a thread of its own while the
+    window's events (all but the user's input) are processed every ``TURN_MS``. Its exception,
+    if any, is raised here. ``func`` must not touch Qt, and should make no pyproj object that
+    outlives it (a PROJ context belongs to the thread that made it)."""
+    app = _qt_thread_app()
+    if app is None:
+        return func(*args, **kwargs)
+    from qtpy.QtCore import QEventLoop
+
+    outcome: dict[str, Any] = {}
+
+    def target() -> None:
+        try:
+            outcome["value"] = func(*args, **kwargs)
+        except BaseException as exc:  # raised again on the Qt thread
+            outcome["error"] = exc
+
+    thread = threading.Thread(target=target, name="meris-ortho-read", daemon=True)
+    thread.start()
+    flags = QEventLoop.ProcessEventsFlag.ExcludeUserInputEvents
+    while thread.is_alive():
+        app.processEvents(flags)
+        thread.join(TURN_MS / 1000)
+    if "error" in outcome:
+        raise outcome["error"]
+    return outcome["value"]
