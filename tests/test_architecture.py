@@ -24,7 +24,7 @@ FLOORS = {
     "errors": 0, "flags": 0, "cores": 0, "_terminal": 0, "_process": 0,
     "options": 1, "geometry": 1, "progress": 1, "_atomic": 1, "display": 1,
     "products": 2, "dem": 2, "output": 2, "engine": 2,
-    "analysis": 3, "simulate": 3, "pyramid": 3,
+    "analysis": 3, "simulate": 3, "pyramid": 3, "placement": 3,
     "ortho": 4,
     "synthesis": 5, "warmup": 5,
     "_commands": 6, "_napari": 6, "cli": 6,

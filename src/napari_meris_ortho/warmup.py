@@ -70,8 +70,11 @@ OVERVIEW_DTYPES = (np.uint16, np.float32)
 
 
 def warm_up() -> float:
-    """Run ``orthorectify`` on a tiny product in every configuration of ``RUNS``, and the
-    overview kernel of the map outputs (``engine.resample.overview_level``); seconds."""
+    """Run ``orthorectify`` on a tiny product in every configuration of ``RUNS``, the
+    overview kernel of the map outputs (``engine.resample.overview_level``) and the ZNCC
+    disparity (``analysis.disparity``: the Flicker widget's "Measure disparity" compiled it,
+    8 s, at its first use); seconds."""
+    from .analysis.disparity import disparity
     from .engine.resample import overview_level
     from .geometry.grid import utm_crs_for
     from .ortho import orthorectify
@@ -80,6 +83,8 @@ def warm_up() -> float:
     t0 = time.perf_counter()
     for dtype in OVERVIEW_DTYPES:
         overview_level(np.ones((3, 3), dtype), 0.0)
+    texture = np.random.default_rng(0).random((40, 40)).astype(np.float32) + 1.0
+    disparity(texture, texture, pixel_size_m=(260.0, 260.0))  # the widget's arguments
     with tempfile.TemporaryDirectory(prefix="meris-ortho-warmup-") as tmp:
         product, dem = _tiny_product(Path(tmp))
         tp = read_product(product).tie_points

@@ -66,6 +66,47 @@ def test_disparity_runs_in_a_worker(make_napari_viewer, qtbot, shifted_pair):
     assert f"E {x:.0f} m" in coords and f"N {y:.0f} m" in coords and "EPSG:32632" in coords
 
 
+def test_disparity_reads_and_warps_its_layers_off_the_qt_thread(make_napari_viewer, qtbot,
+                                                                 tmp_path, monkeypatch):
+    """The layers read whole and B warped onto A's grid came before the worker, on the Qt
+    thread ("Measure disparity" held the window 0.55 s on fr-alps, with the kernels that kept
+    the GIL, now ``nogil``). Both are now the worker's, GDAL's warp without a pyproj object
+    (a pooled Qt thread crashed in PROJ); B on a grid of its own (10 columns more to the west)
+    still measures +2 pixels, twice (the pool's thread used again)."""
+    import threading
+
+    from scipy.ndimage import gaussian_filter
+
+    from napari_meris_ortho._napari import widget_flicker
+
+    texture = gaussian_filter(np.random.default_rng(7).random((120, 174)), 1.5) * 100 + 10
+    ortho = _write(tmp_path / "ortho.tif", texture[:, 12:172])
+    with rasterio.open(tmp_path / "wide.tif", "w", driver="GTiff", width=170, height=120,
+                       count=1, dtype="float32", crs="EPSG:32632",
+                       transform=Affine(PIXEL, 0, X0 - 10 * PIXEL, 0, -PIXEL, Y0)) as ds:
+        ds.write(texture[None, :, 0:170].astype(np.float32))
+    warped_in: list[threading.Thread] = []
+    warp = widget_flicker.warp
+
+    def recorded(*args, **kwargs):
+        warped_in.append(threading.current_thread())
+        return warp(*args, **kwargs)
+
+    monkeypatch.setattr(widget_flicker, "warp", recorded)
+    viewer = make_napari_viewer()
+    widget, a, b = _flicker(viewer, ortho, tmp_path / "wide.tif")
+    assert b.data.shape != a.data.shape  # a grid of its own: the disparity warps it
+    assert widget.start_disparity() is not None
+    assert not warped_in  # nothing warped before the worker
+    qtbot.waitUntil(lambda: widget.disparity_button.enabled, timeout=30_000)
+    assert warped_in and warped_in[0] is not threading.main_thread()
+    assert "dX = +2.0" in widget.disparity_label.value, widget.disparity_label.value
+    widget.disparity_label.value = ""
+    assert widget.start_disparity() is not None
+    qtbot.waitUntil(lambda: widget.disparity_button.enabled, timeout=30_000)
+    assert len(warped_in) == 2 and "dX = +2.0" in widget.disparity_label.value
+
+
 def test_disparity_vectors_are_thin_on_screen(make_napari_viewer, qtbot, shifted_pair, tmp_path):
     import imageio.v3 as iio
 

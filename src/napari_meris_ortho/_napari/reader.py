@@ -27,6 +27,7 @@ import numpy as np
 from ..display import contrast_limits, stretch_channel, stretch_rgb
 from ..errors import MerisOrthoError, N1FormatError
 from ..geometry.grid import OutputGrid
+from ..placement import place_on_frame
 from ..products.n1.format import NUM_BANDS
 from ..pyramid import (
     LazyArray,
@@ -48,7 +49,7 @@ from ._qt.insertion import defer_controls, thumbnails_later
 from ._qt.waiting import responsively
 from .product_layers import QUICKLOOK_BANDS
 from .status import BAND_AXIS
-from .world import current_viewer, geo_image_kwargs, place_on_frame, viewer_frame
+from .world import current_viewer, geo_image_kwargs, viewer_frame
 
 if TYPE_CHECKING:
     from ..products.protocol import MerisProduct

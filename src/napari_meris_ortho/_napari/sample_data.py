@@ -22,6 +22,7 @@ import numpy as np
 
 from ..display import contrast_limits
 from ..geometry.grid import OutputGrid
+from ..placement import reproject_onto
 from ..progress import ProgressCallback
 from ._qt.insertion import (
     SHOW_STEP_MS,
@@ -39,7 +40,7 @@ from .memory import collections_paused, short_collections
 from .ortho_run import multiscale_layer
 from .product_layers import band_layers
 from .reader import meris_band_of
-from .world import current_viewer, geo_image_kwargs, reproject_onto
+from .world import current_viewer, geo_image_kwargs
 
 SAMPLE_BANDS = (2, 5, 7)
 REFERENCE_BAND = 7

@@ -28,14 +28,13 @@ that every layer shares one CRS and one unit (napari keeps its units and the sca
 
 from __future__ import annotations
 
-import os
 from collections.abc import Iterable, Mapping
 from typing import Any
 
 import numpy as np
 
-from ..errors import OptionsError
 from ..geometry.grid import OutputGrid, crs_wkt, lonlat_to_crs
+from ..placement import reproject_onto
 
 GEO_KEY = "geo"
 #: the world grid a layer without a raster grid of its own was placed in (module doc)
@@ -163,64 +162,6 @@ def geo_image_kwargs(frame: OutputGrid, **extra: Any) -> dict[str, Any]:
     metadata[GEO_KEY] = geo_metadata(frame)
     return {"scale": layer_scale(frame), "translate": layer_translate(frame),
             "metadata": metadata, **world_axes(frame.crs), **extra}
-
-
-#: how much bigger than the frame and the raster a raster reprojected into the world's
-#: pixels may get (a world-wide raster opened over a 260 m frame: the frame's extent instead)
-COVER_LIMIT = 4
-
-
-def reproject_onto(data: np.ndarray, source: OutputGrid, target: OutputGrid, *,
-                   nearest: bool = False, nodata: float = 0.0) -> np.ndarray:
-    """Reproject a (rows, cols) or (bands, rows, cols) raster onto ``target``'s grid (rasterio)."""
-    from rasterio.crs import CRS as RioCRS
-    from rasterio.warp import Resampling, reproject
-
-    arr = np.asarray(data)
-    squeeze = arr.ndim == 2
-    src = arr[None] if squeeze else arr
-    dtype = src.dtype if src.dtype.kind in "fiu" and src.dtype.itemsize <= 8 else np.float32
-    out = np.full((src.shape[0], target.height, target.width), nodata, dtype=dtype)
-    method = Resampling.nearest if nearest or src.dtype.kind in "iu" else Resampling.bilinear
-    for k in range(src.shape[0]):
-        reproject(
-            np.ascontiguousarray(src[k], dtype=dtype), out[k],
-            src_transform=source.transform, src_crs=RioCRS.from_wkt(crs_wkt(source.crs)),
-            dst_transform=target.transform, dst_crs=RioCRS.from_wkt(crs_wkt(target.crs)),
-            resampling=method, src_nodata=nodata, dst_nodata=nodata,
-            num_threads=os.cpu_count() or 1,  # GDAL's warp on every core
-        )
-    return out[0] if squeeze else out
-
-
-def place_on_frame(data: np.ndarray, source: OutputGrid, frame: OutputGrid | None,
-                   *, nearest: bool = False, nodata: float = 0.0
-                   ) -> tuple[np.ndarray, OutputGrid]:
-    """Data and grid of a raster placed in the world frame.
-
-    Same CRS and pixel size: kept as is (scale/translate place it). Another CRS or pixel size:
-    reprojected onto the frame's pixels that cover it (``OutputGrid.lattice_cover``: the whole
-    raster, also beyond the frame's extent; the frame's own extent when that cover would be
-    more than ``COVER_LIMIT`` times the frame's and the raster's pixels); ``nodata``: the value
-    of its no-data pixels, and of the pixels it does not cover. Both geographic: the raster's
-    longitudes are taken on the frame's side (190..193 beside a frame at -170: -170..-167).
-    """
-    if frame is None or source.same_grid(frame):
-        return data, source
-    if frame.is_geographic and source.is_geographic:
-        apart = sum(frame.bounds[::2]) / 2 - sum(source.bounds[::2]) / 2
-        turns = round(apart / 360.0)
-        if turns:
-            source = OutputGrid(source.crs, source.x0 + 360.0 * turns, source.y0, source.dx,
-                                source.dy, source.width, source.height)
-    try:
-        target = frame.lattice_cover(source)
-    except OptionsError:  # no finite extent in the frame's CRS (a polar raster in UTM...)
-        target = frame
-    limit = COVER_LIMIT * max(frame.width * frame.height, source.width * source.height)
-    if target.width * target.height > limit:
-        target = frame
-    return reproject_onto(data, source, target, nearest=nearest, nodata=nodata), target
 
 
 def tie_point_affine(tie_points: Mapping[str, np.ndarray], lines_per_tie_point: int,

@@ -326,7 +326,7 @@ def format_report(stats: dict, title: str | None = None) -> str:
 
 # --- numba kernels -----------------------------------------------------------------------------
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)  # nogil: the window turns meanwhile
 def _window_moments(img, valid, half):
     """Mean and 1/standard deviation of each statistical window; 1/sd is NaN where the window
     leaves the image or touches background, 0 for a flat window (ZNCC = 0)."""
@@ -355,7 +355,7 @@ def _window_moments(img, valid, half):
     return mean, inv_sd
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, parallel=True, nogil=True)  # nogil: the window turns meanwhile
 def _integer_search(a, b, mean_a, isd_a, mean_b, isd_b, rows, half, hy, hx, best_val, best_idx):
     """Whole-pixel ZNCC peak over the exploration window for the given lines (section 4.6).
 
@@ -451,7 +451,7 @@ def _zncc_direct(stats, i, j, v, u, half):
     return (s / n - mean_a[i, j] * mean_b[ib, jb]) * isd_a[i, j] * isd_b[ib, jb]
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, parallel=True, nogil=True)  # nogil: the window turns meanwhile
 def _peaks(a, b, mean_a, isd_a, mean_b, isd_b, image, rows, half, hy, hx, step,
            best_val, best_idx, dx, dy, conf, limit, vertex):
     """Parabola refinement of each whole-pixel peak, confidence (%), on-limit bits (1 X, 2 Y),
@@ -553,7 +553,7 @@ def _zncc_at(a, b, mean_a, isd_a, invalid_sum, i, j, sy, sx, half, tmp):
     return (sab / n - mean_a[i, j] * mb) * isd_a[i, j] / math.sqrt(var_b)
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, parallel=True, nogil=True)  # nogil: the window turns meanwhile
 def _refine_on_grid(data, ii, jj, half, hy, hx, res, dx, dy, conf):
     """Climb the ZNCC on the ``res`` grid (8-neighbour moves, within 0.5 px of the parabola's
     estimate and inside the exploration window); write the refined peak and its confidence."""

@@ -1,0 +1,96 @@
+"""Rasters placed on a grid of the world (issue 24, item 3): reprojected by GDAL's warp onto
+the grid's pixels that cover them. No Qt, no napari: the readers, the sample data and the
+Flicker widget's disparity use it off the Qt thread."""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from .errors import OptionsError
+from .geometry.grid import OutputGrid, crs_wkt
+
+#: how much bigger than the frame and the raster a raster reprojected into the world's
+#: pixels may get (a world-wide raster opened over a 260 m frame: the frame's extent instead)
+COVER_LIMIT = 4
+
+
+def reproject_onto(data: np.ndarray, source: OutputGrid, target: OutputGrid, *,
+                   nearest: bool = False, nodata: float = 0.0) -> np.ndarray:
+    """Reproject a (rows, cols) or (bands, rows, cols) raster onto ``target``'s grid (rasterio)."""
+    return warp(data, Warp.between(source, target), nearest=nearest, nodata=nodata)
+
+
+@dataclass(frozen=True)
+class Warp:
+    """What GDAL's warp needs of two grids, as plain values (affine transforms, WKT, shape):
+    ``warp`` then makes no pyproj object, so that it runs in any thread (a pyproj CRS used in a
+    pooled Qt thread crashed inside PROJ: ``_napari.widget_ortho._Job``)."""
+
+    src_transform: Any
+    src_wkt: str
+    dst_transform: Any
+    dst_wkt: str
+    shape: tuple[int, int]
+
+    @classmethod
+    def between(cls, source: OutputGrid, target: OutputGrid) -> Warp:
+        return cls(source.transform, crs_wkt(source.crs), target.transform, crs_wkt(target.crs),
+                   (target.height, target.width))
+
+
+def warp(data: np.ndarray, grids: Warp, *, nearest: bool = False, nodata: float = 0.0
+         ) -> np.ndarray:
+    """``reproject_onto`` of ``grids`` (``Warp``): bilinear, or nearest for integers and when
+    ``nearest``; ``nodata`` left out of the source and filled where it covers nothing."""
+    from rasterio.crs import CRS as RioCRS
+    from rasterio.warp import Resampling, reproject
+
+    arr = np.asarray(data)
+    squeeze = arr.ndim == 2
+    src = arr[None] if squeeze else arr
+    dtype = src.dtype if src.dtype.kind in "fiu" and src.dtype.itemsize <= 8 else np.float32
+    out = np.full((src.shape[0], *grids.shape), nodata, dtype=dtype)
+    method = Resampling.nearest if nearest or src.dtype.kind in "iu" else Resampling.bilinear
+    for k in range(src.shape[0]):
+        reproject(
+            np.ascontiguousarray(src[k], dtype=dtype), out[k],
+            src_transform=grids.src_transform, src_crs=RioCRS.from_wkt(grids.src_wkt),
+            dst_transform=grids.dst_transform, dst_crs=RioCRS.from_wkt(grids.dst_wkt),
+            resampling=method, src_nodata=nodata, dst_nodata=nodata,
+            num_threads=os.cpu_count() or 1,  # GDAL's warp on every core
+        )
+    return out[0] if squeeze else out
+
+
+def place_on_frame(data: np.ndarray, source: OutputGrid, frame: OutputGrid | None,
+                   *, nearest: bool = False, nodata: float = 0.0
+                   ) -> tuple[np.ndarray, OutputGrid]:
+    """Data and grid of a raster placed in the world frame.
+
+    Same CRS and pixel size: kept as is (scale/translate place it). Another CRS or pixel size:
+    reprojected onto the frame's pixels that cover it (``OutputGrid.lattice_cover``: the whole
+    raster, also beyond the frame's extent; the frame's own extent when that cover would be
+    more than ``COVER_LIMIT`` times the frame's and the raster's pixels); ``nodata``: the value
+    of its no-data pixels, and of the pixels it does not cover. Both geographic: the raster's
+    longitudes are taken on the frame's side (190..193 beside a frame at -170: -170..-167).
+    """
+    if frame is None or source.same_grid(frame):
+        return data, source
+    if frame.is_geographic and source.is_geographic:
+        apart = sum(frame.bounds[::2]) / 2 - sum(source.bounds[::2]) / 2
+        turns = round(apart / 360.0)
+        if turns:
+            source = OutputGrid(source.crs, source.x0 + 360.0 * turns, source.y0, source.dx,
+                                source.dy, source.width, source.height)
+    try:
+        target = frame.lattice_cover(source)
+    except OptionsError:  # no finite extent in the frame's CRS (a polar raster in UTM...)
+        target = frame
+    limit = COVER_LIMIT * max(frame.width * frame.height, source.width * source.height)
+    if target.width * target.height > limit:
+        target = frame
+    return reproject_onto(data, source, target, nearest=nearest, nodata=nodata), target
