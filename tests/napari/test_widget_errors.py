@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 
 def _ortho_widget(viewer):
@@ -95,3 +96,23 @@ def test_an_output_a_layer_reads_from_is_refused(make_napari_viewer, qtbot, tiny
     viewer.layers.remove(layer)
     assert _run(widget, qtbot) is not None  # once no layer reads it
     assert widget.status.value.startswith("done"), widget.status.value
+
+
+def test_an_output_in_a_directory_that_takes_no_file_is_refused_before_the_run(
+        make_napari_viewer, qtbot, tiny_n1):
+    """QA of stop 52: an output under /proc passed the widget's checks (root may write there,
+    says ``os.access``) and was refused only after the run had computed (1.6 s on fr-alps).
+    The checks now make (and remove) a file there: refused before the run, in one line."""
+    import os
+
+    if not os.access("/proc", os.W_OK):
+        pytest.skip("needs /proc to look writable (root)")
+    viewer = make_napari_viewer()
+    widget = _ortho_widget(viewer)
+    widget.products.value = [tiny_n1]
+    widget.elevation.value = "none"
+    widget.bands.value = "7"
+    widget.output.value = "/proc/out.tif"
+    assert widget.start() is None  # no run started
+    assert widget.status.value.startswith("/proc/out.tif: cannot write in /proc ("), (
+        widget.status.value)
