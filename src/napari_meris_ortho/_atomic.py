@@ -84,11 +84,10 @@ def check_writable_dir(path: str | os.PathLike[str]) -> Path:
     if not os.access(parent, os.W_OK | os.X_OK):
         raise OutputError(f"{out}: output directory {parent} is not writable")
     try:  # a directory that says writable and takes no file (/proc as root): told now, not
-        fd, probe = tempfile.mkstemp(prefix=".meris-ortho-probe-", dir=parent)  # after a run
+        with tempfile.TemporaryFile(dir=parent):  # after a run; unnamed (O_TMPFILE): a kill
+            pass  # leaves nothing there
     except OSError as exc:
         raise OutputError(f"{out}: cannot write in {parent} ({exc.strerror or exc})") from None
-    os.close(fd)
-    os.unlink(probe)
     return out
 
 
