@@ -391,12 +391,15 @@ def test_removing_layers_hands_the_heap_back(make_napari_viewer, qtbot):
     """Once layers leave the viewer the widget has glibc return the freed heap to the system
     (``memory.trim_after_removals``), in a thread of its own a second after the last removal:
     resident memory goes back without the user doing anything."""
+    import gc
+
     import psutil
 
     from napari_meris_ortho import _process
 
     viewer = make_napari_viewer()
     OrthorectifyWidget(viewer)
+    qtbot.waitUntil(lambda: gc.get_freeze_count() > 0, timeout=2000)  # the opening's turns
     # many small blocks (the Python objects of removed layers are such): freed, they stay in
     # the heap until trimmed
     blocks = [bytearray(2000) for _ in range(150_000)]
@@ -404,8 +407,6 @@ def test_removing_layers_hands_the_heap_back(make_napari_viewer, qtbot):
     del blocks
     before_removal = psutil.Process().memory_info().rss
     viewer.layers.clear()
-    import gc
-
     gc.collect()
     freed = psutil.Process().memory_info().rss
     qtbot.waitUntil(lambda: "timer" in _process._pending, timeout=5_000)
