@@ -1,17 +1,20 @@
-"""Rasters placed on a grid of the world (issue 24, item 3): reprojected by GDAL's warp onto
-the grid's pixels that cover them. No Qt, no napari: the readers, the sample data and the
-Flicker widget's disparity use it off the Qt thread."""
+"""Placement in the world of the napari front end (issue 24, item 3; its conventions:
+``_napari.world``): rasters reprojected by GDAL's warp onto a grid's pixels that cover them,
+positions of a CRS as world (row, column) = (-y, x), a product placed by an affine fit of its
+tie points. No Qt, no napari: the readers, the sample data and the Flicker widget's disparity
+use it off the Qt thread."""
 
 from __future__ import annotations
 
 import os
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from .errors import OptionsError
-from .geometry.grid import OutputGrid, crs_wkt
+from .geometry.grid import OutputGrid, crs_wkt, lonlat_to_crs
 
 #: how much bigger than the frame and the raster a raster reprojected into the world's
 #: pixels may get (a world-wide raster opened over a 260 m frame: the frame's extent instead)
@@ -94,3 +97,48 @@ def place_on_frame(data: np.ndarray, source: OutputGrid, frame: OutputGrid | Non
     if target.width * target.height > limit:
         target = frame
     return reproject_onto(data, source, target, nearest=nearest, nodata=nodata), target
+
+
+# ------------------------------------------------------------------ positions in the world
+def to_world(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """CRS (x, y) -> napari world (row, col) = (-y, x), shape (..., 2)."""
+    return np.stack([-np.asarray(y, dtype=np.float64), np.asarray(x, dtype=np.float64)], axis=-1)
+
+
+def from_world(world: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """napari world (row, col) -> CRS (x, y)."""
+    world = np.asarray(world, dtype=np.float64)
+    return world[..., 1], -world[..., 0]
+
+
+def tie_point_affine(tie_points: Mapping[str, np.ndarray], lines_per_tie_point: int,
+                     samples_per_tie_point: int, crs: Any) -> tuple[np.ndarray, float]:
+    """The affine map (3 x 3, napari ``affine``) from product (line, column) to the world frame
+    of ``crs`` fitted by least squares to the tie points (pixel (i DF, k DJ), section 2.3),
+    and its RMS error in CRS units: an approximate placement of a product-geometry layer."""
+    lat, lon = tie_points["latitude"], tie_points["longitude"]
+    i, k = np.mgrid[0:lat.shape[0], 0:lat.shape[1]].astype(np.float64)
+    x, y = lonlat_to_crs(lon, lat, crs)
+    world = to_world(x, y).reshape(-1, 2)
+    design = np.column_stack([(i * lines_per_tie_point).ravel(),
+                              (k * samples_per_tie_point).ravel(), np.ones(i.size)])
+    coef, *_ = np.linalg.lstsq(design, world, rcond=None)
+    rms = float(np.sqrt(np.mean(np.sum((design @ coef - world) ** 2, axis=1))))
+    affine = np.eye(3)
+    affine[:2, :] = coef.T
+    return affine, rms
+
+
+# --------------------------------------------------------------------------------------------
+# Moving layers into another world frame (another CRS)
+# --------------------------------------------------------------------------------------------
+
+
+def transform_world(points: np.ndarray, source_crs: Any, target_crs: Any) -> np.ndarray:
+    """World (row, col) points of ``source_crs`` -> world points of ``target_crs``."""
+    from pyproj import Transformer
+
+    x, y = from_world(points)
+    tr = Transformer.from_crs(crs_wkt(source_crs), crs_wkt(target_crs), always_xy=True)
+    tx, ty = tr.transform(x, y)
+    return to_world(np.asarray(tx), np.asarray(ty))

@@ -13,7 +13,8 @@ import numpy as np
 from ..engine.boundary import segment_boundary
 from ..geometry.earth import MEAN_EARTH_RADIUS
 from ..geometry.grid import OutputGrid, crs_wkt, lonlat_to_crs
-from .world import TIE_GRID_KEY, WORLD_KEY, geo_metadata, to_world, world_axes
+from ..placement import to_world
+from .world import TIE_GRID_KEY, WORLD_KEY, geo_metadata, world_axes
 
 
 def footprint_polygons(tp_lat: np.ndarray, tp_lon: np.ndarray, crs: Any,

@@ -33,8 +33,12 @@ from typing import Any
 
 import numpy as np
 
-from ..geometry.grid import OutputGrid, crs_wkt, lonlat_to_crs
-from ..placement import reproject_onto
+from ..geometry.grid import OutputGrid, crs_wkt
+from ..placement import (
+    reproject_onto,
+    tie_point_affine,
+    transform_world,
+)
 
 GEO_KEY = "geo"
 #: the world grid a layer without a raster grid of its own was placed in (module doc)
@@ -42,17 +46,6 @@ WORLD_KEY = "world"
 #: layer metadata: a tie-point grid in world coordinates (n_lines, n_cols, 2), moved with the
 #: layer (the facets layer: the status bar names the facet under the cursor)
 TIE_GRID_KEY = "tie_grid_world"
-
-
-def to_world(x: np.ndarray, y: np.ndarray) -> np.ndarray:
-    """CRS (x, y) -> napari world (row, col) = (-y, x), shape (..., 2)."""
-    return np.stack([-np.asarray(y, dtype=np.float64), np.asarray(x, dtype=np.float64)], axis=-1)
-
-
-def from_world(world: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """napari world (row, col) -> CRS (x, y)."""
-    world = np.asarray(world, dtype=np.float64)
-    return world[..., 1], -world[..., 0]
 
 
 # --------------------------------------------------------------------------------------------
@@ -162,37 +155,6 @@ def geo_image_kwargs(frame: OutputGrid, **extra: Any) -> dict[str, Any]:
     metadata[GEO_KEY] = geo_metadata(frame)
     return {"scale": layer_scale(frame), "translate": layer_translate(frame),
             "metadata": metadata, **world_axes(frame.crs), **extra}
-
-
-def tie_point_affine(tie_points: Mapping[str, np.ndarray], lines_per_tie_point: int,
-                     samples_per_tie_point: int, crs: Any) -> tuple[np.ndarray, float]:
-    """The affine map (3 x 3, napari ``affine``) from product (line, column) to the world frame
-    of ``crs`` fitted by least squares to the tie points (pixel (i DF, k DJ), section 2.3),
-    and its RMS error in CRS units: an approximate placement of a product-geometry layer."""
-    lat, lon = tie_points["latitude"], tie_points["longitude"]
-    i, k = np.mgrid[0:lat.shape[0], 0:lat.shape[1]].astype(np.float64)
-    x, y = lonlat_to_crs(lon, lat, crs)
-    world = to_world(x, y).reshape(-1, 2)
-    design = np.column_stack([(i * lines_per_tie_point).ravel(),
-                              (k * samples_per_tie_point).ravel(), np.ones(i.size)])
-    coef, *_ = np.linalg.lstsq(design, world, rcond=None)
-    rms = float(np.sqrt(np.mean(np.sum((design @ coef - world) ** 2, axis=1))))
-    affine = np.eye(3)
-    affine[:2, :] = coef.T
-    return affine, rms
-
-
-# --------------------------------------------------------------------------------------------
-# Moving layers into another world frame (another CRS)
-# --------------------------------------------------------------------------------------------
-def transform_world(points: np.ndarray, source_crs: Any, target_crs: Any) -> np.ndarray:
-    """World (row, col) points of ``source_crs`` -> world points of ``target_crs``."""
-    from pyproj import Transformer
-
-    x, y = from_world(points)
-    tr = Transformer.from_crs(crs_wkt(source_crs), crs_wkt(target_crs), always_xy=True)
-    tx, ty = tr.transform(x, y)
-    return to_world(np.asarray(tx), np.asarray(ty))
 
 
 def move_to_frame(layer: tuple[Any, dict, str], source: OutputGrid, target: OutputGrid
