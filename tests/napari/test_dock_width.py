@@ -39,3 +39,30 @@ def test_flicker_dock_keeps_its_width(make_napari_viewer, qtbot):
     widget.status.value = MESSAGE
     qtbot.wait(200)
     assert dock.width() == before[0]  # (napari's own layer list widens with the names)
+
+
+def test_the_form_scrolls_and_run_stays_in_view(make_napari_viewer, qtbot):
+    """QA of stop 52: the Orthorectify dock asked for its whole height (812 px; 1181 px with the
+    Flicker dock below it), and napari's window grew past the 1080-line screen to give it (the
+    rows at the bottom out of reach). The form now scrolls above its action rows (Run, Cancel,
+    progress, status), which stay in view, and claims at most ``FORM_SCREEN_SHARE`` of the
+    screen's height."""
+    from qtpy.QtWidgets import QApplication, QDockWidget
+
+    from napari_meris_ortho._napari.layout import FORM_SCREEN_SHARE
+
+    viewer = make_napari_viewer(show=True)
+    dock, ortho = viewer.window.add_plugin_dock_widget("napari-meris-ortho", "Orthorectify")
+    viewer.window.add_plugin_dock_widget("napari-meris-ortho", "Flicker")
+    qtbot.wait(300)
+    screen = QApplication.primaryScreen().availableGeometry().height()
+    footer = ortho.footer.native.minimumSizeHint().height()
+    title = 40  # the dock's title bar and margins
+    assert isinstance(dock, QDockWidget)
+    assert dock.minimumSizeHint().height() <= FORM_SCREEN_SHARE * screen + footer + title, (
+        dock.minimumSizeHint().height(), screen, footer)
+    for row in (ortho.run_button, ortho.cancel_button, ortho.progress_bar, ortho.status):
+        assert not row.native.visibleRegion().isEmpty(), row.name
+    ortho.status.value = "done: " + "word " * 80  # a long message: Run stays in view
+    qtbot.wait(100)
+    assert not ortho.run_button.native.visibleRegion().isEmpty()

@@ -11,10 +11,52 @@ from __future__ import annotations
 
 from typing import Any
 
-from magicgui.widgets import Label
+from magicgui.widgets import Container, Label
 
 #: characters a combo box asks room for (longer layer names are elided)
 COMBO_CHARS = 24
+
+
+#: share of the screen's height a scrolled form claims at least (the rest of it scrolls)
+FORM_SCREEN_SHARE = 0.4
+
+
+class ScrolledForm(Container):
+    """A magicgui ``Container`` whose rows scroll above a footer that stays in view (its
+    action rows: Run, Cancel, progress, status). The Orthorectify widget needs 812 px of
+    height, 1181 px with the Flicker dock below it: napari's window grew past a 1080-line screen
+    to give them (QA of stop 52). The form now claims at most ``FORM_SCREEN_SHARE`` of the
+    screen's height and scrolls the rest when the window is shorter. ``native`` is the widget
+    napari docks: the scroll area and the footer (napari docks a container's ``native``)."""
+
+    def __init__(self, *, footer: list[Any], **kwargs: Any) -> None:
+        self._docked: Any = None
+        super().__init__(**kwargs)
+        from qtpy.QtCore import Qt
+        from qtpy.QtWidgets import QApplication, QFrame, QScrollArea, QVBoxLayout, QWidget
+
+        self.footer = Container(widgets=footer)
+        form = self._widget._mgui_get_native_widget()
+        scroll = QScrollArea()
+        scroll.setWidgetResizable(True)
+        scroll.setFrameShape(QFrame.Shape.NoFrame)
+        scroll.setHorizontalScrollBarPolicy(Qt.ScrollBarPolicy.ScrollBarAlwaysOff)
+        scroll.setWidget(form)
+        screen = QApplication.primaryScreen()
+        if screen is not None:
+            share = int(FORM_SCREEN_SHARE * screen.availableGeometry().height())
+            scroll.setMinimumHeight(min(form.minimumSizeHint().height(), share))
+        docked = QWidget()
+        layout = QVBoxLayout(docked)
+        layout.setContentsMargins(0, 0, 0, 0)
+        layout.setSpacing(0)
+        layout.addWidget(scroll)
+        layout.addWidget(self.footer.native)
+        self._docked = docked
+
+    @property
+    def native(self) -> Any:
+        return self._docked if self._docked is not None else super().native
 
 
 class StatusLabel(Label):

@@ -59,7 +59,7 @@ from ._qt.insertion import (
     start_after_paint,
     thumbnails_later,
 )
-from .layout import StatusLabel, frame_layers
+from .layout import ScrolledForm, StatusLabel, frame_layers
 from .legend import prepare_glyphs, show_legends
 from .memory import collections_paused, freeze_long_lived, thaw, trim_after_removals
 from .ortho_run import (
@@ -183,7 +183,7 @@ def build_layers(options: RunSettings, report: Any, check: Any, world: Any,
     return run, layers
 
 
-class OrthorectifyWidget(Container):
+class OrthorectifyWidget(ScrolledForm):
     """The "Orthorectify" dock widget (thread worker, progress bar, cancel)."""
 
     def __init__(self, viewer: napari.viewer.Viewer) -> None:
@@ -274,9 +274,9 @@ class OrthorectifyWidget(Container):
             dem_buttons, self.elevation, self.geolocation, self.algorithm, self.input_store,
             self.keep, self.parallax, self.search, self.sampling, self.crs, self.epsg,
             self.pixel_size, self.bands, self.geometry, self.exaggeration, self.vector_step,
-            self.output, self.mode, self.run_button, self.cancel_button, self.progress_bar,
-            self.status,
-        ])
+            self.output,
+        ], footer=[self.mode, self.run_button, self.cancel_button, self.progress_bar,
+                   self.status])  # the form scrolls on a short screen, not these
         self._cancel = threading.Event()
         self._closed = False
         self.progress_state = (0, 1)
