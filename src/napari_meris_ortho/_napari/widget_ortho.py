@@ -59,6 +59,7 @@ from ._qt.insertion import (
     start_after_paint,
     thumbnails_later,
 )
+from ._qt.waiting import ThreadCall
 from .layout import ScrolledForm, StatusLabel, frame_layers
 from .legend import prepare_glyphs, show_legends
 from .memory import collections_paused, freeze_long_lived, thaw, trim_after_removals
@@ -124,33 +125,17 @@ def _while_open(widget: weakref.ref[OrthorectifyWidget],
     return step
 
 
-class _Job:
-    """One run in a plain Python thread, waited for by a napari thread worker.
-
-    napari's thread workers run on QThreadPool threads whose Python thread state is dropped
-    after every job; pyproj's per-thread PROJ context goes with it and the next job on a pooled
-    thread crashes inside PROJ (segmentation fault in ``proj_create``, reproduced with a bare
-    QRunnable). A Python thread keeps one thread state for the whole job; the widget can join
-    it when the viewer closes.
-    """
+class _Job(ThreadCall):
+    """One run in a plain Python thread (``ThreadCall``: why not napari's pooled worker
+    threads), waited for by a napari thread worker; the widget can join it when the viewer
+    closes."""
 
     def __init__(self, func: Any, *args: Any) -> None:
-        self._outcome: dict[str, Any] = {}
-        self.thread = threading.Thread(target=self._target, args=(func, *args),
-                                       name="meris-ortho-job", daemon=True)
-
-    def _target(self, func: Any, *args: Any) -> None:
-        try:
-            self._outcome["value"] = func(*args)
-        except BaseException as exc:  # re-raised in the worker thread
-            self._outcome["error"] = exc
+        super().__init__(func, *args, name="meris-ortho-job")
 
     def __call__(self) -> Any:
-        self.thread.start()
-        self.thread.join()
-        if "error" in self._outcome:
-            raise self._outcome.pop("error")
-        return self._outcome.pop("value")  # the job keeps nothing of the result
+        self.start().thread.join()
+        return self.outcome()
 
 
 def build_layers(options: RunSettings, report: Any, check: Any, world: Any,

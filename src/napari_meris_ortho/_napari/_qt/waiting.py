@@ -35,30 +35,53 @@ def _qt_thread_app() -> Any:
     return app
 
 
+class ThreadCall:
+    """``func(*args, **kwargs)`` in a plain Python thread of its own (``start``), its value or
+    exception handed over once (``outcome``: the call keeps nothing of the result).
+
+    A plain thread, not one of napari's workers: those run on QThreadPool threads whose Python
+    thread state is dropped after every job; pyproj's per-thread PROJ context goes with it and
+    the next job on a pooled thread crashed inside PROJ (segmentation fault in ``proj_create``,
+    reproduced with a bare QRunnable). A Python thread keeps one thread state for the whole
+    call, and can be joined (``thread``)."""
+
+    def __init__(self, func: Callable[..., Any], *args: Any, name: str = "meris-ortho",
+                 **kwargs: Any) -> None:
+        self._outcome: dict[str, Any] = {}
+        self.thread = threading.Thread(target=self._target, args=(func, args, kwargs),
+                                       name=name, daemon=True)
+
+    def _target(self, func: Callable[..., Any], args: tuple[Any, ...],
+                kwargs: dict[str, Any]) -> None:
+        try:
+            self._outcome["value"] = func(*args, **kwargs)
+        except BaseException as exc:  # raised again by ``outcome``, in the caller's thread
+            self._outcome["error"] = exc
+
+    def start(self) -> ThreadCall:
+        self.thread.start()
+        return self
+
+    def outcome(self) -> Any:
+        """The call's value, or its exception raised here (after the thread has ended)."""
+        if "error" in self._outcome:
+            raise self._outcome.pop("error")
+        return self._outcome.pop("value")
+
+
 def responsively(func: Callable[..., T], *args: Any, **kwargs: Any) -> T:
-    """``func(*args, **kwargs)``; on the Qt thread, run in a thread of its own while the
-    window's events (all but the user's input) are processed every ``TURN_MS``. Its exception,
-    if any, is raised here. ``func`` must not touch Qt, and should make no pyproj object that
-    outlives it (a PROJ context belongs to the thread that made it)."""
+    """``func(*args, **kwargs)``; on the Qt thread, run in a thread of its own (``ThreadCall``)
+    while the window's events (all but the user's input) are processed every ``TURN_MS``. Its
+    exception, if any, is raised here. ``func`` must not touch Qt, and should make no pyproj
+    object that outlives it (a PROJ context belongs to the thread that made it)."""
     app = _qt_thread_app()
     if app is None:
         return func(*args, **kwargs)
     from qtpy.QtCore import QEventLoop
 
-    outcome: dict[str, Any] = {}
-
-    def target() -> None:
-        try:
-            outcome["value"] = func(*args, **kwargs)
-        except BaseException as exc:  # raised again on the Qt thread
-            outcome["error"] = exc
-
-    thread = threading.Thread(target=target, name="meris-ortho-read", daemon=True)
-    thread.start()
+    call = ThreadCall(func, *args, name="meris-ortho-read", **kwargs).start()
     flags = QEventLoop.ProcessEventsFlag.ExcludeUserInputEvents
-    while thread.is_alive():
+    while call.thread.is_alive():
         app.processEvents(flags)
-        thread.join(TURN_MS / 1000)
-    if "error" in outcome:
-        raise outcome["error"]
-    return outcome["value"]
+        call.thread.join(TURN_MS / 1000)
+    return call.outcome()
