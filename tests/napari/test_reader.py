@@ -378,3 +378,72 @@ def test_longitudes_beyond_180_land_beside_the_same_ground(tmp_path):
     lon0 = kw["translate"][1]  # the raster's west edge, 190.5 = -169.5 degrees
     assert -170.0 <= lon0 <= -169.0, lon0
     assert (np.asarray(data) == 3.0).mean() > 0.9
+
+
+def test_an_n1_is_read_off_the_qt_thread_while_the_window_turns(make_napari_viewer, n1_path,
+                                                                 tmp_path, qtbot, monkeypatch):
+    """napari calls the reader on its Qt thread: a session's first N1 (its readers' imports,
+    reading, levels and placement, and napari's own import of xarray for its first layer) held
+    the window for the whole of a first open (1.1 s on fr-alps, measured). That now runs in a
+    thread while the window's timers go on; the coarse-placement warning is still given, from
+    the Qt thread. Here xarray is loaded already: the first read is told it is pending."""
+    import threading
+    import time
+
+    from qtpy.QtCore import QTimer
+
+    from napari_meris_ortho._napari import reader
+    from napari_meris_ortho.products import open as product_open
+
+    viewer = make_napari_viewer(show=True)
+    # a 10 m map first: the N1's affine placement is coarse on it, which warns
+    base = _write_tif(tmp_path / "base.tif", np.ones((30, 40), np.float32), "EPSG:32632",
+                      Affine(10.0, 0, 400_000.0, 0, -10.0, 5_100_000.0))
+    viewer.open(str(base), plugin="napari-meris-ortho")
+    qtbot.wait(100)
+    calls: list[tuple[str, float, float]] = []
+    read, first = product_open.read_product, reader._import_for_first_layer
+
+    def slow_read(*args, **kwargs):  # a slow disk: 0.3 s more
+        t0 = time.perf_counter()
+        time.sleep(0.3)
+        out = read(*args, **kwargs)
+        calls.append((threading.current_thread().name, t0, time.perf_counter()))
+        return out
+
+    def imports():
+        calls.append((threading.current_thread().name, 0.0, 0.0))
+        first()
+
+    ticks: list[float] = []
+    timer = QTimer()
+    timer.timeout.connect(lambda: ticks.append(time.perf_counter()))
+    monkeypatch.setattr(product_open, "read_product", slow_read)
+    monkeypatch.setattr(reader, "_import_for_first_layer", imports)
+    monkeypatch.setattr(reader, "_imports_pending", lambda: True)
+    timer.start(10)
+    try:
+        with pytest.warns(UserWarning, match="affine fit of its tie points"):
+            layers = viewer.open(str(n1_path), plugin="napari-meris-ortho")
+    finally:
+        timer.stop()
+    (name, start, end), (name2, _, _) = calls
+    main = threading.main_thread().name
+    assert name != main and name2 != main, (name, name2)
+    during = [t for t in ticks if start <= t <= end]
+    assert len(during) >= 3, len(during)  # the window turned in the 0.3 s (none before)
+    assert [layer.name.split(" · ")[0] for layer in layers] == ["radiance", "RGB 7-5-2", "flags"]
+    assert layers[0].multiscale and layers[0].data[0].shape == (15, H, W)
+
+
+def test_only_a_sessions_first_product_is_read_in_a_thread(n1_path):
+    """``_imports_pending`` is True in a new process until a product has been read (the
+    thread costs more than a later product's 0.05 s read)."""
+    import subprocess
+    import sys
+
+    code = ("from napari_meris_ortho._napari import reader as r; a = r._imports_pending(); "
+            "r._n1_layer_data(%r, None); print(a, r._imports_pending())")
+    out = subprocess.run([sys.executable, "-c", code % str(n1_path)],
+                         capture_output=True, text=True, timeout=300)
+    assert out.stdout.split() == ["True", "False"], out.stderr[-2000:]

@@ -324,7 +324,48 @@ def n1_layers(path: str | Path, frame: OutputGrid | None = None) -> list[LayerDa
     above it is opaque, so it showed nothing, and napari sliced and drew it at the first frame
     (fr-alps, first open of a session: 0.84-0.96 s hidden against 0.87-0.96 s shown in four
     interleaved pairs, 0.83-0.84 against 0.93-1.03 s in three; opened again 0.43-0.45 against
-    0.46-0.52 s; measured)."""
+    0.46-0.52 s; measured).
+
+    A session's first product (``_imports_pending``) is read in a thread while the window keeps
+    turning (``responsively``): the product readers' imports, the reading, levels and placement,
+    and napari's own import of xarray for its first layer (``_import_for_first_layer``) held
+    the window 0.5-0.8 s of a 1.1 s first open (fr-alps, measured). Later products read in
+    0.05 s, less than the thread's cost. The placement's warning is given here, on the
+    caller's thread (napari shows warnings as notifications, which are widgets)."""
+    read = responsively if _imports_pending() else _call
+    layers, warning = read(_n1_layer_data, path, frame)
+    if warning:
+        import warnings
+
+        warnings.warn(warning, stacklevel=2)
+    return layers
+
+
+def _imports_pending() -> bool:
+    """True until a product has been read in this process: the product readers' modules and
+    napari's xarray are still to be imported."""
+    import sys
+
+    return not {"xarray", "napari_meris_ortho.products.open"} <= sys.modules.keys()
+
+
+def _call(func: Callable[..., Any], *args: Any) -> Any:
+    return func(*args)
+
+
+def _import_for_first_layer() -> None:
+    """Import what napari imports when it makes a session's first image layer: xarray (and with
+    it pandas; ``napari.utils._xarray_utils._check_xarray``, 0.49 s here, measured), so that its
+    Qt thread finds them loaded."""
+    try:
+        import xarray  # noqa: F401
+    except ImportError:  # napari's check does without it
+        pass
+
+
+def _n1_layer_data(path: str | Path, frame: OutputGrid | None
+                   ) -> tuple[list[LayerData], str | None]:
+    """``n1_layers``'s layers and the placement's warning (None when its fit is good); no Qt."""
     from ..products.open import read_product
     from .ortho_run import product_stamp
 
@@ -336,7 +377,7 @@ def n1_layers(path: str | Path, frame: OutputGrid | None = None) -> list[LayerDa
         raise N1FormatError(path, str(exc)) from None
     meta = n1_metadata(product)
     suffix = f" · {product_stamp(product)}"
-    place = _placement(product, frame, meta)
+    place, warning = _placement(product, frame, meta)
     band_axis = {"affine": _with_band_axis(place["affine"]), "units": ("pixel", *place["units"]),
                  "axis_labels": (BAND_AXIS, *place["axis_labels"])}
     read = radiance_reader(product)  # one band cache for the stack and the quick-look
@@ -344,6 +385,7 @@ def n1_layers(path: str | Path, frame: OutputGrid | None = None) -> list[LayerDa
     rgb = quicklook_levels(product, read=read)
     flags = flag_levels(product)
     multiscale = {"multiscale": len(radiance) > 1}
+    _import_for_first_layer()
     return [
         (_one_or_all(radiance), {"name": f"radiance{suffix}", "metadata": meta,
                                  "colormap": "gray", "visible": False, **band_axis,
@@ -355,7 +397,7 @@ def n1_layers(path: str | Path, frame: OutputGrid | None = None) -> list[LayerDa
         (_one_or_all(flags), {"name": f"flags{suffix}", "metadata": meta, "opacity": 0.4,
                               "visible": False, "features": flag_features(flags[0]), **place,
                               **multiscale}, "labels"),
-    ]
+    ], warning
 
 
 def _one_or_all(levels: list[Any]) -> Any:
@@ -385,10 +427,11 @@ def flag_features(flags: np.ndarray | LazyArray) -> dict[str, list[Any]]:
     return {"index": values, "flags": [flag_names(v) for v in values]}
 
 
-def _placement(product: Any, frame: OutputGrid | None, meta: dict[str, Any]) -> dict[str, Any]:
+def _placement(product: Any, frame: OutputGrid | None, meta: dict[str, Any]
+               ) -> tuple[dict[str, Any], str | None]:
     """napari placement of product-geometry layers in the world (``world.product_world``): an
-    affine fit of the tie points in the world's CRS (warned about when it is coarse); a product
-    opened first founds the world in the UTM zone of its footprint."""
+    affine fit of the tie points in the world's CRS, and the warning to give when it is coarse
+    (else None); a product opened first founds the world in the UTM zone of its footprint."""
     from .world import WORLD_KEY, geo_metadata, product_world, world_axes
 
     over_map = frame is not None  # a coarse fit matters when there is a map to overlay
@@ -396,13 +439,12 @@ def _placement(product: Any, frame: OutputGrid | None, meta: dict[str, Any]) -> 
     meta[WORLD_KEY] = geo_metadata(frame)
     meta["placement"] = {"affine": affine.tolist(), "rms_error": rms,
                          "note": "approximate: affine fit of the tie points"}
+    warning = None
     if over_map and rms > 2.0 * max(frame.dx, frame.dy):
-        import warnings
-
-        warnings.warn(f"{Path(product.path).name}: placed on the map by an affine fit of its "
-                      f"tie points (RMS {rms:.3g} {'deg' if frame.is_geographic else 'm'}); "
-                      "orthorectify it for an exact overlay", stacklevel=2)
-    return {"affine": affine, **world_axes(frame.crs)}
+        warning = (f"{Path(product.path).name}: placed on the map by an affine fit of its "
+                   f"tie points (RMS {rms:.3g} {'deg' if frame.is_geographic else 'm'}); "
+                   "orthorectify it for an exact overlay")
+    return {"affine": affine, **world_axes(frame.crs)}, warning
 
 
 def _with_band_axis(affine: np.ndarray) -> np.ndarray:
