@@ -320,20 +320,16 @@ def n1_layers(path: str | Path, frame: OutputGrid | None = None) -> list[LayerDa
     and flags (named bits in the features) of a MERIS L1b product (N1 or .SEN3; FRG/FSG and
     SEN3 products also carry their per-pixel altitude in the metadata), in product geometry
     placed in the world (``frame``, or a new one in the UTM zone of the footprint) by an affine
-    fit of its tie points (``_placement``). The radiance stack opens hidden: the RGB quick-look
-    above it is opaque, so it showed nothing, and napari sliced and drew it at the first frame
-    (fr-alps, first open of a session: 0.84-0.96 s hidden against 0.87-0.96 s shown in four
-    interleaved pairs, 0.83-0.84 against 0.93-1.03 s in three; opened again 0.43-0.45 against
-    0.46-0.52 s; measured).
-
-    A session's first product (``_imports_pending``) is read in a thread while the window keeps
-    turning (``responsively``): the product readers' imports, the reading, levels and placement,
-    and napari's own import of xarray for its first layer (``_import_for_first_layer``) held
-    the window 0.5-0.8 s of a 1.1 s first open (fr-alps, measured). Later products read in
-    0.05 s, less than the thread's cost. The placement's warning is given here, on the
-    caller's thread (napari shows warnings as notifications, which are widgets)."""
-    read = responsively if _imports_pending() else _call
-    layers, warning = read(_n1_layer_data, path, frame)
+    fit of its tie points (``_placement``). The radiance stack opens hidden (the opaque RGB hid
+    it; a first open took 0.84-0.96 s against 0.87-1.03 s shown, measured). A session's first
+    product is read in a thread while the window turns (``responsively``): its readers'
+    imports, the reading and napari's import of xarray for its first layer held the window
+    0.5-0.8 s (fr-alps, measured); later ones take 0.05 s, less than the thread costs. The
+    placement's warning is given on this thread (napari shows warnings as widgets)."""
+    if _imports_pending():
+        layers, warning = responsively(_n1_layer_data, path, frame)
+    else:
+        layers, warning = _n1_layer_data(path, frame)
     if warning:
         import warnings
 
@@ -342,24 +338,17 @@ def n1_layers(path: str | Path, frame: OutputGrid | None = None) -> list[LayerDa
 
 
 def _imports_pending() -> bool:
-    """True until a product has been read in this process: the product readers' modules and
-    napari's xarray are still to be imported."""
+    """True until this process has read a product (readers and xarray not imported yet)."""
     import sys
 
     return not {"xarray", "napari_meris_ortho.products.open"} <= sys.modules.keys()
 
 
-def _call(func: Callable[..., Any], *args: Any) -> Any:
-    return func(*args)
-
-
 def _import_for_first_layer() -> None:
-    """Import what napari imports when it makes a session's first image layer: xarray (and with
-    it pandas; ``napari.utils._xarray_utils._check_xarray``, 0.49 s here, measured), so that its
-    Qt thread finds them loaded."""
+    """xarray (and pandas), which napari imports when it makes its first image layer."""
     try:
         import xarray  # noqa: F401
-    except ImportError:  # napari's check does without it
+    except ImportError:  # napari does without it
         pass
 
 
