@@ -197,17 +197,17 @@ def as_index(r: int | range) -> int | slice:
 
 
 def geotiff_levels(path: Path, ds: Any) -> list[list[LazyArray]]:
-    """Per band the levels of a big GeoTIFF, read on demand (``pyramid``): full resolution and
-    the file's own overviews (a COG's; 2, 4, ... to ``MAX_LEVEL_SIDE`` decimated from the full
-    resolution when it has none); bands with a scale as physical values (``physical_bands``)."""
-    overviews = ds.overviews(1)
-    factors = [1, *overviews] if overviews else level_factors(ds.height, ds.width)
+    """Per band the levels of a big GeoTIFF with overviews (a COG), read on demand
+    (``pyramid``): full resolution and the file's own overviews (without any, every level's
+    read would be the whole band's: such a file is read whole, ``physical_bands``); bands with
+    a scale as physical values."""
+    factors = [1, *ds.overviews(1)]
     physical = has_scale(ds)
     dtype = np.float32 if physical else np.dtype(ds.dtypes[0])
     out = []
     for k in range(ds.count):
         scale = (ds.scales[k], ds.offsets[k]) if physical else None
-        read = _GeoTiffWindows(path, k + 1, [1, *overviews], scale)
+        read = _GeoTiffWindows(path, k + 1, factors, scale)
         band = LazyArray(read, (ds.height, ds.width), dtype)
         out.append([band[::f, ::f] for f in factors])
     return out
@@ -240,11 +240,10 @@ def north_up(ds: Any) -> Iterator[Any]:
 
 
 def geotiff_rgb_levels(path: Path, ds: Any) -> list[LazyArray]:
-    """The levels of a big RGB(A) GeoTIFF (``is_rgb``) as (rows, columns, channels) arrays
-    read on demand, like ``geotiff_levels``."""
-    overviews = ds.overviews(1)
-    factors = [1, *overviews] if overviews else level_factors(ds.height, ds.width)
-    read = _GeoTiffWindows(path, list(range(1, ds.count + 1)), [1, *overviews], None)
+    """The levels of a big RGB(A) GeoTIFF (``is_rgb``) with overviews as (rows, columns,
+    channels) arrays read on demand, like ``geotiff_levels``."""
+    factors = [1, *ds.overviews(1)]
+    read = _GeoTiffWindows(path, list(range(1, ds.count + 1)), factors, None)
     rgb = LazyArray(read, (ds.height, ds.width, ds.count), np.uint8)
     return [rgb[::f, ::f] for f in factors]
 
