@@ -4,6 +4,7 @@ concurrent runs on one store and a corrupt product among many end cleanly."""
 
 from __future__ import annotations
 
+import os
 import socket
 import subprocess
 import sys
@@ -235,3 +236,27 @@ def test_embedded_workers_are_held_to_a_core_each_when_they_fit() -> None:
         with engine(1, None) as runner:
             free = runner.client.run(thread_cores)
         assert [set(threads) for threads in free.values()] == [{all_cores}]
+
+
+@pytest.mark.slow
+def test_a_one_thread_worker_runs_the_engine_on_one_thread() -> None:
+    """A worker of one thread runs its task's kernels on that thread, not on every core (N
+    workers on N cores: N x N busy threads): our embedded workers (``WORKER_ENV``) and a dask
+    nanny's worker as ``dask worker --nthreads 1`` starts it (its ``OMP_NUM_THREADS=1``)."""
+    from distributed import Client, LocalCluster
+
+    from napari_meris_ortho.cores import usable_cores, usable_threads
+    from napari_meris_ortho.synthesis.run import WORKER_ENV, engine
+
+    def threads_and_cores() -> tuple[int, int]:
+        return usable_threads(), usable_cores()
+
+    cores = len(os.sched_getaffinity(0))
+    with engine(1, None) as runner:  # one free worker: every core usable, one thread used
+        assert list(runner.client.run(threads_and_cores).values()) == [(1, cores)]
+    assert WORKER_ENV["NUMBA_NUM_THREADS"] == "1"
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=True,
+                      dashboard_address=None) as cluster, \
+            Client(cluster, set_as_default=False) as client:  # no env of ours: the nanny's
+        assert list(client.run(threads_and_cores).values()) == [(1, cores)]
+

@@ -60,6 +60,45 @@ def test_usable_cores_is_the_affinity():
     assert usable_cores() == len(os.sched_getaffinity(0)) >= 1
 
 
+@pytest.mark.parametrize("env, expected", [
+    ({}, None), ({"NUMBA_NUM_THREADS": "1"}, 1), ({"OMP_NUM_THREADS": "1"}, 1),
+    ({"NUMBA_NUM_THREADS": "3", "OMP_NUM_THREADS": "1"}, 3),  # numba's own first
+    ({"NUMBA_NUM_THREADS": "0", "OMP_NUM_THREADS": "2"}, 2),  # not positive: the next one
+    ({"OMP_NUM_THREADS": "four"}, None), ({"NUMBA_NUM_THREADS": " 2 "}, 2)])
+def test_the_environment_limits_the_engine_threads(monkeypatch, env, expected):
+    """``NUMBA_NUM_THREADS``, else ``OMP_NUM_THREADS`` (what a dask nanny gives its workers)
+    cap the engine's threads at the usable cores; the cores themselves stay the affinity."""
+    from napari_meris_ortho.cores import thread_limit, usable_cores, usable_threads
+
+    for name in ("NUMBA_NUM_THREADS", "OMP_NUM_THREADS"):
+        monkeypatch.delenv(name, raising=False)
+    for name, value in env.items():
+        monkeypatch.setenv(name, value)
+    cores = len(os.sched_getaffinity(0))
+    assert thread_limit() == expected
+    assert usable_cores() == cores
+    assert usable_threads() == (cores if expected is None else min(cores, expected))
+
+
+def test_one_thread_asked_for_runs_every_range_on_the_calling_thread(monkeypatch):
+    import threading
+
+    monkeypatch.delenv("NUMBA_NUM_THREADS", raising=False)
+    monkeypatch.setenv("OMP_NUM_THREADS", "1")
+    callers = set()
+
+    def kernel(lo, hi):
+        callers.add(threading.get_ident())
+
+    threads.split_range(kernel, 1000)
+    assert callers == {threading.get_ident()}
+    monkeypatch.delenv("OMP_NUM_THREADS")
+    if len(os.sched_getaffinity(0)) > 1:  # no limit: the pool's threads run the ranges
+        callers.clear()
+        threads.split_range(kernel, 1000)
+        assert threading.get_ident() not in callers and len(callers) >= 1
+
+
 @pytest.fixture(scope="module")
 def scene():
     tp = analytic_swath(height=200, width=513, lon0=11.0)
@@ -100,13 +139,13 @@ def _run_all(scene):
 def test_engine_results_equal_one_whole_range_call(scene, monkeypatch):
     """Rows and points split over 1, 2 or 3 threads (ranges as small as the kernels allow)
     give the same numbers, bit for bit."""
-    monkeypatch.setattr(threads, "usable_cores", lambda: 1)
+    monkeypatch.setattr(threads, "usable_threads", lambda: 1)
     ref = _run_all(scene)
     assert np.count_nonzero(ref["primary", "iterations"] >= 0) > 10000
     assert np.count_nonzero(ref["index"] >= 0) > 10000
     assert ref["index"].size > 1 << 17  # points in more than one gather/nearest range
     for n in (2, 3):
-        monkeypatch.setattr(threads, "usable_cores", lambda n=n: n)
+        monkeypatch.setattr(threads, "usable_threads", lambda n=n: n)
         got = _run_all(scene)
         assert got.keys() == ref.keys()
         for k, v in ref.items():

@@ -14,7 +14,7 @@ import threading
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 
-from ..cores import usable_cores
+from ..cores import usable_threads
 
 #: ranges per thread: small enough pieces that unequal rows (e.g. spans) balance
 _PIECES_PER_THREAD = 4
@@ -34,9 +34,9 @@ def ranges(n: int, pieces: int, min_size: int = 1) -> list[tuple[int, int]]:
 def split_range(kernel: Callable[[int, int], object], n: int, *, threads: int | None = None,
                 min_size: int = 1) -> None:
     """Call ``kernel(lo, hi)`` on ranges covering [0, n) exactly once each, on up to ``threads``
-    threads (default ``cores.usable_cores()``); ranges of at least ``min_size`` indices. One
+    threads (default ``cores.usable_threads()``); ranges of at least ``min_size`` indices. One
     thread or one range: a single direct call. Exceptions of the kernel are raised here."""
-    threads = usable_cores() if threads is None else max(int(threads), 1)
+    threads = usable_threads() if threads is None else max(int(threads), 1)
     parts = ranges(n, threads * _PIECES_PER_THREAD if threads > 1 else 1, min_size)
     if not parts:
         return

@@ -38,7 +38,7 @@ from typing import Any, BinaryIO
 
 import numpy as np
 
-from ..cores import usable_cores
+from ..cores import usable_threads
 
 #: TIFF field types: size in bytes
 _TYPE_SIZE = {1: 1, 2: 1, 3: 2, 4: 4, 5: 8, 6: 1, 7: 1, 8: 2, 9: 4, 10: 8, 11: 4, 12: 8,
@@ -152,7 +152,7 @@ class CogWriter:
         for k in range(n_levels + 1):
             f = 2 ** k
             self.levels.append(_Level(-(-w // f), -(-h // f), self.block))
-        n = threads or usable_cores()
+        n = threads or usable_threads()
         self._pool = ThreadPoolExecutor(max_workers=max(n, 1), thread_name_prefix="cog")
         self._spill: BinaryIO = open(spill, "w+b")  # closed by close()
         self._full: list[list[Future[bytes]]] = []  # per band, its full-resolution tiles
