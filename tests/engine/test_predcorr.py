@@ -227,6 +227,45 @@ def test_height_rates_put_the_prediction_within_one_newton_step(scene):
     assert max(residuals) < 0.01  # ... and the rates predict it to a hundredth of a pixel
 
 
+def test_the_prediction_is_the_bilinear_primary_grid_moved_by_the_height_rates(scene):
+    """With no correction (``max_iter=0``) the antecedents are the prediction: the primary
+    grid and its height rates interpolated bilinearly at (i / step, j / step), the point moved
+    by its height times the rates; in a cell with a missing node, a valid corner, unmoved."""
+    from napari_meris_ortho.engine.predcorr import find_antecedents, height_rates
+
+    tp, grid, lon, lat, spans = scene
+    h = _terrain(lon, lat).astype(np.float32)
+    lat_tp, lon_tp, coef, df, dj = tp.kernel_args()
+    cl, cp, _ = primary_grid(*primary_nodes(grid, 0, lon.shape, 16), lat_tp, lon_tp, coef, df,
+                             dj, 0)
+    rates = height_rates(cl, cp, coef, df, dj, 0, 0)
+    gap = (cl.shape[0] // 2, cl.shape[1] // 2)
+    cl[gap] = cp[gap] = np.nan
+    line, col, iters, *_ = find_antecedents(lon, lat, h, HEIGHT_GIVEN, *spans, cl, cp, rates,
+                                            16.0, coef, df, dj, tp.height, tp.width, 0, 0,
+                                            0.01, 0, False)
+    i, j = np.indices(lon.shape)
+    a = np.minimum(i // 16, cl.shape[0] - 2)
+    b = np.minimum(j // 16, cl.shape[1] - 2)
+    u, v = i / 16 - a, j / 16 - b
+
+    def bilinear(g):
+        return ((1 - u) * (1 - v) * g[a, b] + (1 - u) * v * g[a, b + 1]
+                + u * (1 - v) * g[a + 1, b] + u * v * g[a + 1, b + 1])
+
+    want_l = bilinear(cl) + h * bilinear(rates[0])
+    want_p = bilinear(cp) + h * bilinear(rates[1])
+    ok = (iters == 0) & np.isfinite(want_l)
+    assert ok.sum() > 0.99 * np.count_nonzero(iters >= 0) > 100_000 and np.ptp(h[ok]) > 1500
+    np.testing.assert_allclose(line[ok], want_l[ok], rtol=0, atol=1e-3)
+    np.testing.assert_allclose(col[ok], want_p[ok], rtol=0, atol=1e-3)
+    near = (iters == 0) & ~np.isfinite(want_l)  # the 4 cells around the missing node
+    assert 100 < near.sum() <= 4 * 16 * 16
+    corners = {(np.float32(cl[x, y]), np.float32(cp[x, y]))
+               for x in (gap[0] - 1, gap[0], gap[0] + 1) for y in (gap[1] - 1, gap[1], gap[1] + 1)}
+    assert set(zip(line[near], col[near], strict=True)) <= corners
+
+
 def test_solve_into_rows_of_a_whole_grid_equals_new_arrays(scene):
     tp, grid, lon, lat, spans = scene
     h = _terrain(lon, lat).astype(np.float32)

@@ -35,7 +35,7 @@ from .pixelgeo import (
     pixel_value,
     primary_grid_pixel,
 )
-from .predcorr import PRIMARY_STEP, _columns, _predict, primary_nodes
+from .predcorr import PRIMARY_STEP, _columns, _node_row, _predict, primary_nodes
 from .threads import split_range
 
 #: fixed-point passes of the parallax inversion (the latitude of the radii moves < 1e-9 deg
@@ -153,13 +153,15 @@ def _dem_rows(lo, hi, tlon_a, tlat_a, height, ptr, start, stop, cl, cp, step, lo
     """Rows [lo, hi) of ``find_dem_antecedents`` into its (pre-filled) outputs."""
     nl, npx = lon.shape
     no_rates = np.zeros((3, 1, 1))  # the prediction is the zero-height inverse on E
+    row = np.empty((2, cl.shape[1]))
     for i in range(lo, hi):
+        _node_row(cl, cp, no_rates, step, i, False, row)
         for j in _columns(ptr, start, stop, i):
             tlon = tlon_a[i, j]
             tlat = tlat_a[i, j]
             if math.isnan(tlon) or math.isnan(tlat):
                 continue
-            gl, gp = _predict(cl, cp, no_rates, step, i, j, 0.0)
+            gl, gp = _predict(row, cl, cp, step, i, j, 0.0)
             if math.isnan(gl) or gl < -_FAR or gl > nl + _FAR or gp < -_FAR or gp > npx + _FAR:
                 continue
             h = float(height[i, j])

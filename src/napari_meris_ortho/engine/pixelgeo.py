@@ -28,7 +28,7 @@ from numba import njit, prange
 
 from .inverse import wrap180
 from .location import facet_of
-from .predcorr import PRIMARY_STEP, _columns, _predict, primary_nodes
+from .predcorr import PRIMARY_STEP, _columns, _node_row, _predict, primary_nodes
 
 #: subsampling (pixels) of the brute-force nearest-node search that seeds the cell search
 SEED_STEP = 8
@@ -417,12 +417,14 @@ def find_pixel_antecedents(tlon_a, tlat_a, ptr, start, stop, cl, cp, step, lon, 
     h_used = np.full((nr, nc) if diagnostics else (1, 1), np.nan, np.float32)
     no_rates = np.zeros((3, 1, 1))  # the pixel geolocation has no height rates: h = 0
     for i in prange(nr):
+        row = np.empty((2, cl.shape[1]))
+        _node_row(cl, cp, no_rates, step, i, False, row)
         for j in _columns(ptr, start, stop, i):
             tlon = tlon_a[i, j]
             tlat = tlat_a[i, j]
             if math.isnan(tlon) or math.isnan(tlat):
                 continue
-            gl, gp = _predict(cl, cp, no_rates, step, i, j, 0.0)
+            gl, gp = _predict(row, cl, cp, step, i, j, 0.0)
             if math.isnan(gl) or gl < -_FAR or gl > nl + _FAR or gp < -_FAR or gp > npx + _FAR:
                 continue
             l2, p2, it = pixel_antecedent(tlon, tlat, gl, gp, step, lon, lat, tol, max_iter)

@@ -37,7 +37,7 @@ import numpy as np
 from numba import njit
 
 from .inverse import search_facet, wrap180
-from .location import direct_point, parallax_factors
+from .location import direct_point, direct_point_inline, parallax_factors
 from .threads import split_range
 
 if TYPE_CHECKING:
@@ -53,13 +53,13 @@ PRIMARY_STEP = 16
 _FAR = 256.0
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _newton(tlon, tlat, line, col, h, coef, df, dj, model, geo, tol, max_iter):
     """Correct (line, col) until f(line, col, h) = (tlon, tlat); returns (line, col, iterations)."""
     it = 0
     while it < max_iter:
         it += 1
-        r = direct_point(line, col, h, coef, df, dj, model, geo)
+        r = direct_point_inline(line, col, h, coef, df, dj, model, geo)
         rx = tlon - r[0]
         if rx > 180.0 or rx < -180.0:
             rx = wrap180(rx)
@@ -118,19 +118,19 @@ def _primary_nodes(lon, lat, lat_tp, lon_tp, coef, df, dj, geo, line, col,
                 j = j2
                 line[r, c] = (f + u) * df
                 col[r, c] = (j + v) * dj
-                if geo != 0:  # the search inverts the bilinear lon/lat facet: polish
-                    l2, p2, it = _newton(lon[r, c], lat[r, c], line[r, c], col[r, c], 0.0, coef,
-                                         df, dj, model0, geo, 1e-6, np.int64(10))
-                    if not math.isnan(l2):
-                        line[r, c] = l2
-                        col[r, c] = p2
+                if geo == 0:
+                    continue
+                # the search inverts the bilinear lon/lat facet: polish
+                l0, p0, most = line[r, c], col[r, c], np.int64(10)
             else:
                 l0, p0 = _edge_start(lon[r, c], lat[r, c], lat_tp, lon_tp, df, dj)
-                l2, p2, it = _newton(lon[r, c], lat[r, c], l0, p0, 0.0, coef, df, dj,
-                                     model0, geo, 1e-6, np.int64(30))
-                if it < 30 and not math.isnan(l2):
-                    line[r, c] = l2
-                    col[r, c] = p2
+                most = np.int64(30)
+            # (one call: ``_newton`` is inlined)
+            l2, p2, it = _newton(lon[r, c], lat[r, c], l0, p0, 0.0, coef, df, dj, model0, geo,
+                                 1e-6, most)
+            if not math.isnan(l2) and (path >= 0 or it < most):
+                line[r, c] = l2
+                col[r, c] = p2
 
 
 @njit(cache=True)
@@ -173,29 +173,39 @@ def _point_height(hmode, height, i, j):  # pragma: no cover
     return np.float64(height[i, j])
 
 
-@njit(cache=True, inline="always")
-def _weighted(g, a, b, w):  # pragma: no cover
-    """Bilinear value of the 2-D grid ``g`` in cell (a, b), weights ``w`` of its corners
-    (a, b), (a, b + 1), (a + 1, b), (a + 1, b + 1)."""
-    return w[0] * g[a, b] + w[1] * g[a, b + 1] + w[2] * g[a + 1, b] + w[3] * g[a + 1, b + 1]
-
-
 @njit(cache=True)
-def _predict(cl, cp, rates, step, i, j, h):
-    """Primary grid interpolated bilinearly at output pixel (i, j), moved by ``h`` times the
-    interpolated height rates (``height_rates``; h NaN: the tie-point height there, 0: no
-    move); a node missing: any valid one, unmoved (then Newton does the rest)."""
-    nr, nc = cl.shape
+def _node_row(cl, cp, rates, step, i, moved, row):  # pragma: no cover
+    """The first half of the bilinear prediction at output row i, once for the whole row: the
+    primary grid (cl, cp) and, when ``moved``, its ``height_rates`` interpolated between the
+    two node rows around i, into ``row`` (2 rows, or 5 when moved, by node columns); NaN where
+    a node is missing."""
+    nr = cl.shape[0]
     ti = i / step
-    tj = j / step
     a = min(int(ti), nr - 2)
-    b = min(int(tj), nc - 2)
     u = ti - a
+    for b in range(cl.shape[1]):
+        row[0, b] = (1 - u) * cl[a, b] + u * cl[a + 1, b]
+        row[1, b] = (1 - u) * cp[a, b] + u * cp[a + 1, b]
+    if moved:
+        for k in range(3):
+            for b in range(cl.shape[1]):
+                row[2 + k, b] = (1 - u) * rates[k, a, b] + u * rates[k, a + 1, b]
+
+
+@njit(cache=True, inline="always")
+def _predict(row, cl, cp, step, i, j, h):
+    """Primary grid interpolated bilinearly at output pixel (i, j) (its ``_node_row`` of row i,
+    then between the node columns around j), moved by ``h`` times the interpolated height
+    rates (``height_rates``; h NaN: the tie-point height there, 0: no move); a node missing:
+    any valid one of the four around, unmoved (then Newton does the rest)."""
+    nr, nc = cl.shape
+    tj = j / step
+    b = min(int(tj), nc - 2)
     v = tj - b
-    w = ((1 - u) * (1 - v), (1 - u) * v, u * (1 - v), u * v)
-    l = _weighted(cl, a, b, w)
-    p = _weighted(cp, a, b, w)
+    l = (1 - v) * row[0, b] + v * row[0, b + 1]
+    p = (1 - v) * row[1, b] + v * row[1, b + 1]
     if math.isnan(l):  # a missing node: take any valid one (then Newton does the rest)
+        a = min(int(i / step), nr - 2)
         for da in range(2):
             for db in range(2):
                 if not math.isnan(cl[a + da, b + db]):
@@ -203,9 +213,9 @@ def _predict(cl, cp, rates, step, i, j, h):
         return l, p
     if h != 0.0:
         if math.isnan(h):
-            h = _weighted(rates[2], a, b, w)
-        rl = _weighted(rates[0], a, b, w)
-        rp = _weighted(rates[1], a, b, w)
+            h = (1 - v) * row[4, b] + v * row[4, b + 1]
+        rl = (1 - v) * row[2, b] + v * row[2, b + 1]
+        rp = (1 - v) * row[3, b] + v * row[3, b + 1]
         if not (math.isnan(rl) or math.isnan(rp) or math.isnan(h)):
             l += h * rl
             p += h * rp
@@ -288,7 +298,10 @@ def _antecedent_rows(lo, hi, lon, lat, height, hmode, ptr, start, stop, cl, cp, 
                      coef, df, dj, n_lines, n_cols, model, geo, tol, max_iter, diagnostics,
                      out_l, out_p, iters, h_used, sh_e, sh_n):  # pragma: no cover
     """Rows [lo, hi) of ``find_antecedents`` into its (pre-filled) outputs."""
+    row = np.empty((5, cl.shape[1]))
     for i in range(lo, hi):
+        if ptr[i + 1] > ptr[i]:
+            _node_row(cl, cp, rates, step, i, hmode != HEIGHT_NONE, row)
         for k in range(ptr[i], ptr[i + 1]):
             for j in range(start[k], stop[k]):
                 tlon = lon[i, j]
@@ -296,7 +309,7 @@ def _antecedent_rows(lo, hi, lon, lat, height, hmode, ptr, start, stop, cl, cp, 
                 if math.isnan(tlon) or math.isnan(tlat):
                     continue
                 h = _point_height(hmode, height, i, j)
-                gl, gp = _predict(cl, cp, rates, step, i, j, h)
+                gl, gp = _predict(row, cl, cp, step, i, j, h)
                 if math.isnan(gl):
                     continue
                 if gl < -_FAR or gl > n_lines + _FAR or gp < -_FAR or gp > n_cols + _FAR:
