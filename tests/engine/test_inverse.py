@@ -76,3 +76,16 @@ def test_inverse_across_the_antimeridian():
     l2, p2, counts = inverse_location(g, lon, lat)
     assert counts["not found"] == 0
     assert np.max(np.abs(l2 - line)) < 1e-6 and np.max(np.abs(p2 - col)) < 1e-6
+
+
+def test_wrap180_keeps_a_difference_on_the_range_exact():
+    """An angle difference already on [-180, 180) is returned bit for bit (no round trip
+    through +180); others are brought onto the range."""
+    from napari_meris_ortho.engine.inverse import wrap180
+
+    for x in (1e-10, -3.3e-12, 0.0123456789012345, -180.0, 179.99999999999997):
+        assert wrap180(x) == x
+    assert wrap180(180.0) == -180.0
+    assert wrap180(190.25) == -169.75
+    assert wrap180(-190.25) == 169.75
+    assert wrap180(719.5) == -0.5

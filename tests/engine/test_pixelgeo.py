@@ -112,3 +112,66 @@ def test_a_jump_cell_hides_the_ground_behind_a_crest():
     # outside the product, no cell (the outer half pixel belongs to the edge cells)
     assert cell_search(10.0 + 44.0 * 0.01, 45.0 - 0.025, 2.5, lon, lat)[0] == -1
     assert cell_search(10.0 + 43.4 * 0.01, 45.0 - 0.025, 2.5, lon, lat)[:2] == (2, 33)
+
+
+def test_the_bracket_from_a_hint_is_the_bisection_of_the_whole_line():
+    """``_bracket`` closed in from a predicted column (doubling steps, then bisection) finds the
+    column the bisection of the whole line finds, from any hint (good, bad, off the line),
+    over no-data runs, before the first and past the last pixel; the jump of a crest too."""
+    from napari_meris_ortho.engine.pixelgeo import _bracket
+
+    rng = np.random.default_rng(7)
+    x = np.cumsum(rng.uniform(0.2, 1.8, 400))  # terrain points in order along the line
+    x[150:] += 30.0  # a crest: hidden ground, a jump
+    lon = np.tile(10.0 + 0.003 * x, (3, 1))
+    lat = np.tile(45.0 - 0.0004 * x, (3, 1)) - 0.003 * np.arange(3.0)[:, None]
+    lon[1, 200:260] = lat[1, 200:260] = np.nan  # no data on line 1
+    lon[1, 40] = np.nan
+    checked = 0
+    for i in range(3):
+        for t in np.r_[rng.uniform(-5.0, x[-1] + 5.0, 400), x[::37], x[201], x[250]]:
+            tlon, tlat = 10.0 + 0.003 * t, 45.0 - 0.0004 * t - 0.003 * i
+            whole = _bracket(tlon, tlat, i, lon, lat)
+            for hint in (np.searchsorted(x, t), np.searchsorted(x, t) + 9.0, 3.0, 395.7,
+                         -50.0, 1e6, rng.uniform(0, 400)):
+                assert _bracket(tlon, tlat, i, lon, lat, float(hint)) == whole, (i, t, hint)
+            checked += 1
+            if x[0] <= t < x[-1] and i != 1:
+                assert x[whole] <= t <= x[whole + 1]
+    assert checked > 1200
+
+
+def test_the_pixel_model_searches_only_the_nodes_its_points_read():
+    """The primary nodes of ``solve_pixel`` are searched only where a point of the spans reads
+    them (``needed_nodes``: the corners of its node cell); those nodes keep the antecedents
+    the search of every node gives, and the others (beyond the swath) are not searched."""
+    from napari_meris_ortho.engine.pixelgeo import SEED_STEP, primary_grid_pixel
+    from napari_meris_ortho.engine.predcorr import PRIMARY_STEP, needed_nodes, primary_nodes
+
+    tp, grid, lon, lat, spans = _scene()
+    plon, plat = _pixel_grids(tp, heights=True)
+    step = PRIMARY_STEP
+    every = primary_nodes(grid, 0, lon.shape, step)
+    needed = needed_nodes(spans, step, every[0].shape)
+    # the corners of the node cell of every point of the spans, counted point by point
+    ptr, start, stop = spans
+    want = np.zeros_like(needed)
+    for i in range(ptr.size - 1):
+        j = np.concatenate([np.arange(a, b) for a, b in zip(start[ptr[i]:ptr[i + 1]],
+                                                             stop[ptr[i]:ptr[i + 1]],
+                                                             strict=True)] or [[]]).astype(int)
+        a = min(i // step, want.shape[0] - 2)
+        b = np.minimum(j // step, want.shape[1] - 2)
+        for da in (0, 1):
+            for db in (0, 1):
+                want[a + da, b + db] = True
+    np.testing.assert_array_equal(needed, want)
+    assert 0.2 < needed.mean() < 0.9
+    nodes = primary_nodes(grid, 0, lon.shape, step, spans=spans)
+    assert np.isnan(nodes[0][~needed]).all() and not np.isnan(nodes[0][needed]).any()
+    cl_all, cp_all, counts_all = primary_grid_pixel(*every, plon, plat, SEED_STEP)
+    cl, cp, counts = primary_grid_pixel(*nodes, plon, plat, SEED_STEP)
+    np.testing.assert_array_equal(cl[needed], cl_all[needed])
+    np.testing.assert_array_equal(cp[needed], cp_all[needed])
+    assert np.isnan(cl[~needed]).all()
+    assert counts.sum() == needed.sum() < counts_all.sum()

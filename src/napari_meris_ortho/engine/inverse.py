@@ -25,7 +25,10 @@ _EPS = 1e-9
 
 @njit(cache=True, inline="always")
 def wrap180(x: float) -> float:
-    """An angle difference brought onto [-180, 180)."""
+    """An angle difference brought onto [-180, 180); one already there is returned as it is
+    (exact, and no floating-point modulo: the kernels call this for every cell corner)."""
+    if -180.0 <= x < 180.0:
+        return x
     return (x + 180.0) % 360.0 - 180.0
 
 

@@ -236,7 +236,7 @@ def solve_pixel_dem(lon_grid: np.ndarray, lat_grid: np.ndarray, ellipsoid: tuple
         raise ValueError("per-point heights of the output points' shape are needed")
     alt = np.ascontiguousarray(altitude, dtype=np.float64)
     ptr, start, stop = (np.ascontiguousarray(a, dtype=np.int64) for a in spans)
-    nlon, nlat = primary_nodes(grid, row_start, lon.shape, step)
+    nlon, nlat = primary_nodes(grid, row_start, lon.shape, step, spans=(ptr, start, stop))
     cl, cp, counts = primary_grid_pixel(nlon, nlat, elon, elat, SEED_STEP, _NODE_OUT)
     line, col, iters, h_used, sh_e, sh_n = find_dem_antecedents(
         lon, lat, h, ptr, start, stop, cl, cp, float(step), lon_g, lat_g, elon, elat, alt,

@@ -57,7 +57,7 @@ _NODE_OUT = 2.0
 _SIDE_REACH = 3.0
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def pixel_point(line: float, col: float, lon: np.ndarray, lat: np.ndarray):
     """Direct pixel model at fractional (line, col): (lon, lat, dlon/dl, dlon/dp, dlat/dl, dlat/dp).
 
@@ -70,7 +70,7 @@ def pixel_point(line: float, col: float, lon: np.ndarray, lat: np.ndarray):
     return cell_point(i, j, u, v, lon, lat)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def cell_point(i: int, j: int, u: float, v: float, lon: np.ndarray, lat: np.ndarray):
     """Bilinear model of the cell between pixel centres (i, j) and (i + 1, j + 1) at offsets
     (u, v), extended linearly outside [0, 1]: (lon, lat, dlon/du, dlon/dv, dlat/du, dlat/dv)."""
@@ -182,7 +182,7 @@ def _in_box(tlon: float, tlat: float, i: int, j: int, lo_u: float, hi_u: float, 
     return xlo - 1e-9 <= dx <= xhi + 1e-9 and ylo - 1e-9 <= tlat <= yhi + 1e-9
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _valid_column(i: int, j: int, lo: int, hi: int, lon: np.ndarray, lat: np.ndarray) -> int:
     """The column of line ``i`` nearest to ``j`` within [lo, hi] whose terrain point is given
     (a no-data pixel of the geolocation is NaN), -1 when none is."""
@@ -193,13 +193,24 @@ def _valid_column(i: int, j: int, lo: int, hi: int, lon: np.ndarray, lat: np.nda
     return -1
 
 
+@njit(cache=True, inline="always")
+def _along(tlon: float, tlat: float, i: int, m: int, c: float, dx: float, dy: float,
+           lon: np.ndarray, lat: np.ndarray) -> float:
+    """Where terrain point (i, m) lies from the point along the line's direction (dx, dy)
+    (longitudes scaled by ``c``): <= 0 before it, > 0 past it."""
+    return wrap180(lon[i, m] - tlon) * c * dx + (lat[i, m] - tlat) * dy
+
+
 @njit(cache=True)
-def _bracket(tlon: float, tlat: float, i: int, lon: np.ndarray, lat: np.ndarray) -> int:
+def _bracket(tlon: float, tlat: float, i: int, lon: np.ndarray, lat: np.ndarray,
+             hint: float = math.nan) -> int:
     """Column j of product line ``i`` whose terrain points j, j + 1 bracket the point along the
     line (bisection: terrain points follow the line of sight's sweep in order, the first
     intersection moves away from the sensor; hidden ground makes jumps, never folds), clamped
     to the first and last cells. No-data pixels (NaN) are passed over: each probe takes the
-    nearest given pixel between the bounds, so they cost only the cells touching them."""
+    nearest given pixel between the bounds, so they cost only the cells touching them. With a
+    ``hint`` (the predicted column) the bounds are first closed in from it by doubling steps:
+    a few probes near the hint, not a dozen across the line; the same column in order."""
     nc = lon.shape[1]
     lo = _valid_column(i, 0, 0, nc - 1, lon, lat)
     if lo < 0:
@@ -208,15 +219,45 @@ def _bracket(tlon: float, tlat: float, i: int, lon: np.ndarray, lat: np.ndarray)
     c = math.cos(math.radians(tlat))
     dx = wrap180(lon[i, hi] - lon[i, lo]) * c
     dy = lat[i, hi] - lat[i, lo]
-    if (wrap180(lon[i, lo] - tlon) * c * dx + (lat[i, lo] - tlat) * dy) >= 0.0:
+    if _along(tlon, tlat, i, lo, c, dx, dy, lon, lat) >= 0.0:
         return 0 if lo == 0 else lo - 1
-    if (wrap180(lon[i, hi] - tlon) * c * dx + (lat[i, hi] - tlat) * dy) <= 0.0:
+    if _along(tlon, tlat, i, hi, c, dx, dy, lon, lat) <= 0.0:
         return min(hi, nc - 2)
+    # from here on: along(lo) <= 0 < along(hi)
+    if hi - lo > 2 and not math.isnan(hint):
+        m = _valid_column(i, min(max(int(hint), lo + 1), hi - 1), lo + 1, hi - 1, lon, lat)
+        if m >= 0:
+            past = _along(tlon, tlat, i, m, c, dx, dy, lon, lat) > 0.0
+            if past:
+                hi = m
+            else:
+                lo = m
+            step = 1
+            while hi - lo > 1:
+                m = hi - step if past else lo + step
+                if m <= lo or m >= hi:
+                    break
+                # the nearest given column on the far side of m (still between the bounds)
+                m = (_valid_column(i, m, lo + 1, m, lon, lat) if past
+                     else _valid_column(i, m, m, hi - 1, lon, lat))
+                if m < 0:
+                    break
+                if (_along(tlon, tlat, i, m, c, dx, dy, lon, lat) > 0.0) != past:
+                    if past:
+                        lo = m
+                    else:
+                        hi = m
+                    break
+                if past:
+                    hi = m
+                else:
+                    lo = m
+                step *= 2
     while hi - lo > 1:
         mid = _valid_column(i, (lo + hi) // 2, lo + 1, hi - 1, lon, lat)
         if mid < 0:  # only no data between the bounds: the point is in one of those cells
             break
-        if (wrap180(lon[i, mid] - tlon) * c * dx + (lat[i, mid] - tlat) * dy) <= 0.0:
+        if _along(tlon, tlat, i, mid, c, dx, dy, lon, lat) <= 0.0:
             lo = mid
         else:
             hi = mid
@@ -225,11 +266,12 @@ def _bracket(tlon: float, tlat: float, i: int, lon: np.ndarray, lat: np.ndarray)
 
 @njit(cache=True)
 def cell_search(tlon: float, tlat: float, gl: float, lon: np.ndarray, lat: np.ndarray,
-                line_reach: int = _LINE_REACH):
+                line_reach: int = _LINE_REACH, gp: float = math.nan):
     """The cell holding the point: on the product lines within ``line_reach`` of the predicted
-    line ``gl`` (outward), the cells around the column that ``_bracket`` finds (relief moves a
-    terrain point along its product line, not across lines). The edge cells are extended by
-    the outer half pixel. Returns (i, j, u, v, iterations), i = -1 when no cell holds it."""
+    line ``gl`` (outward), the cells around the column that ``_bracket`` finds from the
+    predicted column ``gp`` (NaN: none; relief moves a terrain point along its product line,
+    not across lines). The edge cells are extended by the outer half pixel. Returns (i, j, u,
+    v, iterations), i = -1 when no cell holds it."""
     nl, nc = lon.shape
     ic = min(max(int(math.floor(gl)), 0), nl - 2)
     for m in range(2 * line_reach + 1):
@@ -238,7 +280,7 @@ def cell_search(tlon: float, tlat: float, gl: float, lon: np.ndarray, lat: np.nd
             continue
         lo_u = -0.5 if i == 0 else 0.0
         hi_u = 1.5 if i == nl - 2 else 1.0
-        jb = _bracket(tlon, tlat, i, lon, lat)
+        jb = _bracket(tlon, tlat, i, lon, lat, gp)
         for k in range(2 * _COLUMN_REACH + 1):
             j = jb + ((k + 1) // 2 if k % 2 else -(k // 2))
             if j < 0 or j > nc - 2:
@@ -253,7 +295,7 @@ def cell_search(tlon: float, tlat: float, gl: float, lon: np.ndarray, lat: np.nd
     return -1, -1, math.nan, math.nan, 0
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _column_step(i: int, j: int, lon: np.ndarray, lat: np.ndarray) -> float:
     """Ground length (degrees of latitude) of the cell's column step, mean of its two lines."""
     c = math.cos(math.radians(lat[i, j]))
@@ -357,7 +399,7 @@ def _node_antecedent(tlon, tlat, gl, gp, lon, lat, line_reach, node_out):
     """A primary node's antecedent from a guess: its cell, else (just outside the product: the
     edge cells extended) the Newton correction. Returns (line, col, _FOUND | _OUTSIDE |
     _FAILED)."""
-    i, j, u, v, it = cell_search(tlon, tlat, gl, lon, lat, line_reach)
+    i, j, u, v, it = cell_search(tlon, tlat, gl, lon, lat, line_reach, gp)
     if i >= 0:
         return i + u, j + v, _FOUND
     l2, p2, it, ok = correct(tlon, tlat, gl, gp, lon, lat, 1e-6, 30)
@@ -385,13 +427,14 @@ def pixel_antecedent(tlon: float, tlat: float, gl: float, gp: float, step: float
     reach = step + _LINE_REACH  # predicted within a primary step of the product
     near = -reach <= gl <= nl + reach and -reach <= gp <= npx + reach
     if near:
-        ci, cj, u, v, it = cell_search(tlon, tlat, gl, lon, lat)
+        ci, cj, u, v, it = cell_search(tlon, tlat, gl, lon, lat, _LINE_REACH, gp)
     if ci < 0:  # beyond reach of the prediction: a correction, then its cell
         l2, p2, it, ok = correct(tlon, tlat, gl, gp, lon, lat, tol, max_iter)
         if ok and -0.5 <= l2 < nl - 0.5 and -0.5 <= p2 < npx - 0.5:
-            ci, cj, u, v, it = cell_search(tlon, tlat, l2, lon, lat)
+            ci, cj, u, v, it = cell_search(tlon, tlat, l2, lon, lat, _LINE_REACH, p2)
         elif not ok and near:  # lost in folds: the lines within a primary step
-            ci, cj, u, v, it = cell_search(tlon, tlat, gl, lon, lat, int(step) + _LINE_REACH)
+            ci, cj, u, v, it = cell_search(tlon, tlat, gl, lon, lat, int(step) + _LINE_REACH,
+                                           gp)
         if ci < 0:
             return math.nan, math.nan, -1
     l2, p2, seen = seen_antecedent(tlon, tlat, ci, cj, u, v, lon, lat)
@@ -486,7 +529,7 @@ def solve_pixel(lon_grid: np.ndarray, lat_grid: np.ndarray, grid, lon: np.ndarra
     lon = np.ascontiguousarray(lon, dtype=np.float64)
     lat = np.ascontiguousarray(lat, dtype=np.float64)
     ptr, start, stop = (np.ascontiguousarray(a, dtype=np.int64) for a in spans)
-    nlon, nlat = primary_nodes(grid, row_start, lon.shape, step)
+    nlon, nlat = primary_nodes(grid, row_start, lon.shape, step, spans=(ptr, start, stop))
     cl, cp, counts = primary_grid_pixel(nlon, nlat, lon_g, lat_g, SEED_STEP)
     with_alt = diagnostics and altitude is not None
     alt = (np.ascontiguousarray(altitude, dtype=np.float64) if with_alt

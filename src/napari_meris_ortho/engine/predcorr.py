@@ -492,12 +492,40 @@ def _solved_counts(values, iters, first, out):  # pragma: no cover
                 out[k] += 1
 
 
+def needed_nodes(spans: tuple[np.ndarray, np.ndarray, np.ndarray], step: int,
+                 node_shape: tuple[int, int]) -> np.ndarray:
+    """True at the primary-grid nodes (``primary_nodes`` of the spans' rows, ``node_shape``)
+    that the prediction of some output point of the CSR ``spans`` reads: the corners of the
+    point's node cell (``_predict``). The others need no antecedent."""
+    out = np.zeros(node_shape, np.bool_)
+    ptr, start, stop = (np.ascontiguousarray(a, dtype=np.int64) for a in spans)
+    _mark_needed(ptr, start, stop, np.int64(step), out)
+    return out
+
+
+@njit(cache=True)
+def _mark_needed(ptr, start, stop, step, out):  # pragma: no cover
+    """``needed_nodes`` into its False-filled output."""
+    nr, nc = out.shape
+    for i in range(ptr.size - 1):
+        a = min(i // step, nr - 2)
+        for k in range(ptr[i], ptr[i + 1]):
+            if stop[k] <= start[k]:
+                continue
+            for b in range(min(start[k] // step, nc - 2), min((stop[k] - 1) // step, nc - 2) + 2):
+                out[a, b] = True
+                out[a + 1, b] = True
+
+
 def primary_nodes(grid: OutputGrid, row_start: int, shape: tuple[int, int], step: int,
-                  col_start: int = 0) -> tuple[np.ndarray, np.ndarray]:
+                  col_start: int = 0,
+                  spans: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+                  ) -> tuple[np.ndarray, np.ndarray]:
     """WGS84 lon/lat (2-D) of the primary-grid nodes of output rows [row_start, row_start +
     shape[0]) and columns [col_start, col_start + shape[1]): every ``step`` pixels from the
     first row and column, at least 2 x 2 nodes, the last ones past the grid edge when needed
-    (the prediction interpolates between them)."""
+    (the prediction interpolates between them). With the CSR ``spans`` of those rows, NaN at
+    the nodes no point of the spans reads (``needed_nodes``): the searches skip them."""
     nr, nc = shape
     rows = row_start + np.arange(0, max(nr - 1, 0) + step, step, dtype=np.float64)
     cols = col_start + np.arange(0, max(nc - 1, 0) + step, step, dtype=np.float64)
@@ -505,7 +533,11 @@ def primary_nodes(grid: OutputGrid, row_start: int, shape: tuple[int, int], step
         rows = np.r_[rows, rows[-1] + step]
     if cols.size < 2:
         cols = np.r_[cols, cols[-1] + step]
-    return grid.lonlat_at(rows[:, None], cols[None, :])
+    lon, lat = grid.lonlat_at(rows[:, None], cols[None, :])
+    if spans is None:
+        return lon, lat
+    unused = ~needed_nodes(spans, step, lon.shape)
+    return np.where(unused, np.nan, lon), np.where(unused, np.nan, lat)
 
 
 def solve(tp, grid, lon: np.ndarray, lat: np.ndarray, height: np.ndarray | None, hmode: int,
