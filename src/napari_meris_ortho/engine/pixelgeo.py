@@ -10,10 +10,11 @@ output points, interpolated as the prediction of every output point, then the ce
 the point (``cell_search``) inverted exactly (Newton on the bilinear cell). Relief moves a
 terrain point along its product line (a push-broom frame: its lines of sight lie in one plane),
 and along a line the first intersections follow the sweep of the line of sight in order:
-hidden ground makes a jump, never a fold. So the cell is bracketed by bisection along the
-predicted line and its neighbours. A cell spanning a jump (``seen_antecedent``) holds ground
-no pixel sees: it is reported (iterations ``OCCLUDED``), not mapped. The edge cells are
-extended by the outer half pixel; points whose antecedent leaves the product (-0.5 <= l <
+hidden ground makes a jump, never a fold. So the cell is bracketed along the predicted line
+and its neighbours (doubling steps from the predicted column, then bisection; only the primary
+nodes some output point reads are searched). A cell spanning a jump (``seen_antecedent``)
+holds ground no pixel sees: it is reported (iterations ``OCCLUDED``), not mapped. The edge cells
+are extended by the outer half pixel; points whose antecedent leaves the product (-0.5 <= l <
 H-0.5, -0.5 <= p < W-0.5) are dropped.
 
 Arrays in, arrays out: ``lon``/``lat`` grids (H, W) float64 degrees in the stored column order.
