@@ -37,7 +37,7 @@ import numpy as np
 from numba import njit
 
 from .inverse import search_facet, wrap180
-from .location import direct_point, direct_point_inline, parallax_factors
+from .location import direct_point, direct_point_inline, facet_of, parallax_factors
 from .threads import split_range
 
 if TYPE_CHECKING:
@@ -179,10 +179,7 @@ def _node_row(cl, cp, rates, step, i, moved, row):  # pragma: no cover
     primary grid (cl, cp) and, when ``moved``, its ``height_rates`` interpolated between the
     two node rows around i, into ``row`` (2 rows, or 5 when moved, by node columns); NaN where
     a node is missing."""
-    nr = cl.shape[0]
-    ti = i / step
-    a = min(int(ti), nr - 2)
-    u = ti - a
+    a, u = facet_of(i, step, cl.shape[0])
     for b in range(cl.shape[1]):
         row[0, b] = (1 - u) * cl[a, b] + u * cl[a + 1, b]
         row[1, b] = (1 - u) * cp[a, b] + u * cp[a + 1, b]
@@ -198,14 +195,11 @@ def _predict(row, cl, cp, step, i, j, h):
     then between the node columns around j), moved by ``h`` times the interpolated height
     rates (``height_rates``; h NaN: the tie-point height there, 0: no move); a node missing:
     any valid one of the four around, unmoved (then Newton does the rest)."""
-    nr, nc = cl.shape
-    tj = j / step
-    b = min(int(tj), nc - 2)
-    v = tj - b
+    b, v = facet_of(j, step, cl.shape[1])
     l = (1 - v) * row[0, b] + v * row[0, b + 1]
     p = (1 - v) * row[1, b] + v * row[1, b + 1]
     if math.isnan(l):  # a missing node: take any valid one (then Newton does the rest)
-        a = min(int(i / step), nr - 2)
+        a = facet_of(i, step, cl.shape[0])[0]
         for da in range(2):
             for db in range(2):
                 if not math.isnan(cl[a + da, b + db]):
@@ -508,11 +502,12 @@ def _mark_needed(ptr, start, stop, step, out):  # pragma: no cover
     """``needed_nodes`` into its False-filled output."""
     nr, nc = out.shape
     for i in range(ptr.size - 1):
-        a = min(i // step, nr - 2)
+        a = facet_of(i, step, nr)[0]
         for k in range(ptr[i], ptr[i + 1]):
             if stop[k] <= start[k]:
                 continue
-            for b in range(min(start[k] // step, nc - 2), min((stop[k] - 1) // step, nc - 2) + 2):
+            for b in range(facet_of(start[k], step, nc)[0],
+                           facet_of(stop[k] - 1, step, nc)[0] + 2):
                 out[a, b] = True
                 out[a + 1, b] = True
 
