@@ -166,7 +166,8 @@ def main() -> None:
                         help="hold each worker to a core of its own even when there are fewer "
                              "workers than cores (one core against two)")
     parser.add_argument("--codecs", default="zstd,delta-zstd",
-                        help="store codecs of the update table (synthesize's codec=)")
+                        help="store codecs of the update table (synthesize's codec=; '': "
+                             "no update table)")
     args = parser.parse_args()
 
     from napari_meris_ortho.geometry.grid import OutputGrid
@@ -198,7 +199,9 @@ def main() -> None:
         updates = [median([update_cost(paths, g, bands, args.tile, tmp, name, codec)
                            for _ in range(args.repeat)])
                    for name, g in (("small", grid), ("Europe", europe))
-                   for codec in args.codecs.split(",")]
+                   for codec in args.codecs.split(",") if codec]
+    if not updates:
+        return
     print(f"\n{'store':>8s} {'codec':>10s} {'grid':>15s} {'overviews':>9s} {'update s':>9s} "
           f"{'MB added':>9s} {'files added':>12s}")
     for u in updates:

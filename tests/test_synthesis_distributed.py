@@ -260,3 +260,44 @@ def test_a_one_thread_worker_runs_the_engine_on_one_thread() -> None:
             Client(cluster, set_as_default=False) as client:  # no env of ours: the nanny's
         assert list(client.run(threads_and_cores).values()) == [(1, cores)]
 
+
+
+def _mapped_bytes_of_an_array() -> int:
+    """Bytes glibc maps on their own (``mallinfo2().hblkhd``) for an 8 MiB array held."""
+    import ctypes
+
+    class Mallinfo2(ctypes.Structure):
+        _fields_ = [(name, ctypes.c_size_t) for name in (
+            "arena", "ordblks", "smblks", "hblks", "hblkhd", "usmblks", "fsmblks", "uordblks",
+            "fordblks", "keepcost")]
+
+    mallinfo2 = ctypes.CDLL(None).mallinfo2
+    mallinfo2.restype = Mallinfo2
+    before = mallinfo2().hblkhd
+    array = np.ones(1 << 20, np.float64)
+    mapped = mallinfo2().hblkhd - before
+    del array
+    return int(mapped)
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not (os.confstr("CS_GNU_LIBC_VERSION") or "").startswith("glibc"),
+                    reason="glibc's malloc")
+def test_a_worker_keeps_its_arrays_in_its_heap_once_it_runs_a_tile(products, tmp_path) -> None:
+    """A dask nanny starts its worker with ``MALLOC_TRIM_THRESHOLD_=65536``, which holds glibc's
+    mmap threshold at 128 KiB: every array of a tile is mapped on fresh pages and unmapped when
+    freed. Once the worker has run a tile task, an array under 32 MiB comes from its heap
+    (``_process.keep_task_arrays``). The client's own process is left as it is."""
+    from distributed import Client, LocalCluster
+
+    from napari_meris_ortho.synthesis.run import WORKER_ENV, _tune_worker
+
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=True,
+                      dashboard_address=None, env=WORKER_ENV) as cluster, \
+            Client(cluster, set_as_default=False) as client:
+        fresh = list(client.run(_mapped_bytes_of_an_array).values())
+        synthesize(products[:2], tmp_path / "s", scheduler=cluster.scheduler_address, **COMMON)
+        tuned = list(client.run(_mapped_bytes_of_an_array).values())
+    assert fresh[0] >= 8 << 20, fresh  # the nanny's setting: mapped on its own
+    assert tuned == [0], tuned
+    assert _tune_worker() is False  # not a worker: this process untouched

@@ -10,8 +10,10 @@ per tile.
 from __future__ import annotations
 
 import contextlib
+import functools
 import logging
 import os
+import sys
 import uuid
 import warnings
 from collections import OrderedDict
@@ -21,6 +23,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from .._process import keep_task_arrays
 from ..engine.synthesis import NDVI_NIR_BAND, NDVI_RED_BAND, TileState
 from ..errors import DemError, MerisOrthoError, OptionsError, OutputError
 from ..options import OrthoOptions, Sampling, StoreCodec
@@ -461,6 +464,7 @@ def tile_job(fork: Any, spec: Spec, window: Window, jobs: Sequence[Job], rank: n
     One task per tile: no piece travels between workers or waits for its merge, a worker holds
     one piece at a time, and tiles stream (each is written as soon as its products are done).
     ``on_piece``: called after each piece (in process: the run's progress, and its Cancel)."""
+    _tune_worker()
 
     def pieces() -> Iterator[Piece]:
         for index, path, piece, extent in jobs:
@@ -471,6 +475,20 @@ def tile_job(fork: Any, spec: Spec, window: Window, jobs: Sequence[Job], rank: n
                 on_piece()
 
     return tile_task(fork, spec, window, pieces(), rank, writer)
+
+
+@functools.cache
+def _tune_worker() -> bool:
+    """Once per process, in a dask worker only (a user's own process is left as it is): glibc's
+    malloc reuses a tile's arrays for the next one (``_process.keep_task_arrays``)."""
+    distributed = sys.modules.get("distributed")
+    if distributed is None:
+        return False
+    try:
+        distributed.get_worker()
+    except ValueError:  # not in a worker's task
+        return False
+    return keep_task_arrays()
 
 
 def tile_task(fork: Any, spec: Spec, window: Window, pieces: Iterable[Piece],
