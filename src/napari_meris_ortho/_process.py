@@ -107,8 +107,8 @@ def keep_task_arrays() -> bool:
     starts its workers with ``MALLOC_TRIM_THRESHOLD_=65536`` (``distributed.nanny.pre-spawn-
     environ``), which fixes both at 128 KiB: every array of a tile is then fresh, kernel-zeroed
     pages, freed again at once. One worker (held to a core) merging 4 fr-alps products, 15
-    bands: 1.05 M page faults and 3.8-4.1 s of system time, 15.1-15.5 s; with this, 47-50 k
-    faults, 11.2-11.6 s; its peak resident memory 450 -> 670 MB (measured). False off glibc
+    bands: 1.04-1.05 M page faults and 3.8-4.5 s of system time, 15.1-15.8 s; with this, 46-50 k
+    faults, 10.7-11.6 s; its peak resident memory 450 -> 670 MB (measured). False off glibc
     or with the tuning off."""
     return enabled() and _malloc_thresholds(WORKER_MMAP_THRESHOLD, 2 * WORKER_MMAP_THRESHOLD)
 
