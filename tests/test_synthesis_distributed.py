@@ -4,6 +4,7 @@ concurrent runs on one store and a corrupt product among many end cleanly."""
 
 from __future__ import annotations
 
+import ctypes
 import os
 import socket
 import subprocess
@@ -261,10 +262,8 @@ def test_a_one_thread_worker_runs_the_engine_on_one_thread() -> None:
         assert list(client.run(threads_and_cores).values()) == [(1, cores)]
 
 
-
 def _mapped_bytes_of_an_array() -> int:
     """Bytes glibc maps on their own (``mallinfo2().hblkhd``) for an 8 MiB array held."""
-    import ctypes
 
     class Mallinfo2(ctypes.Structure):
         _fields_ = [(name, ctypes.c_size_t) for name in (
@@ -281,8 +280,8 @@ def _mapped_bytes_of_an_array() -> int:
 
 
 @pytest.mark.slow
-@pytest.mark.skipif(not (os.confstr("CS_GNU_LIBC_VERSION") or "").startswith("glibc"),
-                    reason="glibc's malloc")
+@pytest.mark.skipif(not hasattr(ctypes.CDLL(None), "mallinfo2"),
+                    reason="glibc's malloc (2.33 or later: mallinfo2)")
 def test_a_worker_keeps_its_arrays_in_its_heap_once_it_runs_a_tile(products, tmp_path) -> None:
     """A dask nanny starts its worker with ``MALLOC_TRIM_THRESHOLD_=65536``, which holds glibc's
     mmap threshold at 128 KiB: every array of a tile is mapped on fresh pages and unmapped when
