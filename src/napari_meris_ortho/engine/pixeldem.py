@@ -155,6 +155,8 @@ def _dem_rows(lo, hi, tlon_a, tlat_a, height, ptr, start, stop, cl, cp, step, lo
     no_rates = np.zeros((3, 1, 1))  # the prediction is the zero-height inverse on E
     row = np.empty((2, cl.shape[1]))
     for i in range(lo, hi):
+        if ptr[i + 1] == ptr[i]:  # no span in this row: no node row to interpolate
+            continue
         _node_row(cl, cp, no_rates, step, i, False, row)
         for j in _columns(ptr, start, stop, i):
             tlon = tlon_a[i, j]

@@ -461,6 +461,8 @@ def find_pixel_antecedents(tlon_a, tlat_a, ptr, start, stop, cl, cp, step, lon, 
     h_used = np.full((nr, nc) if diagnostics else (1, 1), np.nan, np.float32)
     no_rates = np.zeros((3, 1, 1))  # the pixel geolocation has no height rates: h = 0
     for i in prange(nr):
+        if ptr[i + 1] == ptr[i]:  # no span in this row: no node row to interpolate
+            continue
         row = np.empty((2, cl.shape[1]))
         _node_row(cl, cp, no_rates, step, i, False, row)
         for j in _columns(ptr, start, stop, i):
