@@ -22,6 +22,10 @@ With ``--store``: a Europe-size synthesis store (21384 x 14969 pixels at 260 m, 
 maximum NDVI) holding the scene's product, made once in the cache directory, opened instead
 (no runs): what a user opening a season's store waits for.
 
+With ``--synthesis N``: the runs are the widget's synthesis (maximum NDVI, all 15 bands, tie-point
+elevations) of N products of the scene (``bench_synthesis.products``: the same season), into a
+temporary store read back into layers.
+
 With ``--sen3``: the scene's ``.SEN3`` product instead (``simulate.geocorrected``, written
 next to the scene once), opened only (no runs), and the reader's peak allocation
 (``tracemalloc`` around ``read_layers``, outside the timed opens).
@@ -137,7 +141,7 @@ def europe_store(scene_name: str) -> str:
 
 
 def bench(scene_name: str, sen3: bool = False, store: bool = False,
-          open_only: bool = False) -> dict[str, Any]:
+          open_only: bool = False, synthesis: int = 0) -> dict[str, Any]:
     import tempfile
 
     os.environ.setdefault("MERIS_ORTHO_NO_WARMUP", "1")  # no compiler thread competing
@@ -162,7 +166,8 @@ def bench(scene_name: str, sen3: bool = False, store: bool = False,
     app = QApplication.instance()
     _spin(app, lambda: False, 1.0)  # the window is up
     out: dict[str, Any] = {"source": os.path.dirname(napari_meris_ortho.__file__),
-                           "scene": scene_name, "product": os.path.basename(product),
+                           "scene": scene_name, "synthesis": synthesis,
+                           "product": os.path.basename(product),
                            "rss_start_mb": _rss_mb()}
 
     for key in ("", "warm_"):
@@ -187,10 +192,17 @@ def bench(scene_name: str, sen3: bool = False, store: bool = False,
         _, widget = viewer.window.add_plugin_dock_widget("napari-meris-ortho", "Orthorectify")
         _spin(app, lambda: False, 1.5)  # the user filling the form
     out["dock_open_longest_stall_s"] = turns.longest_gap
-    widget.products.value = [scene.product_path]
-    widget.add_dem(scene.dem_paths["geotiff"])
-    widget.bands.value = "7,5,2"
-    widget.elevation.value, widget.pixel_size.value, widget.geometry.value = "dem", 0.0, True
+    if synthesis:
+        from bench_synthesis import products
+
+        widget.products.value = products(synthesis, scene_name)
+        widget.algorithm.value, widget.bands.value = "max-ndvi", ",".join(map(str, range(1, 16)))
+        widget.elevation.value, widget.geometry.value = "tiepoints", False
+    else:
+        widget.products.value = [scene.product_path]
+        widget.add_dem(scene.dem_paths["geotiff"])
+        widget.bands.value = "7,5,2"
+        widget.elevation.value, widget.pixel_size.value, widget.geometry.value = "dem", 0.0, True
     runs = []
     rss_before = _rss_mb()
     for k in range(RUNS):
@@ -237,9 +249,11 @@ def main() -> None:
                         help="open a Europe-size synthesis store of the scene (no runs)")
     parser.add_argument("--open-only", action="store_true",
                         help="measure the opening only (no runs)")
+    parser.add_argument("--synthesis", type=int, default=0, metavar="N",
+                        help="the runs: the widget's synthesis of N products of the scene")
     parser.add_argument("--json", help="write the figures to this file")
     args = parser.parse_args()
-    out = bench(args.scene, args.sen3, args.store, args.open_only)
+    out = bench(args.scene, args.sen3, args.store, args.open_only, args.synthesis)
     print(f"source: {out['source']}")
     kind = "SEN3" if args.sen3 else "Europe-size synthesis store" if args.store else "N1"
     print(f"open {args.scene} {kind} to first pixels: {out['open_to_first_pixels_s']:.2f} s "
@@ -257,6 +271,8 @@ def main() -> None:
 
 
 def _print_runs(out: dict[str, Any]) -> None:
+    if out.get("synthesis"):
+        print(f"runs: the widget's synthesis of {out['synthesis']} products (max-ndvi, 15 bands)")
     print(f"Orthorectify dock opened: longest stall {out['dock_open_longest_stall_s']:.3f} s")
     for k, run in enumerate(out["runs"]):
         print(f"run {k + 1}: {run['run_s']:.2f} s, longest UI stall "

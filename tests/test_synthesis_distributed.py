@@ -5,6 +5,7 @@ concurrent runs on one store and a corrupt product among many end cleanly."""
 from __future__ import annotations
 
 import ctypes
+import json
 import os
 import socket
 import subprocess
@@ -300,3 +301,37 @@ def test_a_worker_keeps_its_arrays_in_its_heap_once_it_runs_a_tile(products, tmp
     assert fresh[0] >= 8 << 20, fresh  # the nanny's setting: mapped on its own
     assert tuned == [0], tuned
     assert _tune_worker() is False  # not a worker: this process untouched
+
+
+_VIEWER_RUN = """
+import json, sys
+sys.path.insert(0, sys.argv[1])
+from test_synthesis_distributed import COMMON, _mapped_bytes_of_an_array
+from napari_meris_ortho import _process
+from napari_meris_ortho.synthesis.api import synthesize
+
+_process.return_freed_memory()  # as the plugin sets the viewer's malloc
+before = _mapped_bytes_of_an_array()
+during = []
+synthesize(sys.argv[3:], sys.argv[2], workers=0,
+           progress=lambda done, total: during.append(_mapped_bytes_of_an_array()), **COMMON)
+print(json.dumps({"before": before, "during": during, "after": _mapped_bytes_of_an_array()}))
+"""
+
+
+@pytest.mark.skipif(not hasattr(ctypes.CDLL(None), "mallinfo2"),
+                    reason="glibc's malloc (2.33 or later: mallinfo2)")
+def test_a_viewer_keeps_a_runs_arrays_in_its_heap_for_the_run_only(products, tmp_path) -> None:
+    """The viewer's malloc maps a block of 256 KiB or more on its own, so that removed layers
+    give their memory back (``_process.return_freed_memory``). A synthesis run in that process
+    (the Orthorectify widget's, ``workers=0``) takes its arrays from the heap while it runs, as
+    a worker does (``_process.task_arrays_kept``), and the viewer's setting is back after it."""
+    env = {k: v for k, v in os.environ.items() if k != "MERIS_ORTHO_NO_TUNING"}
+    done = subprocess.run([sys.executable, "-c", _VIEWER_RUN, str(Path(__file__).parent),
+                           str(tmp_path / "s"), *products[:2]],
+                          capture_output=True, text=True, env=env, timeout=300)
+    assert done.returncode == 0, done.stderr[-2000:]
+    seen = json.loads(done.stdout.strip().splitlines()[-1])
+    assert seen["before"] >= 8 << 20, seen  # the viewer's setting: mapped on its own
+    assert seen["during"] and set(seen["during"]) == {0}, seen
+    assert seen["after"] >= 8 << 20, seen

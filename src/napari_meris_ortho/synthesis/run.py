@@ -23,7 +23,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from .._process import keep_task_arrays
+from .._process import keep_task_arrays, task_arrays_kept
 from ..engine.synthesis import NDVI_NIR_BAND, NDVI_RED_BAND, TileState
 from ..errors import DemError, MerisOrthoError, OptionsError, OutputError
 from ..options import OrthoOptions, Sampling, StoreCodec
@@ -198,10 +198,11 @@ def engine(workers: int, scheduler: str | None) -> Iterator[InProcess | Dask]:
     """The runner: this process, an embedded LocalCluster or an existing scheduler."""
     if scheduler is None and workers == 0:
         runner = InProcess()
-        try:
-            yield runner
-        finally:
-            runner.writer.close()
+        with task_arrays_kept():  # in a viewer: its arrays from the heap, as in a worker
+            try:
+                yield runner
+            finally:
+                runner.writer.close()
         return
     import distributed
 
