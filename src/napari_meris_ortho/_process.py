@@ -116,7 +116,8 @@ def task_arrays_kept() -> Iterator[None]:
     in a worker (``keep_task_arrays``); the viewer's thresholds come back after the last run,
     and the heap is trimmed (``malloc_trim``). The run's arrays are its own (its result is in
     the store), so none outlives it. The Orthorectify widget's synthesis of 4 fr-alps products
-    (15 bands): ``synthesize`` 9.7-11.4 -> 7.4-7.8 s, memory after the layers' removal the same
+    (15 bands, ``bench_napari.py --synthesis 4``): ``synthesize`` 9.4-11.3 -> 7.6-9.0 s, a run
+    14.2-16.9 -> 12.7-13.4 s, memory after the layers' removal the same
     (measured). Elsewhere (a command, a library user's process): nothing."""
     with _runs_lock:
         viewer = _runs["viewer"]
