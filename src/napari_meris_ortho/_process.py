@@ -100,7 +100,13 @@ def return_freed_memory() -> bool:
         _runs["viewer"] = True
         if _runs["kept"]:  # a run keeps its arrays now: its end sets them
             return True
-        return _malloc_thresholds(VIEWER_MMAP_THRESHOLD, 2 * VIEWER_MMAP_THRESHOLD)
+        return _viewer_thresholds()
+
+
+def _viewer_thresholds() -> bool:
+    """glibc's thresholds of a long-lived process: ``VIEWER_MMAP_THRESHOLD``, trimmed past
+    twice it."""
+    return _malloc_thresholds(VIEWER_MMAP_THRESHOLD, 2 * VIEWER_MMAP_THRESHOLD)
 
 
 #: a process whose malloc hands big blocks back (``return_freed_memory`` called), and how many
@@ -133,7 +139,7 @@ def task_arrays_kept() -> Iterator[None]:
                 _runs["kept"] -= 1
                 last = not _runs["kept"]
                 if last:
-                    _malloc_thresholds(VIEWER_MMAP_THRESHOLD, 2 * VIEWER_MMAP_THRESHOLD)
+                    _viewer_thresholds()
             if last:
                 malloc_trim()
 
