@@ -74,6 +74,36 @@ def test_map_explicit_extent_and_options(files, tmp_path, caplog):
     assert not [r for r in caplog.records if r.levelno < logging.WARNING]  # -q: warnings only
 
 
+def test_map_crs_utm_is_the_zone_of_the_footprint(files, tmp_path):
+    """``--crs utm``: the UTM zone of the footprint centre (the widget's default), the same
+    grid and pixels as that zone named; -q/-v also after the command."""
+    import subprocess
+    import sys
+
+    from napari_meris_ortho.cli import build_parser
+
+    _, prod, _ = files
+    word, named = tmp_path / "utm.tif", tmp_path / "epsg.tif"
+    run = subprocess.run([sys.executable, "-m", "napari_meris_ortho.cli", "map", str(prod), "-o",
+                          str(word), "--crs", "UTM", "--bands", "7", "--elevation", "tiepoints",
+                          "-q"], capture_output=True, text=True, timeout=300)
+    assert run.returncode == 0 and run.stderr == ""  # -q after "map": no log, no bar
+    tp = read_product(prod).tie_points
+    zone = int((np.mean(tp["longitude"]) + 180.0) // 6.0) + 1  # far from the antimeridian
+    assert np.mean(tp["latitude"]) > 0 and zone == 32  # the footprint lies west of lon0 = 15 E
+    assert main(["-q", "map", str(prod), "-o", str(named), "--crs", f"EPSG:326{zone}",
+                 "--bands", "7", "--elevation", "tiepoints"]) == 0
+    (a,), grid, _ = read_geotiff(word)
+    (b,), grid_named, _ = read_geotiff(named)
+    assert grid.crs.to_epsg() == 32632 and grid == grid_named
+    assert np.count_nonzero(a) > 10000 and np.array_equal(a, b)
+    parse = build_parser().parse_args
+    assert parse(["map", "p", "-o", "o.tif", "-v"]).verbose
+    assert parse(["-v", "map", "p", "-o", "o.tif"]).verbose
+    plain = parse(["map", "p", "-o", "o.tif"])
+    assert not plain.verbose and not plain.quiet
+
+
 def test_map_geotiff_carries_band_and_scaling_metadata(files, tmp_path):
     """Issue 4 item 9 / issue 12: band descriptions (number, wavelength); uint16 counts with
     GDAL scale = sf_rad in a valid Cloud-Optimized GeoTIFF; nearest output = the counts."""
@@ -153,6 +183,8 @@ def test_bad_inputs_exit_2_without_output(files, tmp_path, capsys):
         (["map", str(prod), "-o", out, "--pixel-size", "0"], "pixel-size"),
         (["map", str(prod), "-o", out, "--pixel-size", "-3"], "pixel-size"),
         (["map", str(prod), "-o", out, "--crs", "EPSG:999999"], "CRS"),
+        (["map", str(prod), "-o", out, "--crs", "utm", "--ul", "11", "45", "--lr", "12", "44",
+          "--pixel-size", "0.01"], "name the zone"),
         (["map", str(prod), "-o", str(tmp_path / "nodir" / "o.tif")], "does not exist"),
         (["map", str(prod), "-o", out, "--tolerance", "0"], "tolerance"),
     ]

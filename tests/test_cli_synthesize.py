@@ -92,12 +92,30 @@ def test_synthesis_log_and_export(products, tmp_path, capsys) -> None:
     assert not (tmp_path / "x.tif").exists()
 
 
+def test_crs_utm_is_the_first_products_zone(products, tmp_path) -> None:
+    """``--crs utm``: a new synthesis on the UTM zone of its product's footprint, the grid of
+    that zone named."""
+    import numpy as np
+
+    from napari_meris_ortho.ortho import product_grid
+    from napari_meris_ortho.products.n1 import read_product
+
+    assert main(["-q", "synthesize", products[0], "--out", str(tmp_path / "syn"), "--bands", "7",
+                 "--crs", "utm", *COMMON]) == 0
+    grid = open_synthesis(tmp_path / "syn").grid
+    product = read_product(products[0])
+    zone = int((np.mean(product.tie_points["longitude"]) + 180.0) // 6.0) + 1
+    assert grid.crs.to_epsg() == 32600 + zone
+    assert grid == product_grid(product, f"EPSG:{32600 + zone}")
+
+
 def test_refusals_exit_2(products, tmp_path, capsys) -> None:
     out = tmp_path / "syn"
     assert main(["-q", "synthesize", products[0], "--out", str(out), "--bands", "7",
                  *GRID_ARGS, *COMMON]) == 0
     before = _snapshot(out)
-    for extra in (["--crs", "EPSG:32633"], ["--pixel-size", "0.01"], ["--bands", "3"],
+    for extra in (["--crs", "EPSG:32633"], ["--crs", "utm"], ["--pixel-size", "0.01"],
+                  ["--bands", "3"],
                   ["--ul", "13", "47", "--lr", "14", "46"], ["--codec", "delta-zstd"]):
         assert main(["-q", "synthesize", products[1], "--input", str(out), "--out", str(out),
                      *extra, *COMMON]) == 2

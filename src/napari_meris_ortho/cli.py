@@ -46,15 +46,23 @@ def build_parser() -> argparse.ArgumentParser:
         description="Orthorectify, synthesize and analyse Envisat MERIS L1b products.",
     )
     parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
-    parser.add_argument("-v", "--verbose", action="store_true", help="debug logging")
-    parser.add_argument(
-        "-q", "--quiet", action="store_true", help="no progress bars; warnings only"
-    )
+    _add_logging_options(parser, False)
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
     sub.required = True
     for name in COMMANDS:
         import_module(f"napari_meris_ortho._commands.{name.replace('-', '_')}").register(sub)
+    for command in sub.choices.values():  # also after the command: "meris-ortho map ... -q"
+        _add_logging_options(command, argparse.SUPPRESS)
     return parser
+
+
+def _add_logging_options(parser: argparse.ArgumentParser, default: object) -> None:
+    """``-v``/``--verbose`` and ``-q``/``--quiet``; a command's own take ``default``
+    ``SUPPRESS``, so that left out there they keep what was given before the command."""
+    parser.add_argument("-v", "--verbose", action="store_true", default=default,
+                        help="debug logging")
+    parser.add_argument("-q", "--quiet", action="store_true", default=default,
+                        help="no progress bars; warnings only")
 
 
 def _on_signal(signum: int, frame: object) -> None:

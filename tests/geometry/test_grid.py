@@ -15,8 +15,11 @@ from napari_meris_ortho.geometry.grid import (
     MEAN_EARTH_RADIUS,
     OutputGrid,
     default_grid,
+    footprint_utm,
+    is_footprint_utm,
     pixel_pair,
     pixel_size_for,
+    product_crs,
     terrain_margin_px,
     utm_crs_for,
 )
@@ -91,6 +94,19 @@ def test_utm_zone_helper():
     assert utm_crs_for(179.9, 0.0).to_epsg() == 32660
     assert utm_crs_for(180.0, 1.0).to_epsg() == 32601
     assert utm_crs_for(-180.0, 1.0).to_epsg() == 32601
+
+
+def test_footprint_utm_across_the_antimeridian_and_the_word():
+    lat = np.array([[40.0, 41.0], [42.0, 43.0]])
+    lon = np.array([[178.0, -176.0], [177.0, -177.0]])  # centre 180.5 E: zone 1, not 31
+    assert footprint_utm(lat, lon).to_epsg() == 32601
+    assert footprint_utm(-lat, lon + 0.0).to_epsg() == 32701
+    assert footprint_utm(lat, lon - 170.0).to_epsg() == 32632  # 8-14 E
+    assert product_crs(" UTM ", lat, lon).to_epsg() == 32601
+    assert product_crs("EPSG:3035", lat, lon).to_epsg() == 3035
+    assert is_footprint_utm("utm") and not is_footprint_utm("utm32")
+    with pytest.raises(OptionsError, match="unknown CRS"):
+        product_crs("utm32", lat, lon)
 
 
 class _Poly:

@@ -53,9 +53,11 @@ def add_sampling_option(p: Any, help: str) -> None:
     p.add_argument("--sampling", choices=choices(Sampling), default="nearest", help=help)
 
 
-def add_grid_options(p: Any, crs_default: str | None, crs_help: str) -> None:
+def add_grid_options(p: Any, crs_default: str | None) -> None:
     """``--crs``, ``--pixel-size``, ``--ul X Y``, ``--lr X Y`` (a parser or argument group)."""
-    p.add_argument("--crs", default=crs_default, help=crs_help)
+    p.add_argument("--crs", default=crs_default,
+                   help="output CRS: what PROJ reads (EPSG:32632, WKT, a PROJ string), or utm: "
+                   "the UTM zone of the (first) product's footprint centre (default EPSG:4326)")
     p.add_argument("--pixel-size", type=float, default=None, metavar="SIZE",
                    help="pixel size in CRS units (default: 260 m FR / 1040 m RR)")
     p.add_argument("--ul", type=float, nargs=2, default=None, metavar=("X", "Y"),
@@ -115,16 +117,21 @@ def ortho_options(args: argparse.Namespace, **values: Any) -> OrthoOptions:
 def grid_from_args(args: argparse.Namespace, default_crs: str = "EPSG:4326") -> Any:
     """The ``OutputGrid`` of ``--ul``/``--lr``/``--pixel-size``/``--crs``, or None without
     corners (then the product footprint sets the extent); checks the pixel size and the CRS."""
-    from ..geometry.grid import OutputGrid, output_crs
+    from ..geometry.grid import OutputGrid, is_footprint_utm, output_crs
 
     if args.pixel_size is not None and not (math.isfinite(args.pixel_size)
                                             and args.pixel_size > 0):
         raise OptionsError(f"--pixel-size must be > 0, got {args.pixel_size}")
-    crs = output_crs(args.crs or default_crs)
+    crs = args.crs or default_crs
+    if not is_footprint_utm(crs):
+        crs = output_crs(crs)
     if (args.ul is None) != (args.lr is None):
         raise OptionsError("--ul and --lr need each other")
     if args.ul is None:
         return None
+    if is_footprint_utm(crs):
+        raise OptionsError("--crs utm takes its zone from the product's footprint; with --ul/--lr "
+                           "name the zone (e.g. --crs EPSG:32632)")
     if args.pixel_size is None:
         raise OptionsError("--ul/--lr need --pixel-size")
     return OutputGrid.from_extent(crs, args.ul, args.lr, args.pixel_size)

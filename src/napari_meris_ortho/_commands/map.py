@@ -39,7 +39,7 @@ def register(subparsers: Any) -> None:
         p, dem_help="DEM (repeatable; tried in order at each point, then the tie points)",
         elevation_help="elevation source (default: dem with a --dem, else the tie points; "
         "dem given explicitly needs a --dem)")
-    add_grid_options(p, "EPSG:4326", "output CRS (default EPSG:4326)")
+    add_grid_options(p, "EPSG:4326")
     add_bands_option(p, "bands to map, e.g. 3,5,7 (default all 15)")
     add_sampling_option(p, "resampling (default nearest, as MERSYN)")
     p.add_argument("--tolerance", type=float, default=0.01, metavar="PX",

@@ -79,7 +79,7 @@ def register(subparsers: Any) -> None:
                         "$DASK_SCHEDULER_ADDRESS); the store and products must be on storage "
                         "all workers see")
     grid = p.add_argument_group("grid of a new synthesis (refused with --input)")
-    add_grid_options(grid, None, "output CRS (default EPSG:4326)")
+    add_grid_options(grid, None)
     p.set_defaults(func=run)
 
 

@@ -27,7 +27,7 @@ from ..progress import ProgressCallback
 from ..pyramid import level_factors, memory_levels
 from .geometry_layers import geometry_layers
 from .product_layers import band_layers, diagnostic_layers
-from .world import footprint_utm, geo_image_kwargs, move_to_frame
+from .world import geo_image_kwargs, move_to_frame
 
 #: "mapping" orthorectifies every product on its own; the merge rules build a synthesis
 MAPPING = "mapping"
@@ -159,7 +159,7 @@ parse_bands = parse_band_list
 
 def output_crs(options: RunSettings, tie_points: Mapping[str, np.ndarray]) -> Any:
     """The output CRS: the UTM zone of the footprint centre, EPSG:4326 or the given EPSG code."""
-    from ..geometry.grid import parse_crs
+    from ..geometry.grid import footprint_utm, parse_crs
 
     if options.crs == CRS_GEOGRAPHIC:
         return parse_crs("EPSG:4326")
@@ -167,7 +167,7 @@ def output_crs(options: RunSettings, tie_points: Mapping[str, np.ndarray]) -> An
         if not options.epsg:
             raise OptionsError("output CRS 'EPSG code' needs an EPSG code")
         return parse_crs(f"EPSG:{int(options.epsg)}")
-    return footprint_utm(tie_points)
+    return footprint_utm(tie_points["latitude"], tie_points["longitude"])
 
 
 def _pixel_size(options: RunSettings, product: Any, crs: Any) -> float:

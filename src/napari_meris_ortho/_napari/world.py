@@ -28,12 +28,12 @@ that every layer shares one CRS and one unit (napari keeps its units and the sca
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable
 from typing import Any
 
 import numpy as np
 
-from ..geometry.grid import OutputGrid, crs_wkt
+from ..geometry.grid import FOOTPRINT_UTM, OutputGrid, crs_wkt
 from ..placement import (
     reproject_onto,
     tie_point_affine,
@@ -98,16 +98,6 @@ def viewer_frame(layers: Iterable[Any]) -> OutputGrid | None:
     return None
 
 
-def footprint_utm(tie_points: Mapping[str, np.ndarray]) -> Any:
-    """The UTM zone CRS of a product's footprint centre (circular mean of the tie-point
-    longitudes, mean latitude): the default world and output CRS."""
-    from ..geometry.grid import utm_crs_for
-
-    lat, lon = tie_points["latitude"], tie_points["longitude"]
-    centre_lon = float(np.degrees(np.angle(np.mean(np.exp(1j * np.radians(lon))))))
-    return utm_crs_for(centre_lon, float(np.mean(lat)))
-
-
 def product_world(product: Any, frame: OutputGrid | None) -> tuple[np.ndarray, float, OutputGrid]:
     """Where a product-geometry layer goes: the affine fit of its tie points into the world
     ``frame`` (``tie_point_affine``), its RMS error (CRS units) and the world grid; without a
@@ -116,7 +106,7 @@ def product_world(product: Any, frame: OutputGrid | None) -> tuple[np.ndarray, f
     if frame is None:
         from ..ortho import product_grid
 
-        frame = product_grid(product, footprint_utm(product.tie_points))
+        frame = product_grid(product, FOOTPRINT_UTM)
     affine, rms = tie_point_affine(product.tie_points, product.lines_per_tie_point,
                                    product.samples_per_tie_point, frame.crs)
     return affine, rms, frame

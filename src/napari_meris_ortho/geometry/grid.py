@@ -197,6 +197,31 @@ def utm_crs_for(lon: float, lat: float) -> pyproj.CRS:
     return pyproj.CRS.from_epsg((32600 if lat >= 0 else 32700) + zone)
 
 
+#: the ``crs`` word for the UTM zone of a product's footprint (``product_crs``; ``--crs utm``,
+#: the widget's default)
+FOOTPRINT_UTM = "utm"
+
+
+def footprint_utm(latitude: np.ndarray, longitude: np.ndarray) -> pyproj.CRS:
+    """The UTM zone CRS of a product's footprint centre from its tie points (degrees): circular
+    mean of the longitudes (a footprint across the antimeridian has its centre there), mean
+    latitude."""
+    lon = np.radians(np.asarray(longitude, np.float64))
+    centre_lon = float(np.degrees(np.angle(np.mean(np.exp(1j * lon)))))
+    return utm_crs_for(centre_lon, float(np.mean(latitude)))
+
+
+def is_footprint_utm(crs: Any) -> bool:
+    """True when ``crs`` is the word "utm" (``FOOTPRINT_UTM``, any case)."""
+    return isinstance(crs, str) and crs.strip().lower() == FOOTPRINT_UTM
+
+
+def product_crs(crs: Any, latitude: np.ndarray, longitude: np.ndarray) -> pyproj.CRS:
+    """The output CRS of a product: ``output_crs(crs)``, or for the word "utm" the UTM zone of
+    its footprint (``footprint_utm`` of its tie-point ``latitude``/``longitude``)."""
+    return footprint_utm(latitude, longitude) if is_footprint_utm(crs) else output_crs(crs)
+
+
 def pixel_size_for(resolution_m: float, crs: Any) -> float:
     """Pixel size in CRS units for a ground resolution in metres (Appendix C default).
 

@@ -25,7 +25,9 @@ from ..geometry.grid import (
     OutputGrid,
     check_grid_size,
     default_grid,
+    is_footprint_utm,
     parse_crs,
+    product_crs,
     terrain_margin_px,
 )
 from ..geometry.tiepoints import TiePointGrid
@@ -142,11 +144,11 @@ def orthorectify(product: ProductLike, grid: OutputGrid | None = None,
     """Map a MERIS L1b product onto ``grid`` with terrain correction (sections 3.1-3.4).
 
     ``product``: path or opened product (``read_product``); ``grid``: ``OutputGrid`` (default:
-    :func:`product_grid`, the smallest rectangle holding the segment boundary in ``crs``,
-    ``pixel_size`` in CRS units or FR 260 m / RR 1040 m pixels); ``dems``: DEM entries or
-    sources, tried in order. The options: ``options`` (an ``OrthoOptions``) and/or its fields
-    as keywords (``modes``, which replace those of ``options``; all checked by
-    ``OrthoOptions.of``):
+    :func:`product_grid`, the smallest rectangle holding the segment boundary in ``crs`` (the
+    word "utm": the UTM zone of the product's footprint), ``pixel_size`` in CRS units or FR
+    260 m / RR 1040 m pixels); ``dems``: DEM entries or sources, tried in order. The options:
+    ``options`` (an ``OrthoOptions``) and/or its fields as keywords (``modes``, which replace
+    those of ``options``; all checked by ``OrthoOptions.of``):
     ``elevation``: "none" (MERSYN ``-ort NO``), "tiepoints" (dem_alt at the antecedent) or "dem"
     (the DEMs at the output point, tried in order, then the tie points; without DEMs: the tie
     points); ``sampling``: "nearest", "bilinear", "bicubic"; ``bands`` (default all 15);
@@ -187,7 +189,7 @@ def precompute(product: ProductLike, grid: OutputGrid | None = None,
     t_start = time.perf_counter()
     opts = OrthoOptions.of(options, n_dems=len(dems), **modes)
     if grid is None:
-        crs = parse_crs(crs)
+        crs = crs if is_footprint_utm(crs) else parse_crs(crs)  # "utm": from the tie points
         check_pixel_size(pixel_size)
     segment = open_segment(product, dems, opts)
     read_ahead = getattr(segment.prod, "read_ahead", None)  # products that read bands whole
@@ -211,15 +213,16 @@ def check_pixel_size(pixel_size: float | None) -> None:
 def product_grid(product: ProductLike, crs: Any = "EPSG:4326",
                  pixel_size: float | None = None) -> OutputGrid:
     """The default output grid of a product: the smallest rectangle of ``crs`` holding its
-    segment boundary (section 3.1), ``pixel_size`` in CRS units (default: the product's column
-    spacing, FR 260 m / RR 1040 m, in CRS units). The one default grid of the package
-    (``orthorectify``, a new synthesis, the widget)."""
+    segment boundary (section 3.1; ``crs`` "utm": the UTM zone of its footprint),
+    ``pixel_size`` in CRS units (default: the product's column spacing, FR 260 m / RR 1040 m,
+    in CRS units). The one default grid of the package (``orthorectify``, a new synthesis,
+    the widget)."""
     prod = _open_product(product)
     tp = prod.tie_points
     boundary = segment_boundary(tp["latitude"], tp["longitude"])
     check_pixel_size(pixel_size)
-    return default_grid(boundary, _column_spacing_m(prod), parse_crs(crs),
-                        pixel_size=pixel_size)
+    return default_grid(boundary, _column_spacing_m(prod),
+                        product_crs(crs, tp["latitude"], tp["longitude"]), pixel_size=pixel_size)
 
 
 def _column_spacing_m(prod: MerisProduct) -> float:
@@ -347,7 +350,8 @@ def _prepare(seg: Segment, grid: OutputGrid | None, crs: Any, pixel_size: float 
                                               seg.options, seg.pixel)
     res_m = _column_spacing_m(prod)
     if grid is None:
-        grid = default_grid(boundary, res_m, crs, pixel_size=pixel_size)
+        grid = default_grid(boundary, res_m, product_crs(crs, tp.latitude, tp.longitude),
+                            pixel_size=pixel_size)
     size = (grid.width, grid.height, (grid.dx, grid.dy))
     # what the whole grid costs whatever the segment, before the spans (one a row or so)
     check_grid_size(*size, bytes_per_output_pixel(opts, hold_bands=hold_bands, area_share=0.0),

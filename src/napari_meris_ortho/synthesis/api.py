@@ -46,11 +46,12 @@ def synthesize(products: Sequence[str | os.PathLike[str]], out: str | os.PathLik
     1-2, Appendix C) into the synthesis store ``out``: one Icechunk commit.
 
     A new synthesis (no ``input``) takes ``grid``, or the footprint of the earliest readable
-    product (sensing time, then name; with ``crs``/``pixel_size``), and ``bands`` (default all
-    15). With ``input`` (may equal ``out``: update in place; else ``input`` is copied to ``out``
-    first), grid and bands come from the input synthesis; giving grid options or bands too is
-    refused as MERSYN refuses them. A product that cannot be read or orthorectified is reported
-    in ``result.failed`` and skipped; one already in the synthesis in ``result.skipped``.
+    product (sensing time, then name; with ``crs``/``pixel_size``; ``crs`` "utm": its UTM
+    zone), and ``bands`` (default all 15). With ``input`` (may equal ``out``: update in place;
+    else ``input`` is copied to ``out`` first), grid and bands come from the input synthesis;
+    giving grid options or bands too is refused as MERSYN refuses them. A product that cannot
+    be read or orthorectified is reported in ``result.failed`` and skipped; one already in the
+    synthesis in ``result.skipped``.
 
     ``workers``: 0 runs the tasks in this process, N > 0 on an embedded LocalCluster of N
     worker processes; ``scheduler``: address of an existing dask scheduler (the store path and
@@ -254,9 +255,10 @@ def _check_options(products: Sequence[Any], out_dir: Path, algorithm: str | None
     if pixel_size is not None and not pixel_size > 0:
         raise OptionsError(f"pixel size {pixel_size}: must be positive")
     if crs is not None:
-        from ..geometry.grid import parse_crs
+        from ..geometry.grid import is_footprint_utm, parse_crs
 
-        parse_crs(crs)
+        if not is_footprint_utm(crs):  # "utm": the first product's zone
+            parse_crs(crs)
     _check_dems(dems)
     if codec is not None:
         parse(StoreCodec, codec)
