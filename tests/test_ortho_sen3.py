@@ -103,6 +103,29 @@ def test_a_zipped_sen3_maps_end_to_end(pair, tmp_path, capsys):
     assert outs[0][1:] == outs[1][1:] and (outs[0][0] > 0).sum() > 100_000
 
 
+def test_a_renamed_zip_is_still_its_product_in_a_synthesis(pair, tmp_path, caplog):
+    """A download saved as "product (1).zip" holds ESA's ``<name>.SEN3/``: its product name is
+    that folder's, so a synthesis that merged the directory skips the archive (same sensing
+    time and name) instead of merging the same acquisition twice."""
+    from napari_meris_ortho.synthesis.reading import open_synthesis
+
+    archive = tmp_path / "product (1).zip"
+    with zipfile.ZipFile(archive, "w", zipfile.ZIP_STORED) as z:
+        for f in sorted(pair[1].iterdir()):
+            z.write(f, f"{pair[1].name}/{f.name}")
+    assert read_product(archive).product_name == pair[1].name.removesuffix(".SEN3")
+    out = tmp_path / "syn"
+    common = ["--elevation", "tiepoints", "--tile", "256", "--workers", "0"]
+    assert main(["-q", "synthesize", str(pair[1]), "--out", str(out), "--bands", "7",
+                 *common]) == 0
+    caplog.clear()
+    assert main(["synthesize", str(archive), "--input", str(out), "--out", str(out),
+                 *common]) == 0
+    assert "already in the synthesis" in caplog.text
+    store = open_synthesis(out)
+    assert len(store.history()) == 1 and int(store.read("count").max()) == 1
+
+
 def test_saturated_pixels_are_no_data_for_their_band_in_a_synthesis(pair, sen3_copy, tmp_path):
     from napari_meris_ortho.synthesis.api import synthesize
     from napari_meris_ortho.synthesis.reading import open_synthesis

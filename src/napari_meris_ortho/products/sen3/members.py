@@ -52,9 +52,11 @@ def is_sen3(path: str | os.PathLike[str]) -> bool:
     return p.suffix.lower() == ".zip" and _zip_prefix(p) is not None
 
 
-def product_name_of(path: Path) -> str:
-    """The product name of a ``.SEN3`` directory or ``.SEN3.zip``/``.zip`` archive."""
-    name = path.name
+def product_name_of(path: Path, prefix: str | None = None) -> str:
+    """The product name of a ``.SEN3`` directory or ``.SEN3.zip``/``.zip`` archive: an
+    archive's folder holding the manifest (``prefix``; a download renamed "product (1).zip"
+    still holds ESA's ``<name>.SEN3/``), else the file's own name."""
+    name = Path(prefix.rstrip("/")).name if prefix else path.name
     for suffix in (".zip", ".ZIP", ".SEN3", ".sen3"):
         name = name.removesuffix(suffix)
     return name

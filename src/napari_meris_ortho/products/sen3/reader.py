@@ -147,7 +147,7 @@ class MerisSen3Product:
 
     @property
     def product_name(self) -> str:
-        return product_name_of(self.path)
+        return product_name_of(self.path, self.members.prefix)
 
     @property
     def n_tie_lines(self) -> int:
