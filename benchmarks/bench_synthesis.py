@@ -1,8 +1,9 @@
 """Benchmark of the synthesis on dask workers (handbook section 3.1, use cases 1-2).
 
     .venv/bin/python benchmarks/bench_synthesis.py [--scene fr-alps] [--products 8]
-                                [--tile 1024] [--bands 15] [--workers 0,1,2] [--repeat 1]
-                                [--codecs zstd,delta-zstd] [--pin]
+                                [--format n1|sen3] [--tile 1024] [--bands 15]
+                                [--workers 0,1,2] [--repeat 1] [--codecs zstd,delta-zstd]
+                                [--pin]
 
 Prints two tables:
 
@@ -41,14 +42,26 @@ PIXEL_260M = 0.0023382372764265  # 260 m on the sphere R = 6 370 997 m (geometry
 EUROPE = (-10.0, 70.0, 50.0, 35.0)  # x0, y0, width, height (deg)
 
 
-def products(n: int, scene: str) -> list[str]:
+def products(n: int, scene: str, fmt: str = "n1") -> list[str]:
+    """``n`` cloudy dates of ``scene``: N1 files, or (``fmt`` "sen3") the 4th-reprocessing
+    ``.SEN3`` of each, told apart by the cycle field of its name (the simulated dates share a
+    sensing time, and a synthesis takes one product per sensing time and name)."""
+    from napari_meris_ortho.simulate.geocorrected import write_geocorrected
     from napari_meris_ortho.simulate.scene import generate_scene
 
     out = []
     for k in range(n):
         cfg = {"base": scene, "exports": NO_EXPORTS, "file_counter": k + 1,
                "clouds": {"fraction": 0.4, "scale_km": 20.0, "seed": 10 * (k + 1)}}
-        out.append(str(generate_scene(cfg).product_path))
+        generated = generate_scene(cfg)
+        if fmt == "n1":
+            out.append(str(generated.product_path))
+            continue
+        sen3 = write_geocorrected(generated, fsg=False)["sen3"]
+        named = sen3.with_name(sen3.name.replace("_000_000______MOR", f"_{k + 1:03d}_000______MOR"))
+        if not named.exists():
+            shutil.copytree(sen3, named)
+        out.append(str(named))
     return out
 
 
@@ -155,6 +168,8 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--scene", default="fr-alps", help="simulated scene (fr-small: quick)")
     parser.add_argument("--products", type=int, default=8)
+    parser.add_argument("--format", choices=("n1", "sen3"), default="n1",
+                        help="products as N1 files or as 4th-reprocessing .SEN3 directories")
     parser.add_argument("--tile", type=int, default=1024)
     parser.add_argument("--bands", type=int, default=15, help="bands 1..N (plus 7 and 13)")
     parser.add_argument("--workers", default="0,1,2",
@@ -172,15 +187,16 @@ def main() -> None:
 
     from napari_meris_ortho.geometry.grid import OutputGrid
     from napari_meris_ortho.ortho import product_grid
-    from napari_meris_ortho.products.n1 import read_product
+    from napari_meris_ortho.products.open import read_product
 
-    paths = products(args.products, args.scene)
+    paths = products(args.products, args.scene, args.format)
     bands = sorted(set(range(1, min(args.bands, 15) + 1)) | {7, 13})
     grid = product_grid(read_product(paths[0]), "EPSG:4326")
     europe = OutputGrid("EPSG:4326", EUROPE[0], EUROPE[1], PIXEL_260M, PIXEL_260M,
                         round(EUROPE[2] / PIXEL_260M), round(EUROPE[3] / PIXEL_260M))
-    print(f"{len(paths)} {args.scene} products, {len(bands)} bands, grid {grid.width} x "
-          f"{grid.height}, tile {args.tile}; {os.cpu_count()} cores (shared, loaded)")
+    print(f"{len(paths)} {args.scene} products ({args.format}), {len(bands)} bands, grid "
+          f"{grid.width} x {grid.height}, tile {args.tile}; {os.cpu_count()} cores (shared, "
+          "loaded)")
     with tempfile.TemporaryDirectory() as tmp_dir:
         tmp = Path(tmp_dir)
         rows = [median([throughput(paths, grid, bands, args.tile, int(w), tmp, args.pin)

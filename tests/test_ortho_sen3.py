@@ -126,6 +126,37 @@ def test_a_renamed_zip_is_still_its_product_in_a_synthesis(pair, tmp_path, caplo
     assert len(store.history()) == 1 and int(store.read("count").max()) == 1
 
 
+def test_a_synthesis_decodes_each_band_of_a_sen3_once(pair, tmp_path, monkeypatch):
+    """Every tile task reads every band of its products; a .SEN3 band (zlib netCDF-4) is
+    decoded once per process for the run, not once per tile, then freed; the layers are those
+    of a run that decodes at every tile (nothing kept: budget 0)."""
+    from napari_meris_ortho.products.sen3 import kept
+    from napari_meris_ortho.products.sen3.reader import MerisSen3Product
+    from napari_meris_ortho.synthesis.api import synthesize
+    from test_synthesis import layers
+
+    decoded: list[int] = []
+    real = MerisSen3Product._counts
+
+    def counted(self, band):  # the real decoding, observed
+        decoded.append(band)
+        return real(self, band)
+
+    monkeypatch.setattr(MerisSen3Product, "_counts", counted)
+    options = dict(bands=(7, 13), algorithm="max-ndvi", elevation="tiepoints", tile=256)
+    result = synthesize([pair[1]], tmp_path / "kept", **options)
+    assert len(result.merged) == 1 and sorted(decoded) == [7, 13]
+    assert kept.kept_bytes() == 0  # freed at the end of the run
+    product = read_product(pair[1])  # outside a run: nothing kept
+    assert not product.counts(7).flags.writeable and kept.kept_bytes() == 0
+    decoded.clear()
+    monkeypatch.setattr(kept, "BUDGET_BYTES", 0)
+    synthesize([pair[1]], tmp_path / "each", **options)
+    assert len(decoded) == 2 * 8 and decoded.count(7) == 8  # once a tile: 8 tiles of 256
+    a, b = layers(tmp_path / "kept"), layers(tmp_path / "each")
+    assert a.keys() == b.keys() and all(np.array_equal(a[k], b[k]) for k in a)
+
+
 def test_saturated_pixels_are_no_data_for_their_band_in_a_synthesis(pair, sen3_copy, tmp_path):
     from napari_meris_ortho.synthesis.api import synthesize
     from napari_meris_ortho.synthesis.reading import open_synthesis

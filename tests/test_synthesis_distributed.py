@@ -303,6 +303,36 @@ def test_a_worker_keeps_its_arrays_in_its_heap_once_it_runs_a_tile(products, tmp
     assert _tune_worker() is False  # not a worker: this process untouched
 
 
+def _keep_band_7(path: str) -> int:
+    """On a worker: band 7 of ``path`` decoded into the worker's product cache and kept, as a
+    run's tasks keep it; the bytes the worker then keeps."""
+    from napari_meris_ortho.products.sen3.kept import keep_decoded_bands, kept_bytes
+    from napari_meris_ortho.synthesis.run import _product
+
+    keep_decoded_bands()
+    _product(path).counts(7)
+    return kept_bytes()
+
+
+def test_workers_free_the_decoded_sen3_bands_at_the_end_of_a_run(cluster, tmp_path) -> None:
+    """A run's tasks keep the .SEN3 bands they decode (once per worker, not per tile); an
+    external cluster's workers outlive the run, which frees them on every worker."""
+    from distributed import Client
+
+    from napari_meris_ortho.products.sen3.kept import kept_bytes
+    from napari_meris_ortho.simulate.geocorrected import write_geocorrected
+    from napari_meris_ortho.simulate.scene import generate_scene
+
+    sen3 = write_geocorrected(generate_scene("fr-small"), fsg=False, out_dir=tmp_path)["sen3"]
+    with Client(cluster.scheduler_address, set_as_default=False) as client:
+        held = client.run(_keep_band_7, str(sen3))
+        assert list(held.values()) == [320 * 513 * 2] * 2, held  # an fr-small band each
+        result = synthesize([str(sen3)], tmp_path / "s", scheduler=cluster.scheduler_address,
+                            bands=(7, 13), tile=256, elevation="tiepoints")
+        assert len(result.merged) == 1
+        assert client.run(kept_bytes) == dict.fromkeys(held, 0)
+
+
 _VIEWER_RUN = """
 import json, sys
 sys.path.insert(0, sys.argv[1])

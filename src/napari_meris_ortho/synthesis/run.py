@@ -203,6 +203,7 @@ def engine(workers: int, scheduler: str | None) -> Iterator[InProcess | Dask]:
                 yield runner
             finally:
                 runner.writer.close()
+                _release_decoded_bands()
         return
     import distributed
 
@@ -227,7 +228,21 @@ def engine(workers: int, scheduler: str | None) -> Iterator[InProcess | Dask]:
             client = distributed.Client(cluster, set_as_default=False)
             hold_workers_to_cores(client)  # our own processes: one core each, if they fit
         stack.callback(client.close)
+        stack.callback(_release_on_workers, client)  # before the close: on every worker
         yield Dask(client)
+
+
+def _release_on_workers(client: Any) -> None:
+    """The decoded ``.SEN3`` bands the run's tasks kept, freed on every worker (an external
+    cluster's workers outlive the run)."""
+    with contextlib.suppress(Exception):  # a worker gone, a closing cluster: nothing to free
+        client.run(_release_decoded_bands)
+
+
+def _release_decoded_bands() -> None:
+    from ..products.sen3.kept import release_decoded_bands
+
+    release_decoded_bands()
 
 
 # --------------------------------------------------------------------------- worker side
@@ -346,7 +361,9 @@ def segment_task(spec: Spec, index: int, path: str, window: Window,
     its validated pixels); ``extent``: the product's whole window of the grid (default
     ``window``). Errors come back as text (exceptions may not survive pickling)."""
     from ..engine.synthesis import segment_counts_state, segment_state
+    from ..products.sen3.kept import keep_decoded_bands
 
+    keep_decoded_bands()  # a .SEN3 band decoded once per process, not per tile; the run frees it
     try:
         segment = _segment(spec, path, window if extent is None else extent)
         antecedents = segment.precompute(_grid(spec).window(*window), allow_empty=True,
@@ -443,9 +460,9 @@ def counts_as_stored(spec: Spec, scales: dict[int, float]) -> bool:
 
 def _release_pages(product: Any) -> None:
     """Drop the product's file pages that the task read from this worker's resident memory
-    (``release_pages`` of an N1; other products hold no file map). A worker then holds the
-    lines of the task at hand, not every product it was given (section 3.1: a tile reads the
-    antecedent lines only)."""
+    (``release_pages`` of an N1, or the bands a .SEN3 keeps in file maps for the run). A
+    worker then holds the lines of the task at hand, not every product it was given (section
+    3.1: a tile reads the antecedent lines only)."""
     release = getattr(product, "release_pages", None)
     if callable(release):
         release()

@@ -40,6 +40,7 @@ from ..n1.format import (
     tie_lines,
 )
 from ..protocol import radiance_of_counts
+from .kept import KeptBands
 from .layout import (
     DETECTORS,
     DOBSON_KG_M2,
@@ -124,6 +125,9 @@ class MerisSen3Product:
         self._warned: set[str] = set()
         #: bands being read ahead (``read_ahead``), each taken once by ``counts``
         self._ahead: dict[int, Future[np.ndarray]] = {}
+        #: the bands decoded while a run keeps them (``kept``: decoded once per process, in
+        #: file maps)
+        self.kept = KeptBands(self)
         n = self.n_tie_lines
         self.tie_point_times = line_times[0] + self.line_interval_s * df * np.arange(n)
         self.mph = {"PRODUCT": self.product_name, "PROC_CENTER": str(attrs.get("institution", "")),
@@ -197,15 +201,25 @@ class MerisSen3Product:
         return RADIANCE_FILL
 
     def counts(self, band: int) -> np.ndarray:
-        """Stored uint16 values of ``band`` (1..15), radiance = counts x scaling.radiance[b-1];
-        no-data pixels (fill, outside valid_min/valid_max, negative) hold
-        ``no_data_count(band)`` (counted in a warning, once per band)."""
+        """Stored uint16 values of ``band`` (1..15), radiance = counts x scaling.radiance[b-1],
+        read-only; no-data pixels (fill, outside valid_min/valid_max, negative) hold
+        ``no_data_count(band)`` (counted in a warning, once per band). Decoded once while a
+        run keeps decoded bands (``kept``)."""
         if isinstance(band, bool) or not isinstance(band, int | np.integer):
             raise TypeError(f"band must be an integer 1..15, got {band!r}")
         if not 1 <= band <= NUM_BANDS:
             raise ValueError(f"band must be 1..15, got {band}")
+        kept = self.kept.get(int(band))
+        if kept is not None:
+            return kept
         ahead = self._ahead.pop(int(band), None)
-        return self._counts(int(band)) if ahead is None else ahead.result()
+        counts = self._counts(int(band)) if ahead is None else ahead.result()
+        return self.kept.keep(self, int(band), counts)
+
+    def release_pages(self) -> None:
+        """Drop the kept bands' pages a task read from the resident memory (``kept``), as an
+        N1 drops its file's."""
+        self.kept.release_pages()
 
     def read_ahead(self, bands: Sequence[int]) -> None:
         """Start reading ``bands`` (1..15) whole, in order, on a background thread: netCDF-4
