@@ -65,3 +65,20 @@ def test_nothing_is_kept_outside_a_run_or_beyond_the_budget(monkeypatch) -> None
         assert kept.kept_bytes() == 0
     finally:
         kept.release_decoded_bands()
+
+
+def test_a_band_is_kept_only_within_a_quarter_of_the_free_space(monkeypatch, keeping) -> None:
+    import types
+
+    product = _Product()
+    band = np.ones((300, 200), np.uint16)
+    free = {"bytes": 3 * band.nbytes}  # the band would be a third of it
+    monkeypatch.setattr(kept.shutil, "disk_usage",
+                        lambda directory: types.SimpleNamespace(free=free["bytes"]))
+    assert product.kept.keep(product, 1, band) is band and kept.kept_bytes() == 0
+    free["bytes"] = 4 * band.nbytes
+    assert product.kept.keep(product, 1, band) is not band
+    assert kept.kept_bytes() == band.nbytes
+    second = band.copy()  # 2 bands kept would pass (4 free + 1 kept) / 4
+    assert product.kept.keep(product, 2, second) is second
+    assert kept.kept_bytes() == band.nbytes

@@ -11,9 +11,9 @@ While :func:`keep_decoded_bands` is in force, a product keeps each band it decod
 behind, whatever ends the process), so that later calls read it as an N1's map is read, and
 ``release_pages`` drops the pages a task read from the process's resident memory, as an N1's
 (the kernel's page cache keeps them). At most :data:`BUDGET_BYTES` for every product of the
-process together, and never more than a quarter of the temporary directory's free space; bands
-beyond that are decoded at each call, as before. :func:`release_decoded_bands` (the end of a run:
-``synthesis.run.engine``, on every worker) frees them.
+process together, and at most a quarter of the space the temporary directory had free for them;
+bands beyond that are decoded at each call, as before. :func:`release_decoded_bands` (the end of
+a run: ``synthesis.run.engine``, on every worker) frees them.
 """
 
 from __future__ import annotations
@@ -59,9 +59,10 @@ class KeptBands:
                     and _state["bytes"] + counts.nbytes <= BUDGET_BYTES)
             if fits:
                 _state["bytes"] += counts.nbytes  # claimed before the copy, outside the lock
+                total = _state["bytes"]
         if not fits:
             return counts
-        mapped = _file_map(counts)
+        mapped = _file_map(counts, total)
         with _lock:
             if mapped is None or not _state["on"]:  # no room on disk; or released meanwhile
                 _state["bytes"] -= counts.nbytes
@@ -83,12 +84,14 @@ class KeptBands:
                 raw.madvise(mmap.MADV_DONTNEED)
 
 
-def _file_map(counts: np.ndarray) -> tuple[mmap.mmap, np.ndarray] | None:
+def _file_map(counts: np.ndarray, total: int) -> tuple[mmap.mmap, np.ndarray] | None:
     """A copy of ``counts`` in a map of an unlinked temporary file, and the read-only array on
-    it; None when the temporary directory lacks room (four times the band) or refuses."""
+    it; None when the temporary directory refuses, or when ``total`` (the bytes kept with this
+    band) would pass a quarter of its free space plus what is kept already (the space it had
+    for them)."""
     directory = tempfile.gettempdir()
     try:
-        if shutil.disk_usage(directory).free < 4 * counts.nbytes:
+        if 4 * total > shutil.disk_usage(directory).free + total - counts.nbytes:
             return None
         with tempfile.TemporaryFile(dir=directory) as fh:  # unlinked: freed with the map
             fh.truncate(counts.nbytes)
