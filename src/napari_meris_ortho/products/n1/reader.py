@@ -11,10 +11,8 @@ handbook's benchmark use them); :func:`west_to_east` gives the mirrored view BEA
 
 from __future__ import annotations
 
-import contextlib
 import logging
 import math
-import mmap
 import os
 import re
 import stat
@@ -27,6 +25,7 @@ import numpy as np
 from ...errors import N1FormatError
 from ...flags import FLAG_INVALID
 from ...geometry.tiepoints import TiePoints
+from ..pages import drop_resident_pages
 from .checks import (
     PIXEL_GEOLOCATION_RANGES,
     check_counts,
@@ -279,10 +278,7 @@ class MerisL1bProduct:
         cache, so a later read maps them again without going to the disk. Does nothing if the
         file was never mapped, is closed, or the platform lacks ``MADV_DONTNEED``."""
         mapped = self.__dict__.get("_file_map")  # cached_property: present once opened
-        raw = getattr(mapped, "_mmap", None)
-        if isinstance(raw, mmap.mmap) and hasattr(mmap, "MADV_DONTNEED"):
-            with contextlib.suppress(OSError, ValueError):  # closed meanwhile
-                raw.madvise(mmap.MADV_DONTNEED)
+        drop_resident_pages(getattr(mapped, "_mmap", None))
 
     def _records(self, name: str, dtype: np.dtype) -> np.ndarray:
         """Records of data set ``name`` as a structured memmap view (validated at open)."""

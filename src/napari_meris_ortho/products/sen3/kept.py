@@ -18,7 +18,6 @@ a run: ``synthesis.run.engine``, on every worker) frees them.
 
 from __future__ import annotations
 
-import contextlib
 import mmap
 import shutil
 import tempfile
@@ -27,6 +26,8 @@ import weakref
 from typing import Any
 
 import numpy as np
+
+from ..pages import drop_resident_pages
 
 #: decoded bytes a process keeps at most, every product together: 26 FR products of 15 bands
 #: (2241 x 2241 x 2 bytes a band)
@@ -77,11 +78,8 @@ class KeptBands:
     def release_pages(self) -> None:
         """Drop the pages of the kept maps from this process's resident memory
         (``madvise(MADV_DONTNEED)``; the page cache keeps them, so a later read is no decode)."""
-        if not hasattr(mmap, "MADV_DONTNEED"):
-            return
         for raw in list(self.maps):
-            with contextlib.suppress(OSError, ValueError):  # closed meanwhile
-                raw.madvise(mmap.MADV_DONTNEED)
+            drop_resident_pages(raw)
 
 
 def _file_map(counts: np.ndarray, total: int) -> tuple[mmap.mmap, np.ndarray] | None:
