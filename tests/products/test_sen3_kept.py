@@ -36,7 +36,7 @@ def test_a_kept_band_is_a_file_map_whose_pages_can_leave(keeping) -> None:
     product = _Product()
     band = np.arange(64 * 2**20 // 2, dtype=np.uint16).reshape(4096, -1)  # 64 MiB
     before_files = set(os.listdir(kept.tempfile.gettempdir()))
-    held = product.kept.keep(product, 7, band)
+    held = product.kept.keep(7, band)
     assert held is not band and np.array_equal(held, band) and not held.flags.writeable
     assert product.kept.get(7) is held and kept.kept_bytes() == band.nbytes
     assert set(os.listdir(kept.tempfile.gettempdir())) == before_files  # unlinked at once
@@ -53,13 +53,13 @@ def test_a_kept_band_is_a_file_map_whose_pages_can_leave(keeping) -> None:
 def test_nothing_is_kept_outside_a_run_or_beyond_the_budget(monkeypatch) -> None:
     product = _Product()
     band = np.ones((300, 200), np.uint16)
-    assert product.kept.keep(product, 1, band) is band and kept.kept_bytes() == 0  # off
+    assert product.kept.keep(1, band) is band and kept.kept_bytes() == 0  # off
     kept.keep_decoded_bands()
     try:
         monkeypatch.setattr(kept, "BUDGET_BYTES", band.nbytes)
-        assert product.kept.keep(product, 1, band) is not band
+        assert product.kept.keep(1, band) is not band
         other = np.ones((300, 200), np.uint16)
-        assert product.kept.keep(product, 2, other) is other  # over the budget: as it is
+        assert product.kept.keep(2, other) is other  # over the budget: as it is
         assert kept.kept_bytes() == band.nbytes
         del product  # a product gone frees its bands
         assert kept.kept_bytes() == 0
@@ -75,10 +75,10 @@ def test_a_band_is_kept_only_within_a_quarter_of_the_free_space(monkeypatch, kee
     free = {"bytes": 3 * band.nbytes}  # the band would be a third of it
     monkeypatch.setattr(kept.shutil, "disk_usage",
                         lambda directory: types.SimpleNamespace(free=free["bytes"]))
-    assert product.kept.keep(product, 1, band) is band and kept.kept_bytes() == 0
+    assert product.kept.keep(1, band) is band and kept.kept_bytes() == 0
     free["bytes"] = 4 * band.nbytes
-    assert product.kept.keep(product, 1, band) is not band
+    assert product.kept.keep(1, band) is not band
     assert kept.kept_bytes() == band.nbytes
     second = band.copy()  # 2 bands kept would pass (4 free + 1 kept) / 4
-    assert product.kept.keep(product, 2, second) is second
+    assert product.kept.keep(2, second) is second
     assert kept.kept_bytes() == band.nbytes

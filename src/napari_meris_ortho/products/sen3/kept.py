@@ -35,7 +35,7 @@ BUDGET_BYTES = 4 * 2**30
 
 _lock = threading.Lock()
 _state = {"on": False, "bytes": 0}
-_holders: weakref.WeakSet[Any] = weakref.WeakSet()
+_holders: weakref.WeakSet[KeptBands] = weakref.WeakSet()
 
 
 class KeptBands:
@@ -45,13 +45,12 @@ class KeptBands:
     def __init__(self, owner: Any) -> None:
         self.bands: dict[int, np.ndarray] = {}
         self.maps: list[mmap.mmap] = []
-        self.bytes = 0
         weakref.finalize(owner, _forget, self)
 
     def get(self, band: int) -> np.ndarray | None:
         return self.bands.get(band)
 
-    def keep(self, owner: Any, band: int, counts: np.ndarray) -> np.ndarray:
+    def keep(self, band: int, counts: np.ndarray) -> np.ndarray:
         """``counts`` of ``band``, read-only: kept in a file map when keeping is on and the
         budget allows (the map is returned then), else as they are."""
         counts.flags.writeable = False
@@ -71,8 +70,7 @@ class KeptBands:
             raw, array = mapped
             self.bands[band] = array
             self.maps.append(raw)
-            self.bytes += counts.nbytes
-            _holders.add(owner)
+            _holders.add(self)
         return array
 
     def release_pages(self) -> None:
@@ -105,10 +103,9 @@ def _file_map(counts: np.ndarray, total: int) -> tuple[mmap.mmap, np.ndarray] | 
 
 def _forget(kept: KeptBands) -> None:
     with _lock:
-        _state["bytes"] -= kept.bytes
+        _state["bytes"] -= sum(array.nbytes for array in kept.bands.values())
         kept.bands.clear()
         kept.maps.clear()  # each map closes with its last array
-        kept.bytes = 0
 
 
 def keep_decoded_bands() -> None:
@@ -124,10 +121,8 @@ def release_decoded_bands() -> int:
         freed = int(_state["bytes"])
         holders = list(_holders)
         _holders.clear()
-    for owner in holders:
-        kept = getattr(owner, "kept", None)
-        if kept is not None:
-            _forget(kept)
+    for kept in holders:
+        _forget(kept)
     return freed
 
 

@@ -214,7 +214,7 @@ class MerisSen3Product:
             return kept
         ahead = self._ahead.pop(int(band), None)
         counts = self._counts(int(band)) if ahead is None else ahead.result()
-        return self.kept.keep(self, int(band), counts)
+        return self.kept.keep(int(band), counts)
 
     def release_pages(self) -> None:
         """Drop the kept bands' pages a task read from the resident memory (``kept``), as an
