@@ -333,6 +333,62 @@ def test_workers_free_the_decoded_sen3_bands_at_the_end_of_a_run(cluster, tmp_pa
         assert client.run(kept_bytes) == dict.fromkeys(held, 0)
 
 
+_SEEN = {"read": 0, "decoded": 0}
+
+
+def _observe_sen3() -> None:
+    """On a worker: count the bands its .SEN3 products read and those they decode (from now)."""
+    from napari_meris_ortho.products.sen3.reader import MerisSen3Product
+
+    _SEEN.update(read=0, decoded=0)
+    if getattr(MerisSen3Product, "_observed", False):
+        return
+    read, decode = MerisSen3Product.counts, MerisSen3Product._counts
+
+    def counts(self, band):
+        _SEEN["read"] += 1
+        return read(self, band)
+
+    def decoded(self, band):
+        _SEEN["decoded"] += 1
+        return decode(self, band)
+
+    MerisSen3Product.counts, MerisSen3Product._counts = counts, decoded
+    MerisSen3Product._observed = True
+
+
+def _seen() -> dict[str, int]:
+    return dict(_SEEN)
+
+
+def test_the_workers_of_a_host_decode_each_sen3_band_once_between_them(cluster,
+                                                                       tmp_path) -> None:
+    """Both workers read the product's bands; each band is decoded once on the host (by
+    one worker, mapped by the other), and the run's shared directory is gone after the run;
+    the layers are those of one process."""
+    import tempfile
+
+    from distributed import Client
+
+    from napari_meris_ortho.products.sen3.kept import RUN_PREFIX
+    from napari_meris_ortho.simulate.geocorrected import write_geocorrected
+    from napari_meris_ortho.simulate.scene import generate_scene
+
+    sen3 = write_geocorrected(generate_scene("fr-small"), fsg=False, out_dir=tmp_path)["sen3"]
+    options = dict(bands=(7, 13), tile=256, elevation="tiepoints")
+    with Client(cluster.scheduler_address, set_as_default=False) as client:
+        client.run(_observe_sen3)
+        result = synthesize([str(sen3)], tmp_path / "s", scheduler=cluster.scheduler_address,
+                            **options)
+        seen = list(client.run(_seen).values())
+    assert len(result.merged) == 1
+    assert len(seen) == 2 and all(s["read"] >= 2 for s in seen), seen  # both workers read
+    assert sum(s["decoded"] for s in seen) == 2, seen  # bands 7 and 13, once
+    assert not list(Path(tempfile.gettempdir()).glob(f"{RUN_PREFIX}*"))
+    synthesize([str(sen3)], tmp_path / "one", **options)
+    _same(tmp_path / "s", tmp_path / "one")
+
+
 _VIEWER_RUN = """
 import json, sys
 sys.path.insert(0, sys.argv[1])

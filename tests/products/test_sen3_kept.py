@@ -16,8 +16,8 @@ from napari_meris_ortho.products.sen3 import kept
 class _Product:
     """An owner of kept bands, as ``MerisSen3Product`` is."""
 
-    def __init__(self) -> None:
-        self.kept = kept.KeptBands(self)
+    def __init__(self, key: str = "", shape: tuple[int, int] | None = None) -> None:
+        self.kept = kept.KeptBands(self, key, shape)
 
 
 def _resident_bytes() -> int:
@@ -30,6 +30,7 @@ def keeping():
     kept.keep_decoded_bands()
     yield
     kept.release_decoded_bands()
+    assert kept.kept_bytes() == 0
 
 
 def test_a_kept_band_is_a_file_map_whose_pages_can_leave(keeping) -> None:
@@ -82,3 +83,124 @@ def test_a_band_is_kept_only_within_a_quarter_of_the_free_space(monkeypatch, kee
     second = band.copy()  # 2 bands kept would pass (4 free + 1 kept) / 4
     assert product.kept.keep(2, second) is second
     assert kept.kept_bytes() == band.nbytes
+
+
+# ---- the processes of a run share a host's decoded bands (a lock per band, a run directory)
+
+SHAPE = (300, 200)
+
+
+class _Decoder:
+    """Decodes band b as b everywhere, recording which bands it decoded, in order."""
+
+    def __init__(self) -> None:
+        self.done: list[int] = []
+
+    def __call__(self, band: int) -> np.ndarray:
+        self.done.append(band)
+        return np.full(SHAPE, band, np.uint16)
+
+
+@pytest.fixture
+def run_dir(tmp_path, monkeypatch):
+    """A run named "run-a" in a temporary directory of the test's own."""
+    monkeypatch.setattr(kept.tempfile, "tempdir", str(tmp_path))
+    kept.keep_decoded_bands("run-a")
+    yield tmp_path
+    kept.release_decoded_bands()
+    assert kept.kept_bytes() == 0
+
+
+def _run_directories(tmp_path) -> list[str]:
+    return sorted(p.name for p in tmp_path.glob(f"{kept.RUN_PREFIX}*"))
+
+
+def test_a_band_decoded_by_one_process_of_a_run_is_mapped_by_the_others(run_dir) -> None:
+    """Two products of one path (as in two workers of a host): the second maps the band the
+    first decoded; the run's directory goes with the last process to leave it."""
+    first, second = _Decoder(), _Decoder()
+    pa, pb = _Product("/data/P.SEN3", SHAPE), _Product("/data/P.SEN3", SHAPE)
+    a, b = pa.kept, pb.kept
+    held = a.fetch(7, lambda: first(7))
+    assert first.done == [7] and np.all(held == 7) and not held.flags.writeable
+    (directory,) = _run_directories(run_dir)
+    mapped = b.fetch(7, lambda: second(7))
+    assert second.done == [] and mapped.shape == SHAPE and np.all(mapped == 7)
+    assert not mapped.flags.writeable and b.get(7) is mapped
+    other = _Product("/data/Q.SEN3", SHAPE)  # another product
+    other.kept.fetch(7, lambda: second(7))
+    assert second.done == [7]
+    assert kept.release_decoded_bands() == 3 * held.nbytes
+    assert _run_directories(run_dir) == [] and int(mapped[0, 0]) == 7  # maps outlive the files
+
+
+def test_a_process_decodes_first_the_bands_no_other_one_is_decoding(run_dir) -> None:
+    """``prepare``: the band another process holds the lock of is taken last, and mapped once
+    that process has written it, not decoded twice."""
+    import threading
+    import time
+
+    order: list[tuple[str, int]] = []
+    pa, pb = _Product("/data/P.SEN3", SHAPE), _Product("/data/P.SEN3", SHAPE)
+    a, b = pa.kept, pb.kept
+    directory = kept._run_directory()
+    locked = threading.Event()
+
+    def mine(band: int) -> np.ndarray:
+        order.append(("mine", band))
+        return np.full(SHAPE, band, np.uint16)
+
+    def other_process() -> None:  # decodes band 1, done once this process took the others
+        with directory.band_lock(b._name(1), wait=True):
+            locked.set()
+            for _ in range(100):
+                if len(order) == 2:
+                    break
+                time.sleep(0.05)
+            order.append(("theirs", 1))
+            b.keep(1, np.full(SHAPE, 1, np.uint16))
+
+    thread = threading.Thread(target=other_process)
+    thread.start()
+    locked.wait(10)
+    a.prepare([1, 2, 3], mine)
+    thread.join()
+    assert order == [("mine", 2), ("mine", 3), ("theirs", 1)]
+    assert [int(a.get(k)[0, 0]) for k in (1, 2, 3)] == [1, 2, 3]
+
+
+def test_a_run_directory_left_by_a_killed_run_is_removed_by_the_next(tmp_path,
+                                                                      monkeypatch) -> None:
+    import fcntl
+
+    monkeypatch.setattr(kept.tempfile, "tempdir", str(tmp_path))
+    old = kept.time.time() - 2 * kept.STALE_S
+    for name in ("killed", "in-use", "young"):
+        (tmp_path / f"{kept.RUN_PREFIX}{name}").mkdir()
+        users = tmp_path / f"{kept.RUN_PREFIX}{name}" / kept.USERS
+        users.write_bytes(b"")
+        if name != "young":
+            os.utime(users, (old, old))
+    holder = os.open(tmp_path / f"{kept.RUN_PREFIX}in-use" / kept.USERS, os.O_RDWR)
+    fcntl.flock(holder, fcntl.LOCK_SH)  # a live process of that run
+    try:
+        kept.keep_decoded_bands("run-b")
+        product = _Product("/data/P.SEN3", SHAPE)
+        product.kept.fetch(
+            1, lambda: np.ones(SHAPE, np.uint16))
+        names = _run_directories(tmp_path)
+        assert len(names) == 3 and f"{kept.RUN_PREFIX}killed" not in names
+        assert {f"{kept.RUN_PREFIX}in-use", f"{kept.RUN_PREFIX}young"} < set(names)
+    finally:
+        kept.release_decoded_bands()
+        os.close(holder)
+    assert len(_run_directories(tmp_path)) == 2  # its own directory went with it
+
+
+def test_nothing_is_shared_without_a_run_name(tmp_path, monkeypatch, keeping) -> None:
+    monkeypatch.setattr(kept.tempfile, "tempdir", str(tmp_path))
+    product = _Product("/data/P.SEN3", SHAPE)
+    product.kept.prepare([1, 2], _Decoder())  # nothing decoded ahead
+    assert product.kept.get(1) is None
+    assert np.all(product.kept.fetch(1, lambda: np.ones(SHAPE, np.uint16)) == 1)
+    assert product.kept.get(1) is not None and list(tmp_path.iterdir()) == []

@@ -361,11 +361,14 @@ def segment_task(spec: Spec, index: int, path: str, window: Window,
     its validated pixels); ``extent``: the product's whole window of the grid (default
     ``window``). Errors come back as text (exceptions may not survive pickling)."""
     from ..engine.synthesis import segment_counts_state, segment_state
-    from ..products.sen3.kept import keep_decoded_bands
+    from ..products.sen3.kept import keep_decoded_bands, prepare_bands
 
-    keep_decoded_bands()  # a .SEN3 band decoded once per process, not per tile; the run frees it
+    # a .SEN3 band decoded once per process, not per tile, and shared by the run's workers on
+    # a host; the run frees it
+    keep_decoded_bands(spec.layout if _in_worker() else "")
     try:
         segment = _segment(spec, path, window if extent is None else extent)
+        prepare_bands(segment.prod, spec.needed)  # the workers of a host decode them together
         antecedents = segment.precompute(_grid(spec).window(*window), allow_empty=True,
                                          hold_bands=True)
         sampled = _Sampled.of(antecedents, spec)
@@ -499,6 +502,11 @@ def tile_job(fork: Any, spec: Spec, window: Window, jobs: Sequence[Job], rank: n
 def _tune_worker() -> bool:
     """Once per process, in a dask worker only (a user's own process is left as it is): glibc's
     malloc reuses a tile's arrays for the next one (``_process.keep_task_arrays``)."""
+    return _in_worker() and keep_task_arrays()
+
+
+def _in_worker() -> bool:
+    """Whether this is a dask worker's task."""
     distributed = sys.modules.get("distributed")
     if distributed is None:
         return False
@@ -506,7 +514,7 @@ def _tune_worker() -> bool:
         distributed.get_worker()
     except ValueError:  # not in a worker's task
         return False
-    return keep_task_arrays()
+    return True
 
 
 def tile_task(fork: Any, spec: Spec, window: Window, pieces: Iterable[Piece],

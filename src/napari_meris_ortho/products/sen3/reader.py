@@ -19,7 +19,7 @@ from collections.abc import Collection, Iterator, Mapping, Sequence
 from concurrent.futures import Future
 from contextlib import closing
 from dataclasses import replace
-from functools import cached_property
+from functools import cached_property, partial
 from pathlib import Path
 from typing import Any
 
@@ -126,8 +126,8 @@ class MerisSen3Product:
         #: bands being read ahead (``read_ahead``), each taken once by ``counts``
         self._ahead: dict[int, Future[np.ndarray]] = {}
         #: the bands decoded while a run keeps them (``kept``: decoded once per process, in
-        #: file maps)
-        self.kept = KeptBands(self)
+        #: file maps; once per host for the processes of a run)
+        self.kept = KeptBands(self, key=str(members.path), shape=(height, width))
         n = self.n_tie_lines
         self.tie_point_times = line_times[0] + self.line_interval_s * df * np.arange(n)
         self.mph = {"PRODUCT": self.product_name, "PROC_CENTER": str(attrs.get("institution", "")),
@@ -213,8 +213,15 @@ class MerisSen3Product:
         if kept is not None:
             return kept
         ahead = self._ahead.pop(int(band), None)
-        counts = self._counts(int(band)) if ahead is None else ahead.result()
-        return self.kept.keep(int(band), counts)
+        if ahead is not None:
+            return self.kept.keep(int(band), ahead.result())
+        counts = self.kept.fetch(int(band), partial(self._counts, int(band)))  # waits: not None
+        return counts if counts is not None else self._counts(int(band))
+
+    def prepare_bands(self, bands: Sequence[int]) -> None:
+        """While a run keeps decoded bands: decode ``bands`` (1..15) now, those no other
+        process of the run is decoding first (``kept.prepare_bands``)."""
+        self.kept.prepare([int(b) for b in bands if 1 <= int(b) <= NUM_BANDS], self._counts)
 
     def release_pages(self) -> None:
         """Drop the kept bands' pages a task read from the resident memory (``kept``), as an
