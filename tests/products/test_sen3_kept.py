@@ -204,3 +204,26 @@ def test_nothing_is_shared_without_a_run_name(tmp_path, monkeypatch, keeping) ->
     assert product.kept.get(1) is None
     assert np.all(product.kept.fetch(1, lambda: np.ones(SHAPE, np.uint16)) == 1)
     assert product.kept.get(1) is not None and list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.skipif(not hasattr(os, "getuid") or os.getuid() != 0,
+                    reason="making a directory of another user's takes root")
+def test_a_run_directory_of_another_users_is_not_used(tmp_path, monkeypatch) -> None:
+    """A directory of the run's name that another user made in the shared temporary directory
+    is left alone: the bands are this process's own."""
+    import hashlib
+
+    monkeypatch.setattr(kept.tempfile, "tempdir", str(tmp_path))
+    digest = hashlib.sha1(b"run-c").hexdigest()[:16]
+    theirs = tmp_path / f"{kept.RUN_PREFIX}{digest}"
+    theirs.mkdir(mode=0o777)
+    os.chown(theirs, 65534, 65534)
+    kept.keep_decoded_bands("run-c")
+    try:
+        product = _Product("/data/P.SEN3", SHAPE)
+        held = product.kept.fetch(1, lambda: np.ones(SHAPE, np.uint16))
+        assert np.all(held == 1) and product.kept.get(1) is held
+        assert list(theirs.iterdir()) == []
+    finally:
+        kept.release_decoded_bands()
+    assert theirs.is_dir()

@@ -31,6 +31,7 @@ import hashlib
 import mmap
 import os
 import shutil
+import stat
 import tempfile
 import threading
 import time
@@ -184,6 +185,9 @@ class _RunDirectory:
         digest = hashlib.sha1(name.encode()).hexdigest()[:16]
         self.path = Path(tempfile.gettempdir()) / f"{RUN_PREFIX}{digest}"
         self.path.mkdir(mode=0o700, exist_ok=True)
+        found = os.lstat(self.path)
+        if not stat.S_ISDIR(found.st_mode) or found.st_uid != os.getuid():
+            raise OSError(f"{self.path} is not a directory of this user's")
         self._users = os.open(self.path / USERS, os.O_RDWR | os.O_CREAT, 0o600)
         fcntl.flock(self._users, fcntl.LOCK_SH)
         os.utime(self._users)  # in use: not a left-over for a sweep
