@@ -44,6 +44,42 @@ def test_quality_flag_mapping_round_trips():
     assert l1b_to_quality(np.array([FLAG_INVALID]))[0] == 1 << 25
 
 
+@pytest.mark.parametrize("coding", ["esa", "own"])
+def test_quality_flags_translate_flag_by_flag(coding):
+    """``quality_to_l1b`` and ``saturated_bands`` (one byte table per byte of the flags) set
+    each output bit where its mask meets the flags, for ESA's coding (the real RR product's:
+    land 2^31 ... saturated_M01 2^20 ... saturated_M21 2^0) and for a product's own (masks
+    of several bits, in any byte, a flag missing)."""
+    from napari_meris_ortho.products.sen3 import layout
+
+    rng = np.random.default_rng(5)
+    q = (rng.integers(0, 2**32, (37, 53), dtype=np.uint64)
+         & rng.integers(0, 2**32, (37, 53), dtype=np.uint64)).astype(np.uint32)
+    codes = layout.flag_coding({})
+    if coding == "own":
+        codes = {name: int(rng.integers(1, 2**32)) & int(rng.integers(1, 2**32))
+                 for name in codes}
+        codes.pop("land", None)
+        codes.pop("saturated_M07", None)
+    else:
+        assert codes["land"] == 1 << 31 and codes["saturated_M01"] == 1 << 20
+        assert codes["saturated_M15"] == 1 << 6 and codes["invalid"] == 1 << 25
+    flags, saturated = quality_to_l1b(q, codes), layout.saturated_bands(q, codes)
+    expected_flags = np.zeros(q.shape, np.uint8)
+    for name, bit in layout.L1B_OF_QUALITY.items():
+        if name in codes:
+            expected_flags[(q & np.uint32(codes[name])) != 0] |= np.uint8(bit)
+    expected_saturated = np.zeros(q.shape, np.uint16)
+    for b in range(1, 16):
+        if f"saturated_M{b:02d}" in codes:
+            hit = (q & np.uint32(codes[f"saturated_M{b:02d}"])) != 0
+            expected_saturated[hit] |= np.uint16(1 << (b - 1))
+    assert flags.dtype == np.uint8 and saturated.dtype == np.uint16
+    assert np.array_equal(flags, expected_flags) and flags.any()
+    assert np.array_equal(saturated, expected_saturated) and saturated.any()
+    assert np.array_equal(quality_to_l1b(q.astype(">u4"), codes), expected_flags)  # big-endian
+
+
 def test_sen3_reads_like_the_n1_product(scene, products):
     paths, truth = products
     n1 = read_product(scene.product_path)

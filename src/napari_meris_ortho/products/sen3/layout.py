@@ -265,12 +265,8 @@ def quality_to_l1b(quality: np.ndarray, coding: Mapping[str, int] | None = None)
     """L1b flags (uint8, ``flags.FLAG_*``) of ``quality_flags`` with ``coding``
     (:func:`flag_coding`; default ESA's)."""
     coding = dict(coding) if coding is not None else flag_coding({})
-    q = np.asarray(quality).astype(np.uint32)
-    out = np.zeros(q.shape, np.uint8)
-    for name, l1b in L1B_OF_QUALITY.items():
-        if name in coding:
-            out |= np.where(q & np.uint32(coding[name]), np.uint8(l1b), np.uint8(0))
-    return out
+    pairs = [(coding[name], l1b) for name, l1b in L1B_OF_QUALITY.items() if name in coding]
+    return _translate(quality, pairs, np.uint8)
 
 
 def l1b_to_quality(flags: np.ndarray) -> np.ndarray:
@@ -287,10 +283,24 @@ def l1b_to_quality(flags: np.ndarray) -> np.ndarray:
 def saturated_bands(quality: np.ndarray, coding: Mapping[str, int]) -> np.ndarray:
     """uint16 (rows, columns): bit b-1 set where band b (1..15) is saturated
     (``saturated_Mnn`` of ``coding``)."""
-    q = np.asarray(quality).astype(np.uint32)
-    out = np.zeros(q.shape, np.uint16)
-    for b in range(1, NUM_BANDS + 1):
-        mask = coding.get(f"saturated_M{b:02d}")
-        if mask:
-            out |= np.where(q & np.uint32(mask), np.uint16(1 << (b - 1)), np.uint16(0))
+    pairs = [(coding.get(f"saturated_M{b:02d}", 0), 1 << (b - 1)) for b in range(1, NUM_BANDS + 1)]
+    return _translate(quality, pairs, np.uint16)
+
+
+def _translate(quality: np.ndarray, pairs: list[tuple[int, int]], dtype: type) -> np.ndarray:
+    """``dtype`` values of ``quality`` (uint32 flags): for each (mask, bits) of ``pairs``,
+    ``bits`` set where ``quality & mask`` is not 0. One table of 256 values per byte of the
+    flags, looked up and or-ed (4 passes whatever the number of pairs)."""
+    q = np.ascontiguousarray(quality, dtype="<u4")
+    by_byte = q.view(np.uint8).reshape(*q.shape, 4)
+    values = np.arange(256)
+    out = np.zeros(q.shape, dtype)
+    for k in range(4):
+        table = np.zeros(256, dtype)
+        for mask, bits in pairs:
+            part = (int(mask) >> (8 * k)) & 0xFF
+            if part:
+                table[(values & part) != 0] |= dtype(bits)
+        if table.any():
+            out |= table[by_byte[..., k]]
     return out
