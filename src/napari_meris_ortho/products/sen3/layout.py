@@ -294,9 +294,9 @@ def _translate(quality: np.ndarray, pairs: list[tuple[int, int]], dtype: type) -
     q = np.ascontiguousarray(quality, dtype="<u4")
     by_byte = q.view(np.uint8).reshape(*q.shape, 4)
     values = np.arange(256)
-    out = np.zeros(q.shape, dtype)
+    out: np.ndarray = np.zeros(q.shape, dtype)
     for k in range(4):
-        table = np.zeros(256, dtype)
+        table: np.ndarray = np.zeros(256, dtype)
         for mask, bits in pairs:
             part = (int(mask) >> (8 * k)) & 0xFF
             if part:
