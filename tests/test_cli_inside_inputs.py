@@ -68,7 +68,10 @@ def test_a_damaged_store_is_one_error_line(tmp_path):
     product = scene_product()
     synthesize([product], store, grid=GRID, bands=BANDS, algorithm="max-ndvi", tile=256,
                elevation="tiepoints")
-    for damage, said in (("truncate", "a chunk object is truncated"),
+    # a truncated object: Icechunk's length check says so, but in 2 runs of 43 at stop 59 (one
+    # in CI) a decode error of a chunk came first: either way one line naming the damage
+    for damage, said in (("truncate", r"(a chunk object is truncated|"
+                                      r"(layer|chunk) \S+ does not decode \(.+\))"),
                          ("remove", "a chunk object is missing"),
                          ("scramble", r"(layer|chunk) \S+ does not decode \(.+\)")):
         copy = tmp_path / damage
