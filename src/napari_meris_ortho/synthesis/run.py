@@ -361,14 +361,14 @@ def segment_task(spec: Spec, index: int, path: str, window: Window,
     its validated pixels); ``extent``: the product's whole window of the grid (default
     ``window``). Errors come back as text (exceptions may not survive pickling)."""
     from ..engine.synthesis import segment_counts_state, segment_state
-    from ..products.sen3.kept import keep_decoded_bands, prepare_bands
+    from ..products.sen3.kept import keep_decoded_bands
 
     # a .SEN3 band decoded once per process, not per tile, and shared by the run's workers on
     # a host; the run frees it
     keep_decoded_bands(spec.layout if _in_worker() else "")
     try:
         segment = _segment(spec, path, window if extent is None else extent)
-        prepare_bands(segment.prod, spec.needed)  # the workers of a host decode them together
+        _prepare_bands(segment.prod, spec.needed)  # the workers of a host decode them together
         antecedents = segment.precompute(_grid(spec).window(*window), allow_empty=True,
                                          hold_bands=True)
         sampled = _Sampled.of(antecedents, spec)
@@ -459,6 +459,14 @@ def counts_as_stored(spec: Spec, scales: dict[int, float]) -> bool:
     scale of every stored band is the store's (Appendix A factor; both as float32)."""
     return (spec.compact and spec.options.sampling is Sampling.NEAREST
             and all(np.float32(scales[b]) == np.float32(st.BAND_SCALES[b]) for b in spec.bands))
+
+
+def _prepare_bands(product: Any, bands: Sequence[int]) -> None:
+    """Decode ``bands`` of a product that reads its bands whole, the run's workers on a host
+    sharing the work (``prepare_bands`` of a .SEN3); nothing for other products."""
+    prepare = getattr(product, "prepare_bands", None)
+    if callable(prepare):
+        prepare(bands)
 
 
 def _release_pages(product: Any) -> None:

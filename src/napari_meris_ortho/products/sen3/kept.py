@@ -17,7 +17,7 @@ a run: ``synthesis.run.engine``, on every worker) frees them.
 Given the run's name, the processes of the run on one host (the workers of a LocalCluster, or of
 ``dask worker --nworkers N``) share the bands: each band is decoded by one of them into a file of
 the run's directory (``meris-ortho-bands-*`` in the temporary directory; written aside, then
-renamed) and mapped by the others, and :func:`prepare_bands` decodes first the bands no other
+renamed) and mapped by the others, and ``prepare_bands`` decodes first the bands no other
 process is decoding (a lock per band), so that N processes decode a product's bands N times
 faster instead of each decoding all of them. The last process to leave the run removes the
 directory; one left by a killed run is removed by the next run on the host. Without a name (or
@@ -100,10 +100,15 @@ class KeptBands:
         held = self._hold(band, mapped, counts.nbytes)
         return counts if held is None else held
 
-    def fetch(self, band: int, decode: Decode, wait: bool = True) -> np.ndarray | None:
+    def fetch(self, band: int, decode: Decode) -> np.ndarray:
         """``band``'s counts: kept already; or in the run's directory (mapped); or decoded by
-        ``decode`` and kept (:meth:`keep`), the other processes of the run waiting for it. None
-        when ``wait`` is False and another process is decoding it."""
+        ``decode`` and kept (:meth:`keep`), the other processes of the run waiting for it."""
+        counts = self._fetch(band, decode, wait=True)
+        assert counts is not None  # None only without waiting
+        return counts
+
+    def _fetch(self, band: int, decode: Decode, wait: bool) -> np.ndarray | None:
+        """:meth:`fetch`; None when ``wait`` is False and another process is decoding it."""
         held = self.get(band)
         if held is not None:
             return held
@@ -129,14 +134,14 @@ class KeptBands:
 
     def prepare(self, bands: Sequence[int], decode: Callable[[int], np.ndarray]) -> None:
         """Decode ``bands`` now, those no other process of the run is decoding first, then
-        wait for the others (:func:`prepare_bands`); nothing outside a run's directory (a
-        band is then decoded when it is read) or beyond the budget."""
+        wait for the others (``MerisSen3Product.prepare_bands``); nothing outside a run's
+        directory (a band is then decoded when it is read) or beyond the budget."""
         if not self.key or _run_directory() is None:
             return
         todo = [int(b) for b in bands if self.get(int(b)) is None]
         nbytes = 2 * self.shape[0] * self.shape[1]
         while todo and _state["on"] and _state["bytes"] + nbytes <= BUDGET_BYTES:
-            later = [b for b in todo if self.fetch(b, partial(decode, b), wait=False) is None]
+            later = [b for b in todo if self._fetch(b, partial(decode, b), wait=False) is None]
             if len(later) == len(todo):  # every one is being decoded elsewhere: wait for one
                 self.fetch(later[0], partial(decode, later[0]))
                 later = later[1:]
@@ -181,7 +186,6 @@ class _RunDirectory:
     shared lock on its :data:`USERS` file while in the run."""
 
     def __init__(self, name: str) -> None:
-        self.name = name
         digest = hashlib.sha1(name.encode()).hexdigest()[:16]
         self.path = Path(tempfile.gettempdir()) / f"{RUN_PREFIX}{digest}"
         self.path.mkdir(mode=0o700, exist_ok=True)
@@ -199,7 +203,7 @@ class _RunDirectory:
         final = self.path / name
         aside = self.path / f".{name}.{os.getpid()}.{threading.get_ident()}"
         try:
-            if 4 * total > shutil.disk_usage(self.path).free + total - counts.nbytes:
+            if not _fits(self.path, total, counts.nbytes):
                 return None
             with open(aside, "wb") as fh:
                 np.ascontiguousarray(counts).tofile(fh)
@@ -288,7 +292,7 @@ def _file_map(counts: np.ndarray, total: int) -> tuple[mmap.mmap, np.ndarray] | 
     for them)."""
     directory = tempfile.gettempdir()
     try:
-        if 4 * total > shutil.disk_usage(directory).free + total - counts.nbytes:
+        if not _fits(directory, total, counts.nbytes):
             return None
         with tempfile.TemporaryFile(dir=directory) as fh:  # unlinked: freed with the map
             fh.truncate(counts.nbytes)
@@ -300,6 +304,13 @@ def _file_map(counts: np.ndarray, total: int) -> tuple[mmap.mmap, np.ndarray] | 
     view = array.view()
     view.flags.writeable = False
     return raw, view
+
+
+def _fits(directory: str | os.PathLike[str], total: int, nbytes: int) -> bool:
+    """Whether ``total`` (the bytes kept with a band of ``nbytes``) stays within a quarter of
+    the free space of ``directory`` plus what is kept already (the space it had for them);
+    OSError when the directory cannot be asked."""
+    return 4 * total <= shutil.disk_usage(directory).free + total - nbytes
 
 
 def _forget(kept: KeptBands) -> None:
@@ -362,14 +373,6 @@ def release_decoded_bands() -> int:
     if run is not None:
         run.close()
     return freed
-
-
-def prepare_bands(product: Any, bands: Sequence[int]) -> None:
-    """Decode ``bands`` of a product that keeps its bands (``product.prepare_bands``), the
-    run's processes sharing the work; nothing for other products."""
-    prepare = getattr(product, "prepare_bands", None)
-    if callable(prepare):
-        prepare(bands)
 
 
 def kept_bytes() -> int:

@@ -215,12 +215,11 @@ class MerisSen3Product:
         ahead = self._ahead.pop(int(band), None)
         if ahead is not None:
             return self.kept.keep(int(band), ahead.result())
-        counts = self.kept.fetch(int(band), partial(self._counts, int(band)))  # waits: not None
-        return counts if counts is not None else self._counts(int(band))
+        return self.kept.fetch(int(band), partial(self._counts, int(band)))
 
     def prepare_bands(self, bands: Sequence[int]) -> None:
         """While a run keeps decoded bands: decode ``bands`` (1..15) now, those no other
-        process of the run is decoding first (``kept.prepare_bands``)."""
+        process of the run is decoding first (``KeptBands.prepare``)."""
         self.kept.prepare([int(b) for b in bands if 1 <= int(b) <= NUM_BANDS], self._counts)
 
     def release_pages(self) -> None:
