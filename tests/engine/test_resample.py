@@ -259,3 +259,42 @@ def test_copy_window_swaps_big_endian_windows_as_numpy_converts_them():
         copy_window(out, src)
         np.testing.assert_array_equal(out, src)
 
+
+
+@pytest.mark.parametrize("place", [None, "rows", "window"])
+@pytest.mark.parametrize("dtype", [np.uint16, np.uint8])
+def test_gather_takes_every_point_of_long_runs(place, dtype):
+    """Runs of points longer than a block (``GATHER_BLOCK``, band after band within it) and
+    not a multiple of it: every point of every band is the image's value at its index (0 at
+    -1), as numpy's indexing gives it, scaled or not, whatever the placement."""
+    from napari_meris_ortho.engine.resample import GATHER_BLOCK, gather, gather_scaled
+
+    rng = np.random.default_rng(8)
+    n_bands, lines, cols = 15, 90, 80
+    images = rng.integers(0, np.iinfo(dtype).max, (n_bands, lines, cols)).astype(dtype)
+    flat = images.reshape(n_bands, -1)
+    if place is None:  # one run of points
+        h, w, nc, r0, c0 = 1, 2 * GATHER_BLOCK + 37, 2 * GATHER_BLOCK + 37, 0, 0
+    elif place == "rows":  # rows of the grid one after the other: stride == width
+        h, w, nc, r0, c0 = 5, GATHER_BLOCK + 301, GATHER_BLOCK + 301, 2, 0
+    else:  # a window of the grid's rows: stride > width
+        h, w, nc, r0, c0 = 4, GATHER_BLOCK + 5, GATHER_BLOCK + 40, 1, 17
+    nr = r0 + h + 1
+    index = rng.integers(-1, lines * cols, h * w).astype(np.int64)
+    index[rng.random(index.size) < 0.1] = -1
+    expected = np.where(index >= 0, flat[:, np.maximum(index, 0)], 0).reshape(n_bands, h, w)
+    spot = None if place is None else (w, nc, r0 * nc + c0)
+    out = np.full((n_bands, nr, nc), 7, dtype)
+    target = out.reshape(n_bands, -1)
+    gather(images, index, target if place else target[:, :h * w], spot)
+    assert np.array_equal(out[:, r0:r0 + h, c0:c0 + w], expected)
+    rest = out.copy()
+    rest[:, r0:r0 + h, c0:c0 + w] = 7
+    assert (rest == 7).all()  # nothing written outside the points' places
+    scales = rng.uniform(0.001, 0.05, n_bands)
+    scaled = np.zeros((n_bands, nr, nc), np.float32)
+    flat_scaled = scaled.reshape(n_bands, -1)
+    gather_scaled(images, index, scales, flat_scaled if place else flat_scaled[:, :h * w], spot)
+    assert np.array_equal(scaled[:, r0:r0 + h, c0:c0 + w],
+                          expected.astype(np.float32)
+                          * scales.astype(np.float32)[:, None, None])

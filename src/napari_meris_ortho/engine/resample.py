@@ -28,6 +28,10 @@ from ..options import Sampling, parse
 from .threads import split_range
 
 _CHUNK = 1 << 18
+#: points gathered band after band (``_gather_points``): long runs keep each band's reads
+#: and writes one stream (a whole fr-alps grid: 2048 points 337 ms, 2**18 points 142 ms, point
+#: after point 290 ms; a 1024 x 1024 tile: 14 ms from 1024 points up, 47 ms point after point)
+GATHER_BLOCK = 1 << 18
 
 
 def _check_method(method: str) -> int:
@@ -267,20 +271,34 @@ def _gather(images: np.ndarray, index: np.ndarray, scales: np.ndarray, out: np.n
 def _gather_range(lo, hi, pixels, index, scales, out, width, stride, offset):  # pragma: no cover
     """Rows [lo, hi) of the points of ``_gather`` (``pixels``: bands x flat pixels; ``scales``
     empty: the values as they are, else float32 times the band's scale)."""
+    if stride == width:  # the rows follow each other in ``out``: one run of points
+        _gather_points(lo * width, hi * width, offset + lo * width, pixels, index, scales, out)
+        return
+    for r in range(lo, hi):
+        _gather_points(r * width, (r + 1) * width, offset + r * stride, pixels, index, scales,
+                       out)
+
+
+@njit(cache=True, nogil=True)
+def _gather_points(i0, i1, j0, pixels, index, scales, out):  # pragma: no cover
+    """Points [i0, i1) into ``out[:, j0 + i - i0]``, in blocks of ``GATHER_BLOCK`` points and
+    band after band within a block, so that each band is read and written as one stream
+    (point after point, 15 bands made 30 interleaved streams: 2-3 times the time)."""
     n_bands = pixels.shape[0]
     scaled = scales.size > 0
-    for r in range(lo, hi):
-        for c in range(width):
-            i = r * width + c
-            j = offset + r * stride + c
-            k = index[i]
-            for b in range(n_bands):
-                if k < 0:
-                    out[b, j] = 0
-                elif scaled:
-                    out[b, j] = np.float32(pixels[b, k]) * scales[b]
-                else:
-                    out[b, j] = pixels[b, k]
+    for a in range(i0, i1, GATHER_BLOCK):
+        z = min(a + GATHER_BLOCK, i1)
+        d = j0 - i0
+        for b in range(n_bands):
+            if scaled:
+                s = scales[b]
+                for i in range(a, z):
+                    k = index[i]
+                    out[b, d + i] = np.float32(pixels[b, k]) * s if k >= 0 else 0
+            else:
+                for i in range(a, z):
+                    k = index[i]
+                    out[b, d + i] = pixels[b, k] if k >= 0 else 0
 
 
 @njit(cache=True)
