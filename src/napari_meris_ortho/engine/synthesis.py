@@ -264,10 +264,11 @@ def combine_minimum_radiance(bands: np.ndarray, count: np.ndarray, winner: np.nd
             v_old = bands[0, i, j] if bands[0, i, j] > 0.0 else np.inf
             if old == 0 or _beats(v_new, rank[w], v_old, rank[old]):
                 winner[i, j] = w
-            for b in range(n_bands):
+        for b in range(n_bands):  # band after band: one stream each (``_gather_points``)
+            for j in range(cols):
                 new = new_bands[b, i, j]
                 prev = bands[b, i, j]
-                if new > 0.0 and (prev == 0.0 or new < prev):
+                if new_winner[i, j] != 0 and new > 0.0 and (prev == 0.0 or new < prev):
                     bands[b, i, j] = new
 
 
@@ -280,6 +281,7 @@ def combine_maximum_ndvi(bands: np.ndarray, ndvi: np.ndarray, count: np.ndarray,
     coding; equal codes: the lower rank) replace the synthesis pixel."""
     n_bands, rows, cols = bands.shape
     for i in prange(rows):
+        taken = np.zeros(cols, np.bool_)  # the row's pixels the new state wins
         for j in range(cols):
             count[i, j] += new_count[i, j]
             w = new_winner[i, j]
@@ -290,7 +292,10 @@ def combine_maximum_ndvi(bands: np.ndarray, ndvi: np.ndarray, count: np.ndarray,
                                   rank[old]):
                 winner[i, j] = w
                 ndvi[i, j] = new_ndvi[i, j]
-                for b in range(n_bands):
+                taken[j] = True
+        for b in range(n_bands):  # band after band: one stream each (``_gather_points``)
+            for j in range(cols):
+                if taken[j]:
                     bands[b, i, j] = new_bands[b, i, j]
 
 
