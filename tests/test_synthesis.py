@@ -949,3 +949,50 @@ def test_winner_counts_equal_the_sorted_count() -> None:
     assert set(got) == {2, 5} and sum(got.values()) == int(np.isin(winner, [2, 5]).sum())
     assert got[2] > 2 * got[5] > 0  # index 2 also holds the old index 4's pixels
     assert winner_counts(winner[:, 512:], {1, 3}) == {}
+
+
+def test_tiles_are_submitted_with_the_most_work_first() -> None:
+    """Longest processing time first: a tile's work is its products' pixels inside it plus a
+    piece's fixed cost, so a tile covered by one product goes before a tile touched by three
+    slivers; an excluded product's pixels do not count; equal work keeps the grid order."""
+    from napari_meris_ortho.synthesis.run import PIECE_WORK_PX, submission_order, tile_work
+
+    a, b, c, d = (0, 1024, 0, 1024), (0, 1024, 1024, 2048), (1024, 2048, 0, 1024), \
+        (1024, 2048, 1024, 2048)
+    jobs = {t: [] for t in (a, b, c, d)}
+    work = {a: {1: 1_000_000}, b: {1: 1000, 2: 1000, 3: 1000}, c: {2: 500_000, 3: 500_000},
+            d: {1: 1_000_000}}
+    assert tile_work(work[c]) == 1_000_000 + 2 * PIECE_WORK_PX
+    assert submission_order(jobs, work) == [c, a, d, b]  # by pieces it was b, c, a, d
+    assert tile_work(work[c], frozenset({2})) == 500_000 + PIECE_WORK_PX
+    assert submission_order(jobs, work, frozenset({2})) == [a, d, c, b]
+
+
+def test_a_run_computes_its_tiles_in_submission_order(products, tmp_path, monkeypatch) -> None:
+    """In process the tiles are computed in the order they are submitted, the plan's
+    ``submission_order`` (on workers it is their priority): here not the grid order, nor the
+    order by number of products."""
+    from napari_meris_ortho.synthesis import run as _run
+
+    planned: list = []
+    ran: list = []
+    real_jobs, real_tile_job = _run.Synthesis._jobs, _run.tile_job
+
+    def jobs(self, todo):
+        out = real_jobs(self, todo)
+        planned.append(out)
+        return out
+
+    def tile_job(fork, spec, window, *args, **kwargs):
+        ran.append(window)
+        return real_tile_job(fork, spec, window, *args, **kwargs)
+
+    monkeypatch.setattr(_run.Synthesis, "_jobs", jobs)
+    monkeypatch.setattr(_run, "tile_job", tile_job)
+    synthesize([products["east"], products["west"]], tmp_path / "s", grid=GRID, bands=BANDS,
+               tile=256, elevation="tiepoints")
+    (plan, work), = planned
+    assert ran == _run.submission_order(plan, work)
+    assert ran != sorted(plan) and ran != sorted(plan, key=lambda w: -len(plan[w]))
+    works = [_run.tile_work(work[w]) for w in ran]
+    assert works == sorted(works, reverse=True) and works[0] > works[-1]

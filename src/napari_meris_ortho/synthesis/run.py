@@ -67,6 +67,9 @@ WORKER_ENV = {"NUMBA_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_TH
 
 #: a segment task: product index, path, its piece of the grid, the product's whole window
 Job = tuple[int, str, Window, Window]
+#: the fixed cost of a piece (its segment window, lines read, merge call) in output pixels of
+#: work: about 0.04 s against 0.28 s per million pixels inside a product (fr-alps tile tasks)
+PIECE_WORK_PX = 1 << 17
 
 
 # --------------------------------------------------------------------------- runners
@@ -485,6 +488,22 @@ def _quantize(bands: dict[int, np.ndarray], spec: Spec) -> None:
         bands[b] = st.quantized(bands[b], st.BAND_SCALES[b])
 
 
+def tile_work(pixels: dict[int, int], exclude: frozenset[int] = frozenset()) -> int:
+    """The work of a tile task, in output pixels: each product's pixels inside the tile plus
+    a piece's fixed cost (``PIECE_WORK_PX``), for the products not excluded."""
+    return sum(n + PIECE_WORK_PX for index, n in pixels.items() if index not in exclude)
+
+
+def submission_order(jobs: dict[Window, list[Job]], work: dict[Window, dict[int, int]],
+                     exclude: frozenset[int] = frozenset()) -> list[Window]:
+    """The tiles in the order their tasks are submitted: the most work first (``tile_work``),
+    equal work in grid order. Longest processing time first: on N workers the short tiles
+    come last, so that no worker is left with a long one while the others have finished (one
+    free worker of two idled 0.4-0.8 s at the end of 4 fr-alps products when the tiles went
+    by their number of products)."""
+    return sorted(jobs, key=lambda w: (-tile_work(work.get(w, {}), exclude), w))
+
+
 def tile_job(fork: Any, spec: Spec, window: Window, jobs: Sequence[Job], rank: np.ndarray,
              exclude: frozenset[int], writer: TileWriter | None = None,
              on_piece: Callable[[], None] | None = None) -> TileDone:
@@ -723,12 +742,15 @@ class Synthesis:
             rank[index] = r + 1
         return rank
 
-    def _jobs(self, todo: list[_Product]) -> dict[Window, list[Job]]:
-        """Output tile -> the (product index, path, piece, product window) tasks it needs."""
+    def _jobs(self, todo: list[_Product]) -> tuple[dict[Window, list[Job]],
+                                                   dict[Window, dict[int, int]]]:
+        """Output tile -> the (product index, path, piece, product window) tasks it needs, and
+        tile -> product index -> output pixels of the tile inside the product (its work)."""
         from ..engine.boundary import row_spans, segment_boundary
 
         shape = (self.grid.height, self.grid.width)
         jobs: dict[Window, list[Job]] = {}
+        work: dict[Window, dict[int, int]] = {}
         for item in todo:
             if item.window is None:
                 item.report.status = STATUS_OUTSIDE
@@ -738,15 +760,19 @@ class Synthesis:
             boundary = segment_boundary(tp["latitude"], tp["longitude"])
             touched = False
             for piece in tiles(item.window, self.tile):
-                if row_spans(boundary, self.grid.window(*piece), margin=item.margin).count == 0:
+                inside = row_spans(boundary, self.grid.window(*piece), margin=item.margin).count
+                if inside == 0:
                     continue  # beyond any terrain point of the product
-                jobs.setdefault(tile_of(piece, self.tile, shape), []).append(
+                tile = tile_of(piece, self.tile, shape)
+                jobs.setdefault(tile, []).append(
                     (item.report.index, item.report.path, piece, item.window))
+                pixels = work.setdefault(tile, {})
+                pixels[item.report.index] = pixels.get(item.report.index, 0) + inside
                 touched = True
             if not touched:
                 item.report.status = STATUS_OUTSIDE
             item.product = None  # the workers open it themselves
-        return dict(sorted(jobs.items()))
+        return dict(sorted(jobs.items())), work
 
     # ---------------------------------------------------------------- run
     def run(self, runner: InProcess | Dask) -> SynthesisResult:
@@ -757,7 +783,7 @@ class Synthesis:
                                  reports)
         if not todo:
             return _log(result)
-        rank, jobs = self._rank(todo), self._jobs(todo)
+        rank, (jobs, work) = self._rank(todo), self._jobs(todo)
         todo = [i for i in todo if i.report.status != STATUS_OUTSIDE]
         if not todo:  # no product touches the grid: nothing to commit
             return _log(result)
@@ -769,7 +795,8 @@ class Synthesis:
         try:
             failed: set[int] = set()
             while True:
-                done = self._execute(runner, session, spec, jobs, rank, frozenset(failed))
+                done = self._execute(runner, session, spec, jobs, work, rank,
+                                     frozenset(failed))
                 newly = self._collect(done, todo, failed)
                 if not newly:
                     break
@@ -836,9 +863,10 @@ class Synthesis:
                 "radiance": RADIANCE_NOTE, "products": table}
 
     def _execute(self, runner: InProcess | Dask, session: Any, spec: Spec,
-                 jobs: dict[Window, list[Job]], rank: np.ndarray,
-                 exclude: frozenset[int]) -> list[TileDone]:
-        """Submit every task (tile by tile), report progress, return the written tiles."""
+                 jobs: dict[Window, list[Job]], work: dict[Window, dict[int, int]],
+                 rank: np.ndarray, exclude: frozenset[int]) -> list[TileDone]:
+        """Submit every task (tile by tile, the most work first), report progress, return the
+        written tiles."""
         futures: list[Any] = []
         run = uuid.uuid4().hex[:8]
         steps = {window: sum(1 for job in tasks if job[0] not in exclude) + 1
@@ -855,13 +883,11 @@ class Synthesis:
         # in process: the writer thread, and progress (and Cancel) after every piece
         extra: tuple[Any, ...] = ((runner.writer, lambda: advance(1))
                                   if isinstance(runner, InProcess) else ())
-        # the tiles with the most pieces first: on N workers the longest tasks start first
-        order = sorted(jobs.items(), key=lambda item: -len(item[1]))
-        for window, tasks in order:
-            futures.append(runner.submit(tile_job, session.fork(), spec, window, tasks, rank,
-                                         exclude, *extra,
+        for window in submission_order(jobs, work, exclude):
+            futures.append(runner.submit(tile_job, session.fork(), spec, window, jobs[window],
+                                         rank, exclude, *extra,
                                          key=f"tile-{run}-{window[0]}-{window[2]}",
-                                         priority=len(tasks)))
+                                         priority=tile_work(work.get(window, {}), exclude)))
         written: list[TileDone] = []
         try:
             for future in runner.completed(futures):
