@@ -286,9 +286,9 @@ def _gather_points(i0, i1, j0, pixels, index, scales, out):  # pragma: no cover
     (point after point, 15 bands made 30 interleaved streams: 2-3 times the time)."""
     n_bands = pixels.shape[0]
     scaled = scales.size > 0
+    d = j0 - i0
     for a in range(i0, i1, GATHER_BLOCK):
         z = min(a + GATHER_BLOCK, i1)
-        d = j0 - i0
         for b in range(n_bands):
             if scaled:
                 s = scales[b]
