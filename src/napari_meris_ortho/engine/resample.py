@@ -283,7 +283,8 @@ def _gather_range(lo, hi, pixels, index, scales, out, width, stride, offset):  #
 def _gather_points(i0, i1, j0, pixels, index, scales, out):  # pragma: no cover
     """Points [i0, i1) into ``out[:, j0 + i - i0]``, in blocks of ``GATHER_BLOCK`` points and
     band after band within a block, so that each band is read and written as one stream
-    (point after point, 15 bands made 30 interleaved streams: 2-3 times the time)."""
+    (point after point, 15 bands made 30 interleaved streams: 1.5 times the time over a whole
+    fr-alps grid, 2.6 times over a 1024 x 1024 tile)."""
     n_bands = pixels.shape[0]
     scaled = scales.size > 0
     d = j0 - i0
