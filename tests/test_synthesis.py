@@ -996,3 +996,36 @@ def test_a_run_computes_its_tiles_in_submission_order(products, tmp_path, monkey
     assert ran != sorted(plan) and ran != sorted(plan, key=lambda w: -len(plan[w]))
     works = [_run.tile_work(work[w]) for w in ran]
     assert works == sorted(works, reverse=True) and works[0] > works[-1]
+
+
+@pytest.mark.parametrize("bands", [(2, 9), (2, 7, 9, 13)])
+def test_bands_read_where_a_product_wins_give_the_layers_of_whole_pieces(
+        products, tmp_path, monkeypatch, bands) -> None:
+    """Maximum NDVI on standard products: a piece reads its bands at its merge, where it wins
+    only (``run.gathers_winners``); the layers, a new synthesis and an update into it, are the
+    bytes of pieces gathered whole (with and without the NDVI bands among the stored ones)."""
+    from napari_meris_ortho.synthesis import run
+
+    seen: list[bool] = []
+    real = run.gathers_winners
+
+    def observed(spec, product):
+        seen.append(real(spec, product))
+        return seen[-1]
+
+    def merge(out) -> dict[str, np.ndarray]:
+        options = dict(grid=GRID, bands=bands, tile=256, algorithm="max-ndvi",
+                       elevation="tiepoints")
+        synthesize([products["cloudy1"], products["west"]], out, **options)
+        synthesize([products["cloudy2"], products["cloudy3"]], out, input=out,
+                   elevation="tiepoints")
+        return layers(out)
+
+    monkeypatch.setattr(run, "gathers_winners", observed)
+    lazy = merge(tmp_path / "lazy")
+    assert seen and all(seen)
+    monkeypatch.setattr(run, "gathers_winners", lambda spec, product: False)
+    whole = merge(tmp_path / "whole")
+    assert sorted(lazy) == sorted(whole)
+    assert all(lazy[k].tobytes() == whole[k].tobytes() for k in lazy)
+    assert len(np.unique(whole["product"])) == 5  # background and four products hold pixels

@@ -12,6 +12,7 @@ from napari_meris_ortho.engine.synthesis import (
     FLAG_GLINT_RISK,
     FLAG_INVALID,
     TileState,
+    WinnerBands,
     chunk_changes,
     combine,
     ndvi_decode,
@@ -20,6 +21,7 @@ from napari_meris_ortho.engine.synthesis import (
     segment_counts_state,
     segment_state,
     validated_pixels,
+    winner_state,
 )
 
 
@@ -203,3 +205,43 @@ def test_chunk_changes_are_array_equal_and_any_per_block(dtype) -> None:
     assert marks[1, 1] == CHUNK_CHANGED and marks[1, 2] == 0
     assert marks[4, 4] & CHUNK_CHANGED and not marks[2, 2] & CHUNK_CHANGED
     assert bool(marks[3, 0] & CHUNK_CHANGED) == (dtype == np.float32)
+
+
+def test_bands_read_where_a_contribution_wins_are_those_of_the_whole_contribution() -> None:
+    """Maximum NDVI on counts: a contribution whose bands are read at its merge, where it wins
+    only (``winner_state`` + ``WinnerBands``), leaves the same bytes as the same contribution
+    gathered whole (``segment_counts_state`` of the pixels at the nearest index), merged in
+    any order with others: fills and saturated bands are background, points without an
+    antecedent (index -1) give 0, NDVI ties go to the lower rank."""
+    rng = np.random.default_rng(5)
+    shape, n_bands, window = (24, 31), 3, (9, 12)
+    fills = np.array([65535, -1, 7], np.int64)
+    bits = np.array([1 << 0, 1 << 6, 1 << 12], np.uint16)
+    rank = np.array([0, 3, 1, 2])
+    plain, lazy = [], []
+    for k in range(3):
+        pixels = rng.choice(np.array([7, 900, 2000, 65535], np.uint16),
+                            (n_bands, window[0] * window[1]))
+        index = rng.integers(-1, pixels.shape[1], shape).astype(np.int32)
+        saturated = rng.choice(np.array([0, 0, 0, 1, 64, 4096], np.uint16), shape)
+        valid = (rng.random(shape) > 0.25) & (index >= 0)
+        red = rng.choice(np.array([10.0, 20.0], np.float32), shape)  # many equal NDVI codes
+        nir = rng.choice(np.array([30.0, 40.0], np.float32), shape)
+        gathered = np.where(index >= 0, pixels[:, np.maximum(index, 0)], 0).astype(np.uint16)
+        for b in range(n_bands):
+            gathered[b][(gathered[b] == fills[b]) | ((saturated & bits[b]) != 0)] = 0
+        plain.append(segment_counts_state(list(gathered), (0, 0), None, valid, k + 1, red, nir))
+        lazy.append((winner_state(valid, k + 1, red, nir),
+                     WinnerBands(pixels, index, fills, saturated, bits)))
+    for order in ([0, 1, 2], [2, 0, 1], [1, 2, 0]):
+        want = TileState(np.zeros((n_bands, *shape), np.uint16), np.zeros(shape, np.uint16),
+                         np.zeros(shape, np.int32), np.zeros(shape, np.uint16))
+        got = want.copy()
+        for k in order:
+            combine(want, plain[k], rank)
+            combine(got, lazy[k][0], rank, lazy[k][1])
+        _same(got, want)
+    assert np.count_nonzero(want.bands) > want.bands.size // 3  # not an empty synthesis
+    assert set(np.unique(want.winner)) == {0, 1, 2, 3}
+    with pytest.raises(ValueError, match="maximum-NDVI"):
+        combine(TileState.empty(n_bands, shape, False), lazy[0][0], rank, lazy[0][1])

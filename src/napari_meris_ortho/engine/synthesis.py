@@ -299,12 +299,93 @@ def combine_maximum_ndvi(bands: np.ndarray, ndvi: np.ndarray, count: np.ndarray,
                     bands[b, i, j] = new_bands[b, i, j]
 
 
-def combine(acc: TileState, new: TileState, rank: np.ndarray) -> None:
+@dataclass
+class WinnerBands:
+    """The band values of a contribution, not gathered yet: what :func:`combine` takes, under
+    the maximum-NDVI rule, for the pixels the contribution wins only (the other pixels' bands
+    are never read: a season's k-th product wins about 1/k of them). ``pixels`` (n_bands, n)
+    uint16: the product window of each stored band, flattened; ``index`` (rows, cols) the
+    flat pixel of each point of the state (its nearest antecedent; -1: none); ``fills``
+    (n_bands,) int64: the band's no-data count (-1: none), which is taken as 0 (background);
+    ``saturated`` (rows, cols) uint16 saturation bits of the point (shape (0, 0): none) and
+    ``bits`` (n_bands,) uint16 each band's bit in them: a saturated band is taken as 0."""
+
+    pixels: np.ndarray
+    index: np.ndarray
+    fills: np.ndarray
+    saturated: np.ndarray
+    bits: np.ndarray
+
+
+def winner_state(valid: np.ndarray, index: int, red: np.ndarray, nir: np.ndarray
+                 ) -> TileState:
+    """The state of a contribution whose bands a :class:`WinnerBands` gives: no band planes,
+    count 1 and winner ``index`` where ``valid``, the 16-bit NDVI of ``red``/``nir``
+    (Appendix C coding)."""
+    valid = np.ascontiguousarray(valid, dtype=np.bool_)
+    return TileState(np.empty((0, *valid.shape), np.uint16), valid.astype(np.uint16),
+                     np.where(valid, np.int32(index), np.int32(0)),
+                     _ndvi_codes(np.ascontiguousarray(red, np.float32),
+                                 np.ascontiguousarray(nir, np.float32), valid))
+
+
+@njit(cache=True, parallel=True)
+def combine_maximum_ndvi_gathering(bands: np.ndarray, ndvi: np.ndarray, count: np.ndarray,
+                                   winner: np.ndarray, new_ndvi: np.ndarray,
+                                   new_count: np.ndarray, new_winner: np.ndarray,
+                                   rank: np.ndarray, pixels: np.ndarray, index: np.ndarray,
+                                   fills: np.ndarray, saturated: np.ndarray, bits: np.ndarray
+                                   ) -> None:
+    """``combine_maximum_ndvi`` whose new bands come from a :class:`WinnerBands` (its arrays),
+    read at the pixels the new state wins only: the same synthesis, without gathering and
+    copying the bands of the pixels it loses."""
+    n_bands, rows, cols = bands.shape
+    with_saturation = saturated.shape[0] > 0
+    for i in prange(rows):
+        taken = np.zeros(cols, np.bool_)  # the row's pixels the new state wins
+        n_taken = 0
+        for j in range(cols):
+            count[i, j] += new_count[i, j]
+            w = new_winner[i, j]
+            if w == 0:
+                continue
+            old = winner[i, j]
+            if old == 0 or _beats(-float(new_ndvi[i, j]), rank[w], -float(ndvi[i, j]),
+                                  rank[old]):
+                winner[i, j] = w
+                ndvi[i, j] = new_ndvi[i, j]
+                taken[j] = True
+                n_taken += 1
+        if n_taken == 0:
+            continue
+        for b in range(n_bands):  # band after band: one stream each (``_gather_points``)
+            fill = fills[b]
+            bit = bits[b]
+            for j in range(cols):
+                if taken[j]:
+                    p = index[i, j]
+                    v = pixels[b, p] if p >= 0 else np.uint16(0)
+                    if v == fill or (with_saturation and (saturated[i, j] & bit) != 0):
+                        v = np.uint16(0)
+                    bands[b, i, j] = v
+
+
+def combine(acc: TileState, new: TileState, rank: np.ndarray,
+            source: WinnerBands | None = None) -> None:
     """Merge state ``new`` into ``acc`` (same shape; in place). Associative and commutative;
     ``rank[k]``: tie-break rank of product ``k`` (distinct ranks). The bands may also be
     uint16 counts of one positive scale per band (both states alike): the rules only compare
-    and copy them, and counts order as their radiances do."""
+    and copy them, and counts order as their radiances do. ``source``: ``new``'s bands are
+    read from it where ``new`` wins (``winner_state``; maximum-NDVI rule, uint16 counts)."""
     rank = np.ascontiguousarray(rank, dtype=np.int64)
+    if source is not None:
+        if acc.ndvi is None or new.ndvi is None or acc.bands.dtype != np.uint16:
+            raise ValueError("bands read where a state wins: maximum-NDVI rule on counts only")
+        combine_maximum_ndvi_gathering(acc.bands, acc.ndvi, acc.count, acc.winner, new.ndvi,
+                                       new.count, new.winner, rank, source.pixels,
+                                       source.index, source.fills, source.saturated,
+                                       source.bits)
+        return
     if acc.ndvi is None or new.ndvi is None:
         combine_minimum_radiance(acc.bands, acc.count, acc.winner, new.bands, new.count,
                                  new.winner, rank)

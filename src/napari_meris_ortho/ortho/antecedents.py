@@ -211,6 +211,8 @@ class Antecedents:
     bands_counted: bool = False
     #: the whole-grid ``line``, ``col``, ``iterations`` built so far (given: the diagnostics')
     whole_grid: dict[str, np.ndarray] = field(default_factory=dict, repr=False)
+    #: the bands of ``nearest_source`` and their windows' copy (bands, lines, cols)
+    _held: tuple[tuple[int, ...], np.ndarray] | None = field(default=None, repr=False)
 
     @property
     def line(self) -> np.ndarray:
@@ -311,13 +313,16 @@ class Antecedents:
         sec[key] += time.perf_counter() - t0
 
     def _gather(self, images: Sequence[Any], dtype: Any, out: np.ndarray,
-                box: tuple[int, int, int, int], scales: np.ndarray | None = None) -> None:
+                box: tuple[int, int, int, int], scales: np.ndarray | None = None,
+                stack: np.ndarray | None = None) -> None:
         """The nearest pixel of every point of ``box`` (``_extent``) from ``images`` (their
-        window, as ``dtype``) into its place in ``out`` (images, rows, cols): as they are
-        (``gather``), or times ``scales`` as float32 (``gather_scaled``)."""
+        window, as ``dtype``; or ``stack``, those windows copied already) into its place in
+        ``out`` (images, rows, cols): as they are (``gather``), or times ``scales`` as float32
+        (``gather_scaled``)."""
         from ..engine.resample import gather, gather_scaled
 
-        stack = self._stack(images, dtype)
+        if stack is None:
+            stack = self._stack(images, dtype)
         index = self._nearest_index()
         n, nr, nc = out.shape
         r0, r1, c0, c1 = box
@@ -386,12 +391,34 @@ class Antecedents:
             return out
         inside = out[:, box[0]:box[1], box[2]:box[3]]
         if self.sampling is Sampling.NEAREST:
-            self._gather([self.prod.counts(b) for b in bands], np.uint16, out, box)
+            held = self._held
+            if held is not None and set(bands) <= set(held[0]):
+                stack = held[1][[held[0].index(b) for b in bands]]
+                self._gather([], np.uint16, out, box, stack=stack)
+            else:
+                self._gather([self.prod.counts(b) for b in bands], np.uint16, out, box)
             self._clear(inside, self._no_data(bands))
             return out
         for k, v in enumerate(self._interpolated(bands)):
             inside[k] = np.clip(np.floor(v + np.float32(0.5)), 0, 65535)
         return out
+
+    def nearest_source(self, bands: Sequence[int]
+                       ) -> tuple[np.ndarray, np.ndarray, tuple[int, int, int, int]] | None:
+        """What ``counts`` gathers from at the nearest pixel, for a caller that reads some points
+        only: the product window of each band's counts (len(bands), window pixels) uint16, the
+        flat pixel of every point of the extent (its rows x columns; -1: none) and that extent
+        of the grid (rows [r0, r1), columns [c0, c1)); None when there is nothing to sample."""
+        if self.sampling is not Sampling.NEAREST:
+            raise ValueError("nearest_source: the sampling is not nearest")
+        box = self._extent()
+        if box[1] <= box[0] or self.window[1] <= self.window[0] or not bands:
+            return None
+        held = tuple(int(b) for b in bands)
+        stack = self._stack([self.prod.counts(b) for b in held], np.uint16)
+        self._held = (held, stack)  # ``counts`` of these bands gathers from it (no new copy)
+        index = self._nearest_index().reshape(box[1] - box[0], box[3] - box[2])
+        return stack.reshape(stack.shape[0], -1), index, box
 
     def radiance(self, bands: Sequence[int] | None = None) -> dict[int, np.ndarray]:
         """float32 radiances (counts x sf_rad, Scaling Factor GADS) of ``bands``, 0 = background;

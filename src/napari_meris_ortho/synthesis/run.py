@@ -24,7 +24,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from .._process import keep_task_arrays, task_arrays_kept
-from ..engine.synthesis import NDVI_NIR_BAND, NDVI_RED_BAND, TileState
+from ..engine.synthesis import NDVI_NIR_BAND, NDVI_RED_BAND, TileState, WinnerBands
 from ..errors import DemError, MerisOrthoError, OptionsError, OutputError
 from ..options import OrthoOptions, Sampling, StoreCodec
 from ..progress import ProgressCallback
@@ -298,6 +298,8 @@ class Piece:
     validated: int = 0
     error: str | None = None
     dem_error: str | None = None
+    #: the state's bands, read where it wins at its merge (``gathers_winners``), or None
+    source: WinnerBands | None = None
 
 
 @dataclass
@@ -363,7 +365,7 @@ def segment_task(spec: Spec, index: int, path: str, window: Window,
     """Orthorectify product ``path`` on ``window`` of the grid: its contribution (cropped to
     its validated pixels); ``extent``: the product's whole window of the grid (default
     ``window``). Errors come back as text (exceptions may not survive pickling)."""
-    from ..engine.synthesis import segment_counts_state, segment_state
+    from ..engine.synthesis import segment_counts_state, segment_state, winner_state
     from ..products.sen3.kept import keep_decoded_bands
 
     # a .SEN3 band decoded once per process, not per tile, and shared by the run's workers on
@@ -374,7 +376,10 @@ def segment_task(spec: Spec, index: int, path: str, window: Window,
         _prepare_bands(segment.prod, spec.needed)  # the workers of a host decode them together
         antecedents = segment.precompute(_grid(spec).window(*window), allow_empty=True,
                                          hold_bands=True)
-        sampled = _Sampled.of(antecedents, spec)
+        gathering = gathers_winners(spec, segment.prod)
+        # (first: the NDVI bands are then gathered from the windows it copies)
+        source = antecedents.nearest_source(spec.needed) if gathering else None
+        sampled = _Sampled.of(antecedents, spec, _NDVI_BANDS if gathering else None)
         _release_pages(segment.prod)
     except DemError as exc:
         return Piece(index, window, None, dem_error=message_of(exc))
@@ -390,6 +395,11 @@ def segment_task(spec: Spec, index: int, path: str, window: Window,
     if spec.algorithm == "max-ndvi":
         red = sampled.radiance(NDVI_RED_BAND, (r0, r1, c0, c1))
         nir = sampled.radiance(NDVI_NIR_BAND, (r0, r1, c0, c1))
+    if source is not None and red is not None and nir is not None:  # bands read at the merge
+        piece.state = winner_state(valid[r0:r1, c0:c1], index, red, nir)
+        piece.source = _winner_bands(segment.prod, spec, source, sampled, (r0, r1, c0, c1))
+        piece.window = (window[0] + r0, window[0] + r1, window[2] + c0, window[2] + c1)
+        return piece
     planes = [sampled.bands[b] for b in spec.bands]
     if spec.compact:  # the store's counts: half the bytes to ship and hold until the merge
         divisors = (None if sampled.counts  # already the store's counts: copied where valid
@@ -401,6 +411,36 @@ def segment_task(spec: Spec, index: int, path: str, window: Window,
         piece.state = segment_state(segment, valid[r0:r1, c0:c1], index, red, nir)
     piece.window = (window[0] + r0, window[0] + r1, window[2] + c0, window[2] + c1)
     return piece
+
+
+_NDVI_BANDS = (NDVI_RED_BAND, NDVI_NIR_BAND)
+
+
+def gathers_winners(spec: Spec, product: Any) -> bool:
+    """Whether a piece of ``product`` reads its bands where it wins only, at its merge
+    (``engine.synthesis.WinnerBands``): under the maximum-NDVI rule (a pixel's bands follow
+    its NDVI) when its counts at the nearest pixel are the store's (``counts_as_stored``)."""
+    scales = {b: float(product.scaling.radiance[b - 1]) for b in spec.needed}
+    return spec.algorithm == "max-ndvi" and counts_as_stored(spec, scales)
+
+
+def _winner_bands(product: Any, spec: Spec, source: tuple[np.ndarray, np.ndarray, Window],
+                  sampled: _Sampled, box: Window) -> WinnerBands:
+    """The ``WinnerBands`` of a piece cropped to ``box`` of its tile (rows r0:r1, columns
+    c0:c1; inside the extent of ``Antecedents.nearest_source`` of ``spec.needed``): the
+    windows of the stored bands, its index and saturation bits there, each band's fill and
+    bit."""
+    pixels, index, extent = source
+    if spec.needed != spec.bands:  # the NDVI bands were copied for the NDVI only
+        pixels = pixels[[spec.needed.index(b) for b in spec.bands]]
+    r0, r1, c0, c1 = box
+    rows, cols = slice(r0 - extent[0], r1 - extent[0]), slice(c0 - extent[2], c1 - extent[2])
+    fills = [product.no_data_count(b) for b in spec.bands]
+    return WinnerBands(
+        pixels, index[rows, cols], np.array([-1 if f is None else f for f in fills], np.int64),
+        (np.zeros((0, 0), np.uint16) if sampled.saturated is None
+         else sampled.saturated[r0:r1, c0:c1]),
+        np.array([1 << (b - 1) for b in spec.bands], np.uint16))
 
 
 @dataclass
@@ -417,13 +457,16 @@ class _Sampled:
     scales: dict[int, float]
 
     @classmethod
-    def of(cls, antecedents: Antecedents, spec: Spec) -> _Sampled:
+    def of(cls, antecedents: Antecedents, spec: Spec,
+           only: Sequence[int] | None = None) -> _Sampled:
+        """``only``: these bands only (the product's counts are the store's)."""
         prod = antecedents.prod
         scales = {b: float(prod.scaling.radiance[b - 1]) for b in spec.needed}
         counts = counts_as_stored(spec, scales)
         if counts:
-            values = antecedents.counts(spec.needed)
-            bands = {b: values[k] for k, b in enumerate(spec.needed)}
+            needed = spec.needed if only is None else tuple(only)
+            values = antecedents.counts(needed)
+            bands = {b: values[k] for k, b in enumerate(needed)}
         else:
             result = antecedents.result()
             bands = result.bands
@@ -570,9 +613,9 @@ def tile_task(fork: Any, spec: Spec, window: Window, pieces: Iterable[Piece],
                 state = _state_of(stored, spec)
             r0, r1, c0, c1 = (p.window[0] - window[0], p.window[1] - window[0],
                               p.window[2] - window[2], p.window[3] - window[2])
-            combine(state.window(r0, r1, c0, c1), p.state, rank)
+            combine(state.window(r0, r1, c0, c1), p.state, rank, p.source)
             merged.add(p.index)
-            p.state = None  # merged: its memory goes
+            p.state = p.source = None  # merged: its memory goes
     finally:
         # nothing to merge, or an error (a Cancel): the read is dropped, and waited for when
         # it has begun (no read of the fork left running while the run is undone)
