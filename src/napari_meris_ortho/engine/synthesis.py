@@ -329,7 +329,7 @@ def winner_state(valid: np.ndarray, index: int, red: np.ndarray, nir: np.ndarray
                                  np.ascontiguousarray(nir, np.float32), valid))
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, parallel=True, nogil=True)
 def combine_maximum_ndvi_gathering(bands: np.ndarray, ndvi: np.ndarray, count: np.ndarray,
                                    winner: np.ndarray, new_ndvi: np.ndarray,
                                    new_count: np.ndarray, new_winner: np.ndarray,
