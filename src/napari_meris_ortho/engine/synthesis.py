@@ -6,8 +6,10 @@ valid pixel), ``winner`` (rows, cols) int32 (1-based index of the product that w
 0 = background) and, for the maximum-NDVI rule, ``ndvi`` (rows, cols) uint16: NDVI in [-1, 1]
 coded linearly on [1, 65535], 0 = background (Appendix C, ``radioShift``/``radioFactor``).
 
-One product's contribution to a tile is itself a state (:func:`segment_state`); states are
-merged by :func:`combine`, which is associative and commutative: the synthesis does not depend
+One product's contribution to a tile is itself a state (:func:`segment_state`; under the
+maximum-NDVI rule on counts it may also come without its bands, :func:`winner_state`, which
+:func:`combine` reads from a :class:`WinnerBands` where it wins); states are merged by
+:func:`combine`, which is associative and commutative: the synthesis does not depend
 on the order in which products or tiles are merged, nor on how the work is split. Ties are
 broken by the products' ``rank`` (sensing time, then name; lower rank wins).
 """
