@@ -305,7 +305,8 @@ def combine_maximum_ndvi(bands: np.ndarray, ndvi: np.ndarray, count: np.ndarray,
 class WinnerBands:
     """The band values of a contribution, not gathered yet: what :func:`combine` takes, under
     the maximum-NDVI rule, for the pixels the contribution wins only (the other pixels' bands
-    are never read: a season's k-th product wins about 1/k of them). ``pixels`` (n_bands, n)
+    are never read; the 2nd to 6th of 6 simulated dates merged one by one won 36 % down to
+    4 % of their pixels). ``pixels`` (n_bands, n)
     uint16: the product window of each stored band, flattened; ``index`` (rows, cols) the
     flat pixel of each point of the state (its nearest antecedent; -1: none); ``fills``
     (n_bands,) int64: the band's no-data count (-1: none), which is taken as 0 (background);
