@@ -274,6 +274,28 @@ def combine_minimum_radiance(bands: np.ndarray, count: np.ndarray, winner: np.nd
                     bands[b, i, j] = new
 
 
+@njit(cache=True, inline="always")
+def _ndvi_row_winners(i, ndvi, count, winner, new_ndvi, new_count, new_winner, rank,
+                      taken):  # pragma: no cover - numba
+    """Row i of the maximum-NDVI rule without the bands: counts added, and where the new
+    state's NDVI code is greater (equal: the lower rank) its winner and code taken and
+    ``taken[j]`` set; returns how many pixels it took."""
+    n_taken = 0
+    for j in range(taken.size):
+        count[i, j] += new_count[i, j]
+        w = new_winner[i, j]
+        if w == 0:
+            continue
+        old = winner[i, j]
+        if old == 0 or _beats(-float(new_ndvi[i, j]), rank[w], -float(ndvi[i, j]),
+                              rank[old]):
+            winner[i, j] = w
+            ndvi[i, j] = new_ndvi[i, j]
+            taken[j] = True
+            n_taken += 1
+    return n_taken
+
+
 @njit(cache=True, parallel=True)
 def combine_maximum_ndvi(bands: np.ndarray, ndvi: np.ndarray, count: np.ndarray,
                          winner: np.ndarray, new_bands: np.ndarray, new_ndvi: np.ndarray,
@@ -284,17 +306,7 @@ def combine_maximum_ndvi(bands: np.ndarray, ndvi: np.ndarray, count: np.ndarray,
     n_bands, rows, cols = bands.shape
     for i in prange(rows):
         taken = np.zeros(cols, np.bool_)  # the row's pixels the new state wins
-        for j in range(cols):
-            count[i, j] += new_count[i, j]
-            w = new_winner[i, j]
-            if w == 0:
-                continue
-            old = winner[i, j]
-            if old == 0 or _beats(-float(new_ndvi[i, j]), rank[w], -float(ndvi[i, j]),
-                                  rank[old]):
-                winner[i, j] = w
-                ndvi[i, j] = new_ndvi[i, j]
-                taken[j] = True
+        _ndvi_row_winners(i, ndvi, count, winner, new_ndvi, new_count, new_winner, rank, taken)
         for b in range(n_bands):  # band after band: one stream each (``_gather_points``)
             for j in range(cols):
                 if taken[j]:
@@ -346,20 +358,8 @@ def combine_maximum_ndvi_gathering(bands: np.ndarray, ndvi: np.ndarray, count: n
     with_saturation = saturated.shape[0] > 0
     for i in prange(rows):
         taken = np.zeros(cols, np.bool_)  # the row's pixels the new state wins
-        n_taken = 0
-        for j in range(cols):
-            count[i, j] += new_count[i, j]
-            w = new_winner[i, j]
-            if w == 0:
-                continue
-            old = winner[i, j]
-            if old == 0 or _beats(-float(new_ndvi[i, j]), rank[w], -float(ndvi[i, j]),
-                                  rank[old]):
-                winner[i, j] = w
-                ndvi[i, j] = new_ndvi[i, j]
-                taken[j] = True
-                n_taken += 1
-        if n_taken == 0:
+        if _ndvi_row_winners(i, ndvi, count, winner, new_ndvi, new_count, new_winner, rank,
+                             taken) == 0:
             continue
         for b in range(n_bands):  # band after band: one stream each (``_gather_points``)
             fill = fills[b]
