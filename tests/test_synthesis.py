@@ -1029,3 +1029,63 @@ def test_bands_read_where_a_product_wins_give_the_layers_of_whole_pieces(
     assert sorted(lazy) == sorted(whole)
     assert all(lazy[k].tobytes() == whole[k].tobytes() for k in lazy)
     assert len(np.unique(whole["product"])) == 5  # background and four products hold pixels
+
+
+def test_in_process_the_sen3_bands_of_a_tiles_products_decode_ahead_once(tmp_path,
+                                                                        monkeypatch):
+    """A synthesis in this process starts decoding the bands of every product of a tile in the
+    background (``run._decode_ahead``, on ``sen3-bands`` threads) while the first products are
+    orthorectified: each band of each product is decoded once in the run, and the layers are
+    those of a run that decodes each product's bands when it comes to them."""
+    import shutil
+    import threading
+
+    from napari_meris_ortho.products.sen3 import kept
+    from napari_meris_ortho.products.sen3.reader import MerisSen3Product
+    from napari_meris_ortho.simulate.geocorrected import write_geocorrected
+    from napari_meris_ortho.simulate.scene import generate_scene
+    from napari_meris_ortho.synthesis import run
+
+    first = write_geocorrected(generate_scene("fr-small"), fsg=False, out_dir=tmp_path)["sen3"]
+    second = first.with_name(first.name.replace("_000_000______MOR", "_002_000______MOR"))
+    assert second != first
+    shutil.copytree(first, second)  # another cycle's product, the same values
+    seen: list[tuple[str, int, str]] = []
+    decode = MerisSen3Product._counts
+
+    def decoding(self, band: int) -> np.ndarray:
+        seen.append((self.product_name, band, threading.current_thread().name))
+        return decode(self, band)
+
+    events: list[tuple[str, str]] = []
+    ahead, segment = run._decode_ahead, run.segment_task
+
+    def asked(path: str, bands) -> None:
+        events.append(("ahead", Path(path).name))
+        ahead(path, bands)
+
+    def piece(spec, index, path, *args):
+        events.append(("piece", Path(path).name))
+        return segment(spec, index, path, *args)
+
+    monkeypatch.setattr(kept, "usable_threads", lambda: 2)  # as on this 2-core machine
+    monkeypatch.setattr(MerisSen3Product, "_counts", decoding)
+    monkeypatch.setattr(run, "_decode_ahead", asked)
+    monkeypatch.setattr(run, "segment_task", piece)
+    options = dict(bands=(2, 7, 13), tile=256, elevation="tiepoints")
+    result = synthesize([str(first), str(second)], tmp_path / "ahead", **options)
+    assert len(result.merged) == 2
+    assert sorted(events[:2]) == [("ahead", first.name), ("ahead", second.name)]
+    assert events[2][0] == "piece"  # both asked for before the first piece
+    names = sorted({name for name, _, _ in seen})
+    assert len(names) == 2
+    assert sorted((n, b) for n, b, _ in seen) == [(n, b) for n in names for b in (2, 7, 13)]
+    assert all(thread.startswith("sen3-") for _, _, thread in seen)  # never this thread
+    seen.clear()
+    monkeypatch.setattr(run, "_decode_ahead", lambda path, bands: None)
+    synthesize([str(first), str(second)], tmp_path / "plain", **options)
+    assert len(seen) == 6
+    left, right = layers(tmp_path / "ahead"), layers(tmp_path / "plain")
+    assert left.keys() == right.keys()
+    for key in left:
+        assert left[key].tobytes() == right[key].tobytes(), key

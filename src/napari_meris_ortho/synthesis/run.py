@@ -243,8 +243,14 @@ def _release_on_workers(client: Any) -> None:
 
 
 def _release_decoded_bands() -> None:
+    """The end of a run in this process: bands read ahead and not begun are called off, the
+    bands kept are freed."""
     from ..products.sen3.kept import release_decoded_bands
 
+    for product in list(_PRODUCTS.values()):
+        cancel = getattr(product, "cancel_read_ahead", None)
+        if callable(cancel):
+            cancel()
     release_decoded_bands()
 
 
@@ -366,11 +372,8 @@ def segment_task(spec: Spec, index: int, path: str, window: Window,
     its validated pixels); ``extent``: the product's whole window of the grid (default
     ``window``). Errors come back as text (exceptions may not survive pickling)."""
     from ..engine.synthesis import segment_counts_state, segment_state, winner_state
-    from ..products.sen3.kept import keep_decoded_bands
 
-    # a .SEN3 band decoded once per process, not per tile, and shared by the run's workers on
-    # a host; the run frees it
-    keep_decoded_bands(spec.layout if _in_worker() else "")
+    _keep_bands(spec)
     try:
         segment = _segment(spec, path, window if extent is None else extent)
         _prepare_bands(segment.prod, spec.needed)  # the workers of a host decode them together
@@ -507,6 +510,27 @@ def counts_as_stored(spec: Spec, scales: dict[int, float]) -> bool:
             and all(np.float32(scales[b]) == np.float32(st.BAND_SCALES[b]) for b in spec.bands))
 
 
+def _keep_bands(spec: Spec) -> None:
+    """A .SEN3 band decoded once per process, not per tile, and shared by the run's workers on
+    a host; the run frees it (``products.sen3.kept``)."""
+    from ..products.sen3.kept import keep_decoded_bands
+
+    keep_decoded_bands(spec.layout if _in_worker() else "")
+
+
+def _decode_ahead(path: str, bands: Sequence[int]) -> None:
+    """Start decoding ``bands`` of the product at ``path`` (not kept yet) in the background, for
+    a product that reads its bands whole (``read_ahead`` of a .SEN3); nothing for others or
+    when it cannot be opened (its task says why)."""
+    try:
+        product = _product(path)
+    except (MerisOrthoError, OSError, ValueError):
+        return
+    read_ahead = getattr(product, "read_ahead", None)
+    if callable(read_ahead):
+        read_ahead(bands)
+
+
 def _prepare_bands(product: Any, bands: Sequence[int]) -> None:
     """Decode ``bands`` of a product that reads its bands whole, the run's workers on a host
     sharing the work (``prepare_bands`` of a .SEN3); nothing for other products."""
@@ -557,10 +581,14 @@ def tile_job(fork: Any, spec: Spec, window: Window, jobs: Sequence[Job], rank: n
     ``on_piece``: called after each piece (in process: the run's progress, and its Cancel)."""
     _tune_worker()
 
+    todo = [job for job in jobs if job[0] not in exclude]
+    if writer is not None:  # in process: the bands of the products after the first decode
+        _keep_bands(spec)  # while the first ones are orthorectified, and are kept
+        for job in todo:
+            _decode_ahead(job[1], spec.needed)
+
     def pieces() -> Iterator[Piece]:
-        for index, path, piece, extent in jobs:
-            if index in exclude:
-                continue
+        for index, path, piece, extent in todo:
             yield segment_task(spec, index, path, piece, extent)
             if on_piece is not None:
                 on_piece()

@@ -43,6 +43,7 @@ from typing import Any
 
 import numpy as np
 
+from ...cores import usable_threads
 from ..pages import drop_resident_pages
 
 try:
@@ -75,7 +76,7 @@ class KeptBands:
 
     def __init__(self, owner: Any, key: str = "", shape: tuple[int, int] | None = None) -> None:
         self.bands: dict[int, np.ndarray] = {}
-        self.maps: list[mmap.mmap] = []
+        self.maps: dict[int, mmap.mmap] = {}
         self.key = hashlib.sha1(key.encode()).hexdigest()[:16] if key and shape else ""
         self.shape: tuple[int, int] = shape or (0, 0)
         weakref.finalize(owner, _forget, self)
@@ -133,16 +134,23 @@ class KeptBands:
         return found[1].copy() if held is None else held
 
     def prepare(self, bands: Sequence[int], decode: Callable[[int], np.ndarray]) -> None:
-        """Decode ``bands`` now, those no other process of the run is decoding first, then
-        wait for the others (``MerisSen3Product.prepare_bands``); nothing outside a run's
-        directory (a band is then decoded when it is read) or beyond the budget."""
-        if not self.key or _run_directory() is None:
-            return
-        todo = [int(b) for b in bands if self.get(int(b)) is None]
+        """Decode ``bands`` now, ``usable_threads()`` at a time (``chunks``: a band inflates
+        outside the GIL), and keep them (``MerisSen3Product.prepare_bands``). In a run's
+        directory, those no other process of the run is decoding first, then wait for the
+        others. Nothing while keeping is off, and no more than the budget holds."""
         nbytes = 2 * self.shape[0] * self.shape[1]
-        while todo and _state["on"] and _state["bytes"] + nbytes <= BUDGET_BYTES:
-            later = [b for b in todo if self._fetch(b, partial(decode, b), wait=False) is None]
-            if len(later) == len(todo):  # every one is being decoded elsewhere: wait for one
+        todo = [b for b in dict.fromkeys(int(b) for b in bands) if self.get(b) is None]
+        if not (todo and nbytes and _state["on"]):
+            return
+        todo = todo[:max((BUDGET_BYTES - _state["bytes"]) // nbytes, 0)]
+        threads = usable_threads()
+        if not self.key or _run_directory() is None:
+            _each(todo, lambda b: self.fetch(b, partial(decode, b)), threads)
+            return
+        while todo and _state["on"]:
+            got = _each(todo, lambda b: self._fetch(b, partial(decode, b), wait=False), threads)
+            later = [b for b, counts in zip(todo, got, strict=True) if counts is None]
+            if later:  # each is being decoded elsewhere: wait for one
                 self.fetch(later[0], partial(decode, later[0]))
                 later = later[1:]
             todo = later
@@ -150,7 +158,13 @@ class KeptBands:
     def release_pages(self) -> None:
         """Drop the pages of the kept maps from this process's resident memory
         (``madvise(MADV_DONTNEED)``; the page cache keeps them, so a later read is no decode)."""
-        for raw in list(self.maps):
+        for raw in list(self.maps.values()):
+            drop_resident_pages(raw)
+
+    def release_band_pages(self, band: int) -> None:
+        """:meth:`release_pages` of one band (a band read ahead waits for its task so)."""
+        raw = self.maps.get(band)
+        if raw is not None:
             drop_resident_pages(raw)
 
     def _name(self, band: int) -> str:
@@ -176,7 +190,7 @@ class KeptBands:
                 return None
             raw, array = mapped
             self.bands[band] = array
-            self.maps.append(raw)
+            self.maps[band] = raw
             _holders.add(self)
         return array
 
@@ -283,6 +297,17 @@ def sweep_left_over_runs(keep: Path | None = None) -> int:
         finally:
             os.close(fd)
     return removed
+
+
+def _each(bands: list[int], call: Callable[[int], np.ndarray | None], threads: int
+          ) -> list[np.ndarray | None]:
+    """``call`` of every band, ``threads`` at a time (in order when 1)."""
+    if threads <= 1 or len(bands) <= 1:
+        return [call(b) for b in bands]
+    from concurrent.futures import ThreadPoolExecutor
+
+    with ThreadPoolExecutor(min(threads, len(bands)), thread_name_prefix="sen3-decode") as pool:
+        return list(pool.map(call, bands))
 
 
 def _file_map(counts: np.ndarray, total: int) -> tuple[mmap.mmap, np.ndarray] | None:

@@ -15,8 +15,9 @@ from __future__ import annotations
 import logging
 import math
 import os
+import threading
 from collections.abc import Collection, Iterator, Mapping, Sequence
-from concurrent.futures import Future
+from concurrent.futures import Future, ThreadPoolExecutor
 from contextlib import closing
 from dataclasses import replace
 from functools import cached_property, partial
@@ -25,6 +26,7 @@ from typing import Any
 
 import numpy as np
 
+from ...cores import usable_threads
 from ...errors import Sen3FormatError
 from ...geometry.earth import MAX_TERRAIN_M, MIN_SEABED_M
 from ...geometry.parallax import stored_corrections
@@ -40,6 +42,7 @@ from ..n1.format import (
     tie_lines,
 )
 from ..protocol import radiance_of_counts
+from .chunks import DamagedChunk, chunk_index, decode
 from .kept import KeptBands
 from .layout import (
     DETECTORS,
@@ -220,7 +223,15 @@ class MerisSen3Product:
     def prepare_bands(self, bands: Sequence[int]) -> None:
         """While a run keeps decoded bands: decode ``bands`` (1..15) now, those no other
         process of the run is decoding first (``KeptBands.prepare``)."""
-        self.kept.prepare([int(b) for b in bands if 1 <= int(b) <= NUM_BANDS], self._counts)
+        self.kept.prepare([int(b) for b in bands if 1 <= int(b) <= NUM_BANDS], self._decoded)
+
+    def _decoded(self, band: int) -> np.ndarray:
+        """``band`` decoded: taken from ``read_ahead`` when its thread has begun it (else
+        that is called off and it is decoded here)."""
+        ahead = self._ahead.pop(band, None)
+        if ahead is not None and not ahead.cancel():
+            return ahead.result()
+        return self._counts(band)
 
     def release_pages(self) -> None:
         """Drop the kept bands' pages a task read from the resident memory (``kept``), as an
@@ -228,22 +239,52 @@ class MerisSen3Product:
         self.kept.release_pages()
 
     def read_ahead(self, bands: Sequence[int]) -> None:
-        """Start reading ``bands`` (1..15) whole, in order, on a background thread: netCDF-4
-        releases the GIL while it decompresses, so the reading overlaps the caller's work
-        (a mapping's prediction/correction); :meth:`counts` takes each band read ahead once
-        (a later call reads it again). Errors are raised by that :meth:`counts` call."""
-        from concurrent.futures import ThreadPoolExecutor
-
-        todo = [int(b) for b in bands if 1 <= int(b) <= NUM_BANDS and int(b) not in self._ahead]
+        """Start reading ``bands`` (1..15) whole, in order, in the background (bands kept
+        already are not; ``reading_pool``: every product's bands in the order asked, several
+        at once): a band inflates outside the GIL (``chunks``), so the reading overlaps the
+        caller's work (a mapping's prediction/correction, the synthesis of the products
+        before). A band read is kept while a run keeps bands (``kept``); :meth:`counts` and
+        :meth:`prepare_bands` take each band read ahead once (a later call reads it again,
+        or takes it kept). Errors are raised by that call."""
+        todo = [int(b) for b in bands if 1 <= int(b) <= NUM_BANDS and int(b) not in self._ahead
+                and self.kept.get(int(b)) is None]
         if not todo:
             return
-        pool = ThreadPoolExecutor(1, thread_name_prefix="sen3-bands")
+        pool = reading_pool()
         for b in todo:
-            self._ahead[b] = pool.submit(self._counts, b)
-        pool.shutdown(wait=False)  # its thread ends with the last band
+            self._ahead[b] = pool.submit(self._read_kept, b)
+
+    def _read_kept(self, band: int) -> np.ndarray:
+        """``band`` decoded and kept, its pages out of the resident memory until a task
+        reads them (the page cache holds them)."""
+        counts = self.kept.fetch(band, partial(self._counts, band))
+        self.kept.release_band_pages(band)
+        return counts
+
+    def cancel_read_ahead(self) -> None:
+        """Call off the bands :meth:`read_ahead` has not begun, and forget those read."""
+        for ahead in self._ahead.values():
+            ahead.cancel()
+        self._ahead.clear()
+
+    def _band_values(self, band: int) -> np.ndarray:
+        """Stored values of ``band``, whole, in the N1 column order: inflated from its chunks
+        here (``chunks``: several bands at once on several cores), or through netCDF4 when
+        its storage is not one read so."""
+        name, variable = radiance_file(band), radiance_variable(band)
+        source = self.members.read_bytes(name) if self.members.archived \
+            else self.members.path / name
+        index = chunk_index(source, variable)
+        if index is None or index.shape != (self.height, self.width):
+            return self._raw(name, variable)
+        try:
+            return decode(index, source, self.mirrored)
+        except (DamagedChunk, OSError) as exc:
+            raise Sen3FormatError(self.members.where(name),
+                                  f"cannot read {variable}: {exc}") from None
 
     def _counts(self, band: int) -> np.ndarray:
-        raw = self._raw(radiance_file(band), radiance_variable(band))
+        raw = self._band_values(band)
         attrs = self.variables[radiance_variable(band)]
         nd = self.no_data_count(band)
         if raw.dtype == np.uint16 and not any(k in attrs for k in ("valid_min", "valid_max",
@@ -325,6 +366,19 @@ class MerisSen3Product:
 # ------------------------------------------------------------------------------------------
 # read_sen3
 # ------------------------------------------------------------------------------------------
+
+
+_pool: dict[str, ThreadPoolExecutor] = {}
+_pool_lock = threading.Lock()
+
+
+def reading_pool() -> ThreadPoolExecutor:
+    """The threads that read bands ahead (``MerisSen3Product.read_ahead``), one per usable core
+    (``cores.usable_threads``), the bands in the order asked; made at the first use."""
+    with _pool_lock:
+        if "pool" not in _pool:
+            _pool["pool"] = ThreadPoolExecutor(usable_threads(), thread_name_prefix="sen3-bands")
+        return _pool["pool"]
 
 
 def read_sen3(path: str | os.PathLike[str]) -> MerisSen3Product:
