@@ -72,12 +72,14 @@ def test_every_storage_of_a_netcdf4_writer_reads_as_netcdf4_reads_it(storage, tm
         assert np.array_equal(decode(index, source, mirrored=True), expected[:, ::-1])
 
 
-def test_chunks_never_written_hold_the_fill_value(tmp_path):
+@pytest.mark.parametrize("fill", [7, None], ids=["_FillValue 7", "netCDF's default"])
+def test_chunks_never_written_hold_the_fill_value(fill, tmp_path):
     path = tmp_path / "v.nc"
-    expected = _write(path, "u2", fill=65535, part=True, zlib=True, chunksizes=(64, 64))
+    expected = _write(path, "u2", fill=fill, part=True, zlib=True, chunksizes=(64, 64))
     index = chunk_index(path, "v")
     assert index is not None and not index.complete and len(index.chunks) == 1
-    assert index.fill == 65535 and np.count_nonzero(expected == 65535) > 0.9 * expected.size
+    assert index.fill == (65535 if fill is None else fill)
+    assert np.count_nonzero(expected == index.fill) > 0.9 * expected.size
     assert np.array_equal(decode(index, path), expected)
 
 

@@ -2,7 +2,7 @@
 
 netCDF-C is not thread-safe: every read of a ``.SEN3`` member holds one lock (``members.LOCK``),
 so the 15 bands of a product were inflated one after the other on one core (fr-alps: 40 ms a
-band, 2.4 s of the 9.6 s a synthesis of 4 ``.SEN3`` products took in process). h5py gives the
+band, 2.5 s of the 9.6 s a synthesis of 4 ``.SEN3`` products took in process). h5py gives the
 chunk index (``H5Dget_chunk_info``: where each stored chunk lies in the file and which filters
 it went through), which netCDF4-python does not expose. The chunk bytes are then read with
 ``os.pread`` and inflated with ``zlib`` (both outside the GIL), and the HDF5 byte shuffle is
@@ -125,18 +125,14 @@ def _chunk_bytes(index: ChunkIndex, source: Path | bytes) -> Iterator[tuple[int,
         os.close(fd)
 
 
-def decode(index: ChunkIndex, source: Path | bytes, mirrored: bool = False,
-           out: np.ndarray | None = None) -> np.ndarray:
-    """The whole variable of ``index`` in the native byte order (``out`` when given: its
-    shape and that dtype), its columns in the other order when ``mirrored``
-    (``layout.mirror_columns``). A chunk's bytes are inflated, then each byte plane of the
-    HDF5 shuffle is written straight into its place in ``out`` (one copy; the peak is a
-    chunk's stored and inflated bytes besides ``out``). DamagedChunk when a chunk does not
-    inflate to its size."""
+def decode(index: ChunkIndex, source: Path | bytes, mirrored: bool = False) -> np.ndarray:
+    """The whole variable of ``index`` in the native byte order, its columns in the other
+    order when ``mirrored`` (``layout.mirror_columns``). A chunk's bytes are inflated, then
+    each byte plane of the HDF5 shuffle is written straight into its place in the result (one
+    copy; the peak is a chunk's stored and inflated bytes besides the result). DamagedChunk
+    when a chunk does not inflate to its size."""
     rows, cols = index.shape
-    native = index.dtype.newbyteorder("=")
-    if out is None:
-        out = np.empty(index.shape, native)
+    out = np.empty(index.shape, index.dtype.newbyteorder("="))
     if not index.complete:
         out[...] = index.fill
     size = index.dtype.itemsize
