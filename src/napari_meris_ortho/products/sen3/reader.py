@@ -256,8 +256,10 @@ class MerisSen3Product:
 
     def _read_kept(self, band: int) -> np.ndarray:
         """``band`` decoded and kept, its pages out of the resident memory until a task
-        reads them (the page cache holds them)."""
-        counts = self.kept.fetch(band, partial(self._counts, band))
+        reads them (the page cache holds them). ``keep``, not ``fetch``: a reading thread
+        takes no band lock of a run's directory (its caller may hold that lock while it
+        waits for this band: ``prepare_bands``)."""
+        counts = self.kept.keep(band, self._counts(band))
         self.kept.release_band_pages(band)
         return counts
 
