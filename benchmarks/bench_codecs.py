@@ -9,6 +9,10 @@ bytes as a fraction of the raw ones and the encoding speed (raw MB per second, o
 zstd at levels 1-5 (the store's default: level 1), Blosc zstd with byte or bit shuffle, a
 delta filter (``numcodecs.delta``, the store's ``--codec delta-zstd``: along the rows of the
 chunk) or a column delta before zstd, and pcodec when it is installed (not a dependency).
+Below them, the floor of a lossless coder that predicts each count from its neighbours: the
+0-order entropy (bits per 16-bit count, as a fraction of the raw bytes) of the residual of the
+left neighbour and of the MED predictor of JPEG-LS (LOCO-I): what an ideal entropy coder of
+those residuals would write. No codec of the store can do much better on these chunks.
 """
 
 from __future__ import annotations
@@ -80,6 +84,27 @@ def codecs() -> dict[str, Callable[[np.ndarray], bytes]]:
     return out
 
 
+def residual_entropy(chunks: list[np.ndarray], predictor: str) -> float:
+    """Bits per count of the 0-order entropy of ``predictor``'s residual over all chunks (the
+    first row and column of each chunk are left out: they have no full neighbourhood)."""
+    histogram: dict[int, int] = {}
+    for c in chunks:
+        a = c.astype(np.int32)
+        here, west, north, northwest = a[1:, 1:], a[1:, :-1], a[:-1, 1:], a[:-1, :-1]
+        if predictor == "left":
+            guess = west
+        else:  # MED: min/max of west and north at an edge, else the planar west + north - nw
+            high, low = np.maximum(west, north), np.minimum(west, north)
+            guess = np.where(northwest >= high, low,
+                             np.where(northwest <= low, high, west + north - northwest))
+        values, counts = np.unique(here - guess, return_counts=True)
+        for v, n in zip(values.tolist(), counts.tolist(), strict=True):
+            histogram[v] = histogram.get(v, 0) + n
+    n = np.array(list(histogram.values()), dtype=np.float64)
+    p = n / n.sum()
+    return float(-(p * np.log2(p)).sum())
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--scene", default="fr-alps")
@@ -95,6 +120,9 @@ def main() -> None:
         size = sum(len(encode(c)) for c in chunks)
         seconds = time.perf_counter() - t0
         print(f"{name:>28s} {size / raw:7.3f} {raw / seconds / 1e6:6.0f}")
+    for predictor, name in (("left", "left neighbour"), ("med", "MED (JPEG-LS)")):
+        bits = residual_entropy(chunks, predictor)
+        print(f"{'entropy, ' + name:>28s} {bits / 16:7.3f} {'':>6s}  ({bits:.2f} bits per count)")
 
 
 if __name__ == "__main__":

@@ -12,7 +12,12 @@ Prints two tables:
    in this process (numba threads) and on a LocalCluster of 1 and 2 worker processes (one
    thread each). Products merged per minute (workers started and warmed up beforehand: the
    time is the run's), speed-up against 1 worker, peak resident memory per worker (``VmHWM``),
-   tasks and seconds per (product, tile) task. Workers as many as the cores are each held to a
+   tasks and seconds per (product, tile) task, cores busy per worker (its CPU seconds, all
+   threads, over the run's seconds; in process: this process's) and of this process, the
+   client (with the scheduler of the LocalCluster). A free worker busy on more
+   than one core bounds what N workers can gain against it on this machine: the line under
+   the table prints that bound (cores / cores busy of the 1-worker run, the work of the runs
+   being the same CPU seconds). Workers as many as the cores are each held to a
    core of its own (all their threads: the task's, Icechunk's, zstd's), as ``--workers N``
    holds them; with ``--pin``, fewer workers are too, so that the rows compare one core with
    two (a worker left free uses more than one core: its writes run beside its task). Rows of
@@ -31,6 +36,7 @@ from __future__ import annotations
 import argparse
 import logging
 import os
+import resource
 import shutil
 import tempfile
 import time
@@ -100,10 +106,11 @@ def throughput(paths: list[str], grid, bands: list[int], tile: int, workers: int
 
     if workers == 0:
         synthesize(paths[:1], tmp / "warm0", **kwargs)  # numba kernels loaded
+        cpu0 = cpu_seconds()
         t0 = time.perf_counter()
         result = synthesize(paths, tmp / "run0", progress=count, **kwargs)
         seconds = time.perf_counter() - t0
-        peaks, held = [peak_rss_mb()], {}
+        peaks, held, busy = [peak_rss_mb()], {}, [(cpu_seconds() - cpu0) / seconds]
     else:
         with LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
                           dashboard_address=None, env=WORKER_ENV,
@@ -113,14 +120,26 @@ def throughput(paths: list[str], grid, bands: list[int], tile: int, workers: int
             held = hold_workers_to_cores(client, every=pin)
             synthesize(paths[:workers], tmp / f"warm{workers}", scheduler=address, **kwargs)
             client.run(_reset_peak)
+            cpu0, mine0 = client.run(cpu_seconds), cpu_seconds()
             t0 = time.perf_counter()
             result = synthesize(paths, tmp / f"run{workers}", scheduler=address,
                                 progress=count, **kwargs)
             seconds = time.perf_counter() - t0
+            cpu1, mine = client.run(cpu_seconds), (cpu_seconds() - mine0) / seconds
             peaks = sorted(client.run(peak_rss_mb).values())
+            busy = sorted((cpu1[w] - cpu0[w]) / seconds for w in cpu1)
     assert len(result.merged) == len(paths), [r.error for r in result.failed]
+    if workers == 0:
+        mine = busy[0]
     return {"workers": workers, "pinned": workers > 0 and bool(held), "seconds": seconds,
-            "per_minute": 60.0 * len(paths) / seconds, "peaks": peaks, "tasks": tasks["n"]}
+            "per_minute": 60.0 * len(paths) / seconds, "peaks": peaks, "tasks": tasks["n"],
+            "cores": busy, "client": mine}
+
+
+def cpu_seconds() -> float:
+    """User + system CPU seconds of this process, all its threads."""
+    usage = resource.getrusage(resource.RUSAGE_SELF)
+    return usage.ru_utime + usage.ru_stime
 
 
 def _reset_peak() -> None:
@@ -204,14 +223,20 @@ def main() -> None:
                 for w in args.workers.split(",") if w]
         one = next((r for r in rows if r["workers"] == 1), rows[0] if rows else {})
         print(f"\n{'workers':>10s} {'seconds':>8s} {'prod/min':>9s} {'speed-up':>9s} "
-              f"{'tasks':>6s} {'s/task':>7s} {'peak MB per worker':>20s}")
+              f"{'tasks':>6s} {'s/task':>7s} {'cores busy':>11s} {'peak MB per worker':>20s}")
         for r in rows:
             label = ("in-process" if r["workers"] == 0 else
                      f"{r['workers']}{' pinned' if r['pinned'] else ''}")
             per_task = r["seconds"] * max(r["workers"], 1) / max(r["tasks"], 1)
             print(f"{label:>10s} {r['seconds']:8.1f} {r['per_minute']:9.2f} "
                   f"{one['seconds'] / r['seconds']:9.2f} {r['tasks']:6d} {per_task:7.2f} "
+                  f"{' '.join(f'{c:.2f}' for c in r['cores']):>11s} {r['client']:6.2f} "
                   f"{' '.join(f'{p:.0f}' for p in r['peaks']):>20s}  {r['range']}")
+        if one.get("workers") == 1:
+            cores = len(os.sched_getaffinity(0))
+            print(f"bound of N >= {cores} workers against 1 at the 1-worker run's CPU seconds, "
+                  f"every core busy: {cores} / {one['cores'][0]:.2f} cores busy = "
+                  f"{cores / one['cores'][0]:.2f}x")
         updates = [median([update_cost(paths, g, bands, args.tile, tmp, name, codec)
                            for _ in range(args.repeat)])
                    for name, g in (("small", grid), ("Europe", europe))
