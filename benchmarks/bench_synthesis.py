@@ -111,6 +111,7 @@ def throughput(paths: list[str], grid, bands: list[int], tile: int, workers: int
         result = synthesize(paths, tmp / "run0", progress=count, **kwargs)
         seconds = time.perf_counter() - t0
         peaks, held, busy = [peak_rss_mb()], {}, [(cpu_seconds() - cpu0) / seconds]
+        mine = busy[0]  # the client is this process
     else:
         with LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
                           dashboard_address=None, env=WORKER_ENV,
@@ -129,8 +130,6 @@ def throughput(paths: list[str], grid, bands: list[int], tile: int, workers: int
             peaks = sorted(client.run(peak_rss_mb).values())
             busy = sorted((cpu1[w] - cpu0[w]) / seconds for w in cpu1)
     assert len(result.merged) == len(paths), [r.error for r in result.failed]
-    if workers == 0:
-        mine = busy[0]
     return {"workers": workers, "pinned": workers > 0 and bool(held), "seconds": seconds,
             "per_minute": 60.0 * len(paths) / seconds, "peaks": peaks, "tasks": tasks["n"],
             "cores": busy, "client": mine}

@@ -17,7 +17,7 @@ import sen3_real as real
 from napari_meris_ortho.errors import Sen3FormatError
 from napari_meris_ortho.products.open import read_product
 from napari_meris_ortho.products.sen3 import kept
-from napari_meris_ortho.products.sen3.chunks import chunk_index, decode
+from napari_meris_ortho.products.sen3.chunks import DamagedChunk, chunk_index, decode
 from napari_meris_ortho.products.sen3.layout import radiance_file, radiance_variable
 
 SHAPE = (301, 257)  # no chunk size below divides it: edge chunks are cut
@@ -132,6 +132,23 @@ def test_a_damaged_band_chunk_is_one_error_naming_the_member(product_dir, tmp_pa
                                               rf"{radiance_variable(7)}: chunk at byte {offset}"):
         product.counts(7)
     assert product.counts(8).shape == (product.height, product.width)  # the others read
+
+
+def test_a_member_ending_inside_a_chunk_is_damaged_from_a_file_and_from_bytes(product_dir,
+                                                                               tmp_path):
+    """The index read, the member then ends inside its first chunk (a file cut while read, an
+    archive member cut short): DamagedChunk names the chunk, from a path and from bytes."""
+    member = product_dir / radiance_file(7)
+    index = chunk_index(member, radiance_variable(7))
+    assert index is not None
+    _, _, offset, size = index.chunks[0]
+    cut = member.read_bytes()[:offset + size // 2]
+    short = tmp_path / "cut.nc"
+    short.write_bytes(cut)
+    for source in (short, cut):
+        with pytest.raises(DamagedChunk, match=rf"chunk at byte {offset} cut short "
+                                               rf"\({size // 2} of {size} bytes\)"):
+            decode(index, source)
 
 
 def test_a_product_decodes_its_bands_several_at_a_time(product_dir, monkeypatch):

@@ -19,7 +19,7 @@ from __future__ import annotations
 import io
 import os
 import zlib
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -106,23 +106,25 @@ def _chunk_bytes(index: ChunkIndex, source: Path | bytes) -> Iterator[tuple[int,
     asked (``os.pread``: one chunk's bytes held at a time)."""
     if isinstance(source, bytes):
         view = memoryview(source)
-        for _, _, offset, size in index.chunks:
-            data = bytes(view[offset:offset + size])
-            if len(data) != size:
-                raise DamagedChunk(f"chunk at byte {offset} cut short ({len(data)} of "
-                                   f"{size} bytes)")
-            yield offset, data
+        yield from _read_each(index, lambda offset, size: bytes(view[offset:offset + size]))
         return
     fd = os.open(source, os.O_RDONLY)
     try:
-        for _, _, offset, size in index.chunks:
-            data = os.pread(fd, size, offset)
-            if len(data) != size:
-                raise DamagedChunk(f"chunk at byte {offset} cut short ({len(data)} of "
-                                   f"{size} bytes)")
-            yield offset, data
+        yield from _read_each(index, lambda offset, size: os.pread(fd, size, offset))
     finally:
         os.close(fd)
+
+
+def _read_each(index: ChunkIndex, read: Callable[[int, int], bytes]
+               ) -> Iterator[tuple[int, bytes]]:
+    """(byte offset, ``read(offset, size)``) of every chunk of ``index``; DamagedChunk when the
+    source ends before a chunk does."""
+    for _, _, offset, size in index.chunks:
+        data = read(offset, size)
+        if len(data) != size:
+            raise DamagedChunk(f"chunk at byte {offset} cut short ({len(data)} of "
+                               f"{size} bytes)")
+        yield offset, data
 
 
 def decode(index: ChunkIndex, source: Path | bytes, mirrored: bool = False) -> np.ndarray:
