@@ -1,5 +1,5 @@
 """``meris-ortho sample [NAME] --out DIR``: generate a simulated MERIS L1b scene with its DEMs
-and reference image (issue 3, item 9) and print where everything is."""
+and reference image and print where everything is."""
 
 from __future__ import annotations
 

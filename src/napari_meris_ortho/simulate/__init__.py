@@ -1,4 +1,4 @@
-"""Simulator of MERIS L1b products with exact ground truth (issue 3).
+"""Simulator of MERIS L1b products with exact ground truth.
 
 ``generate_scene(name_or_config, out_dir=None, progress=None) -> SimulatedScene`` writes an N1
 product (via ``products.n1.write_product``), DEM exports and a reference image, and returns

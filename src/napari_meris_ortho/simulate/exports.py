@@ -1,4 +1,4 @@
-"""DEM and reference-image exports of a simulated scene (issue 3, item 7; NOTES.md formats).
+"""DEM and reference-image exports of a simulated scene, in the formats of the real DEMs.
 
 All exports are resampled from the truth DEM (bilinear between its posts, ellipsoidal heights):
 

@@ -1,4 +1,4 @@
-"""Per-pixel geolocated versions of a simulated scene (issue 16): the AMORGOS-like
+"""Per-pixel geolocated versions of a simulated scene: the AMORGOS-like
 ``MER_FRG_1P`` (FR) or ``MER_RRG_1P`` (RR) N1 product and the fourth-reprocessing-like
 ``ME_1_FRG___``/``ME_1_RRG___`` ``.SEN3`` directory.
 

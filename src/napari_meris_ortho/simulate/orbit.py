@@ -1,4 +1,4 @@
-"""Envisat-like sun-synchronous circular orbit on the rotating WGS84 Earth (issue 3, item 1).
+"""Envisat-like sun-synchronous circular orbit on the rotating WGS84 Earth.
 
 Times are seconds since 2000-01-01T00:00:00 UTC (MJD2000, like the N1 ``dsr_time``; UT1 = UTC,
 no leap seconds). The orbit is a circle of radius 7159.5 km, inclination 98.55 deg, propagated in
@@ -21,7 +21,7 @@ from ..geometry.earth import WGS84_A, WGS84_B, WGS84_E2
 #: WGS84 ellipsoid
 GM = 3.986004418e14
 OMEGA_EARTH = 7.2921158553e-5  # rad/s
-#: Envisat orbit (issue 3)
+#: Envisat orbit: radius (m) of the circle; its inclination and descending-node local time
 SEMI_MAJOR_AXIS = 7159500.0
 INCLINATION_DEG = 98.55
 DESCENDING_NODE_LOCAL_TIME_H = 10.0

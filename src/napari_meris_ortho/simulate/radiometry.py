@@ -1,4 +1,4 @@
-"""Ground-truth radiometry: land cover, 15-band spectra, texture, clouds, flags (issue 3, item 5).
+"""Ground-truth radiometry: land cover, 15-band spectra, texture, clouds, flags.
 
 The truth radiance of band b at a ground point is *bilinear between the DEM posts* of the post
 radiances ``(sum_c cover_c * spectrum[c, b]) * brightness`` mixed with the cloud spectrum by the

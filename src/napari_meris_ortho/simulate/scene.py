@@ -1,4 +1,4 @@
-"""Scene configs, generation and the cached SimulatedScene (issue 3, items 6 and 8)."""
+"""Scene configs, generation and the cached SimulatedScene."""
 
 from __future__ import annotations
 
@@ -310,7 +310,7 @@ def footprint(geom: SceneGeometry, n: int = 33) -> tuple[float, float, float, fl
 
 @dataclass
 class SimulatedScene:
-    """A generated scene: its files and its exact ground truth (issue 3, item 6)."""
+    """A generated scene: its files and its exact ground truth."""
 
     config: dict
     out_dir: Path
@@ -354,8 +354,8 @@ class SimulatedScene:
         """Truth of visibility: True where no terrain of the truth DEM rises more than 1 m above
         the line of sight from the ground point (lon, lat, h) towards the satellite (view
         angles of the product's tie points at the point's true antecedent (line, col); height
-        d / tan(vz) + d^2 / 2R at ground distance d, sampled every ``step`` m: at 20 m, crests
-        grazed by 1-6 m between samples were missed)."""
+        d / tan(vz) + d^2 / 2R at ground distance d, sampled every ``step`` m: a 20 m step
+        misses crests grazed by 1-6 m between samples)."""
         from scipy.ndimage import map_coordinates
 
         from ..products.n1 import read_product
@@ -457,7 +457,7 @@ MAX_SUN_ZENITH = 90.0
 def _refuse_night(cfg: dict, geom: SceneGeometry, t_mid: float,
                   bounds: tuple[float, float, float, float]) -> None:
     """OptionsError when the sun is below the horizon somewhere on the footprint: the radiance
-    spectra are daylight ones, a night pass would get daylight radiances (issue 11)."""
+    spectra are daylight ones, a night pass would get daylight radiances."""
     lon_min, lat_min, lon_max, lat_max = bounds
     lon = np.array([lon_min, lon_max, lon_min, lon_max, 0.5 * (lon_min + lon_max)])
     lat = np.array([lat_min, lat_min, lat_max, lat_max, 0.5 * (lat_min + lat_max)])

@@ -1,4 +1,4 @@
-"""Synthetic ground truth terrain: the scene's DEM grid and its heights (issue 3, item 5).
+"""Synthetic ground truth terrain: the scene's DEM grid and its heights.
 
 The DEM is a geographic grid of posts (rows North to South, posts at pixel centres) of heights
 above the WGS84 ellipsoid; the terrain surface is *bilinear between these posts* everywhere in the
