@@ -1,4 +1,4 @@
-"""Copernicus DEM GLO-30 / GLO-90 tile directories as one DEM source (issue 11).
+"""Copernicus DEM GLO-30 / GLO-90 tile directories as one DEM source.
 
 Tiles are 1 x 1 deg, named from their south-west corner:
 ``Copernicus_DSM_COG_10_N46_00_E010_00_DEM.tif`` (GLO-30, 1"; ``_30_`` GLO-90, 3"; the DGED

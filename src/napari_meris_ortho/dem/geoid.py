@@ -1,4 +1,4 @@
-"""Vertical datums of DEM heights: the EGM96 and EGM2008 geoids (issues 11, 26).
+"""Vertical datums of DEM heights: the EGM96 and EGM2008 geoids.
 
 The engine needs heights above the WGS84 ellipsoid (the parallax of eq. 6a is computed from the
 ellipsoid point). GETASSE30 gives them already (handbook chapter 5); SRTM30 gives orthometric

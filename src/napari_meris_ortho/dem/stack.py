@@ -19,7 +19,7 @@ chapter 5 GETASSE30, Appendix C ``TimMersynGetAltitudeFromDem``).
   (``Copernicus_DSM_COG_10_N46_00_E010_00_DEM.tif``; ``dem.copernicus``), only the tiles under
   the requested points read; a VRT is any GDAL raster.
 
-Vertical datum (issue 11): every source has a ``datum``, "ellipsoid" or "egm96"; ``sample``
+Vertical datum: every source has a ``datum``, "ellipsoid" or "egm96"; ``sample``
 returns ellipsoidal heights (EGM96 heights + the geoid undulation N, ``dem.geoid``). A DEM entry
 ``PATH:egm96`` or ``PATH:ellipsoid`` names it; by default SRTM30 and Copernicus are EGM96,
 GETASSE30 ellipsoidal, a GDAL raster takes its vertical CRS (compound EGM96/EGM2008 height,
