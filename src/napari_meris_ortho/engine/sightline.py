@@ -1,5 +1,5 @@
-"""Lines of sight marched over a DEM window in memory (issue 22, item 8: hidden ground of the
-pixel geolocation with DEMs, ``ortho.occlusion``).
+"""Lines of sight marched over a DEM window in memory (hidden ground of the pixel geolocation
+with DEMs, ``ortho.occlusion``).
 
 A ground point (lon, lat, h) sees the satellite along its look vector (tan vz sin va,
 tan vz cos va) (eq. 5a-5b); at a ground distance d towards the sensor the ray is

@@ -317,7 +317,7 @@ def combine_maximum_ndvi(bands: np.ndarray, ndvi: np.ndarray, count: np.ndarray,
 class WinnerBands:
     """The band values of a contribution, not gathered yet: what :func:`combine` takes, under
     the maximum-NDVI rule, for the pixels the contribution wins only (the other pixels' bands
-    are never read; the 2nd to 6th of 6 simulated dates merged one by one won 36 % down to
+    are never read; the 2nd to 6th of 6 simulated dates merged one by one win 36 % down to
     4 % of their pixels). ``pixels`` (n_bands, n)
     uint16: the product window of each stored band, flattened; ``index`` (rows, cols) the
     flat pixel of each point of the state (its nearest antecedent; -1: none); ``fills``

@@ -56,8 +56,8 @@ os.register_at_fork(after_in_child=_POOLS.clear)  # a forked child has none of t
 
 
 def _pool(threads: int) -> ThreadPoolExecutor:
-    """One pool of ``threads`` workers per process, kept (starting threads for every call cost
-    0.1 s over the 15 bands of a map)."""
+    """One pool of ``threads`` workers per process, kept (starting threads for every call would
+    cost 0.1 s over the 15 bands of a map)."""
     with _LOCK:
         if threads not in _POOLS:
             _POOLS[threads] = ThreadPoolExecutor(max_workers=threads,

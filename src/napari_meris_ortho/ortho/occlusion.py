@@ -1,6 +1,6 @@
-"""Ground hidden from the sensor by the relief, for the pixel geolocation with DEMs (issue 22,
-item 8): such an output point has no antecedent (the pixel whose line of sight passes through
-it shows the ridge in front), so it is reported ``OCCLUDED`` and left no data.
+"""Ground hidden from the sensor by the relief, for the pixel geolocation with DEMs: such an
+output point has no antecedent (the pixel whose line of sight passes through it shows the
+ridge in front), so it is reported ``OCCLUDED`` and left no data.
 
 An output point T (lon, lat) at the DEM height h is seen when no terrain rises above its line
 of sight towards the satellite. The ray leaves T along the view azimuth va of the tie points
