@@ -1,8 +1,8 @@
 """Byte layouts of MERIS Level 1b ENVISAT N1 products (MER_FR__1P, MER_RR__1P).
 
-Sources (see ``../shared/reference/NOTES.md``): the handbook's Appendix A (a real FR product's
-MPH/SPH decoding log, its 30 DSDs and Scaling Factor GADS), EPR-API's DDDB (``epr_dddb.c``:
-record layouts, DSD line widths, IODD detection) and GDAL's ENVISAT driver (``EnvisatFile.c``).
+Sources: Appendix A of the *MERIS Geometry Handbook* (a real FR product's MPH/SPH decoding log,
+its 30 DSDs and Scaling Factor GADS), EPR-API's DDDB (``epr_dddb.c``: record layouts, DSD line
+widths, IODD detection) and GDAL's ENVISAT driver (``EnvisatFile.c``).
 
 Everything here is pure data and small pure functions shared by the reader and the writer:
 

@@ -1,8 +1,8 @@
 """A netCDF-4 image variable read from its HDF5 chunks, inflated here instead of by netCDF-C.
 
 netCDF-C is not thread-safe: every read of a ``.SEN3`` member holds one lock (``members.LOCK``),
-so the 15 bands of a product were inflated one after the other on one core (fr-alps: 40 ms a
-band, 2.5 s of the 9.6 s a synthesis of 4 ``.SEN3`` products took in process). h5py gives the
+so through it the 15 bands of a product inflate one after the other on one core (fr-alps: 40 ms
+a band, 2.5 s of the 9.6 s a synthesis of 4 ``.SEN3`` products takes in process). h5py gives the
 chunk index (``H5Dget_chunk_info``: where each stored chunk lies in the file and which filters
 it went through), which netCDF4-python does not expose. The chunk bytes are then read with
 ``os.pread`` and inflated with ``zlib`` (both outside the GIL), and the HDF5 byte shuffle is
@@ -11,7 +11,7 @@ undone with numpy, so that several bands decode at once on several cores.
 Only the storage netCDF-4 writers give image variables is read so: chunked (or contiguous),
 through nothing, deflate, shuffle, or shuffle then deflate (HDF5 filters 2 and 1), every chunk
 through all of them. Anything else (Fletcher32, szip, a skipped filter, a compact dataset)
-gives None, and the caller reads the variable through netCDF4 as before.
+gives None, and the caller reads the variable through netCDF4 instead.
 """
 
 from __future__ import annotations

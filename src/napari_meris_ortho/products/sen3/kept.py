@@ -3,15 +3,15 @@
 A band of a ``.SEN3`` is a netCDF-4 variable, zlib-compressed: reading any of its lines decodes
 the whole chunk, and ESA's chunking is not ours to choose. An N1 band is a memory map, read line by
 line for free. Every tile task of a synthesis reads every band of each product it covers, so a
-``.SEN3`` was decoded once per tile (an fr-alps product, 12 tiles: 180 band decodes, 7.3 s of a
-14 s synthesis).
+``.SEN3`` would be decoded once per tile (an fr-alps product, 12 tiles: 180 band decodes, 7.3 s
+of a 14 s synthesis).
 
 While :func:`keep_decoded_bands` is in force, a product keeps each band it decodes
 (``MerisSen3Product.counts``) in a file map, so that later calls read it as an N1's map is read,
 and ``release_pages`` drops the pages a task read from the process's resident memory, as an N1's
 (the kernel's page cache keeps them). At most :data:`BUDGET_BYTES` for every product of the
 process together, and at most a quarter of the space the temporary directory had free for them;
-bands beyond that are decoded at each call, as before. :func:`release_decoded_bands` (the end of
+bands beyond that are decoded at each call. :func:`release_decoded_bands` (the end of
 a run: ``synthesis.run.engine``, on every worker) frees them.
 
 Given the run's name, the processes of the run on one host (the workers of a LocalCluster, or of

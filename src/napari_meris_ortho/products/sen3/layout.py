@@ -2,7 +2,8 @@
 quality-flag coding, the column order and the CF decoding of packed values.
 
 Facts of ESA's products (``ENV_ME_1_RRG____20120406T085654``, 1121 x 1617 pixels, tie points every
-16 x 16; SNAP's and ocssw's readers; NOTES.md "real 4th-reprocessing products"):
+16 x 16, as the test resources of SNAP's Sentinel-3 reader describe it; SNAP's and NASA ocssw's
+SAFE readers):
 
 - **Columns run west to east on a descending pass** (longitude grows with the column), the mirror
   of the N1 "chronological" order. Every product this package returns exposes the N1 order
@@ -65,7 +66,7 @@ L1B_OF_QUALITY: dict[str, int] = {
 }
 
 #: product names: ESA's ``ENV_ME_1_FRG____``/``ENV_ME_1_RRG____`` and the
-#: ``EN1_MDSI_MER_FRS_1P_``/``EN1_MDSI_MER_RR__1P_`` names (NOTES.md)
+#: ``EN1_MDSI_MER_FRS_1P_``/``EN1_MDSI_MER_RR__1P_`` names ESA also delivers them under
 _NAMES = (re.compile(r"ME_1_(FR|RR)G"), re.compile(r"MER_(FR|RR)[S_]_1P"))
 
 

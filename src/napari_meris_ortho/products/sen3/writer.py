@@ -248,9 +248,9 @@ def _write_geo(var, ds, dims: tuple[str, str], geo: dict[str, np.ndarray],
         long_name="DEM corrected altitude")
 
 
-#: what SNAP, ocssw and ACOLITE recognise a MERIS 4th-reprocessing Level 1 product by
-#: (research notes in the README): the contentUnit text (ocssw: "MERIS", "ENVISAT", "Level 1"),
-#: the platform and instrument family names (ACOLITE), the band descriptions (SNAP)
+#: what SNAP, ocssw and ACOLITE recognise a MERIS 4th-reprocessing Level 1 product by: the
+#: contentUnit text (ocssw: "MERIS", "ENVISAT", "Level 1"), the platform and instrument family
+#: names (ACOLITE), the band descriptions (SNAP)
 CONTENT_TEXT = "ENVISAT MERIS Level 1 Product"
 PLATFORM = "Envisat"
 INSTRUMENT = "MEdium Resolution Imaging Spectrometer"
