@@ -1,9 +1,9 @@
-"""Cloud-Optimized GeoTIFF container: compressed tiles streamed band by band (issue 12).
+"""Cloud-Optimized GeoTIFF container: compressed tiles streamed band by band.
 
 GDAL's COG driver only copies a finished dataset (``CreateCopy``): staging every band, reading
-it back and compressing it after the engine has finished cost a third of a ``map``. Here each
-band and its overview levels are cut into square tiles, predicted (TIFF predictor 2, horizontal
-differencing, for integers; 3, floating point, for floats) and compressed (ZSTD through
+it back and compressing it after the engine has finished would cost a third of a ``map``. Here
+each band and its overview levels are cut into square tiles, predicted (TIFF predictor 2,
+horizontal differencing, for integers; 3, floating point, for floats) and compressed (ZSTD through
 zstandard, DEFLATE through zlib; both release the GIL) on worker threads while the caller
 computes the next band. ``CogWriter.finish`` then lays the file out as GDAL's COG driver does:
 
@@ -135,7 +135,7 @@ class CogWriter:
 
     Compressed tiles stay in memory up to ``memory_budget`` bytes (writing a file costs about
     2-3 ms per MB here: a detour through a scratch file costs as much as the final write, and
-    a map at half the default pixel size, 620 MB, took 8 s held and 8.3-10.8 s spilled beyond
+    a map at half the default pixel size, 620 MB, takes 8 s held and 8.3-10.8 s spilled beyond
     256 MiB); beyond it, full-resolution tiles go to ``spill`` (a scratch file) as they are
     done. Memory holds at most three bands in flight besides.
     """
@@ -370,7 +370,7 @@ def _preallocate(f: BinaryIO, size: int) -> None:
         return
     fallocate.argtypes = [ctypes.c_int, ctypes.c_int, ctypes.c_int64, ctypes.c_int64]
     f.flush()
-    fallocate(f.fileno(), 0, 0, max(int(size), 1))  # failure: delayed allocation, as before
+    fallocate(f.fileno(), 0, 0, max(int(size), 1))  # failure: delayed allocation, as without it
 
 
 def _write_tile(f: BinaryIO, data: bytes) -> None:
