@@ -18,12 +18,13 @@ Map-to-geographic conversion (``OutputGrid.lonlat``):
   whole grid. Every cell whose measured midpoint error still exceeds ``tolerance / 2`` (or whose
   corners are outside the projection) is computed exactly with pyproj, pixel by pixel.
   ``OutputGrid.interpolation_stats`` reports the smallest and largest step, the largest measured
-  error and the number of exact fallback pixels. Measured over an FR footprint (~3700 x 3300 px
-  at 260 m) against pyproj at every pixel: a 64-px primary grid errs by 0.024 px in UTM 31/33
-  and LAEA (EPSG:3035); the chosen step (20 px) gives at most 0.0023 px; EPSG:32662 is exact
-  (step 256). The interpolation takes about a third of the time of one pyproj call per pixel.
-  An 8001-line RR segment from 79 N in EPSG:3995 (9783 x 8728 px): one step for the grid was
-  4 px (11.3 s); by bands, 4-14 px (4.2 s), the same largest error (0.0026 px).
+  error and the number of exact fallback pixels. Over an FR footprint (~3700 x 3300 px at
+  260 m), against pyproj at every pixel: a 64-px primary grid errs by 0.024 px in UTM 31/33 and
+  LAEA (EPSG:3035); the chosen step (20 px) gives at most 0.0023 px; EPSG:32662 is exact (step
+  256). The interpolation takes about a third of the time of one pyproj call per pixel. On an
+  8001-line RR segment from 79 N in EPSG:3995 (9783 x 8728 px), one step for the whole grid
+  would be 4 px (11.3 s); by bands the steps are 4-14 px (4.2 s), the largest error the same
+  (0.0026 px).
 
 Default grid (``default_grid``): the smallest rectangle holding the segment boundary (section 3.1,
 fig. 19). Pixel size: MERSYN's nominal FR/RR size, 260 m / 1040 m in a metric CRS and, for a
@@ -714,8 +715,8 @@ MAX_DEGREE_PIXEL = 1.0
 
 def check_degree_pixel(crs: pyproj.CRS, dx: float, dy: float) -> None:
     """Refuse a pixel of more than ``MAX_DEGREE_PIXEL`` in a geographic CRS (OptionsError
-    saying the unit; before, 260 "m" in EPSG:4326 ended in "the extent misses the product
-    footprint")."""
+    saying the unit, where 260 "m" in EPSG:4326 would otherwise end in "the extent misses the
+    product footprint")."""
     if crs.is_geographic and max(dx, dy) > MAX_DEGREE_PIXEL:
         raise OptionsError(
             f"pixel size {max(dx, dy):g} in {crs.name} is in degrees ({max(dx, dy):g} deg is "
