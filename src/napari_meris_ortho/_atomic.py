@@ -1,6 +1,6 @@
 """Atomic output: write to a temporary file in the target directory, then rename.
 
-Policy (README "Reliability"):
+Policy:
 
 - an output target that exists must be a regular file: a directory, FIFO, device or socket is
   refused (``-o /dev/null`` never replaces the device);

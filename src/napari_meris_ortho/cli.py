@@ -4,8 +4,8 @@ Every user error (bad file, bad option, unwritable output) ends in one line on s
 code 2; a run where only some inputs failed exits with code 1. SIGINT (Ctrl-C) and SIGTERM at
 any moment end in "meris-ortho: interrupted" and exit code 130 (143 for SIGTERM) with no output
 of the run left: the handlers are installed before any heavy import (numba, GDAL), and they
-never raise into the running code (a KeyboardInterrupt inside numba's cache loading used to
-end in a SystemError); they undo the run's outputs and leave at once.
+never raise into the running code (a KeyboardInterrupt inside numba's cache loading ends in a
+SystemError); they undo the run's outputs and leave at once.
 """
 
 from __future__ import annotations
