@@ -1,8 +1,7 @@
-"""Placement in the world of the napari front end (issue 24, item 3; its conventions:
-``_napari.world``): rasters reprojected by GDAL's warp onto a grid's pixels that cover them,
-positions of a CRS as world (row, column) = (-y, x), a product placed by an affine fit of its
-tie points. No Qt, no napari: the readers, the sample data and the Flicker widget's disparity
-use it off the Qt thread."""
+"""Placement in the world of the napari front end (its conventions: ``_napari.world``): rasters
+reprojected by GDAL's warp onto a grid's pixels that cover them, positions of a CRS as world
+(row, column) = (-y, x), a product placed by an affine fit of its tie points. No Qt, no napari:
+the readers, the sample data and the Flicker widget's disparity use it off the Qt thread."""
 
 from __future__ import annotations
 
@@ -31,7 +30,7 @@ def reproject_onto(data: np.ndarray, source: OutputGrid, target: OutputGrid, *,
 class Warp:
     """What GDAL's warp needs of two grids, as plain values (affine transforms, WKT, shape):
     ``warp`` then makes no pyproj object, so that it runs in any thread (a pyproj CRS used in a
-    pooled Qt thread crashed inside PROJ: ``_napari.widget_ortho._Job``)."""
+    pooled Qt thread crashes inside PROJ: ``_napari._qt.waiting.ThreadCall``)."""
 
     src_transform: Any
     src_wkt: str

@@ -1,5 +1,5 @@
-"""Multiscale layer data for the napari front end (issue 24, item 2; no Qt, no napari import):
-napari loads the level that fits the canvas and reads only the window on screen.
+"""Multiscale layer data for the napari front end (no Qt, no napari import): napari loads the
+level that fits the canvas and reads only the window on screen.
 
 A ``LazyArray`` is a full-resolution raster read on demand: indexing with integers and slices
 composes without reading, ``np.asarray`` reads the selection through the raster's ``read``
