@@ -6,21 +6,21 @@ process; only speed changes). A library user's process is never tuned: only ``cl
 and ``python -m napari_meris_ortho.warmup --late`` call ``tune_process``. A dask worker that runs
 the synthesis' tile tasks gets its malloc thresholds back (``keep_task_arrays``).
 
-What it does, each measured on a fr-alps map (README, "Speed"):
+What it does (the figures are those of a fr-alps map):
 
 - glibc's malloc keeps the memory the run frees (``mallopt``): band-sized arrays come back from
-  the heap instead of fresh, kernel-zeroed ``mmap`` pages (3.9 -> 3.6 s);
+  the heap instead of fresh, kernel-zeroed ``mmap`` pages (0.3 s of a 3.9 s map);
 - numpy arrays on ordinary pages (``NUMPY_MADVISE_HUGEPAGE=0``, read by numpy when first
   imported: transparent huge pages cost 0.4-0.6 s of compaction and zeroing);
 - one OpenBLAS thread (no linear algebra here: its server threads spin at start-up);
 - Python's cyclic garbage collector run rarely, and not at all on the way out;
-- numba's CPU target started without importing scipy.linalg (0.13-0.2 s).
+- numba's CPU target started without importing scipy.linalg (0.13-0.2 s saved).
 
-In a napari session (the plugin's reader and widget; README, napari figures): glibc's malloc
-handing big blocks back when they are freed (``return_freed_memory``) but for the length of a
-synthesis run (``task_arrays_kept``), the viewer's heap trimmed after layer removals
-(``schedule_trim``), and pint's unit registry loaded from pint's
-own disk cache while no one has used it yet (``unit_registry_from_disk``).
+In a napari session (the plugin's reader and widget): glibc's malloc handing big blocks back
+when they are freed (``return_freed_memory``) but for the length of a synthesis run
+(``task_arrays_kept``), the viewer's heap trimmed after layer removals (``schedule_trim``), and
+pint's unit registry loaded from pint's own disk cache while no one has used it yet
+(``unit_registry_from_disk``).
 
 numba offers no public interface for two things this package needs; both private hooks are
 here and only here (``numba_cache_index``, ``_refresh_cpu_target``), and ``check_numba_hooks``
@@ -61,8 +61,8 @@ def tune_process() -> None:
 
 def _malloc_thresholds(mmap_threshold: int, trim_threshold: int) -> bool:
     """glibc's ``mallopt``: blocks from ``mmap_threshold`` up mapped on their own, a heap
-    trimmed past ``trim_threshold`` free at its top (fixed: glibc no longer moves them). False
-    off glibc or when glibc refuses a value."""
+    trimmed past ``trim_threshold`` free at its top (both set: glibc then leaves them where
+    they are). False off glibc or when glibc refuses a value."""
     with contextlib.suppress(OSError, AttributeError, ValueError):
         if not (os.confstr("CS_GNU_LIBC_VERSION") or "").startswith("glibc"):
             return False
@@ -79,7 +79,7 @@ def _keep_freed_memory() -> None:
 
 #: a long-lived process (the viewer): blocks from this size up are mapped on their own, heaps are
 #: trimmed past twice it (``return_freed_memory``); with 1 MiB, smaller blocks (tiles, small
-#: levels) still kept 21-37 MB in 3 of 15 measurements
+#: levels) can keep 21-37 MB resident
 VIEWER_MMAP_THRESHOLD = 2**18
 
 
@@ -87,9 +87,9 @@ def return_freed_memory() -> bool:
     """glibc's malloc in a long-lived process (the viewer): a block of ``VIEWER_MMAP_THRESHOLD``
     or more mapped on its own, so that freeing it hands it back whichever thread made it, and
     every heap trimmed past twice that. glibc's default raises both thresholds as big blocks are
-    freed (up to 32 and 64 MiB); a run's arrays then came from its worker thread's heap, whose
-    free top ``malloc_trim`` leaves alone: four fr-alps runs, all layers removed, kept 57 MB
-    resident (+13 %) in half the sessions, +3-4 % in every session with this (measured). The
+    freed (up to 32 and 64 MiB); a run's arrays then come from its worker thread's heap, whose
+    free top ``malloc_trim`` leaves alone: after four fr-alps runs with every layer removed, a
+    session can hold 57 MB (13 %) more resident, against 3-4 % with this. The
     cost: a run's arrays come from fresh pages each time (the job of a 3-band fr-alps run, in
     the worker: 0.2-0.36 s more of 2.5 s). False off glibc or with the tuning off. The opposite of
     ``_keep_freed_memory`` (the command's short process). A synthesis run in the process
@@ -98,7 +98,7 @@ def return_freed_memory() -> bool:
         return False
     with _runs_lock:
         _runs["viewer"] = True
-        if _runs["kept"]:  # a run keeps its arrays now: its end sets them
+        if _runs["kept"]:  # a run is keeping its arrays: its end sets them
             return True
         return _viewer_thresholds()
 
@@ -110,7 +110,7 @@ def _viewer_thresholds() -> bool:
 
 
 #: a process whose malloc hands big blocks back (``return_freed_memory`` called), and how many
-#: synthesis runs keep their arrays in it now (``task_arrays_kept``)
+#: synthesis runs are keeping their arrays in it (``task_arrays_kept``)
 _runs = {"viewer": False, "kept": 0}
 _runs_lock = threading.Lock()
 
@@ -121,10 +121,10 @@ def task_arrays_kept() -> Iterator[None]:
     viewer's: ``return_freed_memory``): for the run's length, its arrays come from the heap as
     in a worker (``keep_task_arrays``); the viewer's thresholds come back after the last run,
     and the heap is trimmed (``malloc_trim``). The run's arrays are its own (its result is in
-    the store), so none outlives it. The Orthorectify widget's synthesis of 4 fr-alps products
-    (15 bands, ``bench_napari.py --synthesis 4``): ``synthesize`` 9.4-11.3 -> 7.6-9.0 s, a run
-    14.2-16.9 -> 12.7-13.4 s, memory after the layers' removal the same
-    (measured). Elsewhere (a command, a library user's process): nothing."""
+    the store), so none outlives it. In the Orthorectify widget, this takes about a fifth off
+    ``synthesize`` for 4 fr-alps products of 15 bands (``bench_napari.py --synthesis 4``), with
+    the same memory left once the layers are removed. Elsewhere (a command, a library user's
+    process): nothing."""
     with _runs_lock:
         viewer = _runs["viewer"]
         if viewer:
@@ -155,10 +155,10 @@ def keep_task_arrays() -> bool:
     it free at its top, where glibc's default thresholds would have moved up to. A dask nanny
     starts its workers with ``MALLOC_TRIM_THRESHOLD_=65536`` (``distributed.nanny.pre-spawn-
     environ``), which fixes both at 128 KiB: every array of a tile is then fresh, kernel-zeroed
-    pages, freed again at once. One worker (held to a core) merging 4 fr-alps products, 15
-    bands: 1.04-1.05 M page faults and 3.8-4.5 s of system time, 15.1-15.8 s; with this, 46-50 k
-    faults, 10.7-11.6 s; its peak resident memory 450 -> 670 MB (measured). False off glibc
-    or with the tuning off."""
+    pages, freed again at once: one worker (held to a core) merging 4 fr-alps products of 15
+    bands makes about a million page faults and spends 4 s of system time in a 15 s run; with
+    this, 50 thousand faults in an 11 s run, for a peak resident memory of 670 MB instead of
+    450 MB. False off glibc or with the tuning off."""
     return enabled() and _malloc_thresholds(WORKER_MMAP_THRESHOLD, 2 * WORKER_MMAP_THRESHOLD)
 
 
@@ -219,10 +219,11 @@ def few_collections(last: bool) -> Iterator[None]:
 def unit_registry_from_disk() -> bool:
     """pint's application registry (the units napari gives every layer) loaded from pint's own
     disk cache (``cache_folder`` in the user's cache directory, written by the first session)
-    instead of parsed from pint's definition files in every session: 0.15 s -> 0.015 s in the
-    first layer of a session (measured). Only while the registry is pint's untouched lazy
-    default: a registry in use is never replaced. A cache that cannot be written or read leaves
-    pint as it was (napari then builds its registry as usual). False when nothing was done."""
+    instead of parsed from pint's definition files in every session: the first layer of a
+    session then spends 0.015 s on it, not 0.15 s. Only while the registry is pint's untouched
+    lazy default: a registry in use is never replaced. A cache that cannot be written or read
+    leaves pint as it was (napari then builds its registry as usual). False when nothing was
+    done."""
     if not enabled():
         return False
     import pint
