@@ -181,8 +181,8 @@ def hold_workers_to_cores(client: Any, every: bool = False) -> dict[str, int]:
 
     A worker runs its task on one thread, but its writes (Icechunk's I/O threads, zstd) run
     beside it: left free, the workers' threads move between the cores and meet on the same
-    one. Held, two workers on 2 cores merged 6 fr-alps products in 11.1-11.2 s against
-    11.8-12.3 s (``benchmarks/bench_synthesis.py``, medians of 3, interleaved)."""
+    one. Held, two workers on 2 cores merge 6 fr-alps products in about 11.1 s, left free in
+    about 12 s (``benchmarks/bench_synthesis.py``)."""
     if not (hasattr(os, "sched_setaffinity") and os.path.isdir("/proc/self/task")):
         return {}
     cores = sorted(os.sched_getaffinity(0))
@@ -566,8 +566,8 @@ def submission_order(jobs: dict[Window, list[Job]], work: dict[Window, dict[int,
     """The tiles in the order their tasks are submitted: the most work first (``tile_work``),
     equal work in grid order. Longest processing time first: on N workers the short tiles
     come last, so that no worker is left with a long one while the others have finished (of
-    two workers merging 4 fr-alps products, one idled 0.36-0.67 s at the end when the tiles
-    went by their number of products, 0.25-0.33 s now)."""
+    two workers merging 4 fr-alps products, one idles 0.25-0.33 s at the end in this order,
+    0.36-0.67 s with the tiles ordered by their number of products)."""
     return sorted(jobs, key=lambda w: (-tile_work(work.get(w, {}), exclude), w))
 
 

@@ -183,9 +183,9 @@ def settle_at_exit(timeout: float = SETTLE_TIMEOUT_S) -> None:
     loop's socket with the GIL released; when the process's main thread ends meanwhile, the
     Rust thread re-takes the GIL during finalization, CPython 3.11-3.13 ``pthread_exit``s it
     and the forced unwind through Rust frames aborts the process (SIGABRT, "Fatal Python
-    error: Aborted"; CPython gh-87135). Such a thread shows in ``sys._current_frames`` until
-    it has left Python, unlike the threads of ``threading``; polled every millisecond, with the
-    GIL released, for at most ``timeout`` seconds."""
+    error: Aborted"; https://github.com/python/cpython/issues/87135). Such a thread shows in
+    ``sys._current_frames`` until it has left Python, unlike the threads of ``threading``;
+    polled every millisecond, with the GIL released, for at most ``timeout`` seconds."""
     import sys
     import threading
     import time
@@ -447,8 +447,8 @@ async def _open_array(store: Any, path: str, mode: str, layout: str = "") -> Any
     ``layout`` (the id of a snapshot whose array metadata the store shows unchanged: a run's
     forks, which start from a session without uncommitted changes and write chunks only), the
     metadata (``zarr.json``) is read once per layout and process (``_METADATA``), not at every
-    tile: an update of the fr-alps Europe-size store opened 1 764 arrays for 90 distinct
-    ones (18 tile tasks)."""
+    tile (an update of the fr-alps Europe-size store would open 1 764 arrays for 90 distinct
+    ones, over 18 tile tasks)."""
     import zarr
     import zarr.api.asynchronous as za
     from zarr.storage import StorePath
