@@ -72,8 +72,8 @@ OVERVIEW_DTYPES = (np.uint16, np.float32)
 def warm_up() -> float:
     """Run ``orthorectify`` on a tiny product in every configuration of ``RUNS``, the
     overview kernel of the map outputs (``engine.resample.overview_level``) and the ZNCC
-    disparity (``analysis.disparity``: the Flicker widget's "Measure disparity" compiled it,
-    8 s, at its first use); seconds."""
+    disparity (``analysis.disparity``: the Flicker widget's "Measure disparity" would compile
+    it, 8 s, at its first use); seconds."""
     from .analysis.disparity import disparity
     from .engine.resample import overview_level
     from .geometry.grid import utm_crs_for

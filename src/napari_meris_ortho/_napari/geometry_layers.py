@@ -42,9 +42,9 @@ def footprint_layer_data(tp_lat: np.ndarray, tp_lon: np.ndarray, crs: Any,
     """A Vectors layer tuple: the edges of the footprint boundary polygon(s), drawn as lines.
 
     Vectors, not Shapes: napari keeps every removed Shapes layer alive through its mode
-    buttons (napari issue 2027: a run's two shapes layers, about 9 MB, stayed in memory after
-    their removal, run after run) and builds four shader programs at its first draw (the
-    longest stall of a run)."""
+    buttons (https://github.com/napari/napari/issues/2027: a run's two shapes layers, about
+    9 MB, would stay in memory after their removal, run after run) and builds four shader
+    programs at its first draw (the longest stall of a run)."""
     polys = footprint_polygons(tp_lat, tp_lon, crs)
     kwargs = {
         "name": name, "edge_color": "yellow", "vector_style": "line", "length": 1.0,
@@ -158,9 +158,9 @@ def vector_step_for(frame: OutputGrid) -> int:
     """The automatic spacing of the parallax vectors (px): about ``VECTORS_ACROSS`` of them
     across the larger side of ``frame``, one every ``MIN_VECTOR_STEP`` px at least. The field
     stays readable in the view that frames the result (fr-alps: one every 49 px, 2.4k vectors,
-    where one every 16 px drew 22k arrows, overlapping at ten times their length), and napari
+    where one every 16 px draws 22k arrows, overlapping at ten times their length), and napari
     slices and draws every vector of the layer at each change: showing and first drawing 22k
-    took 0.10-0.16 s of a turn each (measured, software GL)."""
+    take 0.10-0.16 s of a turn each (software GL)."""
     return max(MIN_VECTOR_STEP, max(frame.width, frame.height) // VECTORS_ACROSS)
 
 

@@ -1,8 +1,9 @@
-"""Layout of the plugin's widgets: docks of a fixed width, text never widens them (issue 24,
-item 7); the camera framed on a result. How layers go into the viewer: ``_qt.insertion``.
+"""Layout of the plugin's widgets: docks of a fixed width, text never widens them; the camera
+framed on a result. How layers go into the viewer: ``_qt.insertion``.
 
 A QLabel without word wrap asks for the width of its whole text, and a QComboBox for its
-longest item: a long status message, path or layer name widened the dock from 477 to 1066 px.
+longest item: a long status message, path or layer name would widen the dock from 477 to
+1066 px.
 Labels wrap at spaces and ignore their text width (the full text is also their tooltip);
 combo boxes ask for ``COMBO_CHARS`` characters and elide the rest.
 """
@@ -24,10 +25,10 @@ FORM_SCREEN_SHARE = 0.4
 class ScrolledForm(Container):
     """A magicgui ``Container`` whose rows scroll above a footer that stays in view (its
     action rows: Run, Cancel, progress, status). The Orthorectify widget needs 812 px of
-    height, 1181 px with the Flicker dock below it: napari's window grew past a 1080-line screen
-    to give them (QA of stop 52). The form now claims at most ``FORM_SCREEN_SHARE`` of the
-    screen's height and scrolls the rest when the window is shorter. ``native`` is the widget
-    napari docks: the scroll area and the footer (napari docks a container's ``native``)."""
+    height, 1181 px with the Flicker dock below it: napari's window would grow past a 1080-line
+    screen to give them. The form claims at most ``FORM_SCREEN_SHARE`` of the screen's height
+    and scrolls the rest when the window is shorter. ``native`` is the widget napari docks: the
+    scroll area and the footer (napari docks a container's ``native``)."""
 
     def __init__(self, *, footer: list[Any], **kwargs: Any) -> None:
         self._docked: Any = None

@@ -1,4 +1,4 @@
-"""The colour legend of the parallax vectors on the canvas (issue 24 item 4).
+"""The colour legend of the parallax vectors on the canvas.
 
 A vectors layer of parallax shifts (``geometry_layers.parallax_layer_data``) is coloured by the
 terrain height (viridis); its legend (``metadata["legend"]``, the height range) is shown as
@@ -59,7 +59,7 @@ def update_legend(viewer: Any) -> None:
 #: the characters of a legend line (``legend_line``: "parallax ×10 · 2003-09-21 09:23: colour =
 #: height, purple 412 m → yellow 2391 m")
 GLYPHS = "0123456789 abcdefghijklmnopqrstuvwxyz:=,.-×·→"
-#: glyphs rendered per turn of the event loop (10-20 ms each, measured)
+#: glyphs rendered per turn of the event loop (10-20 ms each)
 GLYPHS_PER_TURN = 2
 
 
@@ -71,9 +71,9 @@ def prepare_glyphs(viewer: Any, step_ms: int = 40,
     GL). The overlay's first draw (its shaders and nine glyphs vispy always renders:
     0.15-0.2 s), with transparent text, is made at once (the widget calls this in a turn of
     its own right after its opening, before a user reaches Run); then a few glyphs per turn
-    into the overlay's font (``text_overlay_font``), no frame drawn (each turn drew the
-    canvas: 0.07-0.11 s in a run's job, 0.13-0.16 s over a run's layers, measured on
-    fr-alps), none while ``paused()`` (a run). A legend asked for meanwhile shows at the end.
+    into the overlay's font (``text_overlay_font``), no frame drawn (drawing the canvas in
+    each turn would cost 0.07-0.11 s during a run's job, 0.13-0.16 s over a run's fr-alps
+    layers), none while ``paused()`` (a run). A legend asked for meanwhile shows at the end.
     Stops when the overlay is in use by another; no-op when it is in use or nothing is
     drawn."""
     from qtpy.QtCore import QTimer
@@ -85,8 +85,8 @@ def prepare_glyphs(viewer: Any, step_ms: int = 40,
     chunks = [GLYPHS[k:k + GLYPHS_PER_TURN] for k in range(0, len(GLYPHS), GLYPHS_PER_TURN)]
     state: dict[str, str | None] = {"text": None}
     # the overlay's colour as it was: the first draw's text is transparent (napari's box
-    # behind it is not: a transparent box colour still drew it, and turning the box off and
-    # on again crashed Mesa's software GL in a later draw)
+    # behind it is not: a transparent box colour still draws it, and turning the box off and
+    # on again crashes Mesa's software GL in a later draw)
     color = overlay.color
 
     def restore(text: Any) -> None:

@@ -1,8 +1,9 @@
 """Memory of the viewer: the heap handed back once layers are removed, and the objects that
-live as long as napari kept out of Python's full garbage collections (issue 24, items 1, 7).
+live as long as napari kept out of Python's full garbage collections.
 
-glibc keeps the freed small-object heap for reuse: four fr-alps runs, every layer removed, left
-861 MB resident against 625 MB before, 671 MB once ``malloc_trim`` had returned it (measured).
+glibc keeps the freed small-object heap for reuse: after four fr-alps runs with every layer
+removed, a viewer that held 625 MB before the runs holds 861 MB resident, and 671 MB once
+``malloc_trim`` has returned that heap.
 ``trim_after_removals`` calls it a second after the last removal, in a thread (no-op off glibc),
 and has glibc hand big blocks back as they are freed (``_process.return_freed_memory``): the
 heap of the thread that made a run's arrays is out of ``malloc_trim``'s reach.
@@ -36,13 +37,13 @@ def freeze_long_lived(viewer: Any, collect: bool = True) -> None:
     """Move the objects alive now (napari, Qt, vispy, modules: 350 000 of them) out of reach of
     Python's garbage collector (``gc.freeze``, cumulative), so that napari's full collection
     after removing layers (``VispyCanvas._clean_and_update_scenegraph`` calls ``gc.collect()``:
-    0.23-0.27 s at every rerun of the widget, measured) traverses only what was made since: a
-    run's layers (0.13-0.15 s reruns after). Frozen objects are never collected as cyclic
+    0.23-0.27 s at every rerun of the widget) traverses only what was made since: a run's
+    layers (0.13-0.15 s then). Frozen objects are never collected as cyclic
     garbage, so this is undone (``thaw``) when one of the layers the viewer holds now leaves
     it, and when the widget goes (viewer closed). ``collect``: first a full collection of every
     object, frozen ones included: Python times its next full collections by the survivors of
-    the last one (a quarter more), and a pass over the unfrozen few alone made them frequent
-    enough to fall in a run's insertions (0.26-0.29 s stalls, measured)."""
+    the last one (a quarter more), and a pass over the unfrozen few alone would make them
+    frequent enough to fall in a run's insertions (0.26-0.29 s stalls)."""
     if collect:
         gc.unfreeze()
         gc.collect()
@@ -66,7 +67,7 @@ def freeze_at_first_read(viewer: Any) -> None:
     """``freeze_long_lived`` at the plugin's first read of the process, without the full
     collection: the session's garbage-collector pauses while napari makes the first layers
     (importing xarray and pandas, 0.15 s) then walk only what is new. At that moment the
-    collection finds nothing (measured: 0 objects) and would cost the 0.1-0.15 s it saves."""
+    collection finds nothing (0 objects) and would cost the 0.1-0.15 s it saves."""
     if not _first_read:
         return
     _first_read.clear()

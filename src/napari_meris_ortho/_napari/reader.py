@@ -162,7 +162,7 @@ def read_layers(path: str | list[str]) -> list[LayerData]:
 def _hidden_names(layers: list[LayerData]) -> list[str]:
     """The names of the image layers that open hidden (their thumbnails: ``thumbnails_later``;
     not a labels layer's: napari's first slicing of one builds its colour textures, a 0.28-0.30 s
-    turn after a session's first open, measured)."""
+    turn after a session's first open)."""
     return [kwargs["name"] for _, kwargs, kind in layers
             if kind == "image" and kwargs.get("visible", True) is False and "name" in kwargs]
 
@@ -212,7 +212,7 @@ def geotiff_layers(path: str | Path, frame: OutputGrid | None = None) -> list[La
             # what the layer's no-data pixels hold: 0 where counts are read as radiances
             # (``_to_physical``), else the file's own value
             nodata = 0.0 if scaled and ds.nodata is not None else ds.nodata
-            # on demand from its overviews (else each level read the whole band: 1.6-2.8 s)
+            # on demand from its overviews (else each level reads the whole band: 1.6-2.8 s)
             lazy = (ds is opened and (frame is None or source.same_grid(frame))
                     and bool(ds.overviews(1)) and len(level_factors(ds.height, ds.width)) > 1)
             rgb = is_rgb(ds)
@@ -323,11 +323,11 @@ def n1_layers(path: str | Path, frame: OutputGrid | None = None) -> list[LayerDa
     and flags (named bits in the features) of a MERIS L1b product (N1 or .SEN3; FRG/FSG and
     SEN3 products also carry their per-pixel altitude in the metadata), in product geometry
     placed in the world (``frame``, or a new one in the UTM zone of the footprint) by an affine
-    fit of its tie points (``_placement``). The radiance stack opens hidden (the opaque RGB hid
-    it; a first open took 0.84-0.96 s against 0.87-1.03 s shown, measured). A session's first
-    product is read in a thread while the window turns (``responsively``): its readers'
-    imports, the reading and napari's import of xarray for its first layer held the window
-    0.5-0.8 s (fr-alps, measured); later ones take 0.05 s, less than the thread costs. The
+    fit of its tie points (``_placement``). The radiance stack opens hidden (the opaque RGB
+    hides it, and a first open takes 0.84-0.96 s, against 0.87-1.03 s with the stack shown). A
+    session's first product is read in a thread while the window turns (``responsively``): its
+    readers' imports, the reading and napari's import of xarray for its first layer would hold
+    the window 0.5-0.8 s (fr-alps); later ones take 0.05 s, less than the thread costs. The
     placement's warning is given on this thread (napari shows warnings as widgets)."""
     if _imports_pending():
         layers, warning = responsively(_n1_layer_data, path, frame)

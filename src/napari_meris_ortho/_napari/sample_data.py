@@ -254,7 +254,7 @@ class SampleLoader:
             self._rename(f"MERIS sample {self.name} failed: {self.error}")
             _LOADERS.discard(self)
             raise self.error
-        # the placeholder out first: beside the sample's layers (metres) its pixels made napari
+        # the placeholder out first: beside the sample's layers (metres) its pixels make napari
         # drop the units of every layer (its "Inconsistent units" warning)
         with short_collections():  # napari's collection after a removal: 0.18 s with the
             for layer in self._placeholders():  # sample's layers in, not now

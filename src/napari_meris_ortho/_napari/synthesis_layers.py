@@ -51,8 +51,8 @@ def pyramids(store: SynthesisStore) -> dict[str, list[DecodedLayer]]:
 def coarse_limits(pyramids: dict[str, list[DecodedLayer]]) -> dict[str, tuple[float, float]]:
     """Contrast limits of each layer from its coarsest level, inside the box of the store's
     written chunks only (``DecodedLayer.written``): a Europe-size store holding one product
-    reads the 16 of its 315 coarsest chunks inside that box, not all of them (4.6 s of
-    napari's open, on the event loop)."""
+    reads the 16 of its 315 coarsest chunks inside that box, not all of them (reading all
+    would cost 4.6 s of napari's open, on the event loop)."""
     out = {}
     for name, levels in pyramids.items():
         window = levels[-1].written

@@ -395,7 +395,7 @@ class FlickerWidget(Container):
     def _disparity_inputs(self) -> tuple[Any, OutputGrid | None, Callable[[], Any]]:
         """Layer A, its grid and the measurement to run (``_disparity_of``: reading both
         layers whole and the warp of B onto A's grid are left to it, off the Qt thread: 0.11 s
-        of the window's time on fr-alps, measured). Checks the pair here (Qt thread)."""
+        of the window's time on fr-alps). Checks the pair here (Qt thread)."""
         a, b = self._pair()
         from napari.layers import Labels
 

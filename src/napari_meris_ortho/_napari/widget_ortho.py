@@ -314,7 +314,7 @@ class OrthorectifyWidget(ScrolledForm):
         _import_engine()
         unit_registry_from_disk()  # napari's units, before its first layer
         # the rest in turns of the event loop of their own, from the next one on: the dock's
-        # opening was one turn of 0.39-0.49 s with them (warm disk cache, measured)
+        # opening would be one turn of 0.39-0.49 s with them (warm disk cache)
         this = weakref.ref(self)  # not kept alive by the turns' timers
         in_turns([_while_open(this, OrthorectifyWidget._prepare_glyphs),
                   *dash_pattern_steps(),
@@ -449,7 +449,7 @@ class OrthorectifyWidget(ScrolledForm):
         self.progress_state = (0, 1)
         self.progress_bar.value = 0
         # the widget's own bar: napari's ``progress`` builds a bar in its activity dock on the
-        # Qt thread at every Run (0.1-0.3 s without an event-loop turn, measured)
+        # Qt thread at every Run (0.1-0.3 s without an event-loop turn)
         self._active = True
         self._timer = QTimer()
         self._timer.timeout.connect(self._update_progress)
@@ -511,9 +511,9 @@ class OrthorectifyWidget(ScrolledForm):
         # a rerun replaces every layer an earlier run made of the same products (or store),
         # not only those of the same names: a layer the new settings no longer make (a band
         # left out, geometry off) would seem to describe the new run (and a rerun with fewer
-        # bands crashed Mesa's software GL drawing beside such leftovers)
+        # bands crashes Mesa's software GL drawing beside such leftovers)
         # top first: a removal that narrows the world slices again the layers left, and the
-        # parallax vectors (on top) redrew their thumbnail in Python (0.09 s)
+        # parallax vectors (on top) would redraw their thumbnail in Python (0.09 s)
         replaced = [old for old in self.viewer.layers[::-1]
                     if old.name in names or layer_source(old) in sources]
         # napari collects garbage after every removal (0.1-0.5 s): the removals go in one

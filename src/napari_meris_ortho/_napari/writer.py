@@ -7,7 +7,7 @@ through ``output.geotiff.write_geotiff`` (temporary name, then rename), with the
 no-data value (``metadata["nodata"]``: a GeoTIFF's, as the reader keeps it; 0 for a run's layers).
 A layer without one (a product-geometry N1 layer, a plain image) is refused with a message naming
 it, and so is a path a layer of the viewer reads from (napari's lazy layers read their file as the
-view moves: replacing it under them crashed the viewer).
+view moves: replacing it under them crashes the viewer).
 """
 
 from __future__ import annotations

@@ -1,5 +1,5 @@
 """How a run's, a sample's and a reader's layers go into a live napari viewer without a long
-turn of the Qt event loop (issue 24, item 1): the canvas held still while they go in
+turn of the Qt event loop: the canvas held still while they go in
 (``canvas_updates``), one layer per turn without switching the layer controls to it
 (``append_inactive``), napari's controls of a layer made and styled in later turns
 (``controls_later``, ``make_controls``, ``polish_controls``, ``add_controls``,
@@ -19,7 +19,7 @@ from functools import partial
 from typing import Any
 
 #: ms between showing two new layers (a run's, a sample's), one per frame: vispy builds a new
-#: visual's shaders at its first draw, so a frame drawing them all was the longest stall. Each
+#: visual's shaders at its first draw, so a frame drawing them all is the longest stall. Each
 #: is drawn in the turn after the one that shows it (canvas updates off while it is shown)
 SHOW_STEP_MS = 40
 
@@ -43,14 +43,15 @@ def thumbnail_while_hidden(layer: Any) -> None:
     """Have napari make the thumbnail of a hidden ``layer``: napari makes a thumbnail when it
     slices a layer, and it slices visible layers only, so a layer that comes hidden (a run's
     single bands under its RGB, its diagnostics; a product's radiances under its quick-look)
-    showed a black square in the layer list. Shown and hidden again at once, it is sliced once
-    (a multiscale layer at the level napari picks: 0.04-0.05 s for fr-alps' radiances, measured)
+    shows a black square in the layer list. Shown and hidden again at once, it is sliced once
+    (a multiscale layer at the level napari picks: 0.04-0.05 s for fr-alps' radiances)
     and keeps its thumbnail; no frame draws it in between. No-op for a visible layer. In a
     viewer: napari empties an image layer's slice, and so its thumbnail, when it inserts it.
 
     The layer's ``visible`` and ``set_data`` events are held meanwhile: its visibility is the
-    same after as before, and the canvas rebuilt its scene graph at each of the two changes
-    and redrew (0.04 s and 0.08 s a thumbnail after a fr-alps run, measured, software GL);
+    same after as before, and the canvas does not rebuild its scene graph and redraw at each
+    of the two changes, as it otherwise would (0.04 s and 0.08 s a thumbnail after a fr-alps
+    run, software GL);
     its vispy layer gets the slice when the layer is shown (napari slices it again then)."""
     if layer.visible:
         return
@@ -87,7 +88,7 @@ def _named(name: str, asked: str) -> bool:
 def dash_pattern_steps() -> list[Callable[[], Any]]:
     """vispy's line dash patterns built beforehand, one call each (every labels layer's polygon
     overlay builds them, 0.08 s in the session's first labels layer insertion; all at once
-    were a turn of 0.18-0.21 s after an N1's first opening of a session, measured): vispy
+    they would be a turn of 0.18-0.21 s after an N1's first opening of a session): vispy
     keeps each pattern it makes; its atlas, made at every line visual, finds them made. The
     patterns are those its atlas asks for (recorded, not made); none without vispy's atlas."""
     try:
@@ -142,7 +143,7 @@ def draw_now(viewer: Any) -> None:
 
 def canvas_updates(viewer: Any, enabled: bool) -> None:
     """Stop (and restart) the canvas repainting while a run's or a sample's layers go in one per
-    event-loop turn: a draw between two insertions crashed Mesa's software GL under Xvfb
+    event-loop turn: a draw between two insertions crashes Mesa's software GL under Xvfb
     (segmentation fault in glDrawArrays); the rest of the window (progress bar, Cancel, the
     layer list) keeps responding. No-op without a Qt window."""
     native = _canvas(viewer)
@@ -158,7 +159,7 @@ def scene_graph_paused(viewer: Any, paused: bool) -> None:
     """Hold (``paused``) or rebuild napari's scene graph while a run's layers go in, one per
     turn: every insertion otherwise rebuilds it for all the layers of the viewer (their order,
     their overlays, a pass of the canvas's draw hook): 0.01-0.02 s per image layer, 0.07-0.08 s
-    for a labels layer, whose polygon overlay is built there (measured, software GL). The
+    for a labels layer, whose polygon overlay is built there (software GL). The
     rebuild of ``paused=False`` then takes a turn of its own. napari's own switch (the one its
     batched layer changes use, without their garbage collection); no-op without it."""
     canvas = getattr(_qt_viewer(viewer), "canvas", None)
@@ -181,7 +182,7 @@ def scene_graph_is_paused(viewer: Any) -> bool:
 def build_overlays(viewer: Any, layer: Any) -> None:
     """Have napari build the canvas overlays of ``layer`` now, in a turn of their own, while the
     scene graph is held (``scene_graph_paused``): a labels layer's polygon and brush overlays
-    took 0.08-0.14 s of the rebuild's turn (fr-alps, software GL). No-op without them."""
+    take 0.08-0.14 s of the rebuild's turn (fr-alps, software GL). No-op without them."""
     canvas = getattr(_qt_viewer(viewer), "canvas", None)
     update = getattr(canvas, "_update_layer_overlays", None)
     if callable(update) and layer in getattr(canvas, "layer_to_visual", {}):
@@ -210,8 +211,8 @@ def append_inactive(viewer: Any, layer: Any, controls_later: bool = False) -> bo
 
     ``controls_later``: napari's controls of the layer are not made in this insertion but by
     :func:`add_controls`, in a turn of their own (making them and Qt's styling of their
-    widgets were 0.1-0.2 s of the 0.2-0.3 s an insertion's turn took, measured on fr-alps
-    under software GL); an empty frame holds their place meanwhile (napari finds it if the
+    widgets are 0.1-0.2 s of the 0.2-0.3 s an insertion's turn takes, on fr-alps under
+    software GL); an empty frame holds their place meanwhile (napari finds it if the
     layer is selected or removed first). Returns whether they are still to be made."""
     layers = getattr(viewer, "__wrapped__", viewer).layers  # the plugin's public-only proxy
     layers = getattr(layers, "__wrapped__", layers)
@@ -245,13 +246,13 @@ def defer_controls(viewer: Any, kinds: Sequence[str]) -> None:
     napari layer types, in that order) to later turns, as
     ``append_inactive(controls_later=True)`` does: a stand-in frame at their insertion, the
     controls made and put in napari's stack two turns per layer once the opening has returned.
-    The canvas shows the layers first: making the controls and Qt's styling of them were
+    The canvas shows the layers first: making the controls and Qt's styling of them are
     0.1-0.2 s per layer of an N1's opening under software GL. A layer selected or removed
     meanwhile finds its stand-in.
 
     From the first labels layer on, napari's scene graph is held (``scene_graph_paused``): its
     insertion would build the labels' polygon and brush overlays, 0.07-0.08 s of an N1's
-    opening and 0.3 s at the session's first (measured, fr-alps, software GL). They are built
+    opening and 0.3 s at the session's first (fr-alps, software GL). They are built
     after the controls, in a turn of their own (``build_overlays``, after one for vispy's dash
     patterns, 0.17 s of the session's first), and the scene graph rebuilt in the next; layers
     inserted after a labels layer are not in the first frame (the readers put their hidden
@@ -290,7 +291,7 @@ def defer_controls(viewer: Any, kinds: Sequence[str]) -> None:
 
     def hand_over() -> None:  # the layers leave these closures as they go to their turns: a
         layers = pending[:]   # timer's callable outlives its call (PyQt frees it later; the
-        pending.clear()       # layers of an N1 opened, then removed, stayed alive)
+        pending.clear()       # layers of an N1 opened, then removed, would stay alive)
         controls_in_turns(viewer, layers, then)
 
     def stand_in(event: Any) -> None:
@@ -395,7 +396,7 @@ def _put_stand_in(container: Any, layer: Any) -> None:
 def make_controls(viewer: Any, layer: Any) -> None:
     """Make napari's controls of ``layer`` (appended with ``controls_later``) without putting
     them in the controls stack yet (:func:`add_controls` does, in a later turn): making them
-    and Qt's styling of their widgets once in the stack were 0.06-0.08 s and 0.06-0.1 s of one
+    and Qt's styling of their widgets once in the stack are 0.06-0.08 s and 0.06-0.1 s of one
     turn (fr-alps, software GL)."""
     container = _controls_container(viewer)
     stand_in = None if container is None else container.widgets.get(layer)
@@ -413,8 +414,8 @@ def make_controls(viewer: Any, layer: Any) -> None:
 
 def polish_controls(viewer: Any, layer: Any) -> None:
     """Have Qt style the controls :func:`make_controls` made for ``layer``, in a turn of its
-    own: put in napari's stack, they were styled there (napari's style sheet applied to each
-    of their widgets: 0.045 s of the 0.05 s of putting them in, measured). They are styled as
+    own: put in napari's stack, they would be styled there (napari's style sheet applied to
+    each of their widgets: 0.045 s of the 0.05 s of putting them in). They are styled as
     children of their stand-in (in the window, so under its style sheet, hidden; gone with it
     if the layer goes first); :func:`add_controls` moves them into the stack."""
     from qtpy.QtWidgets import QWidget

@@ -1,13 +1,13 @@
 """Heavy work that napari makes the plugin do on the Qt thread (a reader's call inside
-``viewer.open``), done in a thread while the Qt event loop keeps turning (issue 24, item 1).
+``viewer.open``), done in a thread while the Qt event loop keeps turning.
 
 napari calls a reader on its Qt thread and adds the layers it returns; a GeoTIFF in another
 CRS than the viewer's world is reprojected there (GDAL's warp: 2.2 s for the 3-band fr-alps
-reference onto its N1's UTM world, a 3.2 s stall, measured). ``responsively`` runs such work
+reference onto its N1's UTM world, a 3.2 s stall). ``responsively`` runs such work
 in a thread (GDAL's warp releases the GIL) and processes the window's events meanwhile: it
 repaints, timers and progress bars go on; the user's input waits until the work is done (it is
 kept, not lost), so nothing re-enters the reader in the middle. The caller still gets the
-result synchronously: ``viewer.open`` returns the finished layers, as before.
+result synchronously: ``viewer.open`` returns the finished layers.
 """
 
 from __future__ import annotations
@@ -20,8 +20,8 @@ T = TypeVar("T")
 
 #: ms the Qt thread waits for the work between two passes over the window's events: 25 passes a
 #: second keep it responsive, and its Python (napari's paints) takes the GIL from a work in
-#: Python less often: a first N1 read in 0.62-0.71 s at 50 ms against 0.82-0.93 s at 10 ms
-#: (fr-alps, four runs each, measured)
+#: Python less often: a first fr-alps N1 reads in 0.62-0.71 s at 50 ms, in 0.82-0.93 s at
+#: 10 ms
 TURN_MS = 40
 
 
@@ -44,8 +44,8 @@ class ThreadCall:
 
     A plain thread, not one of napari's workers: those run on QThreadPool threads whose Python
     thread state is dropped after every job; pyproj's per-thread PROJ context goes with it and
-    the next job on a pooled thread crashed inside PROJ (segmentation fault in ``proj_create``,
-    reproduced with a bare QRunnable). A Python thread keeps one thread state for the whole
+    the next job on a pooled thread crashes inside PROJ (segmentation fault in ``proj_create``,
+    also with a bare QRunnable). A Python thread keeps one thread state for the whole
     call, and can be joined (``thread``)."""
 
     def __init__(self, func: Callable[..., Any], *args: Any, name: str = "meris-ortho",
