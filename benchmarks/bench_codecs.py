@@ -1,4 +1,4 @@
-"""Compression of a synthesis store's radiance chunks by candidate codecs (issue 25, item 1).
+"""Compression of a synthesis store's radiance chunks by candidate codecs.
 
     .venv/bin/python benchmarks/bench_codecs.py [--scene fr-alps] [--bands 2,7,13]
 

@@ -9,7 +9,7 @@ shaped like a synthesis (``--arrays`` uint16 arrays of ``--chunks`` x ``--chunks
 chunks of every array (a product's tiles) at changing places. Prints, per block of commits, the
 median seconds of one commit (session, writes, commit), the seconds to open the repository and
 read its history, and the repository's size and file count, so the cost at 2 000 commits is
-measured rather than assumed (README, "Scale beyond this machine").
+measured rather than assumed.
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""napari at engine speed (issue 24, item 9): what a user of the plugin waits for, on fr-alps.
+"""napari at engine speed: what a user of the plugin waits for, on fr-alps.
 
 One run prints, in a real napari viewer (run it under Xvfb: ``xvfb-run -a``):
 
@@ -31,8 +31,8 @@ next to the scene once), opened only (no runs), and the reader's peak allocation
 (``tracemalloc`` around ``read_layers``, outside the timed opens).
 
 A benchmark, not a test: ``xvfb-run -a python benchmarks/bench_napari.py [--sen3] [--json F]``;
-for the figures before a change, the same command with ``PYTHONPATH`` on the older source tree.
-The machine is shared: read the figures as such.
+to compare two versions of the package, run the same command with ``PYTHONPATH`` on each
+source tree. Wall times depend on whatever else the machine runs.
 """
 
 from __future__ import annotations
@@ -47,7 +47,7 @@ from typing import Any
 import numpy as np
 import psutil
 
-#: Orthorectify runs in a row (issue 24: memory of four runs)
+#: Orthorectify runs in a row (the memory they leave is printed)
 RUNS = 4
 #: then runs whose layers replace the previous run's (same names: napari removes them)
 RERUNS = 2

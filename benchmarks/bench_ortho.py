@@ -1,4 +1,4 @@
-"""Speed of the whole data path on a simulated scene (issues 4 and 12), beside its peers.
+"""Speed of the whole data path on a simulated scene, beside its peers.
 
 One run prints, for ``fr-alps`` (15 bands, default geographic grid):
 
@@ -15,7 +15,8 @@ One run prints, for ``fr-alps`` (15 bands, default geographic grid):
 4. ``map`` at half the pixel size (4x the output pixels): the cost must grow linearly.
 
 A benchmark, not a test: ``python benchmarks/bench_ortho.py [--scene fr-alps] [--json FILE]``.
-The machine is shared: run it when it is quiet, and read the figures as such.
+Wall times depend on whatever else the machine runs: run it when the machine is quiet (the JSON
+file records the system load before and after).
 """
 
 from __future__ import annotations
@@ -36,7 +37,8 @@ import psutil
 
 #: rounds of ``meris-ortho map`` and ``gdalwarp``, one after the other; the best of each
 ROUNDS = 5
-#: MERSYN 02.05 on the handbook's FR scene (Appendix B / the brief): none, tie points, DEM
+#: MERSYN 02.05 on the handbook's FR scene (handbook section 4.5, Appendix B): none, tie points,
+#: DEM
 MERSYN_SECONDS = {"none": 27.7, "tiepoints": 68.8, "dem": 304.0}
 
 
@@ -286,8 +288,7 @@ def main(argv: list[str] | None = None) -> int:
     cores = len(os.sched_getaffinity(0))
     load = os.getloadavg()
     report: dict = {"scene": args.scene, "cores": cores, "load_before": load}
-    print(f"scene {args.scene}: grid {grid.height} x {grid.width}, 15 bands, {cores} cores, "
-          f"load average {load[0]:.1f} {load[1]:.1f} {load[2]:.1f}")
+    print(f"scene {args.scene}: grid {grid.height} x {grid.width}, 15 bands, {cores} cores")
     tmp = Path(tempfile.mkdtemp(prefix="bench-ortho-"))
     try:
         if "inprocess" not in skip:
@@ -335,7 +336,6 @@ def main(argv: list[str] | None = None) -> int:
                       f"{h['wall_s'] / m['wall_s']:.2f}x the time, "
                       f"{h['peak_rss_mb'] / m['peak_rss_mb']:.2f}x the peak memory")
         report["load_after"] = os.getloadavg()
-        print(f"load average after: {report['load_after'][0]:.1f}")
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
     if args.json:

@@ -1,4 +1,4 @@
-"""Accuracy and speed of the pixel geolocation model (issue 16) beside the tie-point model.
+"""Accuracy and speed of the pixel geolocation model beside the tie-point model.
 
 For a simulated scene: its FRG N1 and ``.SEN3`` versions (per-pixel truth geolocation) mapped
 with ``geolocation="pixel"`` on the grid of the tie-point + DEM run, the error against the

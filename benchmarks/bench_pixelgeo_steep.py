@@ -1,5 +1,5 @@
-"""Pixel geolocation on steep terrain (issue 22, item 8): seen ground left unmapped, error on
-seen ground and over all mapped points, hidden ground reported, beside the tie points + DEM.
+"""Pixel geolocation on steep terrain: seen ground left unmapped, error on seen ground and over
+all mapped points, hidden ground reported, beside the tie points + DEM.
 
 The scene's SEN3 (per-pixel truth geolocation) mapped with ``geolocation="pixel"``, without and
 with the scene's DEM (``engine.pixeldem``), on the grid of the tie-point + DEM run; every output

@@ -1,4 +1,4 @@
-"""What a season costs the disk, and what ``synthesis-prune`` gives back (issue 25).
+"""What a season costs the disk, and what ``synthesis-prune`` gives back.
 
     .venv/bin/python benchmarks/bench_prune.py [--scene fr-alps] [--products 6] [--on europe]
 
@@ -7,8 +7,8 @@ commit each into a maximum-NDVI store (15 bands) on the first product's footprin
 ``--on europe`` on Europe at 260 m, in this process: the seconds of each commit and the store's
 bytes and files on disk after it (Icechunk keeps every chunk version an update replaced, for
 the history). Then ``prune_synthesis(keep=1)``: its seconds, what it deleted, the bytes and
-files left, and a check that every layer reads the same as before the prune. The machine is
-shared: read the seconds as loaded.
+files left, and a check that every layer reads the same as before the prune. Wall times depend
+on whatever else the machine runs.
 """
 
 from __future__ import annotations

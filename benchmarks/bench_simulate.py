@@ -1,4 +1,4 @@
-"""Generation time of simulated scenes (issue 3): fr-alps under a minute, fr-small in seconds.
+"""Generation time of simulated scenes: fr-alps under a minute, fr-small in seconds.
 
     .venv/bin/python benchmarks/bench_simulate.py [--scenes fr-small fr-alps] [--keep DIR]
 

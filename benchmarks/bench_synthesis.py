@@ -27,8 +27,9 @@ Prints two tables:
    store codec of ``--codecs``: seconds, bytes added to the store, chunks written. Only the
    tiles the product touches are read and written, so neither should grow with the store.
 
-The paper estimate of 10 000 products on 32 workers (README) uses the measured seconds per
-task. The machine is shared: figures are loaded; ``--repeat N`` prints the median of N runs.
+The seconds per (product, tile) task give the estimate of larger runs (10 000 products on 32
+workers). Wall times depend on whatever else the machine runs; ``--repeat N`` prints the median
+of N runs.
 """
 
 from __future__ import annotations

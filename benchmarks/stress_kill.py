@@ -7,7 +7,7 @@ Setup: three small simulated FR products of the fr-small area (the test products
 ``tests/test_cli_synthesize.py``); a maximum-NDVI synthesis S of the first (bands 7, 13, 256-px
 tiles, tie-point heights). Each trial starts ``meris-ortho synthesize P2 P3 --input S --out S
 --workers 0`` in a new session, SIGKILLs its process group after a random delay in
-[--min, --max] s (issue 26: 0.1-1.2 s), then starts a fresh Python process that opens S with
+[--min, --max] s, then starts a fresh Python process that opens S with
 ``open_synthesis`` and reads every layer (and the decoded NDVI), and records that reader's
 exit code (-6 = SIGABRT). A commit that landed is reset away (branch back to the first
 commit) so every trial kills the same update. ``--cold-numba`` gives every killed update and
@@ -15,18 +15,18 @@ reader a numba cache directory of its own run (``NUMBA_CACHE_DIR``) that starts 
 first trial, so the kills fall in the middle of numba compiling and writing cache entries.
 ``--no-writer``: the baseline, the same readers with no update started or killed;
 ``--probe``: readers that open five sessions and exit (the exit race below, more often);
-``--no-settle``: readers without the exit hook, as before the fix.
+``--no-settle``: readers without the exit hook ``store.settle_at_exit``, to show what it
+prevents.
 
-Result (issue 26, 2 shared cores, other jobs running): 600 killed updates (500 killed 0.1-1.2 s
-in, 100 killed 0.5-25 s in with a cold numba cache) and 0 readers that failed after them; the
-abort is not caused by the kill: readers with no writer at all aborted too (1 of 128 reading
-every layer; exit probe 7 of 800; then, run side by side, ``--probe --no-writer
---no-settle --trials 400``: 9 of 400 readers exit -6, ``--probe --no-writer --trials 400``
-with the hook: 0 of 400; with the hook, ``--trials 150``: 146 killed, 4 done, 0 readers
-failed). gdb on a core: a tokio thread of Icechunk in
-``pyo3_async_runtimes::set_result`` -> ``loop.call_soon_threadsafe`` -> ``sock.send`` re-takes
-the GIL after the main thread began finalizing -> ``PyThread_exit_thread`` -> ``abort``
-(CPython gh-87135). ``store.settle_at_exit`` removes it.
+A killed update leaves the store readable: every reader after a kill is expected to exit 0,
+with a warm numba cache (kills 0.1-1.2 s in) or a cold one (``--cold-numba``, kills up to
+25 s in). A reader may abort at its exit without any writer: ``--probe --no-writer
+--no-settle --trials 400`` shows a few readers in a hundred exiting -6, ``--probe --no-writer
+--trials 400`` none. A core dump of such a reader shows a tokio thread of Icechunk in
+``pyo3_async_runtimes::set_result`` -> ``loop.call_soon_threadsafe`` -> ``sock.send``
+re-taking the GIL after the main thread began finalizing -> ``PyThread_exit_thread`` ->
+``abort`` (https://github.com/python/cpython/issues/87135); ``store.settle_at_exit`` waits
+for such threads to leave Python.
 
 Prints, per outcome, the count of trials: the update's fate ("killed", or "exit N" when it
 ended before the kill) and the reader's exit code; any reader that did not exit 0 has its
@@ -47,7 +47,7 @@ import time
 from pathlib import Path
 
 #: a fresh process: open the store and read every layer at full resolution (argv[2] "0": the
-#: exit hook ``store.settle_at_exit`` left out, as before issue 26)
+#: exit hook ``store.settle_at_exit`` left out: ``--no-settle``)
 READER = """
 import sys
 from napari_meris_ortho.synthesis import store as st
@@ -112,7 +112,7 @@ def main() -> int:
     ap.add_argument("--probe", action="store_true",
                     help="readers: the exit probe (PROBE) instead of reading every layer")
     ap.add_argument("--no-settle", action="store_true",
-                    help="readers without the exit hook store.settle_at_exit (before issue 26)")
+                    help="readers without the exit hook store.settle_at_exit")
     ap.add_argument("--dir", default=None, help="work directory (default: a temporary one)")
     args = ap.parse_args()
 
