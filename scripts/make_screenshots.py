@@ -2,8 +2,8 @@
 
 A real run: the sample scene is generated (or taken from the cache), mapped without and with
 terrain correction, shown in a napari viewer, and captured. Needs an X display with OpenGL;
-without one the script re-runs itself under ``xvfb-run`` (never Qt's offscreen platform:
-NOTES.md). Usage::
+without one the script re-runs itself under ``xvfb-run`` (never Qt's offscreen platform, which
+has no OpenGL context for napari's canvas). Usage::
 
     python scripts/make_screenshots.py [--scene fr-alps] [--out docs/images]
 """
