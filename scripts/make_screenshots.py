@@ -1,9 +1,11 @@
-"""Screenshots and flicker GIFs of the napari plugin for the README tour (docs/images/).
+"""Screenshots and flicker GIFs of the napari plugin for the documentation (docs/images/).
 
 A real run: the sample scene is generated (or taken from the cache), mapped without and with
-terrain correction, shown in a napari viewer, and captured. Needs an X display with OpenGL;
-without one the script re-runs itself under ``xvfb-run`` (never Qt's offscreen platform, which
-has no OpenGL context for napari's canvas). Usage::
+terrain correction, shown in a napari viewer, and captured; then the Orthorectify widget maps
+the scene's product with its DEM (the layers of a run), the product is opened with the
+plugin's reader, and a synthesis store of two cloudy dates of the scene is opened. Needs an X
+display with OpenGL; without one the script re-runs itself under ``xvfb-run`` (Qt's offscreen
+platform has no OpenGL context: its screenshots are black). Usage::
 
     python scripts/make_screenshots.py [--scene fr-alps] [--out docs/images]
 """
@@ -15,6 +17,7 @@ import os
 import shutil
 import sys
 import tempfile
+import time
 from pathlib import Path
 
 import numpy as np
@@ -105,12 +108,129 @@ def _zoom_on_parallax(viewer, half_width_px: int = 70) -> tuple[float, float]:
     return metres, corr
 
 
+def _process_events(seconds: float = 0.0) -> None:
+    """Let the Qt event loop run (layers inserted a turn at a time, frames drawn)."""
+    from qtpy.QtWidgets import QApplication
+
+    end = time.monotonic() + seconds
+    while True:
+        QApplication.processEvents()
+        if time.monotonic() >= end:
+            return
+        time.sleep(0.02)
+
+
+def _close_toasts(viewer) -> None:
+    """Close napari's notification toasts (they would cover the canvas)."""
+    from napari._qt.dialogs.qt_notification import NapariQtNotification
+    from napari.utils.notifications import notification_manager
+
+    notification_manager.records.clear()
+    for toast in viewer.window._qt_window.findChildren(NapariQtNotification):
+        toast.close()
+    _process_events(0.3)
+
+
+def _run_widget(widget, timeout: float = 600.0) -> None:
+    """Start a run of the Orthorectify widget and wait until its last layer is in."""
+    if widget.start() is None:
+        raise SystemExit(f"make_screenshots: the widget refused the run: {widget.status.value}")
+    end = time.monotonic() + timeout
+    while widget.running:
+        if time.monotonic() > end:
+            raise SystemExit("make_screenshots: the Orthorectify run did not finish")
+        _process_events(0.1)
+    if not str(widget.status.value).startswith("done"):
+        raise SystemExit(f"make_screenshots: the run failed: {widget.status.value}")
+    _process_events(1.0)  # the hidden layers' thumbnails, the last frames
+
+
+def _season(scene: str, n: int = 2) -> list[str]:
+    """``n`` cloudy dates of ``scene`` (N1 files told apart by their file counter)."""
+    from napari_meris_ortho.simulate.scene import generate_scene
+
+    no_exports = {"getasse30": False, "getasse30_beam": False, "srtm30": False,
+                  "geotiff_utm": False, "reference": False}
+    return [str(generate_scene({"base": scene, "exports": no_exports, "file_counter": k + 1,
+                                "clouds": {"fraction": 0.4, "scale_km": 20.0,
+                                           "seed": 10 * (k + 1)}}).product_path)
+            for k in range(n)]
+
+
+def _named(viewer, prefix: str):
+    """The first layer whose name starts with ``prefix`` (run layers carry a time stamp)."""
+    for layer in viewer.layers:
+        if layer.name.startswith(prefix):
+            return layer
+    raise SystemExit(f"make_screenshots: no layer named {prefix}...")
+
+
+def _only_prefixed(viewer, *prefixes: str) -> None:
+    for layer in viewer.layers:
+        layer.visible = any(layer.name.startswith(p) for p in prefixes)
+
+
 def _gif_correlation(path: Path) -> float:
     """Correlation of the two frames of a flicker GIF (grey levels): 1 = no visible jump."""
     import imageio.v3 as iio
 
     frames = iio.imread(path, index=None)[..., :3].astype(np.float64).mean(axis=-1)
     return float(np.corrcoef(frames[0].ravel(), frames[1].ravel())[0, 1])
+
+
+def _run_and_readers(viewer, ortho, args) -> list[str]:
+    """The layers of an Orthorectify run, an N1 opened with the reader, a synthesis store."""
+    from napari_meris_ortho import synthesize
+    from napari_meris_ortho.simulate.scene import generate_scene
+
+    wrote = []
+    scene = generate_scene(args.scene)
+    for layer in viewer.layers:
+        layer.visible = False
+    ortho.products.value = [scene.product_path]
+    ortho.add_dem(scene.dem_paths["geotiff"])
+    _run_widget(ortho)
+    _only_prefixed(viewer, "ortho RGB 7-5-2", "footprint ·", "parallax ×10 ·")
+    viewer.reset_view()
+    _close_toasts(viewer)
+    viewer.screenshot(str(args.out / "orthorectify_run.png"), canvas_only=False, flash=False)
+    wrote.append("orthorectify_run.png")
+
+    _only_prefixed(viewer, "iterations", "footprint ·")
+    viewer.screenshot(str(args.out / "iterations.png"), flash=False)
+    wrote.append("iterations.png")
+
+    viewer.window.remove_dock_widget("all")
+    viewer.window.resize(*SIZE)
+    viewer.layers.clear()
+    _process_events(1.0)
+    viewer.open(str(scene.product_path), plugin="napari-meris-ortho")
+    _process_events(2.0)  # controls, overlays and thumbnails come in the turns after
+    _named(viewer, "flags").visible = True
+    viewer.reset_view()
+    _close_toasts(viewer)
+    viewer.screenshot(str(args.out / "reader_n1.png"), canvas_only=False, flash=False)
+    wrote.append("reader_n1.png")
+
+    store = Path(tempfile.mkdtemp(prefix="meris-screens-")) / "season"
+    try:
+        synthesize(_season(args.scene), store, algorithm="max-ndvi", elevation="tiepoints",
+                   crs="utm", workers=0)
+        viewer.layers.clear()
+        _process_events(1.0)
+        viewer.open(str(store), plugin="napari-meris-ortho")
+        _process_events(2.0)
+        product = _named(viewer, "season product")
+        product.visible = True
+        viewer.reset_view()
+        _close_toasts(viewer)
+        viewer.screenshot(str(args.out / "synthesis_store.png"), canvas_only=False, flash=False)
+        wrote.append("synthesis_store.png")
+        viewer.layers.clear()
+        _process_events(0.5)
+    finally:
+        shutil.rmtree(store.parent, ignore_errors=True)
+    return wrote
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -172,7 +292,7 @@ def main(argv: list[str] | None = None) -> int:
 
     viewer.reset_view()
     _only(viewer, "orthorectified RGB 7-5-2", "footprint")
-    viewer.window.add_plugin_dock_widget("napari-meris-ortho", "Orthorectify")
+    _, ortho = viewer.window.add_plugin_dock_widget("napari-meris-ortho", "Orthorectify")
     _, flicker = viewer.window.add_plugin_dock_widget("napari-meris-ortho", "Flicker")
     assert isinstance(flicker, FlickerWidget)
     flicker.layer_a.value = viewer.layers["reference b7"]
@@ -181,18 +301,11 @@ def main(argv: list[str] | None = None) -> int:
     viewer.layers[-1].visible = False
     viewer.window.resize(1900, 1150)
     viewer.reset_view()
-    from napari.utils.notifications import notification_manager
-    from qtpy.QtWidgets import QApplication
-
-    notification_manager.records.clear()
-    from napari._qt.dialogs.qt_notification import NapariQtNotification
-
-    for toast in viewer.window._qt_window.findChildren(NapariQtNotification):
-        toast.close()  # e.g. the PyQt5 deprecation notice over the canvas
-    for _ in range(20):
-        QApplication.processEvents()
+    _close_toasts(viewer)  # e.g. the PyQt5 deprecation notice over the canvas
     viewer.screenshot(str(args.out / "widgets.png"), canvas_only=False, flash=False)
     wrote.append("widgets.png")
+
+    wrote += _run_and_readers(viewer, ortho, args)
 
     dx, dy = result.global_displacement
     print(f"scene {args.scene}: highest point {peak:.0f} m, pixel {pixel:.0f} m")
