@@ -717,7 +717,7 @@ def delete_run_branches(repo: Any) -> int:
 
 @dataclass
 class Pruned:
-    """What :func:`prune` did: synthesis commits kept and expired, run branches of killed
+    """What ``prune`` did: synthesis commits kept and expired, run branches of killed
     runs deleted, objects the garbage collection deleted."""
 
     kept: int
