@@ -34,6 +34,11 @@ stamp=.venv/.installed-$(sha1sum pyproject.toml | cut -c1-12)
 if [[ ! -f $stamp ]]; then
     .venv/bin/python -m pip install -q --upgrade pip
     .venv/bin/python -m pip install -q -e ".[test]"
+    # the viewer runs on PyQt6 (the `napari` extra); a PyQt5 left in the venv by an older
+    # install would be qtpy's first choice, and napari deprecates it
+    if .venv/bin/python -m pip show -q PyQt5 >/dev/null 2>&1; then
+        .venv/bin/python -m pip uninstall -q -y PyQt5 PyQt5-Qt5 PyQt5-sip
+    fi
     rm -f .venv/.installed-*
     touch "$stamp"
     # compile the numba kernels of `meris-ortho map` in the background (a user's first map then
