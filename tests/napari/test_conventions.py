@@ -1,4 +1,4 @@
-"""napari conventions of the plugin's layers and widgets (issue 14): world units and labels, the
+"""napari conventions of the plugin's layers and widgets: world units and labels, the
 status bar, short layer names, reruns, legends, the N1 band axis and placement, settings."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""The Orthorectify widget's DEM list survives napari's reset_choices and runs (issue 14, 2)."""
+"""The Orthorectify widget's DEM list survives napari's reset_choices and runs."""
 
 from __future__ import annotations
 

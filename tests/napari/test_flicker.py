@@ -86,7 +86,7 @@ def test_removing_a_layer_stops_flicker(make_napari_viewer, qtbot):
 
 def test_the_layer_left_gets_its_visibility_back(make_napari_viewer, qtbot):
     """A layer removed while its pair flickers: the other one is shown again as it was before
-    the flicker, whichever frame the flicker was on (before, it could stay hidden)."""
+    the flicker, whichever frame the flicker was on (it never stays hidden)."""
     viewer = make_napari_viewer()
     a, b = _two_layers(viewer)
     widget = FlickerWidget(viewer)
@@ -118,9 +118,9 @@ def test_gif_has_alternating_frames(make_napari_viewer, tmp_path):
 
 def test_images_covering_the_pair_are_hidden_while_it_flickers(make_napari_viewer, qtbot,
                                                                 tmp_path):
-    """QA of stop 51: a shown image above the pair (another band of the reference) hid layer A
-    whenever B was off, in the flicker and in its GIF. Such images are hidden meanwhile;
-    thin geometry stays; everything is as before once it stops."""
+    """A shown image above the pair (another band of the reference) would hide layer A whenever
+    B is off, in the flicker and in its GIF. Such images are hidden meanwhile; thin geometry
+    stays; everything is as before once it stops."""
     viewer = make_napari_viewer()
     a, b = _two_layers(viewer)
     cover = viewer.add_image(np.full((64, 64), 0.5, np.float32), name="cover",

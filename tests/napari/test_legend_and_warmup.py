@@ -1,4 +1,4 @@
-"""Issue 24 item 4: the parallax colour legend is on the canvas (text overlay naming the height
+"""The parallax colour legend is on the canvas (text overlay naming the height
 range of the colours) while a parallax layer is visible, and the widget's own warm-up DEM says
 its vertical datum (no warning at every opening of the widget)."""
 
@@ -70,10 +70,10 @@ def _glyphs_rendered(viewer) -> int:
 
 def test_legend_glyphs_are_rendered_before_a_run(make_napari_viewer, qtbot):
     """The widget has the overlay's font render the legend's characters beforehand, a few per
-    turn: the first legend of a session no longer renders them (0.2-0.6 s under software GL)
-    in the frame that shows the run's layers. No frame is drawn for them but the overlay's
-    first (its shaders, in the widget's opening: transparent text) and its last (the overlay
-    hidden and emptied): each turn drew the canvas, 0.13-0.16 s over a run's layers."""
+    turn: the first legend of a session does not render them (0.2-0.6 s under software GL) in
+    the frame that shows the run's layers. No frame is drawn for them but the overlay's first
+    (its shaders, in the widget's opening: transparent text) and its last (the overlay hidden
+    and emptied): a frame drawn at each turn would cost 0.13-0.16 s over a run's layers."""
     from napari_meris_ortho._napari.legend import GLYPHS
 
     viewer = make_napari_viewer(show=True)
@@ -96,12 +96,12 @@ def test_legend_glyphs_are_rendered_before_a_run(make_napari_viewer, qtbot):
     assert np.array_equal(np.asarray(overlay.color), color)  # napari's own colour back
     font = _overlay_font(viewer)
     assert set(GLYPHS) - {" "} <= set(font._glyphs)
-    assert len(paints) <= 4, len(paints)  # 24 turns of glyphs drew 24 frames before
+    assert len(paints) <= 4, len(paints)  # not one frame per turn of glyphs (24 turns)
 
 
 def test_legend_glyphs_wait_while_a_run_runs(make_napari_viewer, qtbot, tiny_n1, tiny_dem):
     """A run started as the widget opens: the glyphs' preparation waits while it runs (its
-    job's thread held the GIL for most of a glyph's rendering: 0.07-0.11 s turns against
+    job's thread holds the GIL for most of a glyph's rendering: 0.07-0.11 s turns against
     0.01-0.03 s, fr-alps), and the run's legend shows once they are ready."""
     from qtpy.QtCore import QTimer
 

@@ -1,4 +1,4 @@
-"""Issue 24 item 3: one world. Product layers (an N1 opened with the reader) and the map layers
+"""One world. Product layers (an N1 opened with the reader) and the map layers
 of a run share the output CRS and its unit, so napari keeps units (no "Inconsistent units"
 warning, scale bar in metres); an N1 opened first founds the world where it lies, and a run in
 another CRS is moved into that world with its geometry sized in the world's units."""

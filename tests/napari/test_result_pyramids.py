@@ -1,9 +1,7 @@
-"""A run's rasters go into the viewer as pyramids (issue 24, items 1 and 2): inserting a layer
-uploads a canvas-sized level, not the full-resolution result, and the layers go in without
-switching the layer controls at every insertion.
-
-Before, the 2241 x 2241 x 3 RGB of fr-alps went to the canvas whole (0.5-0.9 s stalls) and
-every insertion made the new layer the active one.
+"""A run's rasters go into the viewer as pyramids: inserting a layer uploads a canvas-sized
+level, not the full-resolution result (the 2241 x 2241 x 3 RGB of fr-alps uploaded whole stalls
+the window 0.5-0.9 s), and the layers go in without switching the layer controls at every
+insertion (no new layer is made the active one).
 """
 
 from __future__ import annotations

@@ -78,7 +78,7 @@ def test_sample_from_the_menu_loads_in_the_background(make_napari_viewer, qtbot,
                                                       monkeypatch):
     """File > Open Sample (inside the running event loop) returns at once and simulates the
     scene in another process, maps it off the GUI thread and adds one layer per turn
-    (issue 24, item 7: fr-small froze napari 21 s)."""
+    (simulated and mapped on the GUI thread, fr-small would freeze napari for about 20 s)."""
     import time
 
     from qtpy.QtCore import QTimer
@@ -139,7 +139,7 @@ def test_sample_from_the_menu_loads_in_the_background(make_napari_viewer, qtbot,
     assert gc.get_freeze_count() == 0 or frozen_before > 0
     # the camera on the sample, not on the 1-pixel placeholder napari framed (zoom ~900 on
     # (0, 0): a black canvas); no "Inconsistent units" (the placeholder in pixels beside the
-    # sample in metres); the status bar no longer "generating..."
+    # sample in metres); the status bar not left at "generating..."
     ref = viewer.layers["reference b7"]
     (low, high) = np.asarray(ref.extent.world)[:, -2:]
     assert np.all((low <= viewer.camera.center[-2:]) & (viewer.camera.center[-2:] <= high))

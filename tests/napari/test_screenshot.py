@@ -1,4 +1,5 @@
-"""A screenshot of a shown viewer has real content (Xvfb rendering, NOTES.md)."""
+"""A screenshot of a shown viewer has real content, rendered under Xvfb (Qt's offscreen platform
+has no OpenGL context, and a viewer never shown gives black screenshots)."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Issue 24 item 8: status-bar coordinates right whatever layer is selected (after a run, a
+"""Status-bar coordinates right whatever layer is selected (after a run, a
 vectors layer), the band slider of an N1 naming the MERIS band (1-15, not the step 0-14), and
 distinct names for the per-pixel geolocation results within what the layer list shows."""
 

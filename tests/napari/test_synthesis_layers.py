@@ -50,7 +50,7 @@ def test_store_opens_as_multiscale_layers(store, tmp_path) -> None:
                                                                             (170, 270)]
         assert kwargs["scale"] == layer_scale(GRID)
         name = kwargs["name"].split()[-1]
-        # the NDVI decoded (QA of stop 51: napari showed its 16-bit codes), NaN = background
+        # the NDVI decoded (not its 16-bit codes), NaN = background
         decode = ndvi_decode if name == "ndvi" else np.asarray
         np.testing.assert_array_equal(np.asarray(data[1][:]),
                                       decode(synthesis.read(name, level=2)))
@@ -75,7 +75,7 @@ def test_uneven_bands_open_as_a_layer_each(tmp_path) -> None:
     assert [kwargs["name"] for _, kwargs, _ in layers] == [
         f"uneven {n}" for n in ("band_02", "band_07", "band_13", "count", "product")]
     assert [kwargs["visible"] for _, kwargs, _ in layers] == [False, False, True, False, False]
-    # QA of stop 51: their MERIS band in the metadata (the flicker pairs them by it)
+    # their MERIS band in the metadata (the flicker pairs them by it)
     assert [kwargs["metadata"].get("band") for _, kwargs, _ in layers] == [2, 7, 13, None, None]
 
 

@@ -1,4 +1,4 @@
-"""The Orthorectify widget says what is wrong (issue 14, defect 5)."""
+"""The Orthorectify widget says what is wrong."""
 
 from __future__ import annotations
 
@@ -76,8 +76,8 @@ def test_success_clears_an_old_error(make_napari_viewer, qtbot, tiny_n1, tiny_de
 
 
 def test_an_output_a_layer_reads_from_is_refused(make_napari_viewer, qtbot, tiny_n1, tmp_path):
-    """QA of stop 51: the widget wrote over a GeoTIFF the viewer showed (File > Save refuses
-    it: a lazy layer reads its file as the view moves). One message; the file is unchanged."""
+    """The widget does not write over a GeoTIFF the viewer shows (File > Save refuses it too: a
+    lazy layer reads its file as the view moves). One message; the file is unchanged."""
     viewer = make_napari_viewer()
     widget = _ortho_widget(viewer)
     widget.products.value = [tiny_n1]
@@ -100,9 +100,9 @@ def test_an_output_a_layer_reads_from_is_refused(make_napari_viewer, qtbot, tiny
 
 def test_an_output_in_a_directory_that_takes_no_file_is_refused_before_the_run(
         make_napari_viewer, qtbot, tiny_n1):
-    """QA of stop 52: an output under /proc passed the widget's checks (root may write there,
-    says ``os.access``) and was refused only after the run had computed (1.6 s on fr-alps).
-    The checks now make (and remove) a file there: refused before the run, in one line."""
+    """An output under /proc looks writable to root (``os.access``), and would be refused only
+    after the run had computed. The checks make (and remove) a file there: refused before the
+    run, in one line."""
     import os
 
     if not os.access("/proc", os.W_OK):

@@ -65,7 +65,7 @@ def test_widget_runs_end_to_end(make_napari_viewer, qtbot, tiny_n1, tiny_dem):
     assert band7.data.shape == (expected.height, expected.width)
     assert np.count_nonzero(band7.data) > 0.5 * band7.data.size
 
-    assert widget.last_run.items[0]["valid"] is None  # the run keeps no arrays (issue 24)
+    assert widget.last_run.items[0]["valid"] is None  # the run keeps no arrays
     item = run_orthorectify(widget.settings()).items[0]  # the same run, without Qt
     # elevation source: the DEM (label 1) everywhere it was valid
     src = viewer.layers[f"elevation source{STAMP}"]
@@ -252,10 +252,9 @@ def test_cancel_stops_the_worker(make_napari_viewer, qtbot, tiny_n1):
 
 
 def test_closing_the_dock_mid_run_cancels_the_job(make_napari_viewer, qtbot, tiny_n1):
-    """QA of stop 50: closing the Orthorectify dock (its title bar's close button: napari
-    takes the widget out of the window) while a run ran let the job go on with nothing on
-    screen to follow or cancel it, and its layers came in later. Now it is cancelled as if
-    Cancel had been pressed."""
+    """Closing the Orthorectify dock (its title bar's close button: napari takes the widget out
+    of the window) while a run runs cancels the job as if Cancel had been pressed: nothing left
+    running with nothing on screen to follow or cancel it, no layers coming in later."""
     viewer = make_napari_viewer(show=True)
     dock, widget = viewer.window.add_plugin_dock_widget("napari-meris-ortho", "Orthorectify")
     widget.products.value = [tiny_n1] * 40
@@ -322,10 +321,10 @@ def test_widgets_dock_through_the_manifest(make_napari_viewer, qtbot, tiny_n1):
 
 def test_a_rerun_replaces_all_its_layers_and_shows_a_band(make_napari_viewer, qtbot, tiny_n1,
                                                           tmp_path):
-    """QA of stop 43: a rerun with fewer bands left the first run's RGB and other bands
-    beside the new layers (and crashed Mesa's software GL drawing them); now every layer an
-    earlier run made of the same product goes. A run without bands 7, 5 and 2 showed no
-    image: its first band is shown. Two products of one sensing time got one name."""
+    """A rerun with fewer bands removes every layer an earlier run made of the same product
+    (the first run's RGB and other bands left beside the new layers can crash Mesa's software GL
+    drawing them). A run without bands 7, 5 and 2 shows its first band, not no image. Two
+    products of one sensing time get distinct names."""
     viewer = make_napari_viewer(show=True)
     widget = OrthorectifyWidget(viewer)
     widget.products.value = [tiny_n1]
@@ -351,8 +350,8 @@ def test_a_rerun_replaces_all_its_layers_and_shows_a_band(make_napari_viewer, qt
 
 def test_cancel_while_the_layers_go_in_leaves_the_viewer_as_before(make_napari_viewer, qtbot,
                                                                    tiny_n1):
-    """QA of stop 43: a Cancel between a rerun's layer changes left the old layers partly
-    removed and none of the new ones in. Now the changes made are undone."""
+    """A Cancel between a rerun's layer changes undoes the changes made, not leaving the old
+    layers partly removed and none of the new ones in."""
     viewer = make_napari_viewer(show=True)
     widget = OrthorectifyWidget(viewer)
     widget.products.value = [tiny_n1]
@@ -375,8 +374,8 @@ def test_cancel_while_the_layers_go_in_leaves_the_viewer_as_before(make_napari_v
 def test_hidden_layers_get_their_thumbnails(make_napari_viewer, qtbot, tiny_n1):
     """napari makes a thumbnail when it slices a layer, and slices visible layers only (and
     empties an image layer's slice when it inserts it): a run's single bands and diagnostics,
-    and an opened product's radiances, all hidden, showed black squares in the layer list.
-    They are now sliced once, shown and hidden again in a turn of their own each: after the
+    and an opened product's radiances, all hidden, would show black squares in the layer list.
+    They are sliced once, shown and hidden again in a turn of their own each: after the
     run has ended, after the product's first pixels. Not the labels layers (napari's first
     slicing of one builds its colour textures: 0.28-0.30 s after a session's first open)."""
     viewer = make_napari_viewer(show=True)
