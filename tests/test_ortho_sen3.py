@@ -1,4 +1,4 @@
-"""A ``.SEN3`` as ESA writes it, mapped (issue 22): the SEN3 and the N1 of one simulated
+"""A ``.SEN3`` as ESA writes it, mapped: the SEN3 and the N1 of one simulated
 acquisition orthorectify to the same map; a fill pixel never yields a radiance in any sampling
 (a sample touching it is no data); a zipped SEN3 maps end to end; saturated pixels of a band are
 no data for that band in a synthesis."""

@@ -81,9 +81,9 @@ def test_workers_give_the_bytes_of_one_process_in_any_order(products, cluster, t
 
 def test_one_task_per_tile_and_nothing_moves_between_workers(products, cluster,
                                                              tmp_path) -> None:
-    """Issue 25 item 3: a tile's pieces are orthorectified in the tile's own task and merged as
-    they come, so the cluster runs one task per tile touched and no data travels between
-    workers (before: a (product, tile) task per piece, each piece shipped to its tile task)."""
+    """A tile's pieces are orthorectified in the tile's own task and merged as they come, so the
+    cluster runs one task per tile touched and no data travels between workers (no (product,
+    tile) task per piece, no piece shipped to its tile task)."""
     from distributed import Client, get_task_stream
 
     from napari_meris_ortho.synthesis.tiling import tiles

@@ -1,4 +1,4 @@
-"""Results as ``xarray.Dataset`` (issue 26 item 3): ``OrthoResult.to_xarray()`` and
+"""Results as ``xarray.Dataset``: ``OrthoResult.to_xarray()`` and
 ``SynthesisStore.to_xarray()`` against the Cloud-Optimized GeoTIFFs the CLI writes of the same
 runs, read back with rioxarray (CRS, transform, values), lazily (dask) for stores."""
 

@@ -1,4 +1,4 @@
-"""Copernicus DEM GLO-30/GLO-90 tile directories (dem.copernicus, issue 11)."""
+"""Copernicus DEM GLO-30/GLO-90 tile directories (dem.copernicus)."""
 
 from __future__ import annotations
 
@@ -117,9 +117,9 @@ def test_bad_tile_directories(tmp_path):
 
 
 def test_a_missing_tile_under_the_footprint_is_reported(scene, tmp_path, caplog):
-    """QA of stop 43: with one tile of the directory gone, 45 % of the points took the tie
-    points and nothing said so. The tiles under the footprint the directory lacks are in the
-    run's statistics and warned about by ``map``; a complete directory gives no warning."""
+    """With one tile of the directory gone, the points under it (45 % here) take the tie
+    points' heights, and that is said: the tiles under the footprint the directory lacks are in
+    the run's statistics and warned about by ``map``; a complete directory gives no warning."""
     import logging
 
     from napari_meris_ortho.cli import main

@@ -328,7 +328,7 @@ def test_terrain_margin_is_the_parallax_of_the_highest_terrain_in_pixels():
 
 
 def test_a_geographic_extent_beyond_the_poles_is_refused():
-    """QA of stop 43: --ul 13 95 --lr 14 45.8 made a grid reaching latitude 95."""
+    """--ul 13 95 --lr 14 45.8 is refused, not a grid reaching latitude 95."""
     from napari_meris_ortho.errors import OptionsError
 
     with pytest.raises(OptionsError, match="beyond \\+-90 degrees"):
@@ -340,7 +340,7 @@ def test_a_geographic_extent_beyond_the_poles_is_refused():
 
 
 def test_a_footprint_the_crs_cuts_at_the_antimeridian_is_refused():
-    """QA of stop 43: rr-antimeridian in EPSG:3857 made a 38534 x 1701 grid, 3.5 % of it
+    """rr-antimeridian in EPSG:3857 is refused: its grid would be 38534 x 1701, 3.5 % of it
     data (the footprint's two pieces at both ends of Web Mercator's x range). EPSG:4326 and
     Pacific Mercator (EPSG:3832) keep it compact."""
     from napari_meris_ortho.engine.boundary import segment_boundary
@@ -358,8 +358,8 @@ def test_a_footprint_the_crs_cuts_at_the_antimeridian_is_refused():
 
 
 def test_a_pixel_in_metres_given_to_a_geographic_crs_is_refused():
-    """QA of stop 43: ``map --pixel-size 260`` (EPSG:4326 by default) said "the extent misses
-    the product footprint"; the unit was the problem."""
+    """``map --pixel-size 260`` (EPSG:4326 by default) is refused for its unit (degrees), not
+    as "the extent misses the product footprint"."""
     from napari_meris_ortho.errors import OptionsError
 
     with pytest.raises(OptionsError, match=r"pixel size 260 in WGS 84 is in degrees"):

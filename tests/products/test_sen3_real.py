@@ -1,4 +1,4 @@
-"""ESA's fourth-reprocessing ``.SEN3`` as it is (issue 22): a product written from the documented
+"""ESA's fourth-reprocessing ``.SEN3`` as it is: a product written from the documented
 facts of ``ENV_ME_1_RRG____20120406T085654`` (``sen3_real``) read back with the values a user
 sees in SNAP at the given pixels; orientation, fill values, per-variable CF scales, the file's
 own flag coding, optional meteo, zip archives and ESA's other names, bad content."""

@@ -1,4 +1,4 @@
-"""Scene configs, overrides, cache and determinism (issue 3, item 8)."""
+"""Scene configs, overrides, cache and determinism."""
 
 from __future__ import annotations
 

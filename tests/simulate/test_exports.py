@@ -1,4 +1,5 @@
-"""DEM and reference exports (issue 3, item 7; formats of NOTES.md)."""
+"""DEM and reference exports: GeoTIFF, GETASSE30, SRTM30 tiles and a UTM GeoTIFF like DEM
+Italy, in the formats those DEMs are distributed in."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Exact ground truth of simulated scenes (issue 3, items 3, 5, 6) and their N1 products."""
+"""Exact ground truth of simulated scenes and their N1 products."""
 
 from __future__ import annotations
 
