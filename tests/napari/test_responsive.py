@@ -17,6 +17,7 @@ import numpy as np
 import pytest
 from qtpy.QtCore import QTimer
 
+from napari_meris_ortho._napari.layout import camera_of
 from napari_meris_ortho._napari.widget_ortho import OrthorectifyWidget
 from napari_meris_ortho.simulate.scene import generate_scene
 from qt_paints import paints_of
@@ -142,12 +143,12 @@ def test_camera_frames_the_result(make_napari_viewer, qtbot, tiny_n1):
     _run(widget, qtbot)
     rgb = next(layer for layer in viewer.layers if layer.name.startswith("ortho RGB"))
     (top, left), (bottom, right) = np.asarray(rgb.extent.world)[:, -2:]
-    centre = np.asarray(viewer.camera.center)[-2:]
+    centre = np.asarray(camera_of(viewer).center)[-2:]
     np.testing.assert_allclose(centre, [(top + bottom) / 2, (left + right) / 2],
                                atol=0.05 * (right - left))
-    zoom_result = viewer.camera.zoom
+    zoom_result = camera_of(viewer).zoom
     viewer.fit_to_view()
-    assert zoom_result > 5 * viewer.camera.zoom  # framed on the result, not on the map
+    assert zoom_result > 5 * camera_of(viewer).zoom  # framed on the result, not on the map
 
 
 def test_a_run_shows_its_layers_one_per_frame(make_napari_viewer, qtbot, tiny_n1):

@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from napari_meris_ortho._napari.layout import camera_of
 from napari_meris_ortho.geometry.grid import OutputGrid
 
 
@@ -142,9 +143,9 @@ def test_sample_from_the_menu_loads_in_the_background(make_napari_viewer, qtbot,
     # sample in metres); the status bar not left at "generating..."
     ref = viewer.layers["reference b7"]
     (low, high) = np.asarray(ref.extent.world)[:, -2:]
-    assert np.all((low <= viewer.camera.center[-2:]) & (viewer.camera.center[-2:] <= high))
+    assert np.all((low <= camera_of(viewer).center[-2:]) & (camera_of(viewer).center[-2:] <= high))
     canvas = np.asarray(viewer.canvas.size, np.float64)
-    assert viewer.camera.zoom < 2 * np.min(canvas / (high - low))  # the whole sample in view
+    assert camera_of(viewer).zoom < 2 * np.min(canvas / (high - low))  # the whole sample in view
     units = [str(n.message) for n in notification_manager.records[told:]
              if "units" in str(n.message)]
     assert not units, units

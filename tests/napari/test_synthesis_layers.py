@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from napari_meris_ortho._napari.layout import camera_of
 from napari_meris_ortho._napari.reader import get_reader, read_store
 from napari_meris_ortho._napari.world import layer_scale
 from napari_meris_ortho.engine.synthesis import ndvi_decode
@@ -151,13 +152,13 @@ def test_a_sparse_store_opened_into_an_empty_viewer_frames_its_data(tmp_path, ma
     viewer = make_napari_viewer(show=True)
     (radiance, *_) = viewer.open(str(out), plugin="napari-meris-ortho")
     qtbot.wait(200)
-    framed, centre = viewer.camera.zoom, radiance.world_to_data(viewer.camera.center)[-2:]
+    framed, centre = camera_of(viewer).zoom, radiance.world_to_data(camera_of(viewer).center)[-2:]
     r0, r1, c0, c1 = radiance.metadata["data_window"]
     assert r0 <= centre[0] <= r1 and c0 <= centre[1] <= c1
     viewer.reset_view()  # napari's view: the whole grid
-    whole = viewer.camera.zoom
+    whole = camera_of(viewer).zoom
     assert framed > 4 * whole
     # into a viewer that already shows something, the camera stays where the user put it
     viewer.open(str(out), plugin="napari-meris-ortho")
     qtbot.wait(200)
-    assert viewer.camera.zoom == whole
+    assert camera_of(viewer).zoom == whole
