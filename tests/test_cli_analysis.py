@@ -44,7 +44,8 @@ def test_disparity_cli(image_pair, tmp_path, capsys):
     assert "STATISTICAL WINDOW SIZE = 5" in out and "EXPLORATION WINDOW WIDTH = 19" in out
     assert "TOTAL NUMBER OF PIXELS = 10800" in out and "IMAGE PIXELS = 9900" in out
     assert sta.read_text() == out
-    rows = list(csv.DictReader(open(vec)))
+    with open(vec) as f:
+        rows = list(csv.DictReader(f))
     assert len(rows) > 0.8 * 9900
     dx = np.array([float(r["dx_px"]) for r in rows])
     dy_m = np.array([float(r["dy_m"]) for r in rows])

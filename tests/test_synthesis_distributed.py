@@ -24,6 +24,9 @@ COMMON = dict(grid=GRID, bands=(7, 13), tile=256, elevation="tiepoints")
 GRID_ARGS = ["--crs", "EPSG:4326", "--ul", "13.45", "46.70", "--lr", "14.26", "46.19",
              "--pixel-size", "0.0015", "--bands", "7,13", "--elevation", "tiepoints",
              "--tile", "256"]
+#: a test cluster serves no dashboard, and its scheduler's HTTP endpoints take a free port: at
+#: 8787 (distributed's default) a second cluster beside the module's would find it taken
+NO_DASHBOARD = dict(dashboard_address=None, scheduler_kwargs={"dashboard_address": ":0"})
 
 
 @pytest.fixture(scope="module")
@@ -41,7 +44,7 @@ def cluster():
     from napari_meris_ortho.synthesis.run import WORKER_ENV
 
     with LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
-                      dashboard_address=None, env=WORKER_ENV) as c:
+                      **NO_DASHBOARD, env=WORKER_ENV) as c:
         yield c
 
 
@@ -223,7 +226,7 @@ def test_embedded_workers_are_held_to_a_core_each_when_they_fit() -> None:
         from napari_meris_ortho.synthesis.run import WORKER_ENV, hold_workers_to_cores
 
         with LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
-                          dashboard_address=None, env=WORKER_ENV) as cluster, \
+                          **NO_DASHBOARD, env=WORKER_ENV) as cluster, \
                 Client(cluster, set_as_default=False) as client:
             assert hold_workers_to_cores(client) == {}  # fewer workers than cores: free
             assert sorted(hold_workers_to_cores(client, every=True).values()) == [*cores[:2]]
@@ -258,7 +261,7 @@ def test_a_one_thread_worker_runs_the_engine_on_one_thread() -> None:
         assert list(runner.client.run(threads_and_cores).values()) == [(1, cores)]
     assert WORKER_ENV["NUMBA_NUM_THREADS"] == "1"
     with LocalCluster(n_workers=1, threads_per_worker=1, processes=True,
-                      dashboard_address=None) as cluster, \
+                      **NO_DASHBOARD) as cluster, \
             Client(cluster, set_as_default=False) as client:  # no env of ours: the nanny's
         assert list(client.run(threads_and_cores).values()) == [(1, cores)]
 
@@ -293,7 +296,7 @@ def test_a_worker_keeps_its_arrays_in_its_heap_once_it_runs_a_tile(products, tmp
     from napari_meris_ortho.synthesis.run import WORKER_ENV, _tune_worker
 
     with LocalCluster(n_workers=1, threads_per_worker=1, processes=True,
-                      dashboard_address=None, env=WORKER_ENV) as cluster, \
+                      **NO_DASHBOARD, env=WORKER_ENV) as cluster, \
             Client(cluster, set_as_default=False) as client:
         fresh = list(client.run(_mapped_bytes_of_an_array).values())
         synthesize(products[:2], tmp_path / "s", scheduler=cluster.scheduler_address, **COMMON)

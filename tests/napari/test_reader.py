@@ -3,10 +3,12 @@
 from __future__ import annotations
 
 import datetime as dt
+import warnings
 
 import numpy as np
 import pytest
 import rasterio
+from rasterio.errors import NotGeoreferencedWarning
 from rasterio.transform import Affine
 
 from napari_meris_ortho._napari.reader import get_reader, read_layers
@@ -183,9 +185,11 @@ def test_geotiff_same_crs_other_pixel_size_overlays(tmp_path):
 
 def test_geotiff_without_crs_is_refused(tmp_path):
     path = tmp_path / "plain.tif"
-    with rasterio.open(path, "w", driver="GTiff", width=4, height=4, count=1,
-                       dtype="float32") as ds:
-        ds.write(np.ones((1, 4, 4), np.float32))
+    with warnings.catch_warnings():  # written without georeferencing, as meant
+        warnings.simplefilter("ignore", NotGeoreferencedWarning)
+        with rasterio.open(path, "w", driver="GTiff", width=4, height=4, count=1,
+                           dtype="float32") as ds:
+            ds.write(np.ones((1, 4, 4), np.float32))
     with pytest.raises(MerisOrthoError, match="no CRS"):
         read_layers(str(path))
 

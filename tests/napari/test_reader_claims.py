@@ -3,17 +3,22 @@ napari's own reader instead of "Choose reader" and "GeoTIFF has no CRS"."""
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import rasterio
+from rasterio.errors import NotGeoreferencedWarning
 from rasterio.transform import Affine
 
 from napari_meris_ortho._napari.reader import get_reader
 
 
 def _plain_tiff(path):
-    with rasterio.open(path, "w", driver="GTiff", width=6, height=5, count=1,
-                       dtype="uint16") as ds:
-        ds.write(np.arange(30, dtype=np.uint16).reshape(1, 5, 6))
+    with warnings.catch_warnings():  # written without georeferencing, as meant
+        warnings.simplefilter("ignore", NotGeoreferencedWarning)
+        with rasterio.open(path, "w", driver="GTiff", width=6, height=5, count=1,
+                           dtype="uint16") as ds:
+            ds.write(np.arange(30, dtype=np.uint16).reshape(1, 5, 6))
     return path
 
 

@@ -29,7 +29,7 @@ STORAGES = {
     "deflate without shuffle": ("u2", dict(zlib=True, shuffle=False, chunksizes=(50, 50))),
     "chunked, no filter": ("u2", dict(chunksizes=(128, 64))),
     "contiguous": ("u2", dict(contiguous=True)),
-    "big-endian": ("u2", dict(zlib=True, endian="big", chunksizes=(64, 64))),
+    "big-endian": (">u2", dict(zlib=True, endian="big", chunksizes=(64, 64))),
     "signed 16 bits": ("i2", dict(zlib=True, chunksizes=(100, 100))),
     "32 bits": ("u4", dict(zlib=True, chunksizes=(100, 100))),
 }

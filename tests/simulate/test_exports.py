@@ -38,7 +38,7 @@ def test_geotiff_is_the_truth_dem(fr_small):
     assert (t.c, t.f, t.a, -t.e) == (g.lon0, g.lat0, g.spacing, g.spacing)
     # posts at pixel centres: dem_height at a pixel centre is the pixel value
     r, c = 100, 200
-    lon, lat = t * (c + 0.5, r + 0.5)
+    lon, lat = rasterio.transform.xy(t, r, c)  # the pixel's centre
     assert abs(fr_small.dem_height(lon, lat) - z[r, c]) < 1e-3
     assert z.max() > 3500.0 and (z == 0).any()  # mountains and sea
 
@@ -101,7 +101,7 @@ def test_utm_geotiff_like_dem_italy(fr_small):
         assert ds.crs.to_epsg() == 32633 and ds.res == (500.0, 500.0)
         z = ds.read(1)
         r, c = ds.height // 2, ds.width // 2
-        x, y = ds.transform * (c + 0.5, r + 0.5)
+        x, y = rasterio.transform.xy(ds.transform, r, c)
     lon, lat = Transformer.from_crs(32633, 4326, always_xy=True).transform(x, y)
     assert abs(z[r, c] - fr_small.dem_height(lon, lat)) < 1e-2
 
@@ -112,6 +112,6 @@ def test_reference_image_is_the_truth(fr_small):
         img = ds.read()
         t = ds.transform
     r, c = 321, 456
-    lon, lat = t * (c + 0.5, r + 0.5)
+    lon, lat = rasterio.transform.xy(t, r, c)  # the pixel's centre
     for k, band in enumerate((5, 7, 13)):
         assert abs(img[k, r, c] - fr_small.truth_radiance(lon, lat, band)) < 1e-3
