@@ -9,6 +9,8 @@ import hashlib
 import re
 from pathlib import Path
 
+import pytest
+
 from napari_meris_ortho.cli import main
 from napari_meris_ortho.synthesis.api import synthesize
 from test_synthesis import BANDS, GRID, scene_product
@@ -56,6 +58,7 @@ def test_export_into_its_store_and_a_store_inside_its_input_are_refused(tmp_path
                  "--out", str(store), "--workers", "0", "--elevation", "tiepoints"]) == 0
 
 
+@pytest.mark.slow
 def test_a_damaged_store_is_one_error_line(tmp_path):
     """A chunk object of the store missing or truncated: export and an update end in one
     line naming what is wrong, exit 2, nothing else on stderr (not Icechunk's multi-line report

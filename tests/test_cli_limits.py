@@ -121,6 +121,7 @@ def test_a_grid_of_too_many_rows_is_refused_before_its_spans(product, tmp_path, 
     assert code == 2 and f"({pixels:.3g} pixels, at least {2 * pixels / 2**40:.1f} TiB)" in err
 
 
+@pytest.mark.slow
 def test_synthesis_over_the_world_is_refused_and_leaves_no_directory(product, tmp_path, capsys):
     out = tmp_path / "synthesis"
     code, err = run(capsys, "synthesize", product, "--out", out, "--ul", "-180", "90", "--lr",

@@ -49,6 +49,7 @@ def _tile(path, lat0, lon0, step=3.0 / 3600):
         ds.write(h[None].astype(np.float32))
 
 
+@pytest.mark.slow
 def test_copernicus_directory_with_and_without_the_geoid(files, tmp_path, caplog):
     _, prod, tiles, _ = files
     caplog.set_level(logging.INFO, logger="napari_meris_ortho")

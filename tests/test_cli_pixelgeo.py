@@ -7,6 +7,7 @@ import shutil
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from napari_meris_ortho.cli import main
 from napari_meris_ortho.output.geotiff import read_geotiff
@@ -18,6 +19,7 @@ def _run(capsys, *argv):
     return code, out, err
 
 
+@pytest.mark.slow
 def test_sample_writes_the_geolocated_products(tmp_path, capsys):
     code, out, _ = _run(capsys, "sample", "fr-small", "--out", tmp_path, "--fsg", "--sen3",
                         "--set", '{"lines": 130}')
@@ -74,6 +76,7 @@ def test_map_with_the_pixel_geolocation_and_a_dem(fr_small, geolocated, tmp_path
     assert 0.95 < same < 1.0, same
 
 
+@pytest.mark.slow
 def test_synthesize_with_the_pixel_geolocation(geolocated, tmp_path, capsys):
     from napari_meris_ortho.synthesis.reading import open_synthesis
 

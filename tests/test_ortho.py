@@ -338,6 +338,7 @@ def test_accuracy_against_the_simulator_truth(fr_small):
     assert np.sqrt(np.mean(e_none ** 2)) > 1.0 and e_none.max() > 5.0
 
 
+@pytest.mark.slow
 def test_a_grid_far_larger_than_the_segment_searches_only_the_segment(fr_small):
     """A fixed extent 5 x 5 times the segment's own UTM grid (a regional grid for time series):
     the same antecedents inside (within the truth tolerance), nothing searched in the rows and

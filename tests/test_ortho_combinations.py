@@ -20,6 +20,8 @@ from scipy.ndimage import map_coordinates
 from napari_meris_ortho import orthorectify
 from napari_meris_ortho.products.n1 import read_product
 
+pytestmark = pytest.mark.slow
+
 ELEVATIONS = ("none", "tiepoints", "dem")
 PARALLAXES = ("handbook", "ellipsoid")
 SEARCHES = ("primary", "handbook")
@@ -113,7 +115,6 @@ def _handbook_processes(prod, zero, antecedent):
     return in_facets(l0, p0) & in_facets(2 * l0 - lt, 2 * p0 - pt)
 
 
-@pytest.mark.slow
 @pytest.mark.parametrize("elev,par,search",
                          list(itertools.product(ELEVATIONS, PARALLAXES, SEARCHES)))
 def test_combination_matches_the_truth(scene, runs, truth, elev, par, search):

@@ -145,6 +145,7 @@ def steep(tmp_path_factory):
                            tc=tc, inside=inside, seen=seen, edge=edge, pixel=pixel)
 
 
+@pytest.mark.slow
 def test_pixel_geolocation_in_steep_terrain(steep):
     """9 km relief at up to 41 deg view zenith (scene fr-steep): every output point whose
     ground the sensor sees is mapped (the cell holding it is searched along its product line,
@@ -177,6 +178,7 @@ def test_pixel_geolocation_in_steep_terrain(steep):
                for line in r.stats.log_lines())
 
 
+@pytest.mark.slow
 def test_pixel_geolocation_with_a_dem_in_steep_terrain(steep):
     """With the scene's DEM the per-pixel terrain points are moved back to the ellipsoid and
     every output point gets the parallax of its own DEM height (``engine.pixeldem``): on
@@ -221,6 +223,7 @@ def test_pixel_geolocation_with_a_dem_in_steep_terrain(steep):
     assert np.mean(tn[seen & ok]) > 0.999
 
 
+@pytest.mark.slow
 def test_pixel_geolocation_falls_back_where_the_dem_ends(steep, tmp_path):
     """A DEM covering the west of the scene only: east of it the points fall back to the
     product's own geolocation (the pixel model alone: same antecedents, hidden ground reported),
@@ -262,6 +265,7 @@ def test_pixel_geolocation_falls_back_where_the_dem_ends(steep, tmp_path):
     assert np.sqrt(np.mean(e ** 2)) < 0.005
 
 
+@pytest.mark.slow
 def test_hidden_ground_with_a_stack_of_dems(steep):
     """Two DEMs (the scene's DEM given twice): the lines of sight are marched over the first
     DEM's window in memory as with one DEM (a cell without data there would hand the ray to the
@@ -284,6 +288,7 @@ def test_hidden_ground_with_a_stack_of_dems(steep):
     assert lost.sum() <= 1 and np.all(steep.edge[lost] < 0.05)
 
 
+@pytest.mark.slow
 def test_hidden_ground_with_a_dem_above_the_geoid(steep, tmp_path):
     """The scene's DEM written as heights above the EGM96 geoid (posts - N, read as
     ``PATH:egm96``): the window is made ellipsoidal once (posts + N) and marched cell by cell
@@ -316,6 +321,7 @@ def test_hidden_ground_with_a_dem_above_the_geoid(steep, tmp_path):
     assert np.count_nonzero(reported != expected) <= 3
 
 
+@pytest.mark.slow
 def test_hidden_ground_with_a_projected_dem(steep, tmp_path):
     """A projected DEM in memory (the scene's DEM reprojected to UTM 32N, 100 m posts) is
     marched cell by cell along each point's track on its lattice (its projected look vector):

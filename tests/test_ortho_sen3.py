@@ -126,6 +126,7 @@ def test_a_renamed_zip_is_still_its_product_in_a_synthesis(pair, tmp_path, caplo
     assert len(store.history()) == 1 and int(store.read("count").max()) == 1
 
 
+@pytest.mark.slow
 def test_a_synthesis_decodes_each_band_of_a_sen3_once(pair, tmp_path, monkeypatch):
     """Every tile task reads every band of its products; a .SEN3 band (zlib netCDF-4) is
     decoded once per process for the run, not once per tile, then freed; the layers are those

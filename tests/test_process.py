@@ -131,6 +131,7 @@ def _units(mode: str, cache: str) -> dict:
     return json.loads(run.stdout)
 
 
+@pytest.mark.slow
 def test_the_unit_registry_comes_from_pints_disk_cache(tmp_path):
     """napari's units (pint's application registry) from pint's disk cache: written by the
     first session, read by the next; same units. Never a registry already in use; a cache

@@ -277,6 +277,7 @@ def test_maximum_ndvi_keeps_the_greenest_date(products, singles, tmp_path) -> No
 
 
 @pytest.mark.parametrize("algorithm", ["min-radiance", "max-ndvi"])
+@pytest.mark.slow
 def test_incremental_equals_batch(products, tmp_path, algorithm) -> None:
     names = [products[k] for k in ("cloudy1", "cloudy2", "cloudy3")]
     synthesize(names, tmp_path / "batch", grid=GRID, bands=BANDS, algorithm=algorithm,
@@ -843,6 +844,7 @@ def _chunk_bytes(store, prefix: str) -> int:
 
 
 @pytest.mark.parametrize("workers", [0, 1])
+@pytest.mark.slow
 def test_store_codecs_kept_by_updates(products, tmp_path, workers) -> None:
     """A store of codec delta-zstd encodes the full-resolution bands and NDVI by delta then
     zstd (smaller chunks), the overviews, count and product by zstd alone; a default (zstd)
@@ -1000,6 +1002,7 @@ def test_a_run_computes_its_tiles_in_submission_order(products, tmp_path, monkey
 
 
 @pytest.mark.parametrize("bands", [(2, 9), (2, 7, 9, 13)])
+@pytest.mark.slow
 def test_bands_read_where_a_product_wins_give_the_layers_of_whole_pieces(
         products, tmp_path, monkeypatch, bands) -> None:
     """Maximum NDVI on standard products: a piece reads its bands at its merge, where it wins
@@ -1032,6 +1035,7 @@ def test_bands_read_where_a_product_wins_give_the_layers_of_whole_pieces(
     assert len(np.unique(whole["product"])) == 5  # background and four products hold pixels
 
 
+@pytest.mark.slow
 def test_in_process_the_sen3_bands_of_a_tiles_products_decode_ahead_once(tmp_path,
                                                                         monkeypatch):
     """A synthesis in this process starts decoding the bands of every product of a tile in the

@@ -120,6 +120,7 @@ def _free_port() -> int:
 
 
 @pytest.mark.timeout(60)
+@pytest.mark.slow
 def test_unreachable_scheduler_is_one_message_exit_2(products, tmp_path, capsys) -> None:
     address = f"tcp://127.0.0.1:{_free_port()}"  # nobody listens there
     out = tmp_path / "syn"
@@ -317,6 +318,7 @@ def _keep_band_7(path: str) -> int:
     return kept_bytes()
 
 
+@pytest.mark.slow
 def test_workers_free_the_decoded_sen3_bands_at_the_end_of_a_run(cluster, tmp_path) -> None:
     """A run's tasks keep the .SEN3 bands they decode (once per worker, not per tile); an
     external cluster's workers outlive the run, which frees them on every worker."""
@@ -364,6 +366,7 @@ def _seen() -> dict[str, int]:
     return dict(_SEEN)
 
 
+@pytest.mark.slow
 def test_the_workers_of_a_host_decode_each_sen3_band_once_between_them(cluster,
                                                                        tmp_path) -> None:
     """Both workers read the product's bands; each band is decoded once on the host (by
@@ -410,6 +413,7 @@ print(json.dumps({"before": before, "during": during, "after": _mapped_bytes_of_
 
 @pytest.mark.skipif(not hasattr(ctypes.CDLL(None), "mallinfo2"),
                     reason="glibc's malloc (2.33 or later: mallinfo2)")
+@pytest.mark.slow
 def test_a_viewer_keeps_a_runs_arrays_in_its_heap_for_the_run_only(products, tmp_path) -> None:
     """The viewer's malloc maps a block of 256 KiB or more on its own, so that removed layers
     give their memory back (``_process.return_freed_memory``). A synthesis run in that process

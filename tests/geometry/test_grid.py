@@ -204,7 +204,8 @@ def test_polar_stereographic_steps_follow_the_bending():
     np.testing.assert_array_equal(part_lat, full_lat[37:201])
 
 
-@pytest.mark.parametrize("crs", ["EPSG:3995", "EPSG:4326"])
+@pytest.mark.parametrize("crs", [pytest.param("EPSG:3995", marks=pytest.mark.slow),
+                                 "EPSG:4326"])
 def test_a_column_window_holds_the_whole_rows_values(crs):
     """lon/lat of columns [c0, c1) are those of the whole rows bit for bit (the same nodes and
     cells), for windows anywhere, one column wide or ending on the last column."""

@@ -5,6 +5,9 @@ from __future__ import annotations
 import shutil
 
 import numpy as np
+import pytest
+
+pytestmark = pytest.mark.slow
 
 
 def _ortho_widget(viewer):

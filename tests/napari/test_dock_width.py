@@ -4,6 +4,9 @@ name must not widen the dock (and shrink the canvas)."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
+
+pytestmark = pytest.mark.slow
 
 #: a 500-character status message: words, then a long path without a space
 LONG_PATH = "/data/" + "a_very_long_directory_name/" * 8 + "MER_FR__1PNSIM20030921.N1"

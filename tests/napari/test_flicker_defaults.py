@@ -4,12 +4,14 @@ the reference image, not the two top-most layers ("elevation source" / "elevatio
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from napari_meris_ortho._napari.widget_flicker import FlickerWidget, default_pair
 from napari_meris_ortho._napari.widget_ortho import OrthorectifyWidget
 from napari_meris_ortho.simulate.scene import generate_scene
 
 
+@pytest.mark.slow
 def test_sample_then_run_pairs_newest_ortho_with_reference(make_napari_viewer, qtbot):
     viewer = make_napari_viewer()
     viewer.open_sample("napari-meris-ortho", "fr-small")
@@ -35,6 +37,7 @@ def test_sample_then_run_pairs_newest_ortho_with_reference(make_napari_viewer, q
     assert both.sum() > 100_000 and np.corrcoef(a[both], b[both])[0, 1] > 0.95
 
 
+@pytest.mark.slow
 def test_without_reference_the_previous_product_then_the_uncorrected(make_napari_viewer):
     viewer = make_napari_viewer()
     img = np.ones((8, 8), np.float32)
@@ -51,6 +54,7 @@ def test_without_reference_the_previous_product_then_the_uncorrected(make_napari
     assert default_pair(list(viewer.layers)) == (second, first)
 
 
+@pytest.mark.slow
 def test_a_reference_geotiff_pairs_by_its_meris_band(make_napari_viewer):
     """A GeoTIFF layer's band is its MERIS band, not its place in the file: "ortho b7" pairs
     with the reference's band 7, not its third band (13)."""
@@ -78,6 +82,7 @@ def test_meris_band_of_a_geotiff_band():
         assert meris_band_of(description) is None, description
 
 
+@pytest.mark.slow
 def test_a_synthesis_band_counts_as_orthorectified(make_napari_viewer):
     """A synthesis store's band counts as orthorectified, not only layers named "ortho...": a
     store's band 7 against the reference pairs with the reference's band 7 (not its bands 13

@@ -8,6 +8,8 @@ import pytest
 import rasterio
 from rasterio.transform import Affine
 
+pytestmark = pytest.mark.slow
+
 PIXEL = 260.0
 X0, Y0 = 400_000.0, 5_100_000.0  # UTM 32N, upper-left corner
 

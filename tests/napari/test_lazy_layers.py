@@ -99,6 +99,7 @@ def test_levels_hold_the_product_values(big_n1):
     np.testing.assert_array_equal(np.asarray(flags[1]), product.flags[::2, ::2])
 
 
+@pytest.mark.slow
 def test_viewer_shows_a_decimated_level_of_the_n1(make_napari_viewer, big_n1):
     viewer = make_napari_viewer(show=True)
     layers = viewer.open(str(big_n1), plugin="napari-meris-ortho")
@@ -141,6 +142,7 @@ def test_cog_opens_on_its_own_overviews(make_napari_viewer, tmp_path):
     assert np.asarray(layer.data[1][:20]).max() == 0  # background stays 0, not nodata x scale
 
 
+@pytest.mark.slow
 def test_a_cog_of_gdals_cog_driver_opens_with_its_odd_overviews(make_napari_viewer, tmp_path):
     """GDAL's COG driver rounds an overview's size down (627 lines: 313, 156), the pyramid's
     levels are ceil(n / f) (314, 157): the last line and column of a level repeat the
@@ -170,6 +172,7 @@ def test_a_cog_of_gdals_cog_driver_opens_with_its_odd_overviews(make_napari_view
     np.testing.assert_array_equal(np.asarray(layer.data[0][620:, 1000:]), values[620:, 1000:])
 
 
+@pytest.mark.slow
 def test_multiscale_layer_saves_its_full_resolution(make_napari_viewer, tmp_path):
     """File > Save Selected Layers on a multiscale layer writes level 0 (the plugin's writer;
     np.asarray of napari's multiscale data would not even be an image)."""
@@ -197,6 +200,7 @@ def _cog(tmp_path):
                      offsets=[0.0], halve=overview_level)
 
 
+@pytest.mark.slow
 def test_an_n1_is_drawn_before_its_layers_controls_are_made(make_napari_viewer, qtbot, tiny_n1,
                                                              monkeypatch):
     """Opening an N1 inserts three layers in one napari call; their controls (and Qt's styling
@@ -234,6 +238,7 @@ def test_an_n1_is_drawn_before_its_layers_controls_are_made(make_napari_viewer, 
     assert container.widgets == {}
 
 
+@pytest.mark.slow
 def test_an_n1s_flags_overlays_are_built_after_its_first_frame(make_napari_viewer, qtbot,
                                                               tiny_n1):
     """napari builds a labels layer's polygon and brush overlays at its insertion (0.07-0.08 s

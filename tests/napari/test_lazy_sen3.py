@@ -60,6 +60,7 @@ def pair(tmp_path_factory):
     return n1, sen3
 
 
+@pytest.mark.slow
 def test_sen3_opens_as_multiscale_levels_of_its_bands(pair):
     """Every level of the SEN3's layers is its eager array decimated (every 2nd, 4th line and
     column): radiances (no data NaN), the quick-look stretched by the coarsest level's 1-99 %
@@ -152,6 +153,7 @@ def test_whole_bands_keeps_the_last_bands_read(pair):
     assert list(bands._counts) == [12, 13, 14, 15, 10, 1]  # the oldest (11) dropped
 
 
+@pytest.mark.slow
 def test_viewer_shows_a_decimated_level_of_the_sen3(make_napari_viewer, pair):
     """In a real viewer: every layer multiscale, the canvas shows a decimated level, and the
     band slider shows each band's values at that level."""

@@ -7,12 +7,14 @@ from __future__ import annotations
 import logging
 
 import numpy as np
+import pytest
 
 from qt_paints import paints_of
 
 STAMP = " · 2003-09-21 09:23"
 
 
+@pytest.mark.slow
 def test_parallax_legend_on_the_canvas(make_napari_viewer, qtbot, tiny_n1, tiny_dem):
     viewer = make_napari_viewer(show=True)  # a hidden canvas draws no overlays
     _, widget = viewer.window.add_plugin_dock_widget("napari-meris-ortho", "Orthorectify")
@@ -68,6 +70,7 @@ def _glyphs_rendered(viewer) -> int:
     return len(_overlay_font(viewer)._glyphs)
 
 
+@pytest.mark.slow
 def test_legend_glyphs_are_rendered_before_a_run(make_napari_viewer, qtbot):
     """The widget has the overlay's font render the legend's characters beforehand, a few per
     turn: the first legend of a session does not render them (0.2-0.6 s under software GL) in
@@ -99,6 +102,7 @@ def test_legend_glyphs_are_rendered_before_a_run(make_napari_viewer, qtbot):
     assert len(paints) <= 4, len(paints)  # not one frame per turn of glyphs (24 turns)
 
 
+@pytest.mark.slow
 def test_legend_glyphs_wait_while_a_run_runs(make_napari_viewer, qtbot, tiny_n1, tiny_dem):
     """A run started as the widget opens: the glyphs' preparation waits while it runs (its
     job's thread holds the GIL for most of a glyph's rendering: 0.07-0.11 s turns against
@@ -125,6 +129,7 @@ def test_legend_glyphs_wait_while_a_run_runs(make_napari_viewer, qtbot, tiny_n1,
     assert overlay.visible and overlay.color[-1] == 1.0  # seen
 
 
+@pytest.mark.slow
 def test_text_put_in_the_overlay_during_the_preparation_is_seen(make_napari_viewer, qtbot):
     """A user's own text in the canvas overlay while the glyphs are being prepared stops the
     preparation and is seen: the preparation's transparent colour goes back (it stayed)."""

@@ -12,6 +12,8 @@ from napari.utils.notifications import notification_manager
 from napari_meris_ortho._napari.layout import camera_of
 from napari_meris_ortho._napari.widget_ortho import CRS_GEOGRAPHIC, OrthorectifyWidget
 
+pytestmark = pytest.mark.slow
+
 STAMP = " · 2003-09-21 09:23"
 
 

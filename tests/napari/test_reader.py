@@ -209,6 +209,7 @@ def test_sparse_huge_geotiff_is_refused_before_reading(tmp_path):
     assert str(info.value).startswith(f"{path}: ")
 
 
+@pytest.mark.slow
 def test_reader_in_viewer_reprojects_onto_first_geocoded_layer(make_napari_viewer, tmp_path):
     viewer = make_napari_viewer()
     base = _write_tif(tmp_path / "base.tif", np.ones((30, 40), np.float32), "EPSG:32632",
@@ -229,6 +230,7 @@ def test_reader_in_viewer_reprojects_onto_first_geocoded_layer(make_napari_viewe
     assert np.all(np.asarray(layer.data)[r:r + 30, c:c + 40] == pytest.approx(7.0))
 
 
+@pytest.mark.slow
 def test_a_geotiff_reprojected_onto_the_world_keeps_the_window_turning(make_napari_viewer,
                                                                          tmp_path, qtbot):
     """A GeoTIFF in another CRS than the viewer's world is reprojected inside napari's call of
@@ -300,6 +302,7 @@ def _rgb_tif(path, rgb, alpha=None, overviews=()):
 
 
 @pytest.mark.parametrize("big", [False, True])
+@pytest.mark.slow
 def test_an_rgb_geotiff_opens_as_one_rgb_layer(make_napari_viewer, tmp_path, big):
     """A true-colour reference image (PHOTOMETRIC=RGB, with or without alpha), as GDAL, QGIS or
     a satellite's TCI write it, is one RGB layer, transparent where its alpha is 0 (not three or
@@ -333,6 +336,7 @@ def full_res(layer):
     return layer.data[0] if layer.multiscale else layer.data
 
 
+@pytest.mark.slow
 def test_south_up_rotated_and_gcp_geotiffs_open_north_up(make_napari_viewer, tmp_path):
     """A south-up raster (positive y pixel size), a rotated geotransform and ground control
     points only (``gdal_translate -gcp``) are valid GDAL georeferencing: each opens north-up,
@@ -384,6 +388,7 @@ def test_longitudes_beyond_180_land_beside_the_same_ground(tmp_path):
     assert (np.asarray(data) == 3.0).mean() > 0.9
 
 
+@pytest.mark.slow
 def test_an_n1_is_read_off_the_qt_thread_while_the_window_turns(make_napari_viewer, n1_path,
                                                                  tmp_path, qtbot, monkeypatch):
     """napari calls the reader on its Qt thread: a session's first N1 (its readers' imports,
@@ -453,6 +458,7 @@ def test_only_a_sessions_first_product_is_read_in_a_thread(n1_path):
     assert out.stdout.split() == ["True", "False"], out.stderr[-2000:]
 
 
+@pytest.mark.slow
 def test_a_big_geotiff_without_overviews_is_read_once_off_the_qt_thread(make_napari_viewer,
                                                                          tmp_path, monkeypatch):
     """A GeoTIFF with no overviews opened on its own grid is read once, in a thread, into

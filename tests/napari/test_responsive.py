@@ -22,6 +22,8 @@ from napari_meris_ortho._napari.widget_ortho import OrthorectifyWidget
 from napari_meris_ortho.simulate.scene import generate_scene
 from qt_paints import paints_of
 
+pytestmark = pytest.mark.slow
+
 #: longest event-loop gap allowed during a run: one napari layer insertion or napari's one
 #: garbage collection after the replaced layers went (about 0.5-0.8 s on a busy 2-core
 #: machine), with room to spare. Collecting garbage at each removal, switching the layer

@@ -19,6 +19,7 @@ def fr_small():
     return generate_scene("fr-small")
 
 
+@pytest.mark.slow
 def test_run_layers_are_pyramids_shown_at_canvas_size(make_napari_viewer, qtbot, fr_small):
     viewer = make_napari_viewer(show=True)
     widget = OrthorectifyWidget(viewer)

@@ -47,6 +47,7 @@ def test_sample_small_in_viewer(make_napari_viewer):
     assert length.max() == pytest.approx(10 * h.max() * np.tan(np.radians(30)), rel=0.4)
 
 
+@pytest.mark.slow
 def test_disparity_of_sample_ortho_against_reference(make_napari_viewer):
     from napari_meris_ortho._napari.widget_flicker import FlickerWidget
 
@@ -75,6 +76,7 @@ def test_disparity_of_sample_ortho_against_reference(make_napari_viewer):
 MAX_GAP_S = 2.0
 
 
+@pytest.mark.slow
 def test_sample_from_the_menu_loads_in_the_background(make_napari_viewer, qtbot, tmp_path,
                                                       monkeypatch):
     """File > Open Sample (inside the running event loop) returns at once and simulates the

@@ -66,6 +66,7 @@ def test_store_opens_as_multiscale_layers(store, tmp_path) -> None:
         assert kwargs["visible"] is False  # under the radiance
 
 
+@pytest.mark.slow
 def test_uneven_bands_open_as_a_layer_each(tmp_path) -> None:
     """Bands 2, 7, 13 have no common spacing for a band axis: a layer per band, the top one
     visible."""
@@ -80,6 +81,7 @@ def test_uneven_bands_open_as_a_layer_each(tmp_path) -> None:
     assert [kwargs["metadata"].get("band") for _, kwargs, _ in layers] == [2, 7, 13, None, None]
 
 
+@pytest.mark.slow
 def test_the_band_slider_names_the_meris_band(store, make_napari_viewer) -> None:
     viewer = make_napari_viewer()
     (radiance, *_) = viewer.open(str(store), plugin="napari-meris-ortho")
@@ -92,6 +94,7 @@ def test_the_band_slider_names_the_meris_band(store, make_napari_viewer) -> None
     np.testing.assert_array_equal(np.asarray(radiance._slice.image.raw)[:5, :5] >= 0, True)
 
 
+@pytest.mark.slow
 def test_winning_product_tooltip_names_the_product(store, make_napari_viewer) -> None:
     viewer = make_napari_viewer()
     layers = viewer.open(str(store), plugin="napari-meris-ortho")
@@ -138,6 +141,7 @@ def test_a_sparse_store_is_read_only_where_it_holds_values(tmp_path) -> None:
     np.testing.assert_array_equal(np.asarray(coarse), synthesis.read("count", level=factor))
 
 
+@pytest.mark.slow
 def test_a_sparse_store_opened_into_an_empty_viewer_frames_its_data(tmp_path, make_napari_viewer,
                                                                     qtbot) -> None:
     """napari frames the whole grid of a store it opens; the plugin then frames the pixels the

@@ -15,6 +15,8 @@ from napari_meris_ortho.ortho import orthorectify
 from napari_meris_ortho.products.n1 import read_product, write_product
 from napari_meris_ortho.synthesis.reading import open_synthesis
 
+pytestmark = pytest.mark.slow
+
 
 def _widget(viewer):
     _, widget = viewer.window.add_plugin_dock_widget("napari-meris-ortho", "Orthorectify")

@@ -13,6 +13,8 @@ import pytest
 from napari_meris_ortho.ortho import orthorectify
 from napari_meris_ortho.products.n1 import read_product, write_product
 
+pytestmark = pytest.mark.slow
+
 BANDS = (7, 13)
 
 

@@ -107,6 +107,7 @@ def product_dir(tmp_path_factory):
     return real.write_real_like(tmp_path_factory.mktemp("real"))
 
 
+@pytest.mark.slow
 def test_the_bands_of_a_product_are_netcdf4s_values_in_the_n1_column_order(product_dir):
     product = read_product(product_dir)
     assert product.mirrored  # ESA's column order, the mirror of the N1's

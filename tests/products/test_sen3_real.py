@@ -119,6 +119,7 @@ def test_meteo_variables_are_optional_one_by_one(tmp_path):
     assert np.isnan(read_product(d).tie_points["ozone"]).all()
 
 
+@pytest.mark.slow
 def test_zip_archives_and_esas_other_names_open(product_dir, tmp_path):
     archive = tmp_path / (product_dir.name + ".zip")
     with zipfile.ZipFile(archive, "w", zipfile.ZIP_STORED) as z:

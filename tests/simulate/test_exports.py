@@ -4,6 +4,7 @@ Italy, in the formats those DEMs are distributed in."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 import rasterio
 
 from napari_meris_ortho.dem.geoid import geoid_undulation
@@ -28,6 +29,7 @@ def test_tile_names_from_their_corners():
     assert srtm30_tiles((-70.0, -73.0, -60.0, -70.0)) == [(-120, -60, 60, 30)]
 
 
+@pytest.mark.slow
 def test_geotiff_is_the_truth_dem(fr_small):
     with rasterio.open(fr_small.dem_paths["geotiff"]) as ds:
         z = ds.read(1)
