@@ -57,7 +57,7 @@ def make_dem(path: Path, lon0: float, lat0: float, lon1: float, lat1: float,
 
 
 #: a 128 x 193 piece of fr-small (20-30 deg view zenith, up to ~4 km terrain) whose DEM is
-#: also exported as Copernicus GLO-90 tiles with heights above the EGM96 geoid (issue 11)
+#: also exported as Copernicus GLO-90 tiles with heights above the EGM96 geoid
 COPERNICUS_SCENE = {"base": "fr-small", "lines": 128, "columns": 193,
                     "exports": {"copernicus": True, "getasse30": False, "getasse30_beam": False,
                                 "srtm30": False, "geotiff_utm": False, "reference": False}}

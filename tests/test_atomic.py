@@ -79,7 +79,7 @@ def test_failed_run_removes_new_outputs_and_restores_replaced(tmp_path):
     old.write_text("before")
     new = tmp_path / "new.txt"
     folder = tmp_path / "synthesis"
-    # the output's name in the message, not the temporary file's (QA of stop 43)
+    # the output's name in the message, not the temporary file's
     with pytest.raises(OutputError, match=r"third.txt: cannot write \(disk full\); nothing was "
                        "written"), output_run():
         write(old, "replaced")
@@ -149,7 +149,7 @@ def test_scratch_dir_is_removed_on_abort_and_when_stale(tmp_path):
 
 def test_a_directory_that_takes_no_file_names_the_output(tmp_path):
     """/proc passes the writable-directory check as root but takes no new file: the message
-    named the temporary ``/proc/.out.tif.<pid>-<random>.tif.part`` (QA of stop 43)."""
+    names the output, not the temporary ``/proc/.out.tif.<pid>-<random>.tif.part``."""
     if not os.access("/proc", os.W_OK):
         pytest.skip("needs /proc to look writable (root)")
     with pytest.raises(OutputError, match=r"^/proc/out.tif: cannot write in /proc \("):

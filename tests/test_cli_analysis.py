@@ -44,7 +44,8 @@ def test_disparity_cli(image_pair, tmp_path, capsys):
     assert "STATISTICAL WINDOW SIZE = 5" in out and "EXPLORATION WINDOW WIDTH = 19" in out
     assert "TOTAL NUMBER OF PIXELS = 10800" in out and "IMAGE PIXELS = 9900" in out
     assert sta.read_text() == out
-    rows = list(csv.DictReader(open(vec)))
+    with open(vec) as f:
+        rows = list(csv.DictReader(f))
     assert len(rows) > 0.8 * 9900
     dx = np.array([float(r["dx_px"]) for r in rows])
     dy_m = np.array([float(r["dy_m"]) for r in rows])
@@ -82,7 +83,7 @@ def test_disparity_cli_errors(image_pair, tmp_path, capsys):
     assert "--explore" in capsys.readouterr().err
     assert main(["disparity", str(a), str(a), "--band", "3"]) == 2
     assert "no band 3" in capsys.readouterr().err
-    # issue 26: 99999 x 999999 hung (killed at 60 s); bounded: one message, at once
+    # an exploration window of 99999 x 999999 is bounded: one message, at once (no hang)
     t0 = time.perf_counter()
     assert main(["disparity", str(a), str(a), "--explore", "99999", "999999"]) == 2
     err = capsys.readouterr().err
@@ -94,11 +95,11 @@ def test_disparity_cli_errors(image_pair, tmp_path, capsys):
     assert main(["disparity", str(a), str(a), "--band", "3"]) == 2
     assert "no band 3" in capsys.readouterr().err
     assert main(["disparity", str(a), str(a), "--vectors", str(tmp_path / "no" / "v.csv")]) == 2
-    for size in (["0", "0"], ["-5", "nan"]):  # QA of stop 43: "(0.000, 0.000) m", "nan m"
+    for size in (["0", "0"], ["-5", "nan"]):  # refused, not "(0.000, 0.000) m", "nan m"
         assert main(["disparity", str(a), str(a), "--pixel-size", *size]) == 2
         assert "--pixel-size must be two sizes > 0" in capsys.readouterr().err
     fifo = tmp_path / "fifo.tif"
-    os.mkfifo(fifo)  # QA of stop 43: blocked its reader forever
+    os.mkfifo(fifo)  # refused: reading it would block forever
     assert main(["disparity", str(fifo), str(a)]) == 2
     assert "the image is a FIFO, not a regular file" in capsys.readouterr().err
 
@@ -133,7 +134,8 @@ def test_demcheck_cli_errors(tmp_path, capsys):
     pts, dem = appendix_f2_scene(tmp_path)
     assert main(["demcheck", str(tmp_path / "none.csv"), "--dem", str(dem)]) == 2
     assert "points file not found" in capsys.readouterr().err
-    # QA of stop 43: a FIFO blocked its reader forever; a missing geoid file was "DEM not found"
+    # a FIFO is refused (reading it would block forever); a missing geoid file is named as the
+    # geoid, not "DEM not found"
     fifo = tmp_path / "fifo.csv"
     os.mkfifo(fifo)
     assert main(["demcheck", str(fifo), "--dem", str(dem)]) == 2

@@ -105,7 +105,7 @@ def test_map_crs_utm_is_the_zone_of_the_footprint(files, tmp_path):
 
 
 def test_map_geotiff_carries_band_and_scaling_metadata(files, tmp_path):
-    """Issue 4 item 9 / issue 12: band descriptions (number, wavelength); uint16 counts with
+    """Band descriptions (number, wavelength); uint16 counts with
     GDAL scale = sf_rad in a valid Cloud-Optimized GeoTIFF; nearest output = the counts."""
     import rasterio
     from rio_cogeo.cogeo import cog_validate
@@ -120,7 +120,7 @@ def test_map_geotiff_carries_band_and_scaling_metadata(files, tmp_path):
     assert cog_validate(out, quiet=True)[0]
     with rasterio.open(out) as ds:
         tags, band_tags = ds.tags(), [ds.tags(1), ds.tags(2)]
-        # in the order given (stop 43: an RGB composite is its bands' order)
+        # in the order given (an RGB composite is its bands' order)
         assert ds.descriptions == (f"MERIS band 13 ({product.wavelengths[12]:.1f} nm)",
                                    f"MERIS band 7 ({product.wavelengths[6]:.1f} nm)")
         assert ds.dtypes == ("uint16", "uint16") and ds.nodata == 0 and ds.overviews(1)

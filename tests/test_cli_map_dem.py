@@ -1,5 +1,5 @@
 """``meris-ortho map --dem PATH[:datum]``: vertical datums and Copernicus tile directories on the
-command line; bad DEM entries end in one error line and exit code 2 (issue 11)."""
+command line; bad DEM entries end in one error line and exit code 2."""
 
 from __future__ import annotations
 
@@ -49,6 +49,7 @@ def _tile(path, lat0, lon0, step=3.0 / 3600):
         ds.write(h[None].astype(np.float32))
 
 
+@pytest.mark.slow
 def test_copernicus_directory_with_and_without_the_geoid(files, tmp_path, caplog):
     _, prod, tiles, _ = files
     caplog.set_level(logging.INFO, logger="napari_meris_ortho")
@@ -113,10 +114,10 @@ def test_help_tells_the_dem_entries_and_the_handbook_search(capsys):
 def test_a_copernicus_tile_cut_short_is_one_message(files, tmp_path, capsys, caplog, recwarn,
                                                     cut, reason):
     """A tile that ends early (an interrupted download): one line naming the tile, that it is
-    damaged or cut short and GDAL's root reason. Before, a tile cut in its data said "(Read
-    failed. See previous exception for details.)", and one cut in its header printed five GDAL
-    warnings and rasterio's NotGeoreferencedWarning before "not a Copernicus DEM tile of its
-    name (origin 0.000000, 0.000000 ...)"."""
+    damaged or cut short and GDAL's root reason: not "(Read failed. See previous exception for
+    details.)" for a tile cut in its data, nor five GDAL warnings, rasterio's
+    NotGeoreferencedWarning and "not a Copernicus DEM tile of its name (origin 0.000000,
+    0.000000 ...)" for one cut in its header."""
     import shutil
 
     _, prod, tiles, _ = files

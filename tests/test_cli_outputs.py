@@ -1,4 +1,4 @@
-"""Output safety of the commands (issue 15 reproducers): ``-o`` naming an input, another output
+"""Output safety of the commands: ``-o`` naming an input, another output
 or a special file is refused before any work; a failure writing any output of a run removes
 every new output of the run and leaves the old files as they were."""
 
@@ -97,9 +97,9 @@ def test_a_failing_second_output_removes_the_first(files, tmp_path):
 
 
 def test_band_order_and_unneeded_dems(files, tmp_path, caplog):
-    """QA of stop 43: ``--bands 7,5,2`` wrote planes 2, 5, 7 (no RGB composite in any viewer);
-    a DEM after one that answered every point was warned about as "contributed no height";
-    a DEM that misses the product, before it, still is."""
+    """``--bands 7,5,2`` writes planes 7, 5, 2 in that order (an RGB composite in any viewer,
+    not planes 2, 5, 7); a DEM after one that answered every point is not warned about as
+    "contributed no height"; a DEM that misses the product, before it, is."""
     import logging
 
     import rasterio
@@ -129,7 +129,7 @@ def test_band_order_and_unneeded_dems(files, tmp_path, caplog):
 
 
 def test_a_geotiff_is_named_as_one(files, tmp_path, capsys):
-    """QA of stop 43: ``-o out.png`` wrote a TIFF named .png."""
+    """``-o out.png`` is refused: the output is a GeoTIFF, named .tif or .tiff."""
     prod, _ = files
     for name in ("out.png", "out.nc", "out"):
         code, err = run_map(capsys, prod, "-o", tmp_path / name, "--bands", "7")

@@ -7,6 +7,7 @@ import shutil
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from napari_meris_ortho.cli import main
 from napari_meris_ortho.output.geotiff import read_geotiff
@@ -18,6 +19,7 @@ def _run(capsys, *argv):
     return code, out, err
 
 
+@pytest.mark.slow
 def test_sample_writes_the_geolocated_products(tmp_path, capsys):
     code, out, _ = _run(capsys, "sample", "fr-small", "--out", tmp_path, "--fsg", "--sen3",
                         "--set", '{"lines": 130}')
@@ -55,8 +57,8 @@ def test_map_with_the_pixel_geolocation(geolocated, tmp_path, capsys):
 
 
 def test_map_with_the_pixel_geolocation_and_a_dem(fr_small, geolocated, tmp_path, capsys):
-    """``--geolocation pixel --dem``: the per-pixel geolocation with the DEM's parallax
-    (before: exit 2, "DEMs given with geolocation 'pixel'"); on fr-small's gentle relief the
+    """``--geolocation pixel --dem``: the per-pixel geolocation with the DEM's parallax (not
+    refused with "DEMs given with geolocation 'pixel'"); on fr-small's gentle relief the
     same pixels as without the DEM almost everywhere, not everywhere."""
     args = ("--geolocation", "pixel", "--bands", "7", "--crs", "EPSG:32632", "--pixel-size",
             "300")
@@ -74,6 +76,7 @@ def test_map_with_the_pixel_geolocation_and_a_dem(fr_small, geolocated, tmp_path
     assert 0.95 < same < 1.0, same
 
 
+@pytest.mark.slow
 def test_synthesize_with_the_pixel_geolocation(geolocated, tmp_path, capsys):
     from napari_meris_ortho.synthesis.reading import open_synthesis
 
@@ -132,7 +135,7 @@ def test_broken_fsg_and_misshapen_sen3_exit_2(geolocated, tmp_path, capsys):
 def test_map_of_an_rrg_in_pixel_mode_against_the_truth(rr_small, rrg, tmp_path, capsys):
     """``map MER_RRG_1P --geolocation pixel`` end to end: the antecedents it writes
     (``--diagnostics``) are those of the simulator's lines of sight, as for the FSG
-    (``test_ortho_pixel``): 0.0034 RR px RMS measured (1 km pixels: little relief per pixel)."""
+    (``test_ortho_pixel``): about 0.0034 RR px RMS (1 km pixels: little relief per pixel)."""
     out = tmp_path / "rrg.tif"
     code, _, err = _run(capsys, "map", rrg, "-o", out, "--geolocation", "pixel", "--bands", "7",
                         "--crs", "EPSG:32632", "--diagnostics")

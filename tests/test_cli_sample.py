@@ -57,9 +57,9 @@ def test_sample_bad_input_exits_2(tmp_path, capsys):
 
 
 def test_sample_rerun_after_the_product_was_deleted(tmp_path, capsys):
-    """Issue 26: a rerun into a folder whose N1 was deleted regenerates it and rewrites the
-    per-pixel geolocated FRG N1 and .SEN3 in place (before: it failed on the existing .SEN3
-    folder and deleted the FRG N1 that was there)."""
+    """A rerun into a folder whose N1 was deleted regenerates it and rewrites the per-pixel
+    geolocated FRG N1 and .SEN3 in place (it neither fails on the existing .SEN3 folder nor
+    deletes the FRG N1 that is there)."""
     out = tmp_path / "scene"
     args = ["-q", "sample", "fr-small", "--out", str(out), "--set", json.dumps(SMALL), "--fsg",
             "--sen3"]
@@ -92,8 +92,8 @@ def test_sample_rerun_after_the_product_was_deleted(tmp_path, capsys):
     ('{"dem": {"spacing_deg": true}}', "dem.spacing_deg must be a number, not True"),
 ])
 def test_bad_overrides_are_one_line_and_leave_nothing(override, said, tmp_path, capsys):
-    """QA of stop 43: each of these ended in a Python error deep in the simulator (and left
-    an empty --out directory); an unknown key was silently ignored."""
+    """Each bad override is one error line, not a Python error deep in the simulator, and
+    leaves no empty --out directory; an unknown key is refused, not silently ignored."""
     out = tmp_path / "out"
     assert main(["-q", "sample", "fr-small", "--out", str(out), "--set", override]) == 2
     err = capsys.readouterr().err.strip().splitlines()

@@ -16,6 +16,8 @@ import pytest
 from napari_meris_ortho.products.n1 import read_product
 from ortho_samples import make_dem, make_product
 
+pytestmark = pytest.mark.slow
+
 #: signal offsets as fractions of an uninterrupted run
 FRACTIONS = (0.0, 0.03, 0.08, 0.15, 0.25, 0.4, 0.55, 0.7, 0.85)
 OLD = b"the output of an earlier run"

@@ -194,8 +194,8 @@ def test_synthesis_with_a_dem(products, tmp_path) -> None:
                  "13", *GRID_ARGS, *COMMON]) == 0
     tiepoints = open_synthesis(tmp_path / "tp").read("band_13")
     both = (with_dem > 0) & (tiepoints > 0)
-    assert both.sum() > 0.45 * both.size  # 53 % measured
-    # the DEM moves the pixels of the relief the tie-point heights miss (39 % measured)
+    assert both.sum() > 0.45 * both.size  # 53 % on this scene
+    # the DEM moves the pixels of the relief the tie-point heights miss (39 % on this scene)
     moved = (with_dem != tiepoints) & both
     assert 0.2 < moved.sum() / both.sum() < 0.6
 
@@ -228,7 +228,7 @@ def test_shared_grid_and_height_options_refused_alike(products, tmp_path, capsys
 def test_refused_or_empty_runs_leave_nothing_behind(products, tmp_path, capsys) -> None:
     """A new synthesis refused under the lock (grid too big for --max-pixels, known only from
     the products) or that merges nothing leaves the folder as it was: no store, no
-    ``.STORE.meris-ortho-lock`` (issue 26), an empty given directory empty again; the lock
+    ``.STORE.meris-ortho-lock``, an empty given directory empty again; the lock
     file of an existing synthesis stays."""
     work = tmp_path / "work"
     work.mkdir()

@@ -1,4 +1,4 @@
-"""One way to do each thing (issue 23): one writer of mapped products, one option check, one
+"""One way to do each thing: one writer of mapped products, one option check, one
 band parser, one default grid, one DEM-order walk, typed contracts."""
 
 from __future__ import annotations

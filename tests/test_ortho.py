@@ -71,7 +71,7 @@ def test_dem_mode_finds_consistent_antecedents(files, dem_run):
 
 
 def test_precompute_once_apply_to_any_band(files, dem_run):
-    """Issue 12: antecedents once, then counts (fused gather of all bands), radiances, flags."""
+    """Antecedents once, then counts (fused gather of all bands), radiances, flags."""
     from napari_meris_ortho import precompute
 
     _, prod, dem, _ = files
@@ -338,11 +338,12 @@ def test_accuracy_against_the_simulator_truth(fr_small):
     assert np.sqrt(np.mean(e_none ** 2)) > 1.0 and e_none.max() > 5.0
 
 
+@pytest.mark.slow
 def test_a_grid_far_larger_than_the_segment_searches_only_the_segment(fr_small):
     """A fixed extent 5 x 5 times the segment's own UTM grid (a regional grid for time series):
     the same antecedents inside (within the truth tolerance), nothing searched in the rows and
     columns the segment does not reach (the primary-grid nodes searched in vain stay within a
-    few times those of the own grid; every node of the whole rows was searched before: 60 x)."""
+    few times those of the own grid, not every node of the whole rows: 60 x)."""
     s = fr_small
     dem = s.dem_paths["geotiff"]
     own = orthorectify(s.product_path, dems=[dem], crs="EPSG:32633", bands=[7],

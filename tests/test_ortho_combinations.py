@@ -1,5 +1,5 @@
 """Every elevation x parallax x search combination of ``orthorectify`` against the simulator's
-truth on fr-small (issue 11, defects 1-3).
+truth on fr-small.
 
 The truth of an output point (lon, lat) is the product position whose line of sight passes
 through (lon, lat, h): h = 0 for ``elevation="none"``, the scene's DEM for "dem" and the
@@ -19,6 +19,8 @@ from scipy.ndimage import map_coordinates
 
 from napari_meris_ortho import orthorectify
 from napari_meris_ortho.products.n1 import read_product
+
+pytestmark = pytest.mark.slow
 
 ELEVATIONS = ("none", "tiepoints", "dem")
 PARALLAXES = ("handbook", "ellipsoid")
@@ -113,7 +115,6 @@ def _handbook_processes(prod, zero, antecedent):
     return in_facets(l0, p0) & in_facets(2 * l0 - lt, 2 * p0 - pt)
 
 
-@pytest.mark.slow
 @pytest.mark.parametrize("elev,par,search",
                          list(itertools.product(ELEVATIONS, PARALLAXES, SEARCHES)))
 def test_combination_matches_the_truth(scene, runs, truth, elev, par, search):
@@ -126,7 +127,7 @@ def test_combination_matches_the_truth(scene, runs, truth, elev, par, search):
     err = np.hypot(d["line"][ok] - tl[ok], d["col"][ok] - tc[ok])
     rms = float(np.sqrt(np.mean(err ** 2)))
     assert rms <= 0.05 and err.max() <= 0.25, (rms, float(err.max()))
-    # elevation diagnostics on every path (defect 3): the height used and its parallax shift
+    # elevation diagnostics on every path: the height used and its parallax shift
     h = d["elevation"][ok]
     assert np.isfinite(h).all() and np.isfinite(d["shift_east_m"][ok]).all()
     if elev == "none":
@@ -148,9 +149,10 @@ def test_combination_matches_the_truth(scene, runs, truth, elev, par, search):
 
 
 def test_handbook_search_in_dem_mode_loses_terrain_beyond_the_boundary(runs, truth):
-    """Defect 3 is MERSYN's behaviour: high terrain near the near-nadir edge of the product is
-    seen from pixels whose zero-height position lies outside the swath; the handbook search
-    misses those output points, the primary-grid search maps them with the same accuracy."""
+    """The handbook search loses terrain as MERSYN does: high terrain near the near-nadir edge
+    of the product is seen from pixels whose zero-height position lies outside the swath; the
+    handbook search misses those output points, the primary-grid search maps them with the same
+    accuracy."""
     prod, _, true = truth
     tl, tc = true["dem"]
     hb = runs["dem", "ellipsoid", "handbook"]

@@ -1,4 +1,4 @@
-"""Orthorectification with DEM heights above the geoid (issue 11): a simulated scene whose DEM
+"""Orthorectification with DEM heights above the geoid: a simulated scene whose DEM
 is exported as Copernicus GLO-90 tiles holding H = h - N (EGM96). With the geoid handled the
 accuracy is that of the ellipsoidal DEM; read as ellipsoidal heights, the missing N (about 47 m
 here, seen at 20-30 deg) shifts every antecedent by about a tenth of a pixel."""

@@ -74,9 +74,9 @@ def test_masked_geolocation_costs_only_the_cells_touching_it(geolocated, tmp_pat
     """No-data pixels of the geolocation (fill values of ``geo_coordinates.nc``) leave no data
     only at the output points whose bilinear cell has such a pixel as a corner: 100 scattered
     pixels cost 661 points of fr-small (6.6 each), a 10 x 10 block 204 (+1 beside it); every
-    other point keeps its antecedent to the bit. Before: the bisection along a product line
-    stepped on a no-data pixel and lost the points of the whole line beyond it (412 points more,
-    up to 42 px from a masked pixel)."""
+    other point keeps its antecedent to the bit. A bisection along a product line that stepped
+    on a no-data pixel would lose the points of the whole line beyond it (412 points more, up
+    to 42 px from a masked pixel)."""
     import shutil
 
     import netCDF4
@@ -145,13 +145,13 @@ def steep(tmp_path_factory):
                            tc=tc, inside=inside, seen=seen, edge=edge, pixel=pixel)
 
 
+@pytest.mark.slow
 def test_pixel_geolocation_in_steep_terrain(steep):
     """9 km relief at up to 41 deg view zenith (scene fr-steep): every output point whose
     ground the sensor sees is mapped (the cell holding it is searched along its product line,
     where the parallax moves it), within 0.08 px RMS of the truth (the floor of a bilinear model
     between terrain points of pixel centres, 260 m apart, on this relief); ground hidden by the
-    relief is reported (iterations -2, counted in the statistics), not a silent hole. Before:
-    2.4 % of the seen ground unmapped, the hidden ground neither mapped nor reported."""
+    relief is reported (iterations -2, counted in the statistics), not a silent hole."""
     from napari_meris_ortho.engine.pixelgeo import OCCLUDED
 
     r, tl, tc, inside, seen, edge = (steep.pixel, steep.tl, steep.tc, steep.inside, steep.seen,
@@ -160,7 +160,7 @@ def test_pixel_geolocation_in_steep_terrain(steep):
     assert 0.02 < hidden.sum() / inside.sum() < 0.05  # a steep scene indeed (2.8 %)
     it = r.diagnostics["iterations"]
     # the seen ground is mapped: 0.014 % left, all within 0.5 px of the product edge or taken
-    # for hidden ground at a crest (before: 2.4 %)
+    # for hidden ground at a crest
     lost = seen & ~r.valid
     assert lost.sum() < 2e-4 * seen.sum()
     assert np.all((edge[lost] < 0.5) | (it[lost] == OCCLUDED))
@@ -168,7 +168,7 @@ def test_pixel_geolocation_in_steep_terrain(steep):
     assert np.sqrt(np.mean(e ** 2)) < 0.08 and np.percentile(e, 99) < 0.35 and e.max() < 2.5
     # hidden ground is reported: counted, 95 % of the reported points truly hidden; the hidden
     # ground not reported is mapped (a crest sampled between pixel centres hides it) or at the
-    # product edge, never dropped unexplained (before: 3372 of 6262)
+    # product edge, never dropped unexplained
     reported = it == OCCLUDED
     assert r.stats.facet_search["occluded"] == reported.sum() > 0.03 * hidden.sum()
     assert (reported & hidden).sum() > 0.9 * reported.sum()
@@ -178,6 +178,7 @@ def test_pixel_geolocation_in_steep_terrain(steep):
                for line in r.stats.log_lines())
 
 
+@pytest.mark.slow
 def test_pixel_geolocation_with_a_dem_in_steep_terrain(steep):
     """With the scene's DEM the per-pixel terrain points are moved back to the ellipsoid and
     every output point gets the parallax of its own DEM height (``engine.pixeldem``): on
@@ -199,8 +200,8 @@ def test_pixel_geolocation_with_a_dem_in_steep_terrain(steep):
     assert lost.sum() <= 1 and np.all(steep.edge[lost] < 0.05)
     # hidden ground is reported as the pixel model alone reports it (iterations OCCLUDED,
     # counted, no data): 6331 of the 6351 reported points hidden by the truth's 5 m march, all
-    # of its 6331 hidden reported (before: none; all of it mapped to the pixel whose line of
-    # sight passes through it, which shows the ridge in front: a double image). The other 20
+    # of its 6331 hidden reported (not mapped to the pixel whose line of sight passes through
+    # it, which shows the ridge in front: a double image). The other 20
     # are hidden too, by crests 1.0-2.2 m above the ray between the truth's samples (0.1 m
     # steps): the exact march per DEM cell finds them
     hidden = steep.inside & ~seen
@@ -222,6 +223,7 @@ def test_pixel_geolocation_with_a_dem_in_steep_terrain(steep):
     assert np.mean(tn[seen & ok]) > 0.999
 
 
+@pytest.mark.slow
 def test_pixel_geolocation_falls_back_where_the_dem_ends(steep, tmp_path):
     """A DEM covering the west of the scene only: east of it the points fall back to the
     product's own geolocation (the pixel model alone: same antecedents, hidden ground reported),
@@ -263,12 +265,13 @@ def test_pixel_geolocation_falls_back_where_the_dem_ends(steep, tmp_path):
     assert np.sqrt(np.mean(e ** 2)) < 0.005
 
 
+@pytest.mark.slow
 def test_hidden_ground_with_a_stack_of_dems(steep):
     """Two DEMs (the scene's DEM given twice): the lines of sight are marched over the first
     DEM's window in memory as with one DEM (a cell without data there would hand the ray to the
-    stack's march): the same points reported hidden as with the DEM alone (before: the stack
-    marched by samples, 97.8 % of the hidden ground, 64 points apart on fr-alps, 80 s there
-    instead of 1 s), the seen ground mapped as with one DEM."""
+    stack's march): the same points reported hidden as with the DEM alone (the stack's march by
+    samples finds 97.8 % of the hidden ground, and takes 80 s on fr-alps instead of 1 s), the
+    seen ground mapped as with one DEM."""
     from napari_meris_ortho.engine.pixelgeo import OCCLUDED
 
     dem = steep.scene.dem_paths["geotiff"]
@@ -285,12 +288,13 @@ def test_hidden_ground_with_a_stack_of_dems(steep):
     assert lost.sum() <= 1 and np.all(steep.edge[lost] < 0.05)
 
 
+@pytest.mark.slow
 def test_hidden_ground_with_a_dem_above_the_geoid(steep, tmp_path):
     """The scene's DEM written as heights above the EGM96 geoid (posts - N, read as
     ``PATH:egm96``): the window is made ellipsoidal once (posts + N) and marched cell by cell
     like an ellipsoidal DEM: the same points reported hidden as with the ellipsoidal DEM but
-    where the two sources' heights differ by their float32 rounding (before: sampled by the
-    stack's march, 10 s on fr-alps instead of 1 s)."""
+    where the two sources' heights differ by their float32 rounding (not sampled by the
+    stack's march: 10 s on fr-alps instead of 1 s)."""
     import rasterio
 
     from napari_meris_ortho.dem.geoid import geoid_undulation
@@ -317,12 +321,13 @@ def test_hidden_ground_with_a_dem_above_the_geoid(steep, tmp_path):
     assert np.count_nonzero(reported != expected) <= 3
 
 
+@pytest.mark.slow
 def test_hidden_ground_with_a_projected_dem(steep, tmp_path):
     """A projected DEM in memory (the scene's DEM reprojected to UTM 32N, 100 m posts) is
     marched cell by cell along each point's track on its lattice (its projected look vector):
-    on fr-steep the same hidden ground as the stack's sampled march (every 1/32 post, the only
-    march of projected DEMs before; fr-alps's 250 m UTM DEM: 295 s, now 3.8 s), and the crests
-    grazing a ray between the samples."""
+    on fr-steep the same hidden ground as the stack's sampled march (every 1/32 post, about 80
+    times slower on fr-alps's 250 m UTM DEM), and the crests grazing a ray between the
+    samples."""
     import time
 
     import rasterio

@@ -1,5 +1,5 @@
 """Tie-point heights below 0 (bathymetry, as ESA stores it over sea) give no parallax in every
-elevation mode that takes heights from the tie points (issue 22, item 11)."""
+elevation mode that takes heights from the tie points."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""A ``.SEN3`` as ESA writes it, mapped (issue 22): the SEN3 and the N1 of one simulated
+"""A ``.SEN3`` as ESA writes it, mapped: the SEN3 and the N1 of one simulated
 acquisition orthorectify to the same map; a fill pixel never yields a radiance in any sampling
 (a sample touching it is no data); a zipped SEN3 maps end to end; saturated pixels of a band are
 no data for that band in a synthesis."""
@@ -126,6 +126,7 @@ def test_a_renamed_zip_is_still_its_product_in_a_synthesis(pair, tmp_path, caplo
     assert len(store.history()) == 1 and int(store.read("count").max()) == 1
 
 
+@pytest.mark.slow
 def test_a_synthesis_decodes_each_band_of_a_sen3_once(pair, tmp_path, monkeypatch):
     """Every tile task reads every band of its products; a .SEN3 band (zlib netCDF-4) is
     decoded once per process for the run, not once per tile, then freed; the layers are those

@@ -219,11 +219,11 @@ def test_minimum_radiance_is_cloud_free_where_one_product_is_clear(products, sin
     inside = clear[0] > 0
     clear_in = [np.all(singles[k] == clear, axis=0) & inside for k in cloudy]
     one_clear = np.logical_or.reduce(clear_in)
-    for c in clear_in:  # each date alone is clear on 38-43 % of the scene (measured)
+    for c in clear_in:  # each date alone is clear on 38-43 % of the scene
         assert 0.3 < c.sum() / inside.sum() < 0.5
-    assert one_clear.sum() / inside.sum() > 0.8  # 82 % measured
+    assert one_clear.sum() / inside.sum() > 0.8  # 82 % on this scene
     # wherever one product is clear, the synthesis is the clear radiance, where the ground
-    # is darker than the clouds (all but snow, 0.6 % here; measured 99.85 % exact, the rest
+    # is darker than the clouds (all but snow, 0.6 % here; 99.85 % exact, the rest
     # are pixels next to snow posts, where a cloud mixture is darker still)
     darker = np.all(clear < CLOUD_SPECTRUM[np.array(BANDS) - 1, None, None], axis=0)
     sel = one_clear & darker
@@ -273,10 +273,11 @@ def test_maximum_ndvi_keeps_the_greenest_date(products, singles, tmp_path) -> No
                                       for k in cloudy]) & covered & green
     assert one_clear.sum() > 0.3 * covered.sum()
     exact = np.all(synthesis[:, one_clear] == clear[:, one_clear], axis=0)
-    assert exact.mean() > 0.999  # measured 99.99 %: pixels mixing a snow post
+    assert exact.mean() > 0.999  # 99.99 % on this scene: pixels mixing a snow post
 
 
 @pytest.mark.parametrize("algorithm", ["min-radiance", "max-ndvi"])
+@pytest.mark.slow
 def test_incremental_equals_batch(products, tmp_path, algorithm) -> None:
     names = [products[k] for k in ("cloudy1", "cloudy2", "cloudy3")]
     synthesize(names, tmp_path / "batch", grid=GRID, bands=BANDS, algorithm=algorithm,
@@ -431,7 +432,8 @@ def test_tile_beyond_the_zero_height_boundary_keeps_terrain_pixels(tmp_path) -> 
 
 def test_product_table_and_cog_export_carry_band_and_scaling_metadata(products,
                                                                       tmp_path) -> None:
-    """Issue 4 item 9: band description (number, wavelength) and radiance factors sf_rad."""
+    """Band description (number, wavelength) and radiance factors sf_rad in the product table
+    and the COG export."""
     from napari_meris_ortho.products.n1 import read_product
 
     clear, cloudy = read_product(products["clear"]), read_product(products["cloudy1"])
@@ -494,7 +496,7 @@ def test_progress_per_task_and_cancel_leave_the_store_untouched(products, tmp_pa
 
 
 def test_tie_points_and_boundary_built_once_per_product(tmp_path, monkeypatch) -> None:
-    """Issue 13: the (product, tile) tasks share one tie-point grid, segment boundary and DEM
+    """The (product, tile) tasks share one tie-point grid, segment boundary and DEM
     window per product and process; every tile still equals the product orthorectified alone
     on that tile (DEM heights from the product-wide window = the tile's own)."""
     from collections import Counter, OrderedDict
@@ -746,9 +748,9 @@ def test_an_update_reads_only_zarr_v3_keys(products, tmp_path, monkeypatch) -> N
 
 def test_tile_tasks_read_each_array_metadata_once(products, tmp_path, monkeypatch) -> None:
     """The tile tasks of a run read and write the same arrays of one snapshot: each array's
-    ``zarr.json`` is read once in the process, not once per tile (3 tiles here; before, every
-    tile task opened every layer it read and every level it wrote: 5 reads of each
-    full-resolution array and 2 of each overview in this update)."""
+    ``zarr.json`` is read once in the process, not once per tile (3 tiles here; a tile task
+    opening every layer it reads and every level it writes would read each full-resolution
+    array 5 times and each overview twice in this update)."""
     import collections
 
     import icechunk.store as ics
@@ -842,6 +844,7 @@ def _chunk_bytes(store, prefix: str) -> int:
 
 
 @pytest.mark.parametrize("workers", [0, 1])
+@pytest.mark.slow
 def test_store_codecs_kept_by_updates(products, tmp_path, workers) -> None:
     """A store of codec delta-zstd encodes the full-resolution bands and NDVI by delta then
     zstd (smaller chunks), the overviews, count and product by zstd alone; a default (zstd)
@@ -999,6 +1002,7 @@ def test_a_run_computes_its_tiles_in_submission_order(products, tmp_path, monkey
 
 
 @pytest.mark.parametrize("bands", [(2, 9), (2, 7, 9, 13)])
+@pytest.mark.slow
 def test_bands_read_where_a_product_wins_give_the_layers_of_whole_pieces(
         products, tmp_path, monkeypatch, bands) -> None:
     """Maximum NDVI on standard products: a piece reads its bands at its merge, where it wins
@@ -1031,6 +1035,7 @@ def test_bands_read_where_a_product_wins_give_the_layers_of_whole_pieces(
     assert len(np.unique(whole["product"])) == 5  # background and four products hold pixels
 
 
+@pytest.mark.slow
 def test_in_process_the_sen3_bands_of_a_tiles_products_decode_ahead_once(tmp_path,
                                                                         monkeypatch):
     """A synthesis in this process starts decoding the bands of every product of a tile in the

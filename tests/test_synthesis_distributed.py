@@ -24,6 +24,9 @@ COMMON = dict(grid=GRID, bands=(7, 13), tile=256, elevation="tiepoints")
 GRID_ARGS = ["--crs", "EPSG:4326", "--ul", "13.45", "46.70", "--lr", "14.26", "46.19",
              "--pixel-size", "0.0015", "--bands", "7,13", "--elevation", "tiepoints",
              "--tile", "256"]
+#: a test cluster serves no dashboard, and its scheduler's HTTP endpoints take a free port: at
+#: 8787 (distributed's default) a second cluster beside the module's would find it taken
+NO_DASHBOARD = dict(dashboard_address=None, scheduler_kwargs={"dashboard_address": ":0"})
 
 
 @pytest.fixture(scope="module")
@@ -41,7 +44,7 @@ def cluster():
     from napari_meris_ortho.synthesis.run import WORKER_ENV
 
     with LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
-                      dashboard_address=None, env=WORKER_ENV) as c:
+                      **NO_DASHBOARD, env=WORKER_ENV) as c:
         yield c
 
 
@@ -81,9 +84,9 @@ def test_workers_give_the_bytes_of_one_process_in_any_order(products, cluster, t
 
 def test_one_task_per_tile_and_nothing_moves_between_workers(products, cluster,
                                                              tmp_path) -> None:
-    """Issue 25 item 3: a tile's pieces are orthorectified in the tile's own task and merged as
-    they come, so the cluster runs one task per tile touched and no data travels between
-    workers (before: a (product, tile) task per piece, each piece shipped to its tile task)."""
+    """A tile's pieces are orthorectified in the tile's own task and merged as they come, so the
+    cluster runs one task per tile touched and no data travels between workers (no (product,
+    tile) task per piece, no piece shipped to its tile task)."""
     from distributed import Client, get_task_stream
 
     from napari_meris_ortho.synthesis.tiling import tiles
@@ -117,6 +120,7 @@ def _free_port() -> int:
 
 
 @pytest.mark.timeout(60)
+@pytest.mark.slow
 def test_unreachable_scheduler_is_one_message_exit_2(products, tmp_path, capsys) -> None:
     address = f"tcp://127.0.0.1:{_free_port()}"  # nobody listens there
     out = tmp_path / "syn"
@@ -223,7 +227,7 @@ def test_embedded_workers_are_held_to_a_core_each_when_they_fit() -> None:
         from napari_meris_ortho.synthesis.run import WORKER_ENV, hold_workers_to_cores
 
         with LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
-                          dashboard_address=None, env=WORKER_ENV) as cluster, \
+                          **NO_DASHBOARD, env=WORKER_ENV) as cluster, \
                 Client(cluster, set_as_default=False) as client:
             assert hold_workers_to_cores(client) == {}  # fewer workers than cores: free
             assert sorted(hold_workers_to_cores(client, every=True).values()) == [*cores[:2]]
@@ -258,7 +262,7 @@ def test_a_one_thread_worker_runs_the_engine_on_one_thread() -> None:
         assert list(runner.client.run(threads_and_cores).values()) == [(1, cores)]
     assert WORKER_ENV["NUMBA_NUM_THREADS"] == "1"
     with LocalCluster(n_workers=1, threads_per_worker=1, processes=True,
-                      dashboard_address=None) as cluster, \
+                      **NO_DASHBOARD) as cluster, \
             Client(cluster, set_as_default=False) as client:  # no env of ours: the nanny's
         assert list(client.run(threads_and_cores).values()) == [(1, cores)]
 
@@ -293,7 +297,7 @@ def test_a_worker_keeps_its_arrays_in_its_heap_once_it_runs_a_tile(products, tmp
     from napari_meris_ortho.synthesis.run import WORKER_ENV, _tune_worker
 
     with LocalCluster(n_workers=1, threads_per_worker=1, processes=True,
-                      dashboard_address=None, env=WORKER_ENV) as cluster, \
+                      **NO_DASHBOARD, env=WORKER_ENV) as cluster, \
             Client(cluster, set_as_default=False) as client:
         fresh = list(client.run(_mapped_bytes_of_an_array).values())
         synthesize(products[:2], tmp_path / "s", scheduler=cluster.scheduler_address, **COMMON)
@@ -314,6 +318,7 @@ def _keep_band_7(path: str) -> int:
     return kept_bytes()
 
 
+@pytest.mark.slow
 def test_workers_free_the_decoded_sen3_bands_at_the_end_of_a_run(cluster, tmp_path) -> None:
     """A run's tasks keep the .SEN3 bands they decode (once per worker, not per tile); an
     external cluster's workers outlive the run, which frees them on every worker."""
@@ -361,6 +366,7 @@ def _seen() -> dict[str, int]:
     return dict(_SEEN)
 
 
+@pytest.mark.slow
 def test_the_workers_of_a_host_decode_each_sen3_band_once_between_them(cluster,
                                                                        tmp_path) -> None:
     """Both workers read the product's bands; each band is decoded once on the host (by
@@ -407,6 +413,7 @@ print(json.dumps({"before": before, "during": during, "after": _mapped_bytes_of_
 
 @pytest.mark.skipif(not hasattr(ctypes.CDLL(None), "mallinfo2"),
                     reason="glibc's malloc (2.33 or later: mallinfo2)")
+@pytest.mark.slow
 def test_a_viewer_keeps_a_runs_arrays_in_its_heap_for_the_run_only(products, tmp_path) -> None:
     """The viewer's malloc maps a block of 256 KiB or more on its own, so that removed layers
     give their memory back (``_process.return_freed_memory``). A synthesis run in that process

@@ -1,5 +1,5 @@
-"""A process that used a synthesis store ends cleanly (issue 26, the reader that died of
-SIGABRT): Icechunk resolves futures from its own Rust threads, which run Python code
+"""A process that used a synthesis store ends cleanly, never dying of
+SIGABRT: Icechunk resolves futures from its own Rust threads, which run Python code
 (``loop.call_soon_threadsafe``) and may still do so when the main thread ends; the exit waits
 for them (``store.settle_at_exit``) instead of letting CPython ``pthread_exit`` them during
 finalization, which aborts the process (gdb: ``take_gil`` -> ``PyThread_exit_thread`` ->

@@ -36,6 +36,7 @@ def season(products: list[str], out: Path) -> None:
         synthesize([path], out, input=out, **RUN)
 
 
+@pytest.mark.slow
 def test_prune_keeps_the_layers_and_frees_the_old_chunk_versions(products, tmp_path) -> None:
     out, twin = tmp_path / "pruned", tmp_path / "twin"
     season(products[:3], out)
@@ -123,6 +124,7 @@ def test_synthesis_prune_command(products, tmp_path, capsys) -> None:
     assert len(err) == 1 and err[0].startswith("meris-ortho: error:")
 
 
+@pytest.mark.slow
 def test_synthesize_keep_prunes_after_its_commit(products, tmp_path, capsys) -> None:
     """``synthesize --keep N``: the update commits, then prunes under the same lock; the
     store ends as an update followed by ``synthesis-prune --keep N`` leaves its twin."""

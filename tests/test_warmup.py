@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from napari_meris_ortho import warmup
 
@@ -49,6 +50,7 @@ sys.exit(code)
 """
 
 
+@pytest.mark.slow
 def test_late_kernels_compiled_by_the_child_are_not_compiled_again_by_map(tmp_path):
     """A first ``map`` (cold cache) starts ``compile_late`` in a child: with the child's cache,
     the map itself compiles none of the late kernels (same types), only the early ones."""
@@ -99,6 +101,7 @@ print(json.dumps({"after_start": after_start, "half": int(half[0, 0]), "dot": fl
 """
 
 
+@pytest.mark.slow
 def test_numba_starts_without_scipy_linalg_and_blas_still_works(tmp_path):
     import json
     import os

@@ -1,5 +1,6 @@
 """DEMCHK (section 5.2) of the simulated ``fr-small`` scene's DEM exports against GPS points taken
-on its truth terrain: the DEM formats of NOTES.md read through ``dem``."""
+on its truth terrain: each DEM format the simulator exports (GeoTIFF, GETASSE30) read through
+``dem``."""
 
 from __future__ import annotations
 

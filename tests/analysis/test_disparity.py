@@ -29,6 +29,7 @@ def fourier_shift(img: np.ndarray, dy: float, dx: float) -> np.ndarray:
     return np.real(np.fft.ifft2(np.fft.fft2(img) * np.exp(-2j * np.pi * (ky * dy + kx * dx))))
 
 
+@pytest.mark.slow
 def test_synthetic_shift_recovered_to_a_tenth_of_a_pixel():
     a = textured()
     b = fourier_shift(a, dy=-2.6, dx=1.3)

@@ -1,4 +1,4 @@
-"""Copernicus DEM GLO-30/GLO-90 tile directories (dem.copernicus, issue 11)."""
+"""Copernicus DEM GLO-30/GLO-90 tile directories (dem.copernicus)."""
 
 from __future__ import annotations
 
@@ -116,10 +116,11 @@ def test_bad_tile_directories(tmp_path):
         open_dem(tmp_path / "b")
 
 
+@pytest.mark.slow
 def test_a_missing_tile_under_the_footprint_is_reported(scene, tmp_path, caplog):
-    """QA of stop 43: with one tile of the directory gone, 45 % of the points took the tie
-    points and nothing said so. The tiles under the footprint the directory lacks are in the
-    run's statistics and warned about by ``map``; a complete directory gives no warning."""
+    """With one tile of the directory gone, the points under it (45 % here) take the tie
+    points' heights, and that is said: the tiles under the footprint the directory lacks are in
+    the run's statistics and warned about by ``map``; a complete directory gives no warning."""
     import logging
 
     from napari_meris_ortho.cli import main
@@ -145,6 +146,7 @@ def test_a_missing_tile_under_the_footprint_is_reported(scene, tmp_path, caplog)
     assert f"DEM {holed} has no tile N46 E013 under the footprint" in caplog.text
 
 
+@pytest.mark.slow
 def test_getasse30_names_its_missing_tiles(fr_small):
     """GETASSE30 covers the globe in 15-degree tiles: under a box across 15 E the scene's
     directory (one tile, 45N000E) lacks 45N015E."""

@@ -295,7 +295,7 @@ def test_geotiff_prepared_window_read_once_same_heights(tmp_path):
 
 
 def test_geotiff_vertical_datum_from_its_crs_or_a_warning(tmp_path, caplog):
-    """Issue 11: a compound EGM96-height CRS gives EGM96 heights (+ N), a plain 2-D CRS is
+    """A compound EGM96-height CRS gives EGM96 heights (+ N), a plain 2-D CRS is
     taken as ellipsoidal with one warning per path, each tile of a directory keeps its own."""
     t = from_origin(10.0, 47.0, 0.01, 0.01)
     data = np.full((100, 100), 500.0)
@@ -317,7 +317,7 @@ def test_geotiff_vertical_datum_from_its_crs_or_a_warning(tmp_path, caplog):
 
 
 def test_multiband_raster_is_not_a_dem(tmp_path):
-    """A 3-band radiance GeoTIFF (an orthorectified RGB) is refused as a DEM (issue 14)."""
+    """A 3-band radiance GeoTIFF (an orthorectified RGB) is refused as a DEM."""
     path = tmp_path / "radiance.tif"
     with rasterio.open(path, "w", driver="GTiff", width=8, height=6, count=3, dtype="float32",
                        crs="EPSG:4326", transform=from_origin(7.0, 46.0, 0.01, 0.01)) as ds:

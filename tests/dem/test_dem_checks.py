@@ -1,4 +1,4 @@
-"""Hostile DEMs (issue 15 reproducers): special files refused without hanging, invalid
+"""Hostile DEMs: special files refused without hanging, invalid
 georeferencing refused, implausible heights are no data, a half float32 GETASSE30 tile is not
 read as the int16 variant, and a DEM that gives no height is reported by ``map``."""
 
@@ -128,7 +128,7 @@ MARS_GEOGCS = ('GEOGCS["Mars 2000",DATUM["D_Mars_2000",SPHEROID["Mars_2000_IAU_I
 @pytest.mark.parametrize("ignore_body", ["", "YES"])
 def test_dem_off_the_earth_is_one_message(tmp_path, capsys, monkeypatch, crs, message,
                                           ignore_body):
-    """A DEM in an engineering CRS or on Mars (issue 26): one message naming the DEM and its
+    """A DEM in an engineering CRS or on Mars: one message naming the DEM and its
     CRS, exit 2, no output, also when PROJ is told to ignore the celestial body."""
     import pyproj
 
@@ -150,7 +150,7 @@ def test_dem_off_the_earth_is_one_message(tmp_path, capsys, monkeypatch, crs, me
 
 def test_a_dem_masked_by_a_mask_band_has_no_data_there(tmp_path):
     """GDAL and QGIS write no data as an internal mask band (0 under it), not as a nodata
-    value: the masked posts were read as 0 m heights, silently (QA of stop 49)."""
+    value: the masked posts are no data, not 0 m heights."""
     z = np.full((4, 6), 1500.0, np.float32)
     z[1:3, 2:4] = 0.0  # under the mask
     path = tmp_path / "masked.tif"
@@ -184,9 +184,9 @@ def test_a_copernicus_tile_given_as_a_file_is_above_the_geoid(tmp_path, caplog):
 
 
 def test_a_dem_in_a_national_height_datum_is_above_the_geoid(tmp_path, caplog):
-    """EPSG:3035 + EVRF2007 height, as European DEMs are tagged: "does not say its vertical
-    datum" and ellipsoidal heights before (-31 m mean, radiances off by up to 188); now the
-    heights are above the geoid, and the warning names the datum."""
+    """EPSG:3035 + EVRF2007 height, as European DEMs are tagged: the heights are above the
+    geoid and the warning names the datum (read as ellipsoidal heights, "does not say its
+    vertical datum", they would be 31 m low on average, radiances off by up to 188)."""
     from rasterio.crs import CRS
 
     z = np.full((10, 10), 1000.0, np.float32)
@@ -210,7 +210,7 @@ def pyproj_lonlat(x, y):
 
 def test_a_dem_with_ground_control_points_only_says_so(tmp_path):
     """``gdal_translate -gcp`` makes a raster with a CRS on its ground control points and no
-    geotransform: "the DEM has no coordinate reference system" was wrong (QA of stop 49)."""
+    geotransform: the message says so, not "the DEM has no coordinate reference system"."""
     from rasterio.control import GroundControlPoint
     from rasterio.crs import CRS
 
@@ -225,8 +225,8 @@ def test_a_dem_with_ground_control_points_only_says_so(tmp_path):
 
 
 def test_an_n1_product_chosen_as_a_dem_is_named_as_such(tmp_path):
-    """QA of stop 51: GDAL opens an N1 (its Envisat driver, ground control points), and the
-    message told the user to warp it with gdalwarp; it is a product, not a DEM."""
+    """GDAL opens an N1 (its Envisat driver, ground control points): the message names it a
+    product, not a DEM (and does not tell the user to warp it with gdalwarp)."""
     n1 = make_product(tmp_path / "MER_FR__1PNTEST.N1", height=64)
     with pytest.raises(DemError, match=r"an Envisat product \(N1\), not a DEM"):
         open_dem(n1)

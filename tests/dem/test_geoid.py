@@ -1,4 +1,4 @@
-"""EGM96 geoid undulations and DEM vertical datums (dem.geoid, issue 11)."""
+"""EGM96 geoid undulations and DEM vertical datums (dem.geoid)."""
 
 from __future__ import annotations
 
@@ -59,7 +59,7 @@ def test_vertical_crs_gives_the_datum():
     assert crs_datum("EPSG:4979") == ELLIPSOID
     assert crs_datum("EPSG:4326") is None and crs_datum("EPSG:32632") is None
     # a national height datum (EVRF2007, NAVD88) lies within metres of the geoid, not 47 m
-    # away as the ellipsoid: before, it was "no vertical datum" and the heights ellipsoidal
+    # away as the ellipsoid: not "no vertical datum" with the heights taken as ellipsoidal
     assert crs_datum("EPSG:3035+5621") == EGM2008
     assert other_height_datum("EPSG:3035+5621") == "EVRF2007 height"
     assert crs_datum("EPSG:4269+5703") == EGM2008

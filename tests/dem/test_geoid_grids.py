@@ -1,4 +1,4 @@
-"""Geoid grids as PROJ ships them (issue 26 item 1): both EGM96 names in PROJ's search path,
+"""Geoid grids as PROJ ships them both EGM96 names in PROJ's search path,
 EGM2008 for EGM2008 heights (Copernicus) when present, PROJ's network only when enabled, and a
 message naming every way to get a missing grid. No test uses the network."""
 

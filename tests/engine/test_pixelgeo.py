@@ -58,6 +58,7 @@ def test_direct_model_across_the_antimeridian():
     np.testing.assert_allclose(lo, [-180.0, -179.995], atol=1e-9)
 
 
+@pytest.mark.slow
 def test_flat_pixel_inverse_matches_the_tie_point_inverse():
     """Without heights the bilinear tie-point model restricted to a pixel cell is bilinear:
     the pixel inverse must find the tie-point antecedents."""
@@ -114,6 +115,7 @@ def test_a_jump_cell_hides_the_ground_behind_a_crest():
     assert cell_search(10.0 + 43.4 * 0.01, 45.0 - 0.025, 2.5, lon, lat)[:2] == (2, 33)
 
 
+@pytest.mark.slow
 def test_the_bracket_from_a_hint_is_the_bisection_of_the_whole_line():
     """``_bracket`` closed in from a predicted column (doubling steps, then bisection) finds the
     column the bisection of the whole line finds, from any hint (good, bad, off the line),

@@ -150,8 +150,8 @@ def test_ecef_geolocation_converges_on_both_paths(scene):
 
 
 def test_handbook_loop_without_heights_reads_no_height(scene):
-    """Defect 1 (issue 11): with no height and the ecef geolocation the handbook loop runs at
-    h = 0; it once read height[i, j] out of a 1 x 1 placeholder (random antecedents)."""
+    """With no height and the ecef geolocation the handbook loop runs at h = 0; it never reads
+    height[i, j] out of the 1 x 1 placeholder (which would give random antecedents)."""
     tp, grid, lon, lat, spans = scene
     fast = solve(tp, grid, lon, lat, None, HEIGHT_NONE, spans, model=1, geo=1, tolerance=1e-4)
     ref = solve(tp, grid, lon, lat, None, HEIGHT_NONE, spans, model=1, geo=1, tolerance=1e-4,
@@ -312,7 +312,7 @@ def test_a_column_window_solves_as_the_whole_rows(scene, method):
 def test_primary_nodes_depend_on_the_node_alone(scene):
     """A node outside the tie-point grid starts its Newton from the nearest edge tie point, not
     from the node computed before it: a window of the nodes gives their values bit for bit
-    (before, 124 of the 499 nodes outside differed in the last bits)."""
+    (a Newton started from the previous node would differ in the last bits)."""
     tp, grid, lon, _, _ = scene
     lat_tp, lon_tp, coef, df, dj = tp.kernel_args()
     nlon, nlat = primary_nodes(grid, 0, (256, lon.shape[1]), 16)

@@ -90,6 +90,7 @@ def test_unknown_method_is_an_options_error():
         resample(np.zeros((3, 3)), np.zeros(1), np.zeros(1), "lanczos")
 
 
+@pytest.mark.slow
 def test_overview_level_averages_2x2_ignoring_nodata_and_rounds_half_up():
     a = np.array([[4, 0, 7], [6, 0, 9], [0, 0, 2]], np.uint16)
     np.testing.assert_array_equal(overview_level(a, 0), [[5, 8], [0, 2]])  # (4+6)/2, (7+9)/2
@@ -263,6 +264,7 @@ def test_copy_window_swaps_big_endian_windows_as_numpy_converts_them():
 
 @pytest.mark.parametrize("place", [None, "rows", "window"])
 @pytest.mark.parametrize("dtype", [np.uint16, np.uint8])
+@pytest.mark.slow
 def test_gather_takes_every_point_of_long_runs(place, dtype):
     """Runs of points longer than a block (``GATHER_BLOCK``, band after band within it) and
     not a multiple of it: every point of every band is the image's value at its index (0 at

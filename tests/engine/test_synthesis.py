@@ -44,6 +44,7 @@ def test_ndvi_value_and_zero_sum() -> None:
     assert ndvi_value(0.0, 0.0) == 0.0
 
 
+@pytest.mark.slow
 def test_validity_from_flags() -> None:
     flags = np.array([[0, FLAG_GLINT_RISK, FLAG_INVALID, FLAG_BRIGHT, 16 | 1]], dtype=np.uint8)
     inside = np.array([[True, True, True, True, False]])
@@ -64,6 +65,7 @@ def _same(a: TileState, b: TileState) -> None:
         assert (x is None and y is None) or x.tobytes() == y.tobytes()
 
 
+@pytest.mark.slow
 def test_minimum_radiance_band_by_band() -> None:
     # two products, bands (7, 13); the stored state holds product 1
     stored = segment_state(np.array([[[50.0, 50.0, 0.0]], [[10.0, 10.0, 0.0]]], np.float32),
@@ -86,6 +88,7 @@ def test_segment_state_keeps_only_positive_valid_radiances() -> None:
     assert state.winner.tolist() == [[3, 3, 3, 0]] and state.count.tolist() == [[1, 1, 1, 0]]
 
 
+@pytest.mark.slow
 def test_segment_counts_state_is_the_counts_of_segment_state() -> None:
     """A product's contribution as 16-bit counts, made in one pass from the whole planes
     (a window from an origin), equals ``segment_state`` of the cropped window with its bands
@@ -115,6 +118,7 @@ def test_segment_counts_state_is_the_counts_of_segment_state() -> None:
 
 
 @pytest.mark.parametrize("ndvi", [False, True])
+@pytest.mark.slow
 def test_combine_is_associative_and_commutative(ndvi) -> None:
     """Any order and any grouping of the contributions gives the same bytes, ties included
     (products of equal radiance or equal NDVI code: the lower rank wins)."""
@@ -207,6 +211,7 @@ def test_chunk_changes_are_array_equal_and_any_per_block(dtype) -> None:
     assert bool(marks[3, 0] & CHUNK_CHANGED) == (dtype == np.float32)
 
 
+@pytest.mark.slow
 def test_bands_read_where_a_contribution_wins_are_those_of_the_whole_contribution() -> None:
     """Maximum NDVI on counts: a contribution whose bands are read at its merge, where it wins
     only (``winner_state`` + ``WinnerBands``), leaves the same bytes as the same contribution

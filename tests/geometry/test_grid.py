@@ -204,7 +204,8 @@ def test_polar_stereographic_steps_follow_the_bending():
     np.testing.assert_array_equal(part_lat, full_lat[37:201])
 
 
-@pytest.mark.parametrize("crs", ["EPSG:3995", "EPSG:4326"])
+@pytest.mark.parametrize("crs", [pytest.param("EPSG:3995", marks=pytest.mark.slow),
+                                 "EPSG:4326"])
 def test_a_column_window_holds_the_whole_rows_values(crs):
     """lon/lat of columns [c0, c1) are those of the whole rows bit for bit (the same nodes and
     cells), for windows anywhere, one column wide or ending on the last column."""
@@ -328,7 +329,7 @@ def test_terrain_margin_is_the_parallax_of_the_highest_terrain_in_pixels():
 
 
 def test_a_geographic_extent_beyond_the_poles_is_refused():
-    """QA of stop 43: --ul 13 95 --lr 14 45.8 made a grid reaching latitude 95."""
+    """--ul 13 95 --lr 14 45.8 is refused, not a grid reaching latitude 95."""
     from napari_meris_ortho.errors import OptionsError
 
     with pytest.raises(OptionsError, match="beyond \\+-90 degrees"):
@@ -340,7 +341,7 @@ def test_a_geographic_extent_beyond_the_poles_is_refused():
 
 
 def test_a_footprint_the_crs_cuts_at_the_antimeridian_is_refused():
-    """QA of stop 43: rr-antimeridian in EPSG:3857 made a 38534 x 1701 grid, 3.5 % of it
+    """rr-antimeridian in EPSG:3857 is refused: its grid would be 38534 x 1701, 3.5 % of it
     data (the footprint's two pieces at both ends of Web Mercator's x range). EPSG:4326 and
     Pacific Mercator (EPSG:3832) keep it compact."""
     from napari_meris_ortho.engine.boundary import segment_boundary
@@ -358,8 +359,8 @@ def test_a_footprint_the_crs_cuts_at_the_antimeridian_is_refused():
 
 
 def test_a_pixel_in_metres_given_to_a_geographic_crs_is_refused():
-    """QA of stop 43: ``map --pixel-size 260`` (EPSG:4326 by default) said "the extent misses
-    the product footprint"; the unit was the problem."""
+    """``map --pixel-size 260`` (EPSG:4326 by default) is refused for its unit (degrees), not
+    as "the extent misses the product footprint"."""
     from napari_meris_ortho.errors import OptionsError
 
     with pytest.raises(OptionsError, match=r"pixel size 260 in WGS 84 is in degrees"):

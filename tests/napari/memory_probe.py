@@ -1,4 +1,4 @@
-"""Resident memory of a fresh process around Orthorectify runs (issue 24, item 7), for
+"""Resident memory of a fresh process around Orthorectify runs, for
 ``test_responsive.test_finished_runs_keep_nothing_but_their_layers``.
 
     python memory_probe.py PRODUCT.N1 SETTINGS.yaml   (in a session with a DISPLAY: Xvfb)

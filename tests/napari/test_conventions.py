@@ -1,4 +1,4 @@
-"""napari conventions of the plugin's layers and widgets (issue 14): world units and labels, the
+"""napari conventions of the plugin's layers and widgets: world units and labels, the
 status bar, short layer names, reruns, legends, the N1 band axis and placement, settings."""
 
 from __future__ import annotations
@@ -10,6 +10,8 @@ import pytest
 from pyproj import Transformer
 
 from napari_meris_ortho.products.n1 import read_product, write_product
+
+pytestmark = pytest.mark.slow
 
 STAMP = "2003-09-21 09:23"  # sensing start of the tiny product
 

@@ -1,10 +1,13 @@
-"""The Orthorectify widget's DEM list survives napari's reset_choices and runs (issue 14, 2)."""
+"""The Orthorectify widget's DEM list survives napari's reset_choices and runs."""
 
 from __future__ import annotations
 
 import shutil
 
 import numpy as np
+import pytest
+
+pytestmark = pytest.mark.slow
 
 
 def _ortho_widget(viewer):

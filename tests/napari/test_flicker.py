@@ -47,6 +47,7 @@ def test_flicker_alternates_visibility(make_napari_viewer, qtbot):
     assert widget.status.value == "stopped"
 
 
+@pytest.mark.slow
 def test_key_binding_toggles(make_napari_viewer, qtbot):
     viewer = make_napari_viewer()
     _two_layers(viewer)
@@ -60,6 +61,7 @@ def test_key_binding_toggles(make_napari_viewer, qtbot):
     assert not widget.running
 
 
+@pytest.mark.slow
 def test_same_layer_is_refused(make_napari_viewer):
     viewer = make_napari_viewer()
     a, _ = _two_layers(viewer)
@@ -73,6 +75,7 @@ def test_same_layer_is_refused(make_napari_viewer):
         widget.export_gif()
 
 
+@pytest.mark.slow
 def test_removing_a_layer_stops_flicker(make_napari_viewer, qtbot):
     viewer = make_napari_viewer()
     a, b = _two_layers(viewer)
@@ -84,9 +87,10 @@ def test_removing_a_layer_stops_flicker(make_napari_viewer, qtbot):
     assert b.visible
 
 
+@pytest.mark.slow
 def test_the_layer_left_gets_its_visibility_back(make_napari_viewer, qtbot):
     """A layer removed while its pair flickers: the other one is shown again as it was before
-    the flicker, whichever frame the flicker was on (before, it could stay hidden)."""
+    the flicker, whichever frame the flicker was on (it never stays hidden)."""
     viewer = make_napari_viewer()
     a, b = _two_layers(viewer)
     widget = FlickerWidget(viewer)
@@ -99,6 +103,7 @@ def test_the_layer_left_gets_its_visibility_back(make_napari_viewer, qtbot):
     assert a.visible
 
 
+@pytest.mark.slow
 def test_gif_has_alternating_frames(make_napari_viewer, tmp_path):
     viewer = make_napari_viewer()
     a, b = _two_layers(viewer)
@@ -116,11 +121,12 @@ def test_gif_has_alternating_frames(make_napari_viewer, tmp_path):
     assert not list(tmp_path.glob("*.part"))
 
 
+@pytest.mark.slow
 def test_images_covering_the_pair_are_hidden_while_it_flickers(make_napari_viewer, qtbot,
                                                                 tmp_path):
-    """QA of stop 51: a shown image above the pair (another band of the reference) hid layer A
-    whenever B was off, in the flicker and in its GIF. Such images are hidden meanwhile;
-    thin geometry stays; everything is as before once it stops."""
+    """A shown image above the pair (another band of the reference) would hide layer A whenever
+    B is off, in the flicker and in its GIF. Such images are hidden meanwhile; thin geometry
+    stays; everything is as before once it stops."""
     viewer = make_napari_viewer()
     a, b = _two_layers(viewer)
     cover = viewer.add_image(np.full((64, 64), 0.5, np.float32), name="cover",
@@ -143,6 +149,7 @@ def test_images_covering_the_pair_are_hidden_while_it_flickers(make_napari_viewe
     assert cover.visible
 
 
+@pytest.mark.slow
 def test_gif_export_rejects_bad_rate(make_napari_viewer, tmp_path):
     viewer = make_napari_viewer()
     a, b = _two_layers(viewer)
@@ -151,6 +158,7 @@ def test_gif_export_rejects_bad_rate(make_napari_viewer, tmp_path):
     assert not (tmp_path / "x.gif").exists()
 
 
+@pytest.mark.slow
 def test_measure_disparity_finds_known_shift(make_napari_viewer):
     from scipy.ndimage import gaussian_filter
 

@@ -1,15 +1,17 @@
-"""Flicker defaults know their job (issue 24, item 5): the newest orthorectified band against
+"""Flicker defaults know their job: the newest orthorectified band against
 the reference image, not the two top-most layers ("elevation source" / "elevation")."""
 
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from napari_meris_ortho._napari.widget_flicker import FlickerWidget, default_pair
 from napari_meris_ortho._napari.widget_ortho import OrthorectifyWidget
 from napari_meris_ortho.simulate.scene import generate_scene
 
 
+@pytest.mark.slow
 def test_sample_then_run_pairs_newest_ortho_with_reference(make_napari_viewer, qtbot):
     viewer = make_napari_viewer()
     viewer.open_sample("napari-meris-ortho", "fr-small")
@@ -35,6 +37,7 @@ def test_sample_then_run_pairs_newest_ortho_with_reference(make_napari_viewer, q
     assert both.sum() > 100_000 and np.corrcoef(a[both], b[both])[0, 1] > 0.95
 
 
+@pytest.mark.slow
 def test_without_reference_the_previous_product_then_the_uncorrected(make_napari_viewer):
     viewer = make_napari_viewer()
     img = np.ones((8, 8), np.float32)
@@ -51,9 +54,10 @@ def test_without_reference_the_previous_product_then_the_uncorrected(make_napari
     assert default_pair(list(viewer.layers)) == (second, first)
 
 
+@pytest.mark.slow
 def test_a_reference_geotiff_pairs_by_its_meris_band(make_napari_viewer):
-    """QA of stop 51: the reader gave a GeoTIFF layer its place in the file as its band, so
-    "ortho b7" was paired with the reference's third band (13), not its band 7."""
+    """A GeoTIFF layer's band is its MERIS band, not its place in the file: "ortho b7" pairs
+    with the reference's band 7, not its third band (13)."""
     viewer = make_napari_viewer()
     reference = generate_scene("fr-small").reference_path  # bands 5, 7, 13
     layers = viewer.open(reference, plugin="napari-meris-ortho")
@@ -78,9 +82,11 @@ def test_meris_band_of_a_geotiff_band():
         assert meris_band_of(description) is None, description
 
 
+@pytest.mark.slow
 def test_a_synthesis_band_counts_as_orthorectified(make_napari_viewer):
-    """QA of stop 51: only layers named "ortho..." were, so a store's band 7 against the
-    reference got the reference's bands 13 and 7 as the pair."""
+    """A synthesis store's band counts as orthorectified, not only layers named "ortho...": a
+    store's band 7 against the reference pairs with the reference's band 7 (not its bands 13
+    and 7)."""
     viewer = make_napari_viewer()
     img = np.ones((8, 8), np.float32)
     reference = [viewer.add_image(img, name=f"reference band {b} radiance",

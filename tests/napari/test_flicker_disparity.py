@@ -1,4 +1,4 @@
-"""Flicker widget's "Measure disparity" on geocoded layers (issue 14, defects 1 and 7): the
+"""Flicker widget's "Measure disparity" on geocoded layers: the
 matched-point vectors are drawn a pixel or two wide, and the analysis runs in a worker."""
 
 from __future__ import annotations
@@ -7,6 +7,8 @@ import numpy as np
 import pytest
 import rasterio
 from rasterio.transform import Affine
+
+pytestmark = pytest.mark.slow
 
 PIXEL = 260.0
 X0, Y0 = 400_000.0, 5_100_000.0  # UTM 32N, upper-left corner
@@ -59,7 +61,8 @@ def test_disparity_runs_in_a_worker(make_napari_viewer, qtbot, shifted_pair):
     assert np.median(world_dx) == pytest.approx(10 * 2 * PIXEL, rel=0.02)
     np.testing.assert_allclose(vectors.scale, a.scale)
     np.testing.assert_allclose(vectors.translate, a.translate)
-    # QA of stop 51: over the vectors the status bar gave raw world numbers (negative northing)
+    # over the vectors the status bar gives easting and northing, not raw world numbers
+    # (a negative northing)
     x, y = X0 + 10.5 * PIXEL, Y0 - 20.5 * PIXEL
     coords = vectors.get_status((-y, x), view_direction=None, dims_displayed=[0, 1],
                                 world=True)["coords"]
@@ -68,11 +71,11 @@ def test_disparity_runs_in_a_worker(make_napari_viewer, qtbot, shifted_pair):
 
 def test_disparity_reads_and_warps_its_layers_off_the_qt_thread(make_napari_viewer, qtbot,
                                                                  tmp_path, monkeypatch):
-    """The layers read whole and B warped onto A's grid came before the worker, on the Qt
-    thread ("Measure disparity" held the window 0.55 s on fr-alps, with the kernels that kept
-    the GIL, now ``nogil``). Both are now the worker's, GDAL's warp without a pyproj object
-    (a pooled Qt thread crashed in PROJ); B on a grid of its own (10 columns more to the west)
-    still measures +2 pixels, twice (the pool's thread used again)."""
+    """Reading the layers whole and warping B onto A's grid are the worker's, not the Qt
+    thread's (there "Measure disparity" would hold the window about 0.5 s on fr-alps; the
+    kernels are ``nogil``). GDAL's warp runs without a pyproj object (one crashes PROJ in a
+    pooled Qt thread); B on a grid of its own (10 columns more to the west) measures +2 pixels,
+    twice (the pool's thread used again)."""
     import threading
 
     from scipy.ndimage import gaussian_filter
@@ -131,8 +134,8 @@ def test_disparity_vectors_are_thin_on_screen(make_napari_viewer, qtbot, shifted
 
 
 def test_an_rgb_layer_is_named_as_the_reason(make_napari_viewer, shifted_pair):
-    """QA of stop 43: an RGB composite against a band gave "different shapes and no
-    georeference" although both were on one grid."""
+    """An RGB composite against a band on the same grid is refused as an RGB layer (not as
+    "different shapes and no georeference")."""
     viewer = make_napari_viewer()
     widget, a, _ = _flicker(viewer, *shifted_pair)
     rgb = viewer.add_image(np.zeros((*a.data.shape, 3), np.float32), rgb=True, name="an RGB",
@@ -144,8 +147,8 @@ def test_an_rgb_layer_is_named_as_the_reason(make_napari_viewer, shifted_pair):
 
 
 def test_a_labels_layer_is_named_as_the_reason(make_napari_viewer, shifted_pair):
-    """QA of stop 49: a labels layer (flags, elevation source) was correlated as if it were
-    radiances and gave "no candidate point above the confidence threshold"."""
+    """A labels layer (flags, elevation source) is refused as labels, not correlated as if it
+    were radiances (which ends in "no candidate point above the confidence threshold")."""
     viewer = make_napari_viewer()
     widget, a, _ = _flicker(viewer, *shifted_pair)
     labels = viewer.add_labels(np.ones(a.data.shape, np.uint8), name="flags",

@@ -1,5 +1,5 @@
 """The flicker key (Shift-F) is declared in the manifest, works through a real key event on the
-canvas and is unbound when the Flicker widget closes (issue 14, contributions)."""
+canvas and is unbound when the Flicker widget closes."""
 
 from __future__ import annotations
 

@@ -1,8 +1,7 @@
-"""Lazy multiscale layers (issue 24, item 2): an N1 or a COG opens as pyramids read on demand;
-napari shows the level that fits the canvas and reads only that.
-
-Before, the reader read the whole product (four full float32 bands for the contrast limits and
-the RGB quick-look: 2.5-3.2 s for fr-alps) and napari uploaded full-resolution textures.
+"""Lazy multiscale layers: an N1 or a COG opens as pyramids read on demand; napari shows the
+level that fits the canvas and reads only that, not the whole product (four full float32 bands
+for the contrast limits and the RGB quick-look: about 3 s for fr-alps) in full-resolution
+textures.
 """
 
 from __future__ import annotations
@@ -41,8 +40,8 @@ def big_n1(tmp_path_factory):
 
 def test_opening_reads_a_fraction_of_one_band(big_n1):
     """The reader reads the coarsest level only: it allocates less than one full float32 band
-    (12.5 MB); before it read four full bands (band 7 for the contrast limits, 7, 5 and 2 for
-    the quick-look) and stretched them."""
+    (12.5 MB), not four full bands (band 7 for the contrast limits, 7, 5 and 2 for the
+    quick-look) read and stretched."""
     read_product(big_n1)  # the headers' own allocations are not the reader's
     tracemalloc.start()
     try:
@@ -60,8 +59,8 @@ def test_opening_reads_a_fraction_of_one_band(big_n1):
 def test_an_n1_selection_converts_only_its_own_pixels(big_n1):
     """A decimated level or a tile of an N1 band converts the selected columns of the selected
     lines to radiance, not the whole lines: every 4th line and column allocates what it returns
-    (0.8 MB), a 512 x 512 tile too (1.0 MB); before, 6.3 MB and 9.2 MB at the peak (whole lines
-    as float32 twice, one of them kept alive by the returned view)."""
+    (0.8 MB), a 512 x 512 tile too (1.0 MB), not whole lines as float32 twice, one of them
+    kept alive by the returned view (6.3 MB and 9.2 MB at the peak)."""
     from napari_meris_ortho._napari.reader import radiance_reader
 
     product = read_product(big_n1)
@@ -100,6 +99,7 @@ def test_levels_hold_the_product_values(big_n1):
     np.testing.assert_array_equal(np.asarray(flags[1]), product.flags[::2, ::2])
 
 
+@pytest.mark.slow
 def test_viewer_shows_a_decimated_level_of_the_n1(make_napari_viewer, big_n1):
     viewer = make_napari_viewer(show=True)
     layers = viewer.open(str(big_n1), plugin="napari-meris-ortho")
@@ -142,10 +142,11 @@ def test_cog_opens_on_its_own_overviews(make_napari_viewer, tmp_path):
     assert np.asarray(layer.data[1][:20]).max() == 0  # background stays 0, not nodata x scale
 
 
+@pytest.mark.slow
 def test_a_cog_of_gdals_cog_driver_opens_with_its_odd_overviews(make_napari_viewer, tmp_path):
     """GDAL's COG driver rounds an overview's size down (627 lines: 313, 156), the pyramid's
     levels are ceil(n / f) (314, 157): the last line and column of a level repeat the
-    overview's last ones. Before, a view reaching them failed ("cannot reshape array")."""
+    overview's last ones: a view reaching them reads (no "cannot reshape array")."""
     import rasterio.shutil
     from rasterio.transform import from_origin
 
@@ -171,6 +172,7 @@ def test_a_cog_of_gdals_cog_driver_opens_with_its_odd_overviews(make_napari_view
     np.testing.assert_array_equal(np.asarray(layer.data[0][620:, 1000:]), values[620:, 1000:])
 
 
+@pytest.mark.slow
 def test_multiscale_layer_saves_its_full_resolution(make_napari_viewer, tmp_path):
     """File > Save Selected Layers on a multiscale layer writes level 0 (the plugin's writer;
     np.asarray of napari's multiscale data would not even be an image)."""
@@ -198,6 +200,7 @@ def _cog(tmp_path):
                      offsets=[0.0], halve=overview_level)
 
 
+@pytest.mark.slow
 def test_an_n1_is_drawn_before_its_layers_controls_are_made(make_napari_viewer, qtbot, tiny_n1,
                                                              monkeypatch):
     """Opening an N1 inserts three layers in one napari call; their controls (and Qt's styling
@@ -235,6 +238,7 @@ def test_an_n1_is_drawn_before_its_layers_controls_are_made(make_napari_viewer, 
     assert container.widgets == {}
 
 
+@pytest.mark.slow
 def test_an_n1s_flags_overlays_are_built_after_its_first_frame(make_napari_viewer, qtbot,
                                                               tiny_n1):
     """napari builds a labels layer's polygon and brush overlays at its insertion (0.07-0.08 s

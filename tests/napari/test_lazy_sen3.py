@@ -1,10 +1,8 @@
-"""A ``.SEN3`` opens like an N1 (issue 24, item 2): multiscale layers read on demand, the
-quick-look stretched from the coarsest level, a band read whole when first shown and the last
-few kept (``pyramid.WholeBands``), the flags read when first shown.
-
-Before, a ``.SEN3`` opened as one level, read eagerly: four full float32 bands (band 7 for the
-contrast limits, 7, 5 and 2 for the quick-look), its quality flags decoded whole, and every
-tile napari drew read its band whole again.
+"""A ``.SEN3`` opens like an N1: multiscale layers read on demand, the quick-look stretched from
+the coarsest level, a band read whole when first shown and the last few kept
+(``pyramid.WholeBands``), the flags read when first shown. Not one level read eagerly: four full
+float32 bands (band 7 for the contrast limits, 7, 5 and 2 for the quick-look), its quality flags
+decoded whole, and every tile napari draws reading its band whole again.
 """
 
 from __future__ import annotations
@@ -62,6 +60,7 @@ def pair(tmp_path_factory):
     return n1, sen3
 
 
+@pytest.mark.slow
 def test_sen3_opens_as_multiscale_levels_of_its_bands(pair):
     """Every level of the SEN3's layers is its eager array decimated (every 2nd, 4th line and
     column): radiances (no data NaN), the quick-look stretched by the coarsest level's 1-99 %
@@ -119,9 +118,9 @@ def test_sen3_layers_equal_the_n1_layers(pair):
 
 def test_opening_a_sen3_reads_the_quicklook_bands_only(pair):
     """Opening reads the three quick-look bands' counts (uint16, kept) and decimates them:
-    less than three full float32 bands allocated at the peak (30 MB measured); before it read
-    four float32 bands, stretched three full ones and decoded the uint32 quality flags
-    (117 MB)."""
+    less than three full float32 bands allocated at the peak (about 30 MB; reading four
+    float32 bands, stretching three full ones and decoding the uint32 quality flags would take
+    117 MB)."""
     read_layers(str(pair[1]))  # imports and the headers' own allocations are not the reader's
     tracemalloc.start()
     try:
@@ -154,6 +153,7 @@ def test_whole_bands_keeps_the_last_bands_read(pair):
     assert list(bands._counts) == [12, 13, 14, 15, 10, 1]  # the oldest (11) dropped
 
 
+@pytest.mark.slow
 def test_viewer_shows_a_decimated_level_of_the_sen3(make_napari_viewer, pair):
     """In a real viewer: every layer multiscale, the canvas shows a decimated level, and the
     band slider shows each band's values at that level."""

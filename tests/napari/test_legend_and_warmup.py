@@ -1,4 +1,4 @@
-"""Issue 24 item 4: the parallax colour legend is on the canvas (text overlay naming the height
+"""The parallax colour legend is on the canvas (text overlay naming the height
 range of the colours) while a parallax layer is visible, and the widget's own warm-up DEM says
 its vertical datum (no warning at every opening of the widget)."""
 
@@ -7,12 +7,14 @@ from __future__ import annotations
 import logging
 
 import numpy as np
+import pytest
 
 from qt_paints import paints_of
 
 STAMP = " · 2003-09-21 09:23"
 
 
+@pytest.mark.slow
 def test_parallax_legend_on_the_canvas(make_napari_viewer, qtbot, tiny_n1, tiny_dem):
     viewer = make_napari_viewer(show=True)  # a hidden canvas draws no overlays
     _, widget = viewer.window.add_plugin_dock_widget("napari-meris-ortho", "Orthorectify")
@@ -68,12 +70,13 @@ def _glyphs_rendered(viewer) -> int:
     return len(_overlay_font(viewer)._glyphs)
 
 
+@pytest.mark.slow
 def test_legend_glyphs_are_rendered_before_a_run(make_napari_viewer, qtbot):
     """The widget has the overlay's font render the legend's characters beforehand, a few per
-    turn: the first legend of a session no longer renders them (0.2-0.6 s under software GL)
-    in the frame that shows the run's layers. No frame is drawn for them but the overlay's
-    first (its shaders, in the widget's opening: transparent text) and its last (the overlay
-    hidden and emptied): each turn drew the canvas, 0.13-0.16 s over a run's layers."""
+    turn: the first legend of a session does not render them (0.2-0.6 s under software GL) in
+    the frame that shows the run's layers. No frame is drawn for them but the overlay's first
+    (its shaders, in the widget's opening: transparent text) and its last (the overlay hidden
+    and emptied): a frame drawn at each turn would cost 0.13-0.16 s over a run's layers."""
     from napari_meris_ortho._napari.legend import GLYPHS
 
     viewer = make_napari_viewer(show=True)
@@ -96,12 +99,13 @@ def test_legend_glyphs_are_rendered_before_a_run(make_napari_viewer, qtbot):
     assert np.array_equal(np.asarray(overlay.color), color)  # napari's own colour back
     font = _overlay_font(viewer)
     assert set(GLYPHS) - {" "} <= set(font._glyphs)
-    assert len(paints) <= 4, len(paints)  # 24 turns of glyphs drew 24 frames before
+    assert len(paints) <= 4, len(paints)  # not one frame per turn of glyphs (24 turns)
 
 
+@pytest.mark.slow
 def test_legend_glyphs_wait_while_a_run_runs(make_napari_viewer, qtbot, tiny_n1, tiny_dem):
     """A run started as the widget opens: the glyphs' preparation waits while it runs (its
-    job's thread held the GIL for most of a glyph's rendering: 0.07-0.11 s turns against
+    job's thread holds the GIL for most of a glyph's rendering: 0.07-0.11 s turns against
     0.01-0.03 s, fr-alps), and the run's legend shows once they are ready."""
     from qtpy.QtCore import QTimer
 
@@ -125,6 +129,7 @@ def test_legend_glyphs_wait_while_a_run_runs(make_napari_viewer, qtbot, tiny_n1,
     assert overlay.visible and overlay.color[-1] == 1.0  # seen
 
 
+@pytest.mark.slow
 def test_text_put_in_the_overlay_during_the_preparation_is_seen(make_napari_viewer, qtbot):
     """A user's own text in the canvas overlay while the glyphs are being prepared stops the
     preparation and is seen: the preparation's transparent colour goes back (it stayed)."""

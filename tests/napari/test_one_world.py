@@ -1,4 +1,4 @@
-"""Issue 24 item 3: one world. Product layers (an N1 opened with the reader) and the map layers
+"""One world. Product layers (an N1 opened with the reader) and the map layers
 of a run share the output CRS and its unit, so napari keeps units (no "Inconsistent units"
 warning, scale bar in metres); an N1 opened first founds the world where it lies, and a run in
 another CRS is moved into that world with its geometry sized in the world's units."""
@@ -9,7 +9,10 @@ import numpy as np
 import pytest
 from napari.utils.notifications import notification_manager
 
+from napari_meris_ortho._napari.layout import camera_of
 from napari_meris_ortho._napari.widget_ortho import CRS_GEOGRAPHIC, OrthorectifyWidget
+
+pytestmark = pytest.mark.slow
 
 STAMP = " · 2003-09-21 09:23"
 
@@ -60,7 +63,7 @@ def test_product_and_map_layers_share_units(make_napari_viewer, qtbot, tiny_n1, 
     gap = np.hypot(*(_centre(n1_rgb) - _centre(ortho_rgb)))
     assert gap < 10_000.0, gap
     # the camera frames the result (napari's fit_to_view(layers=) fails over a 3-D band stack)
-    assert np.hypot(*(np.asarray(viewer.camera.center)[-2:] - _centre(ortho_rgb))) < 10_000.0
+    assert np.hypot(*(np.asarray(camera_of(viewer).center)[-2:] - _centre(ortho_rgb))) < 10_000.0
     # the band axis in front of the same world
     radiance = viewer.layers[f"radiance{STAMP}"]
     assert [str(u) for u in radiance.units[-2:]] == ["meter", "meter"]

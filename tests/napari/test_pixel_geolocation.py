@@ -12,6 +12,8 @@ from napari_meris_ortho._napari.reader import get_reader
 from napari_meris_ortho._napari.widget_flicker import FlickerWidget
 from napari_meris_ortho._napari.widget_ortho import OrthorectifyWidget
 
+pytestmark = pytest.mark.slow
+
 
 @pytest.fixture(scope="module")
 def scene():

@@ -3,10 +3,12 @@
 from __future__ import annotations
 
 import datetime as dt
+import warnings
 
 import numpy as np
 import pytest
 import rasterio
+from rasterio.errors import NotGeoreferencedWarning
 from rasterio.transform import Affine
 
 from napari_meris_ortho._napari.reader import get_reader, read_layers
@@ -141,7 +143,7 @@ def test_geotiff_other_crs_reprojected_onto_frame(tmp_path):
     (data, kw, _), = geotiff_layers(path, frame)
     assert kw["scale"] == layer_scale(frame) and kw["metadata"]["reprojected"]
     # on the frame's pixels, but the whole reference (3 x 2 degrees), not cut to the frame's
-    # 50 x 40 km (QA of stop 49: a second raster was cut to the first layer's extent)
+    # 50 x 40 km: a second raster is not cut to the first layer's extent
     offset = (np.array(kw["translate"]) - np.array(layer_translate(frame))) / np.array(
         layer_scale(frame))
     np.testing.assert_allclose(offset, np.round(offset), atol=1e-6)
@@ -183,9 +185,11 @@ def test_geotiff_same_crs_other_pixel_size_overlays(tmp_path):
 
 def test_geotiff_without_crs_is_refused(tmp_path):
     path = tmp_path / "plain.tif"
-    with rasterio.open(path, "w", driver="GTiff", width=4, height=4, count=1,
-                       dtype="float32") as ds:
-        ds.write(np.ones((1, 4, 4), np.float32))
+    with warnings.catch_warnings():  # written without georeferencing, as meant
+        warnings.simplefilter("ignore", NotGeoreferencedWarning)
+        with rasterio.open(path, "w", driver="GTiff", width=4, height=4, count=1,
+                           dtype="float32") as ds:
+            ds.write(np.ones((1, 4, 4), np.float32))
     with pytest.raises(MerisOrthoError, match="no CRS"):
         read_layers(str(path))
 
@@ -205,6 +209,7 @@ def test_sparse_huge_geotiff_is_refused_before_reading(tmp_path):
     assert str(info.value).startswith(f"{path}: ")
 
 
+@pytest.mark.slow
 def test_reader_in_viewer_reprojects_onto_first_geocoded_layer(make_napari_viewer, tmp_path):
     viewer = make_napari_viewer()
     base = _write_tif(tmp_path / "base.tif", np.ones((30, 40), np.float32), "EPSG:32632",
@@ -225,11 +230,12 @@ def test_reader_in_viewer_reprojects_onto_first_geocoded_layer(make_napari_viewe
     assert np.all(np.asarray(layer.data)[r:r + 30, c:c + 40] == pytest.approx(7.0))
 
 
+@pytest.mark.slow
 def test_a_geotiff_reprojected_onto_the_world_keeps_the_window_turning(make_napari_viewer,
                                                                          tmp_path, qtbot):
     """A GeoTIFF in another CRS than the viewer's world is reprojected inside napari's call of
-    the reader, on the Qt thread: the fr-alps reference onto its N1's UTM world froze the
-    window 2.3-3.2 s (measured). The warp now runs in a thread while the window's timers and
+    the reader, on the Qt thread: warping the fr-alps reference onto its N1's UTM world there
+    would freeze the window for 2-3 s. The warp runs in a thread while the window's timers and
     paints go on (``_qt.waiting.responsively``), and the bands come back as pyramids (napari
     uploads the level that fits the canvas); ``viewer.open`` still returns the layers whole."""
     import time
@@ -268,7 +274,7 @@ def test_a_geotiff_reprojected_onto_the_world_keeps_the_window_turning(make_napa
         timer.stop()
     ((start, end),) = warps
     during = [t for t in ticks if start <= t <= end]
-    # the window turned while the warp ran (no turn at all before: 0 ticks in 0.2 s)
+    # the window turned while the warp ran (a warp on the Qt thread: 0 ticks in 0.2 s)
     assert end - start > 0.05 and len(during) >= 3, (end - start, len(during))
     assert layer.multiscale and layer.metadata["reprojected"]
     assert layer.data[0].shape[0] > 1024  # whole: about 120 x 200 km on 100 m pixels
@@ -296,11 +302,12 @@ def _rgb_tif(path, rgb, alpha=None, overviews=()):
 
 
 @pytest.mark.parametrize("big", [False, True])
+@pytest.mark.slow
 def test_an_rgb_geotiff_opens_as_one_rgb_layer(make_napari_viewer, tmp_path, big):
     """A true-colour reference image (PHOTOMETRIC=RGB, with or without alpha), as GDAL, QGIS or
-    a satellite's TCI write it, is one RGB layer, transparent where its alpha is 0; before, it
-    opened as three (four) grey layers, the alpha band an opaque one on top (QA of stop 49).
-    A big one reads its levels on demand, from its overviews."""
+    a satellite's TCI write it, is one RGB layer, transparent where its alpha is 0 (not three or
+    four grey layers, the alpha band an opaque one on top). A big one reads its levels on
+    demand, from its overviews."""
     h, w = (2600, 2200) if big else (60, 80)
     rows, cols = np.mgrid[0:h, 0:w]
     rgb = np.stack([(rows % 256), (cols % 256), ((rows + cols) % 256)], -1).astype(np.uint8)
@@ -329,11 +336,12 @@ def full_res(layer):
     return layer.data[0] if layer.multiscale else layer.data
 
 
+@pytest.mark.slow
 def test_south_up_rotated_and_gcp_geotiffs_open_north_up(make_napari_viewer, tmp_path):
     """A south-up raster (positive y pixel size), a rotated geotransform and ground control
     points only (``gdal_translate -gcp``) are valid GDAL georeferencing: each opens north-up,
-    warped by GDAL (nearest: the south-up pixels exactly, flipped). Before: "raster is not
-    north-up", or "refused the file" with no reason (QA of stop 49)."""
+    warped by GDAL (nearest: the south-up pixels exactly, flipped), never refused as "not
+    north-up" or with no reason."""
     from rasterio.control import GroundControlPoint
     from rasterio.crs import CRS
 
@@ -368,7 +376,7 @@ def test_south_up_rotated_and_gcp_geotiffs_open_north_up(make_napari_viewer, tmp
 
 def test_longitudes_beyond_180_land_beside_the_same_ground(tmp_path):
     """A geographic raster in longitudes 190..193 opened into a world at -170..-167 (the same
-    ground) lay 360 degrees away (QA of stop 49); it now overlays that ground."""
+    ground) overlays that ground, not a place 360 degrees away."""
     from napari_meris_ortho._napari.reader import geotiff_layers
 
     frame = OutputGrid.from_transform("EPSG:4326", (0.01, 0, -170.0, 0, -0.01, 10.0), (300, 300))
@@ -380,11 +388,12 @@ def test_longitudes_beyond_180_land_beside_the_same_ground(tmp_path):
     assert (np.asarray(data) == 3.0).mean() > 0.9
 
 
+@pytest.mark.slow
 def test_an_n1_is_read_off_the_qt_thread_while_the_window_turns(make_napari_viewer, n1_path,
                                                                  tmp_path, qtbot, monkeypatch):
     """napari calls the reader on its Qt thread: a session's first N1 (its readers' imports,
-    reading, levels and placement, and napari's own import of xarray for its first layer) held
-    the window for the whole of a first open (1.1 s on fr-alps, measured). That now runs in a
+    reading, levels and placement, and napari's own import of xarray for its first layer) would
+    hold the window for the whole of a first open (about 1 s on fr-alps). That runs in a
     thread while the window's timers go on; the coarse-placement warning is still given, from
     the Qt thread. Here xarray is loaded already: the first read is told it is pending."""
     import threading
@@ -431,7 +440,7 @@ def test_an_n1_is_read_off_the_qt_thread_while_the_window_turns(make_napari_view
     main = threading.main_thread().name
     assert name != main and name2 != main, (name, name2)
     during = [t for t in ticks if start <= t <= end]
-    assert len(during) >= 3, len(during)  # the window turned in the 0.3 s (none before)
+    assert len(during) >= 3, len(during)  # the window turned in the 0.3 s
     assert [layer.name.split(" · ")[0] for layer in layers] == ["radiance", "RGB 7-5-2", "flags"]
     assert layers[0].multiscale and layers[0].data[0].shape == (15, H, W)
 
@@ -449,13 +458,14 @@ def test_only_a_sessions_first_product_is_read_in_a_thread(n1_path):
     assert out.stdout.split() == ["True", "False"], out.stderr[-2000:]
 
 
+@pytest.mark.slow
 def test_a_big_geotiff_without_overviews_is_read_once_off_the_qt_thread(make_napari_viewer,
                                                                          tmp_path, monkeypatch):
-    """A GeoTIFF with no overviews opened on its own grid was read on demand, and each level's
-    read (the contrast limits, napari's first slice of each band) read the whole band on the
-    Qt thread: the fr-alps reference (3810 x 2955, 3 bands) held the window 1.6-2.8 s at every
-    opening (measured). It is now read once, in a thread, into in-memory levels; a COG still
-    opens on its own overviews (``test_lazy_layers``)."""
+    """A GeoTIFF with no overviews opened on its own grid is read once, in a thread, into
+    in-memory levels: read on demand, each level's read (the contrast limits, napari's first
+    slice of each band) would read the whole band on the Qt thread (the fr-alps reference, 3810
+    x 2955, 3 bands, would hold the window about 2 s at every opening). A COG still opens on its
+    own overviews (``test_lazy_layers``)."""
     import threading
 
     from napari_meris_ortho._napari import reader

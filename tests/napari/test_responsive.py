@@ -1,13 +1,12 @@
-"""The Orthorectify widget never blocks the Qt event loop (issue 24, item 1) and lets go of a
-finished run (item 7).
+"""The Orthorectify widget never blocks the Qt event loop and lets go of a finished run.
 
 The longest gap between two turns of the event loop is measured with a 10 ms QTimer recording
-timestamps. Before, the result layers were built (contrast limits, RGB stretch, geometry) and
-added in one turn on the Qt thread: 4-7 s on fr-small on the shared test machine. Now all of
-that runs in the job and the Qt thread inserts one ready layer per turn, without making it the
-active layer; the layers a rerun replaces go one per turn inside one napari batch, so napari
-collects garbage once, in a turn of its own. One napari insertion (vispy visual, layer controls)
-or that collection is what remains.
+timestamps. The result layers are built (contrast limits, RGB stretch, geometry) in the job, off
+the Qt thread: built and added in one turn, they would freeze the viewer for seconds on
+fr-small. The Qt thread inserts one ready layer per turn, without making it the active layer;
+the layers a rerun replaces go one per turn inside one napari batch, so napari collects garbage
+once, in a turn of its own. The longest turn left is one napari insertion (vispy visual, layer
+controls) or that collection.
 """
 
 from __future__ import annotations
@@ -18,16 +17,17 @@ import numpy as np
 import pytest
 from qtpy.QtCore import QTimer
 
+from napari_meris_ortho._napari.layout import camera_of
 from napari_meris_ortho._napari.widget_ortho import OrthorectifyWidget
 from napari_meris_ortho.simulate.scene import generate_scene
 from qt_paints import paints_of
 
+pytestmark = pytest.mark.slow
+
 #: longest event-loop gap allowed during a run: one napari layer insertion or napari's one
-#: garbage collection after the replaced layers went, with room for a loaded 2-core machine
-#: (0.51-0.83 s measured beside three other agents' jobs, load average 5.7-7.3); before this, the
-#: replaced layers' removals collected garbage one by one, every insertion switched the layer
-#: controls and two steps could run in one turn: 0.64-1.79 s in the same conditions (2.5 s
-#: allowed); before issue 24, one turn built and added every layer: 4-7 s
+#: garbage collection after the replaced layers went (about 0.5-0.8 s on a busy 2-core
+#: machine), with room to spare. Collecting garbage at each removal, switching the layer
+#: controls at each insertion or running two steps in one turn would exceed it.
 MAX_GAP_S = 1.5
 
 
@@ -66,9 +66,9 @@ def test_event_loop_keeps_turning_during_a_run(make_napari_viewer, qtbot, tiny_n
     from napari_meris_ortho._napari import widget_ortho
 
     # the widget's opening ends with a full garbage collection before ``freeze_long_lived``; it
-    # waits while a run goes on, so a run started at once pushed it into the measured run's
-    # last turns: 1.57 s in this pytest process's heap (the suite's earlier tests), where a
-    # napari session's takes 0.1 s. The runs start after it, as a user's would.
+    # waits while a run goes on, so a run started at once would push it into the measured run's
+    # last turns (over a second in this pytest process's heap, the suite's earlier tests, where
+    # a napari session's takes 0.1 s). The runs start after it, as a user's would.
     frozen: list[bool] = []
     freeze = widget_ortho.freeze_long_lived
     monkeypatch.setattr(widget_ortho, "freeze_long_lived",
@@ -110,8 +110,8 @@ def test_cancel_acts_within_half_a_second(make_napari_viewer, qtbot, fr_small):
 
 def test_finished_runs_keep_nothing_but_their_layers(fr_small, tmp_path):
     """Four runs, all layers removed: resident memory within 10 % of before them. Measured in a
-    fresh process (``memory_probe.py``: one warm-up run, then the four), on this session's
-    display: in the pytest process the earlier tests' allocations moved the figure by 10 %."""
+    fresh process (``memory_probe.py``: one warm-up run, then the four), on the test's display:
+    in the pytest process the earlier tests' allocations would move the figure by 10 %."""
     import json
     import subprocess
     import sys
@@ -129,8 +129,8 @@ def test_finished_runs_keep_nothing_but_their_layers(fr_small, tmp_path):
 
 
 def test_camera_frames_the_result(make_napari_viewer, qtbot, tiny_n1):
-    """After a run the camera frames the result, not the whole viewer (issue 24, item 4: the
-    result showed as a small patch in a mostly black canvas)."""
+    """After a run the camera frames the result, not the whole viewer (where the result would
+    show as a small patch in a mostly black canvas)."""
     from napari_meris_ortho._napari.world import geo_image_kwargs
     from napari_meris_ortho.geometry.grid import OutputGrid
 
@@ -145,18 +145,18 @@ def test_camera_frames_the_result(make_napari_viewer, qtbot, tiny_n1):
     _run(widget, qtbot)
     rgb = next(layer for layer in viewer.layers if layer.name.startswith("ortho RGB"))
     (top, left), (bottom, right) = np.asarray(rgb.extent.world)[:, -2:]
-    centre = np.asarray(viewer.camera.center)[-2:]
+    centre = np.asarray(camera_of(viewer).center)[-2:]
     np.testing.assert_allclose(centre, [(top + bottom) / 2, (left + right) / 2],
                                atol=0.05 * (right - left))
-    zoom_result = viewer.camera.zoom
+    zoom_result = camera_of(viewer).zoom
     viewer.fit_to_view()
-    assert zoom_result > 5 * viewer.camera.zoom  # framed on the result, not on the map
+    assert zoom_result > 5 * camera_of(viewer).zoom  # framed on the result, not on the map
 
 
 def test_a_run_shows_its_layers_one_per_frame(make_napari_viewer, qtbot, tiny_n1):
-    """vispy builds a new visual's shaders at its first draw: a frame that draws every new layer
-    of a run at once was the longest stall of a run (0.26-0.63 s measured on fr-alps, loaded).
-    The run's visible layers are shown one at a time, each in a frame of its own, once all are
+    """vispy builds a new visual's shaders at its first draw: a frame that drew every new layer
+    of a run at once would be the longest stall of a run (up to about 0.6 s on fr-alps). The
+    run's visible layers are shown one at a time, each in a frame of its own, once all are
     in (the canvas draws nothing while they go in: ``insertion.canvas_updates``)."""
     viewer = make_napari_viewer(show=True)
     widget = OrthorectifyWidget(viewer)
@@ -192,7 +192,7 @@ def test_a_run_shows_its_layers_one_per_frame(make_napari_viewer, qtbot, tiny_n1
     steps = np.diff([0, *shown_at_draw])
     assert steps.max() == 1, f"new layers per frame: {shown_at_draw}"
     # the first draw of a shown layer is in a turn after the one that showed it (its slicing
-    # and thumbnail, 0.01-0.04 s, and its first draw, 0.03-0.09 s, were one stall)
+    # and thumbnail, 0.01-0.04 s, and its first draw, 0.03-0.09 s, would make one stall)
     shown = {layer.name for layer in visible}
     assert set(painting_when_shown) >= shown
     assert not any(painting_when_shown[name] for name in shown), painting_when_shown
@@ -240,8 +240,8 @@ def test_a_labels_layer_after_the_widget_builds_no_dash_pattern(make_napari_view
 
 def test_an_n1_opening_builds_the_dash_patterns_one_per_turn(make_napari_viewer, qtbot, tiny_n1):
     """An N1 opens with hidden labels (its flags): their insertion waits for vispy's dash
-    patterns, which were built in one turn (0.18-0.21 s after a session's first opening of
-    fr-alps, measured). Now one pattern per turn, and a labels layer then builds none."""
+    patterns (about 0.2 s of work after a session's first opening of fr-alps, if built in one
+    turn). They are built one pattern per turn, and a labels layer then builds none."""
     from qtpy.QtCore import QTimer
     from vispy.visuals.line.dash_atlas import _make_pattern
 
@@ -262,12 +262,12 @@ def test_an_n1_opening_builds_the_dash_patterns_one_per_turn(make_napari_viewer,
 
 
 def test_the_widget_opens_in_turns_of_its_own(make_napari_viewer, qtbot):
-    """Opening the dock was one turn of the event loop of 0.39-0.49 s (warm disk cache; 0.72-1.2
-    s cold): the widget, the text overlay's first draw (its shaders and the nine glyphs vispy
-    always renders, 0.13-0.17 s), a full garbage collection before freezing what napari holds
-    (0.11 s) and vispy's dash patterns (0.04 s). The constructor now makes the widget only; the
-    overlay's first draw (transparent text), the patterns and the freeze come in turns of their
-    own right after, before a user can fill the form and reach Run."""
+    """Opening the dock in one turn of the event loop would take 0.4-0.5 s (warm disk cache;
+    up to 1.2 s cold): the widget, the text overlay's first draw (its shaders and the nine
+    glyphs vispy always renders, 0.13-0.17 s), a full garbage collection before freezing what
+    napari holds (0.11 s) and vispy's dash patterns (0.04 s). The constructor makes the widget
+    only; the overlay's first draw (transparent text), the patterns and the freeze come in turns
+    of their own right after, before a user can fill the form and reach Run."""
     import gc
 
     from napari_meris_ortho._napari import memory
@@ -291,8 +291,8 @@ def test_the_widget_opens_in_turns_of_its_own(make_napari_viewer, qtbot):
 
 def test_a_run_collects_its_garbage_off_the_qt_thread(make_napari_viewer, tiny_n1):
     """Building a run's layers makes tens of thousands of objects; Python's next full collection
-    then fell in one of their insertion turns on the Qt thread (0.04-0.09 s more in that turn:
-    0.22-0.29 s stalls in some fr-alps runs). The worker's job (``build_layers``) ends with that
+    would then fall in one of their insertion turns on the Qt thread (0.04-0.09 s more in that
+    turn). The worker's job (``build_layers``) ends with that
     collection: the layers come to the Qt thread with every generation's count at zero."""
     import gc
 
@@ -313,10 +313,9 @@ def test_a_run_collects_its_garbage_off_the_qt_thread(make_napari_viewer, tiny_n
 def test_a_job_makes_one_full_collection_and_none_when_it_replaces_layers(make_napari_viewer,
                                                                          tiny_n1):
     """A full collection holds the GIL for as long as it walks (0.1-0.2 s with a session's
-    layers), so the Qt thread stalls whichever thread runs it. A rerun's job made two (Python's
-    own while making the layers, then the job's), and napari a third after removing the
-    replaced layers. Now the job pauses Python's while it makes the layers and collects once;
-    a job whose layers replace the viewer's collects not at all (napari's comes before the
+    layers), so the Qt thread stalls whichever thread runs it. The job pauses Python's automatic
+    collections while it makes the layers and collects once; a job whose layers replace the
+    viewer's collects not at all (napari collects after removing the replaced layers, before the
     insertions)."""
     import gc
     import threading
@@ -354,10 +353,10 @@ def test_a_job_makes_one_full_collection_and_none_when_it_replaces_layers(make_n
 
 
 def test_a_runs_removed_layers_are_collected(make_napari_viewer, qtbot, tiny_n1):
-    """Every layer of a run is freed once removed (QA of stop 43: the footprint and facets
-    were napari Shapes, which napari keeps alive through their mode buttons after removal,
-    napari issue 2027: +9 MB per run and clear of fr-small, no plateau). They are Vectors now;
-    a weak reference to each of a run's layers is dead after the viewer is cleared."""
+    """Every layer of a run is freed once removed. The footprint and facets are Vectors, not
+    napari Shapes, which napari keeps alive through their mode buttons after removal
+    (https://github.com/napari/napari/issues/2027: 9 MB more at each run and clear of fr-small).
+    A weak reference to each of a run's layers is dead after the viewer is cleared."""
     import gc
     import weakref
 
@@ -379,9 +378,9 @@ def test_a_runs_removed_layers_are_collected(make_napari_viewer, qtbot, tiny_n1)
 
 
 def test_an_opened_products_removed_layers_are_collected(make_napari_viewer, qtbot, tiny_n1):
-    """An N1's layers, opened then removed, stayed alive (QA of stop 50): the timer's callable
-    that hands their controls to later turns kept the list of them, and PyQt frees a single
-    shot's callable only later. The layers now leave that list as they go to their turns."""
+    """An N1's layers, opened then removed, are freed. The timer's callable that hands their
+    controls to later turns holds a list of them, and PyQt frees a single shot's callable only
+    later, so the layers leave that list as they go to their turns."""
     import gc
     import weakref
 
@@ -457,7 +456,7 @@ def test_long_lived_objects_are_frozen_until_a_held_layer_goes(make_napari_viewe
 def test_the_first_read_freezes_what_napari_holds(make_napari_viewer, tiny_n1):
     """napari makes the first layers of a session slowly (importing xarray and pandas: their
     objects fill the collector's oldest generation, and a full collection walks everything:
-    0.15 s of a 1.1 s fr-alps open, measured). The plugin's first read freezes the objects
+    about 0.15 s of a 1.1 s fr-alps open). The plugin's first read freezes the objects
     alive then, without a collection of its own, so later full passes walk only the new
     objects. Once per process: a later read freezes nothing."""
     import gc
@@ -492,7 +491,7 @@ def test_the_widget_collects_what_the_first_read_froze(make_napari_viewer, qtbot
     """The first read freezes without collecting. The widget, when it opens, collects every
     object, frozen ones included, then freezes again: garbage frozen at the first read is
     reclaimed, and Python times its next full collections by all the survivors (a pass over
-    the unfrozen few alone made them frequent enough to stall runs 0.26-0.29 s, measured)."""
+    the unfrozen few alone makes them frequent enough to stall runs by about 0.3 s)."""
     import gc
     import weakref
 
@@ -559,8 +558,8 @@ def test_a_docked_widget_holds_the_canvas_without_napari_privates(make_napari_vi
 
 def test_a_layers_controls_are_made_in_a_turn_of_their_own(make_napari_viewer, qtbot, tiny_n1,
                                                             monkeypatch):
-    """Making napari's controls of a new layer (and Qt's styling of their widgets after) was
-    0.1-0.2 s of the 0.2-0.3 s an insertion's turn took (fr-alps, software GL): the widget
+    """Making napari's controls of a new layer (and Qt's styling of their widgets after) is
+    0.1-0.2 s of the 0.2-0.3 s an insertion takes (fr-alps, software GL): the widget
     appends a layer with a stand-in in napari's controls stack and makes its controls in the
     next turn. After the run every layer has its own controls, selecting one shows them, no
     stand-in is left, and the scene graph held during the insertions is rebuilt in order."""
@@ -669,9 +668,9 @@ def napari_image(name: str):
 
 def test_a_hidden_layers_thumbnail_draws_no_frame(make_napari_viewer, qtbot):
     """A run's hidden bands get their thumbnails shown and hidden again at once: each of the
-    two changes rebuilt the canvas's scene graph and the canvas redrew (0.04 s and 0.08 s a
-    thumbnail after a fr-alps run). Now neither; the layer's pixels are on the canvas when it
-    is shown."""
+    two changes would rebuild the canvas's scene graph and redraw the canvas (0.04 s and 0.08 s
+    a thumbnail after a fr-alps run). Neither happens; the layer's pixels are on the canvas when
+    it is shown."""
     from napari_meris_ortho._napari._qt.insertion import thumbnail_while_hidden
 
     viewer = make_napari_viewer(show=True)
@@ -694,8 +693,8 @@ def test_a_hidden_layers_thumbnail_draws_no_frame(make_napari_viewer, qtbot):
 
 
 def test_a_layers_controls_are_styled_before_they_go_in(make_napari_viewer, qtbot):
-    """Putting a layer's controls in napari's stack had Qt apply napari's style sheet to each
-    of their widgets there (0.045 s of the 0.05 s it took): they are now styled in a turn of
+    """Putting a layer's controls in napari's stack has Qt apply napari's style sheet to each
+    of their widgets (0.045 s of the 0.05 s it takes): they are styled beforehand, in a turn of
     their own (``polish_controls``), as children of their stand-in; those of a layer removed
     before they go in go with the stand-in."""
     from qtpy.QtCore import Qt

@@ -1,10 +1,14 @@
-"""A screenshot of a shown viewer has real content (Xvfb rendering, NOTES.md)."""
+"""A screenshot of a shown viewer has real content, rendered under Xvfb (Qt's offscreen platform
+has no OpenGL context, and a viewer never shown gives black screenshots)."""
 
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from napari_meris_ortho._napari.widget_flicker import FlickerWidget, show_viewer
+
+pytestmark = pytest.mark.slow
 
 
 def test_screenshot_of_shown_viewer_has_content(make_napari_viewer):

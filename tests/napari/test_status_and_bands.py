@@ -1,4 +1,4 @@
-"""Issue 24 item 8: status-bar coordinates right whatever layer is selected (after a run, a
+"""Status-bar coordinates right whatever layer is selected (after a run, a
 vectors layer), the band slider of an N1 naming the MERIS band (1-15, not the step 0-14), and
 distinct names for the per-pixel geolocation results within what the layer list shows."""
 
@@ -25,6 +25,7 @@ def _run(widget, qtbot):
     assert widget.status.value.startswith("done"), widget.status.value
 
 
+@pytest.mark.slow
 def test_status_bar_over_the_geometry_layers(make_napari_viewer, qtbot, tiny_n1):
     viewer = make_napari_viewer()
     widget = _widget(viewer, tiny_n1)
@@ -59,6 +60,7 @@ def test_band_slider_names_the_band(make_napari_viewer, tiny_n1):
     assert viewer.dims.axis_labels[0] == "MERIS band 15 (900 nm)"
 
 
+@pytest.mark.slow
 def test_pixel_geolocation_names_are_distinct(make_napari_viewer, qtbot, geolocated):
     viewer = make_napari_viewer()
     widget = _widget(viewer, geolocated["fsg"])

@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from napari_meris_ortho._napari.layout import camera_of
 from napari_meris_ortho._napari.reader import get_reader, read_store
 from napari_meris_ortho._napari.world import layer_scale
 from napari_meris_ortho.engine.synthesis import ndvi_decode
@@ -50,7 +51,7 @@ def test_store_opens_as_multiscale_layers(store, tmp_path) -> None:
                                                                             (170, 270)]
         assert kwargs["scale"] == layer_scale(GRID)
         name = kwargs["name"].split()[-1]
-        # the NDVI decoded (QA of stop 51: napari showed its 16-bit codes), NaN = background
+        # the NDVI decoded (not its 16-bit codes), NaN = background
         decode = ndvi_decode if name == "ndvi" else np.asarray
         np.testing.assert_array_equal(np.asarray(data[1][:]),
                                       decode(synthesis.read(name, level=2)))
@@ -65,6 +66,7 @@ def test_store_opens_as_multiscale_layers(store, tmp_path) -> None:
         assert kwargs["visible"] is False  # under the radiance
 
 
+@pytest.mark.slow
 def test_uneven_bands_open_as_a_layer_each(tmp_path) -> None:
     """Bands 2, 7, 13 have no common spacing for a band axis: a layer per band, the top one
     visible."""
@@ -75,10 +77,11 @@ def test_uneven_bands_open_as_a_layer_each(tmp_path) -> None:
     assert [kwargs["name"] for _, kwargs, _ in layers] == [
         f"uneven {n}" for n in ("band_02", "band_07", "band_13", "count", "product")]
     assert [kwargs["visible"] for _, kwargs, _ in layers] == [False, False, True, False, False]
-    # QA of stop 51: their MERIS band in the metadata (the flicker pairs them by it)
+    # their MERIS band in the metadata (the flicker pairs them by it)
     assert [kwargs["metadata"].get("band") for _, kwargs, _ in layers] == [2, 7, 13, None, None]
 
 
+@pytest.mark.slow
 def test_the_band_slider_names_the_meris_band(store, make_napari_viewer) -> None:
     viewer = make_napari_viewer()
     (radiance, *_) = viewer.open(str(store), plugin="napari-meris-ortho")
@@ -91,6 +94,7 @@ def test_the_band_slider_names_the_meris_band(store, make_napari_viewer) -> None
     np.testing.assert_array_equal(np.asarray(radiance._slice.image.raw)[:5, :5] >= 0, True)
 
 
+@pytest.mark.slow
 def test_winning_product_tooltip_names_the_product(store, make_napari_viewer) -> None:
     viewer = make_napari_viewer()
     layers = viewer.open(str(store), plugin="napari-meris-ortho")
@@ -137,6 +141,7 @@ def test_a_sparse_store_is_read_only_where_it_holds_values(tmp_path) -> None:
     np.testing.assert_array_equal(np.asarray(coarse), synthesis.read("count", level=factor))
 
 
+@pytest.mark.slow
 def test_a_sparse_store_opened_into_an_empty_viewer_frames_its_data(tmp_path, make_napari_viewer,
                                                                     qtbot) -> None:
     """napari frames the whole grid of a store it opens; the plugin then frames the pixels the
@@ -151,13 +156,13 @@ def test_a_sparse_store_opened_into_an_empty_viewer_frames_its_data(tmp_path, ma
     viewer = make_napari_viewer(show=True)
     (radiance, *_) = viewer.open(str(out), plugin="napari-meris-ortho")
     qtbot.wait(200)
-    framed, centre = viewer.camera.zoom, radiance.world_to_data(viewer.camera.center)[-2:]
+    framed, centre = camera_of(viewer).zoom, radiance.world_to_data(camera_of(viewer).center)[-2:]
     r0, r1, c0, c1 = radiance.metadata["data_window"]
     assert r0 <= centre[0] <= r1 and c0 <= centre[1] <= c1
     viewer.reset_view()  # napari's view: the whole grid
-    whole = viewer.camera.zoom
+    whole = camera_of(viewer).zoom
     assert framed > 4 * whole
     # into a viewer that already shows something, the camera stays where the user put it
     viewer.open(str(out), plugin="napari-meris-ortho")
     qtbot.wait(200)
-    assert viewer.camera.zoom == whole
+    assert camera_of(viewer).zoom == whole

@@ -1,4 +1,4 @@
-"""The Orthorectify widget says what is wrong (issue 14, defect 5)."""
+"""The Orthorectify widget says what is wrong."""
 
 from __future__ import annotations
 
@@ -29,6 +29,7 @@ def test_missing_product_is_named(make_napari_viewer, qtbot, tiny_n1, tmp_path):
     assert len(viewer.layers) == 0
 
 
+@pytest.mark.slow
 def test_dem_elevation_without_dem_is_refused(make_napari_viewer, qtbot, tiny_n1):
     viewer = make_napari_viewer()
     widget = _ortho_widget(viewer)
@@ -39,6 +40,7 @@ def test_dem_elevation_without_dem_is_refused(make_napari_viewer, qtbot, tiny_n1
     assert len(viewer.layers) == 0
 
 
+@pytest.mark.slow
 def test_radiance_geotiff_is_not_a_dem(make_napari_viewer, qtbot, tiny_n1, tiny_dem, tmp_path):
     viewer = make_napari_viewer()
     widget = _ortho_widget(viewer)
@@ -55,6 +57,7 @@ def test_radiance_geotiff_is_not_a_dem(make_napari_viewer, qtbot, tiny_n1, tiny_
     assert widget.dems == [tiny_dem]
 
 
+@pytest.mark.slow
 def test_success_clears_an_old_error(make_napari_viewer, qtbot, tiny_n1, tiny_dem):
     viewer = make_napari_viewer()
     widget = _ortho_widget(viewer)
@@ -75,9 +78,10 @@ def test_success_clears_an_old_error(make_napari_viewer, qtbot, tiny_n1, tiny_de
     assert np.count_nonzero(viewer.layers[-1].data) > 0
 
 
+@pytest.mark.slow
 def test_an_output_a_layer_reads_from_is_refused(make_napari_viewer, qtbot, tiny_n1, tmp_path):
-    """QA of stop 51: the widget wrote over a GeoTIFF the viewer showed (File > Save refuses
-    it: a lazy layer reads its file as the view moves). One message; the file is unchanged."""
+    """The widget does not write over a GeoTIFF the viewer shows (File > Save refuses it too: a
+    lazy layer reads its file as the view moves). One message; the file is unchanged."""
     viewer = make_napari_viewer()
     widget = _ortho_widget(viewer)
     widget.products.value = [tiny_n1]
@@ -98,11 +102,12 @@ def test_an_output_a_layer_reads_from_is_refused(make_napari_viewer, qtbot, tiny
     assert widget.status.value.startswith("done"), widget.status.value
 
 
+@pytest.mark.slow
 def test_an_output_in_a_directory_that_takes_no_file_is_refused_before_the_run(
         make_napari_viewer, qtbot, tiny_n1):
-    """QA of stop 52: an output under /proc passed the widget's checks (root may write there,
-    says ``os.access``) and was refused only after the run had computed (1.6 s on fr-alps).
-    The checks now make (and remove) a file there: refused before the run, in one line."""
+    """An output under /proc looks writable to root (``os.access``), and would be refused only
+    after the run had computed. The checks make (and remove) a file there: refused before the
+    run, in one line."""
     import os
 
     if not os.access("/proc", os.W_OK):

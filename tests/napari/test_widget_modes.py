@@ -1,4 +1,4 @@
-"""Issue 24 item 8: the Orthorectify widget offers the CLI's parallax and search options (through
+"""The Orthorectify widget offers the CLI's parallax and search options (through
 ``OrthoOptions.of``), updates an existing synthesis store (input-store field), and names what
 Run will do before Run (remembered settings never switch the mode silently)."""
 
@@ -14,6 +14,8 @@ from napari_meris_ortho.options import Geolocation, Parallax, SearchMethod
 from napari_meris_ortho.ortho import orthorectify
 from napari_meris_ortho.products.n1 import read_product, write_product
 from napari_meris_ortho.synthesis.reading import open_synthesis
+
+pytestmark = pytest.mark.slow
 
 
 def _widget(viewer):
@@ -95,7 +97,7 @@ def test_synthesis_update_from_the_widget(make_napari_viewer, qtbot, tiny_n1, tm
     widget.output.value = None
     widget.input_store.value = store
     assert widget.mode.value == "update synthesis store (min-radiance) with 1 product in place"
-    widget.output.value = store  # the same store as output: in place too (QA of stop 43)
+    widget.output.value = store  # the same store as output: in place too
     assert widget.mode.value == "update synthesis store (min-radiance) with 1 product in place"
     widget.output.value = store.parent / "copy"
     assert widget.mode.value == ("update synthesis store (min-radiance) with 1 product into a "
@@ -182,8 +184,8 @@ def test_mode_label_and_remembered_selection(make_napari_viewer, tiny_n1, tiny_d
 def test_update_of_a_large_store_reads_only_what_the_products_changed(make_napari_viewer, qtbot,
                                                                       tiny_n1, tmp_path):
     """A store nine times the product's footprint (a Europe-size store, in small): the widget's
-    update shows the part the product reached, read from the store, placed where it lies;
-    before, it read every layer of the whole grid into memory (15 x 3.2e8 pixels for Europe)."""
+    update shows the part the product reached, read from the store, placed where it lies, and
+    does not read every layer of the whole grid into memory (15 x 3.2e8 pixels for Europe)."""
     from napari_meris_ortho.geometry.grid import OutputGrid
     from napari_meris_ortho.ortho import product_grid
     from napari_meris_ortho.synthesis.api import synthesize

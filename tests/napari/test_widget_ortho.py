@@ -65,7 +65,7 @@ def test_widget_runs_end_to_end(make_napari_viewer, qtbot, tiny_n1, tiny_dem):
     assert band7.data.shape == (expected.height, expected.width)
     assert np.count_nonzero(band7.data) > 0.5 * band7.data.size
 
-    assert widget.last_run.items[0]["valid"] is None  # the run keeps no arrays (issue 24)
+    assert widget.last_run.items[0]["valid"] is None  # the run keeps no arrays
     item = run_orthorectify(widget.settings()).items[0]  # the same run, without Qt
     # elevation source: the DEM (label 1) everywhere it was valid
     src = viewer.layers[f"elevation source{STAMP}"]
@@ -75,6 +75,7 @@ def test_widget_runs_end_to_end(make_napari_viewer, qtbot, tiny_n1, tiny_dem):
     assert it[item["valid"]].min() >= 1 and it[~item["valid"]].max() == -1
 
 
+@pytest.mark.slow
 def test_footprint_and_facets_match_engine_boundary(make_napari_viewer, qtbot, tiny_n1):
     viewer = make_napari_viewer()
     widget = OrthorectifyWidget(viewer)
@@ -122,6 +123,7 @@ def test_footprint_and_facets_match_engine_boundary(make_napari_viewer, qtbot, t
     assert "facet" not in far["coordinates"]
 
 
+@pytest.mark.slow
 def test_parallax_vectors_count_and_direction(make_napari_viewer, qtbot, tiny_n1):
     viewer = make_napari_viewer()
     widget = OrthorectifyWidget(viewer)
@@ -151,6 +153,7 @@ def test_parallax_vectors_count_and_direction(make_napari_viewer, qtbot, tiny_n1
     np.testing.assert_allclose(vec.features["height"], diag["elevation"][rr, cc])
 
 
+@pytest.mark.slow
 def test_geographic_and_epsg_output(make_napari_viewer, qtbot, tiny_n1, tmp_path):
     viewer = make_napari_viewer()
     widget = OrthorectifyWidget(viewer)
@@ -196,6 +199,7 @@ def test_geographic_and_epsg_output(make_napari_viewer, qtbot, tiny_n1, tmp_path
     assert ratio == pytest.approx(1.0, abs=0.05)
 
 
+@pytest.mark.slow
 def test_dem_list_order(make_napari_viewer, tiny_dem, tmp_path):
     import shutil
 
@@ -219,6 +223,7 @@ def test_dem_list_order(make_napari_viewer, tiny_dem, tmp_path):
     assert widget.dem_list.choices == (second,)
 
 
+@pytest.mark.slow
 def test_bad_options_are_reported(make_napari_viewer, qtbot, tiny_n1, tiny_dem):
     viewer = make_napari_viewer()
     widget = OrthorectifyWidget(viewer)
@@ -251,11 +256,11 @@ def test_cancel_stops_the_worker(make_napari_viewer, qtbot, tiny_n1):
     assert len(viewer.layers) == 0
 
 
+@pytest.mark.slow
 def test_closing_the_dock_mid_run_cancels_the_job(make_napari_viewer, qtbot, tiny_n1):
-    """QA of stop 50: closing the Orthorectify dock (its title bar's close button: napari
-    takes the widget out of the window) while a run ran let the job go on with nothing on
-    screen to follow or cancel it, and its layers came in later. Now it is cancelled as if
-    Cancel had been pressed."""
+    """Closing the Orthorectify dock (its title bar's close button: napari takes the widget out
+    of the window) while a run runs cancels the job as if Cancel had been pressed: nothing left
+    running with nothing on screen to follow or cancel it, no layers coming in later."""
     viewer = make_napari_viewer(show=True)
     dock, widget = viewer.window.add_plugin_dock_widget("napari-meris-ortho", "Orthorectify")
     widget.products.value = [tiny_n1] * 40
@@ -274,6 +279,7 @@ def test_closing_the_dock_mid_run_cancels_the_job(make_napari_viewer, qtbot, tin
     assert not widget.running
 
 
+@pytest.mark.slow
 def test_closing_the_dock_while_the_layers_go_in_leaves_the_viewer_as_before(
         make_napari_viewer, qtbot, tiny_n1):
     """Closed between a rerun's layer changes, the widget undoes them as Cancel does: the
@@ -303,6 +309,7 @@ def test_parse_bands():
         parse_bands("x")
 
 
+@pytest.mark.slow
 def test_widgets_dock_through_the_manifest(make_napari_viewer, qtbot, tiny_n1):
     from napari_meris_ortho._napari.widget_flicker import FlickerWidget
 
@@ -320,12 +327,13 @@ def test_widgets_dock_through_the_manifest(make_napari_viewer, qtbot, tiny_n1):
     assert flicker.layer_a.value.name != flicker.layer_b.value.name
 
 
+@pytest.mark.slow
 def test_a_rerun_replaces_all_its_layers_and_shows_a_band(make_napari_viewer, qtbot, tiny_n1,
                                                           tmp_path):
-    """QA of stop 43: a rerun with fewer bands left the first run's RGB and other bands
-    beside the new layers (and crashed Mesa's software GL drawing them); now every layer an
-    earlier run made of the same product goes. A run without bands 7, 5 and 2 showed no
-    image: its first band is shown. Two products of one sensing time got one name."""
+    """A rerun with fewer bands removes every layer an earlier run made of the same product
+    (the first run's RGB and other bands left beside the new layers can crash Mesa's software GL
+    drawing them). A run without bands 7, 5 and 2 shows its first band, not no image. Two
+    products of one sensing time get distinct names."""
     viewer = make_napari_viewer(show=True)
     widget = OrthorectifyWidget(viewer)
     widget.products.value = [tiny_n1]
@@ -349,10 +357,11 @@ def test_a_rerun_replaces_all_its_layers_and_shows_a_band(make_napari_viewer, qt
                                         f"ortho b7{STAMP} {twin.name}"]), names
 
 
+@pytest.mark.slow
 def test_cancel_while_the_layers_go_in_leaves_the_viewer_as_before(make_napari_viewer, qtbot,
                                                                    tiny_n1):
-    """QA of stop 43: a Cancel between a rerun's layer changes left the old layers partly
-    removed and none of the new ones in. Now the changes made are undone."""
+    """A Cancel between a rerun's layer changes undoes the changes made, not leaving the old
+    layers partly removed and none of the new ones in."""
     viewer = make_napari_viewer(show=True)
     widget = OrthorectifyWidget(viewer)
     widget.products.value = [tiny_n1]
@@ -372,11 +381,12 @@ def test_cancel_while_the_layers_go_in_leaves_the_viewer_as_before(make_napari_v
     assert widget.run_button.enabled
 
 
+@pytest.mark.slow
 def test_hidden_layers_get_their_thumbnails(make_napari_viewer, qtbot, tiny_n1):
     """napari makes a thumbnail when it slices a layer, and slices visible layers only (and
     empties an image layer's slice when it inserts it): a run's single bands and diagnostics,
-    and an opened product's radiances, all hidden, showed black squares in the layer list.
-    They are now sliced once, shown and hidden again in a turn of their own each: after the
+    and an opened product's radiances, all hidden, would show black squares in the layer list.
+    They are sliced once, shown and hidden again in a turn of their own each: after the
     run has ended, after the product's first pixels. Not the labels layers (napari's first
     slicing of one builds its colour textures: 0.28-0.30 s after a session's first open)."""
     viewer = make_napari_viewer(show=True)
@@ -404,6 +414,7 @@ def test_hidden_layers_get_their_thumbnails(make_napari_viewer, qtbot, tiny_n1):
     assert len(np.unique(thumb)) > 10
 
 
+@pytest.mark.slow
 def test_the_running_state_is_painted_before_the_job_starts(make_napari_viewer, qtbot,
                                                             tiny_n1):
     """The widget's "running..." state is on screen before the job's thread starts: a first

@@ -8,6 +8,7 @@ import rasterio
 from rasterio.transform import Affine
 
 
+@pytest.mark.slow
 def test_save_geocoded_layer_as_geotiff(make_napari_viewer, tmp_path):
     src = tmp_path / "ortho.tif"
     data = np.arange(1, 1 + 30 * 40, dtype=np.float32).reshape(30, 40)
@@ -28,6 +29,7 @@ def test_save_geocoded_layer_as_geotiff(make_napari_viewer, tmp_path):
     assert not list(tmp_path.glob("*.part")) and not list(tmp_path.glob(".*tmp*"))
 
 
+@pytest.mark.slow
 def test_writer_refuses_a_layer_without_georeference(make_napari_viewer, tmp_path):
     viewer = make_napari_viewer()
     viewer.add_image(np.ones((4, 4), np.float32), name="plain")
@@ -46,6 +48,7 @@ def _geotiff(path, data, nodata):
     return path
 
 
+@pytest.mark.slow
 def test_writer_refuses_the_file_a_layer_reads_from(make_napari_viewer, tmp_path):
     """napari's lazy layers read their file as the view moves: saving another layer over it
     replaced the file under them and the viewer aborted at its next draw."""
@@ -66,8 +69,8 @@ def test_writer_refuses_the_file_a_layer_reads_from(make_napari_viewer, tmp_path
 
 
 def test_writer_keeps_the_layers_nodata(make_napari_viewer, tmp_path):
-    """A GeoTIFF's no-data value goes back out with its layer; before, every layer was written
-    with nodata 0, so -9999 pixels became data and a real 0 became no data."""
+    """A GeoTIFF's no-data value goes back out with its layer, not nodata 0 for every layer
+    (which would make -9999 pixels data and a real 0 no data)."""
     data = np.arange(1, 1 + 30 * 40, dtype=np.float32).reshape(30, 40)
     data[:5] = -9999.0
     data[10, 10] = 0.0
@@ -81,10 +84,11 @@ def test_writer_keeps_the_layers_nodata(make_napari_viewer, tmp_path):
     assert (mask[:5] == 0).all() and mask[10, 10] == 255 and (mask[5:] == 255).all()
 
 
+@pytest.mark.slow
 def test_a_geocoded_labels_layer_is_saved_with_its_classes(make_napari_viewer, tmp_path):
     """A run's "elevation source" or a synthesis's winning product is a labels layer: saved as
-    a GeoTIFF of its classes, 0 (napari's background) as no data. Before, napari offered no
-    writer of ours for labels."""
+    a GeoTIFF of its classes, 0 (napari's background) as no data: the plugin's writer is
+    offered for labels too."""
     src = _geotiff(tmp_path / "band.tif", np.ones((30, 40), np.float32), None)
     viewer = make_napari_viewer()
     (band,) = viewer.open(str(src), plugin="napari-meris-ortho")

@@ -1,6 +1,6 @@
 """A ``.SEN3`` written from the documented facts of ESA's product
-``ENV_ME_1_RRG____20120406T085654`` (NOTES.md "real 4th-reprocessing products": SNAP's reader
-test description, SNAP's DDDB, ocssw's ``l1_safe``), with netCDF4 directly: not with our
+``ENV_ME_1_RRG____20120406T085654`` (as SNAP's Sentinel-3 reader test describes it, SNAP's
+DDDB and ocssw's ``l1_safe``), with netCDF4 directly: not with our
 writer, so that the reader is checked against the facts, not against ourselves.
 
 Facts used: 1121 columns x 1617 rows, tie points every 16 x 16 (71 x 102); columns run west to

@@ -1,5 +1,5 @@
 """Plausibility checks (io/n1_checks.py): products that are well formed but physically impossible
-or forged (the reproducers of issue 15) end in one N1FormatError naming the field and the value,
+or forged end in one N1FormatError naming the field and the value,
 before anything big is allocated."""
 
 from __future__ import annotations

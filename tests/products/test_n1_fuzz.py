@@ -13,6 +13,8 @@ from napari_meris_ortho.errors import N1FormatError
 from napari_meris_ortho.products.n1 import read_product, write_product
 from napari_meris_ortho.products.n1.format import DSD_SIZE, MPH_SIZE, SPH_TEXT_SIZE
 
+pytestmark = pytest.mark.slow
+
 MUTATIONS = 3000
 
 

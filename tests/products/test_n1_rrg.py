@@ -12,6 +12,7 @@ from napari_meris_ortho.products.n1.format import GEOLOCATION_MDS
 from napari_meris_ortho.simulate.geocorrected import pixel_truth
 
 
+@pytest.mark.slow
 def test_rrg_read_with_the_rr_geometry(rrg, rr_small):
     p = read_product(rrg)
     assert p.product_type == "MER_RRG_1P" and p.has_pixel_geolocation

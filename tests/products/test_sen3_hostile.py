@@ -1,5 +1,5 @@
-"""``.SEN3`` products that differ from what our writer makes, as real or hostile files do
-(issue 22, held-out sweep): radiances packed in other integer types or unpacked, packing
+"""``.SEN3`` products that differ from what our writer makes, as real or hostile files do:
+radiances packed in other integer types or unpacked, packing
 attributes that are not one number, non-finite geolocation, damaged zip archives. Each is read
 with correct values, masked with a warning that counts what was masked, or refused with one
 :class:`Sen3FormatError` (CLI exit 2, nothing written). Files are altered with netCDF4 directly
@@ -331,8 +331,8 @@ def test_a_damaged_annotation_member_is_one_error(copy, member, tmp_path, capsys
 
 def test_signed_flag_masks_mean_the_same_bits(copy, product_dir):
     """quality_flags whose flag_masks are stored as int32 (land = -2**31, as a NETCDF4_CLASSIC
-    rewrite has them) decode to the same L1b flags as ESA's uint32 masks; before, the first
-    flag read raised a raw OverflowError."""
+    rewrite has them) decode to the same L1b flags as ESA's uint32 masks (no raw
+    OverflowError)."""
     from napari_meris_ortho.flags import FLAG_LAND_OCEAN
 
     path = copy / "qualityFlags.nc"
@@ -349,8 +349,8 @@ def test_signed_flag_masks_mean_the_same_bits(copy, product_dir):
 
 def test_flag_meanings_as_an_array_of_strings(copy, product_dir):
     """flag_meanings stored as an array of strings (one meaning each; an NC_STRING array)
-    decodes to the same flags; before, the array's repr was split into words, which by chance
-    counted as many as the masks, and every flag read 0."""
+    decodes to the same flags (the array's repr split into words can count as many as the
+    masks, and every flag would read 0)."""
     from napari_meris_ortho.flags import FLAG_INVALID, FLAG_LAND_OCEAN
     from napari_meris_ortho.products.sen3.layout import flag_coding
 
@@ -371,8 +371,8 @@ def test_flag_meanings_as_an_array_of_strings(copy, product_dir):
 def test_humidity_on_pressure_levels_is_left_out(copy, product_dir, caplog):
     """``humidity`` on (tie_rows, tie_columns, pressure levels), as OLCI's tie_meteo has it
     and SNAP's MERIS 4RP adapter reads it: the N1 annotation has no levels, so it is left NaN
-    (logged) and the rest of the product reads as before; before, the product was refused
-    ("rel_humidity of shape (6, 9, 25)")."""
+    (logged) and the rest of the product reads as usual, not refused ("rel_humidity of shape
+    (6, 9, 25)")."""
     path = copy / "tie_meteo.nc"
     with netCDF4.Dataset(path) as ds:  # the real-like file has the temperature profile's levels
         rows, cols = (len(ds.dimensions[d]) for d in ds.variables["humidity"].dimensions)
@@ -402,8 +402,8 @@ def _without(path: Path, name: str) -> None:
 def test_a_tie_grid_without_altitude_takes_the_pixels_altitude(copy, caplog):
     """tie_geo_coordinates.nc without ``altitude`` (no format description at hand says that
     member holds it): the tie points' heights are geo_coordinates.nc's altitude at the tie
-    points (line 16 k, column 16 j in the file, then in N1 column order), with a warning;
-    before, the product was refused ("has no variable 'altitude'")."""
+    points (line 16 k, column 16 j in the file, then in N1 column order), with a warning; the
+    product is not refused ("has no variable 'altitude'")."""
     with netCDF4.Dataset(copy / "geo_coordinates.nc") as ds:
         h, w = ds.variables["altitude"].shape
     rows, cols = np.mgrid[0:h, 0:w]
@@ -422,8 +422,8 @@ def test_a_tie_grid_without_altitude_takes_the_pixels_altitude(copy, caplog):
 
 def test_a_product_wrapped_in_folders_of_an_archive_opens(product_dir, tmp_path):
     """A zip archive that wraps the .SEN3 folder in a folder of its own (a delivery package:
-    ``EN1_MDSI_.../<name>.SEN3/...``) opens as the product; before, only a manifest at the
-    archive's root or one folder down was looked for ("no xfdumanifest.xml in it")."""
+    ``EN1_MDSI_.../<name>.SEN3/...``) opens as the product: the manifest is looked for deeper
+    than the archive's root or one folder down (no "no xfdumanifest.xml in it")."""
     archive = tmp_path / "EN1_MDSI_MER_RR__1P_20120406T085654.zip"
     with zipfile.ZipFile(archive, "w", zipfile.ZIP_DEFLATED) as z:
         z.writestr("EN1_MDSI_MER_RR__1P_20120406T085654/README.txt", "delivery note")
@@ -438,7 +438,7 @@ def test_time_stamps_in_their_own_units_and_zero_stamps(copy, product_dir, caplo
     """time_stamp is read in its CF ``units`` (here milliseconds since 1970, the same instants):
     the same line times as ESA's microseconds since 2000; a stamp of 0 or -1 (ocssw's "no
     time") is interpolated and counted, not taken as 2000-01-01; units that are no CF time are
-    one error. Before, the units were ignored (times 30 years off) and 0 was a valid time."""
+    one error. Ignoring the units would put times 30 years off."""
     from napari_meris_ortho.products.sen3.layout import time_units
 
     assert time_units("microseconds since 2000-01-01 00:00:00 ") == (1e-6, 0.0)
@@ -487,7 +487,7 @@ def test_a_product_in_the_n1_column_order_is_read_as_it_is(copy, product_dir, ca
     """ESA's .SEN3 columns run against the N1 order (the reader mirrors them). A file already
     in the N1 order (a third-party rewrite) is recognised from its tie-point geometry (column
     0 on the left of the flight direction) and read as it is, with a warning: the same arrays
-    as ESA's file; before, it was mirrored a second time (east and west swapped)."""
+    as ESA's file, not mirrored a second time (east and west swapped)."""
     _reverse_columns(copy)
     with caplog.at_level(logging.WARNING):
         esa = read_product(product_dir)

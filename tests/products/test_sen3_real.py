@@ -1,4 +1,4 @@
-"""ESA's fourth-reprocessing ``.SEN3`` as it is (issue 22): a product written from the documented
+"""ESA's fourth-reprocessing ``.SEN3`` as it is: a product written from the documented
 facts of ``ENV_ME_1_RRG____20120406T085654`` (``sen3_real``) read back with the values a user
 sees in SNAP at the given pixels; orientation, fill values, per-variable CF scales, the file's
 own flag coding, optional meteo, zip archives and ESA's other names, bad content."""
@@ -119,6 +119,7 @@ def test_meteo_variables_are_optional_one_by_one(tmp_path):
     assert np.isnan(read_product(d).tie_points["ozone"]).all()
 
 
+@pytest.mark.slow
 def test_zip_archives_and_esas_other_names_open(product_dir, tmp_path):
     archive = tmp_path / (product_dir.name + ".zip")
     with zipfile.ZipFile(archive, "w", zipfile.ZIP_STORED) as z:

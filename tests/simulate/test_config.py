@@ -1,4 +1,4 @@
-"""Scene configs, overrides, cache and determinism (issue 3, item 8)."""
+"""Scene configs, overrides, cache and determinism."""
 
 from __future__ import annotations
 
@@ -69,6 +69,7 @@ def test_default_cache_directory(monkeypatch, tmp_path):
     assert default_out_dir(cfg) == tmp_path / f"fr-small-{config_hash(cfg)}"
 
 
+@pytest.mark.slow
 def test_cache_reuse_regeneration_and_determinism(tmp_path):
     a = generate_scene(TINY, out_dir=tmp_path / "a")
     stamp = a.product_path.stat().st_mtime_ns

@@ -1,4 +1,4 @@
-"""Product grid and line-of-sight geometry (issue 3, items 2-4; handbook section 2.2, App. E)."""
+"""Product grid and line-of-sight geometry (handbook section 2.2, App. E)."""
 
 from __future__ import annotations
 

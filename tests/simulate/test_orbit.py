@@ -1,4 +1,4 @@
-"""Orbit: Envisat-like sun-synchronous circle on the rotating WGS84 Earth (issue 3, item 1)."""
+"""Orbit: Envisat-like sun-synchronous circle on the rotating WGS84 Earth."""
 
 from __future__ import annotations
 

@@ -1,8 +1,9 @@
-"""Exact ground truth of simulated scenes (issue 3, items 3, 5, 6) and their N1 products."""
+"""Exact ground truth of simulated scenes and their N1 products."""
 
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from napari_meris_ortho import geodetic_correction
 from napari_meris_ortho.geometry.earth import MEAN_EARTH_RADIUS
@@ -32,6 +33,7 @@ def _pairs(scene, lines, cols):
     return {k: np.array(v) for k, v in out.items()}
 
 
+@pytest.mark.slow
 def test_true_antecedent_of_pixel_terrain_points(fr_small):
     """The terrain point T seen by pixel (l, c) projects back on (l, c) to 0.001 px."""
     lines = np.arange(0, fr_small.geometry.lines, 37, dtype=np.float64)

@@ -105,6 +105,12 @@ def compact_combo(combo: Any) -> Any:
     return combo
 
 
+def camera_of(viewer: Any) -> Any:
+    """The viewer's camera: ``viewer.scene.camera`` (napari 0.9 deprecates ``viewer.camera``),
+    ``viewer.camera`` in earlier napari."""
+    return getattr(viewer, "scene", viewer).camera
+
+
 def frame_extent(viewer: Any, low: Any, high: Any) -> None:
     """Point the camera at the world box ``low``..``high`` (its last two axes: row, column),
     the box filling 95 % of the canvas."""
@@ -112,9 +118,10 @@ def frame_extent(viewer: Any, low: Any, high: Any) -> None:
 
     low, high = np.asarray(low, np.float64)[-2:], np.asarray(high, np.float64)[-2:]
     size = np.where(np.isclose(high - low, 0.0), 1.0, high - low)
-    viewer.camera.center = tuple(float(v) for v in (low + high) / 2.0)
+    camera = camera_of(viewer)
+    camera.center = tuple(float(v) for v in (low + high) / 2.0)
     canvas = np.asarray(viewer.canvas.size, np.float64)
-    viewer.camera.zoom = float(0.95 * np.min(canvas / size))
+    camera.zoom = float(0.95 * np.min(canvas / size))
 
 
 def frame_layers(viewer: Any, layers: list[Any]) -> None:

@@ -337,15 +337,15 @@ def simulate_in_subprocess(name: str, progress: ProgressCallback | None = None) 
 
     from ..errors import MerisOrthoError
 
-    proc = subprocess.Popen([sys.executable, "-m", __name__, name], stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True)
-    assert proc.stdout is not None
-    for line in proc.stdout:
-        done, _, total = line.partition(" ")
-        if progress is not None and done.isdigit() and total.strip().isdigit():
-            progress(int(done), int(total))
-    error = proc.stderr.read() if proc.stderr is not None else ""
-    if proc.wait() != 0:
+    with subprocess.Popen([sys.executable, "-m", __name__, name], stdout=subprocess.PIPE,
+                          stderr=subprocess.PIPE, text=True) as proc:  # its pipes closed after
+        assert proc.stdout is not None
+        for line in proc.stdout:
+            done, _, total = line.partition(" ")
+            if progress is not None and done.isdigit() and total.strip().isdigit():
+                progress(int(done), int(total))
+        error = proc.stderr.read() if proc.stderr is not None else ""
+    if proc.returncode != 0:
         raise MerisOrthoError(f"simulation of sample {name} failed: "
                               f"{error.strip().splitlines()[-1] if error.strip() else '?'}")
 
