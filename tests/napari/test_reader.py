@@ -247,9 +247,12 @@ def test_a_geotiff_reprojected_onto_the_world_keeps_the_window_turning(make_napa
     viewer = make_napari_viewer(show=True)
     base = _write_tif(tmp_path / "base.tif", np.ones((30, 40), np.float32), "EPSG:32632",
                       Affine(100.0, 0, 300_000.0, 0, -100.0, 5_000_000.0))
-    rows, cols = np.mgrid[0:1500, 0:3000]
-    ref = _write_tif(tmp_path / "ref.tif", (1.0 + rows + cols).astype(np.float32), "EPSG:4326",
-                     Affine(0.0008, 0, 6.0, 0, -0.0008, 45.3))
+    # a warp of a quarter of a second or more: the waiting loop turns every ``TURN_MS`` plus
+    # its paints, so the timer below ticks about four times meanwhile
+    rows, cols = np.mgrid[0:3000, 0:6000]
+    values = (1.0 + (rows + cols) / 2).astype(np.float32)
+    ref = _write_tif(tmp_path / "ref.tif", values, "EPSG:4326",
+                     Affine(0.0004, 0, 6.0, 0, -0.0004, 45.3))
     viewer.open(str(base), plugin="napari-meris-ortho")
     qtbot.wait(100)
     warps: list[tuple[float, float]] = []
@@ -274,8 +277,8 @@ def test_a_geotiff_reprojected_onto_the_world_keeps_the_window_turning(make_napa
         timer.stop()
     ((start, end),) = warps
     during = [t for t in ticks if start <= t <= end]
-    # the window turned while the warp ran (a warp on the Qt thread: 0 ticks in 0.2 s)
-    assert end - start > 0.05 and len(during) >= 3, (end - start, len(during))
+    # the window turned while the warp ran (a warp on the Qt thread: 0 ticks)
+    assert end - start > 0.1 and len(during) >= 2, (end - start, len(during))
     assert layer.multiscale and layer.metadata["reprojected"]
     assert layer.data[0].shape[0] > 1024  # whole: about 120 x 200 km on 100 m pixels
     assert layer.data[-1].shape[0] <= 1024
