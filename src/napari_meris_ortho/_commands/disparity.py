@@ -131,6 +131,7 @@ def run(args: argparse.Namespace) -> int:
 
 def _write_vectors(path: str, result: Any, transform: Any) -> None:
     from .._atomic import atomic_path
+    from ..display import fixed
 
     v = result.vectors()
     x = transform.c + (v[:, 1] + 0.5) * transform.a + (v[:, 0] + 0.5) * transform.b
@@ -139,5 +140,5 @@ def _write_vectors(path: str, result: Any, transform: Any) -> None:
     with atomic_path(path) as tmp, open(tmp, "w") as f:
         f.write("line,column,x,y,dx_px,dy_px,dx_m,dy_m,confidence\n")
         for (line, col, dx, dy, conf), xi, yi in zip(v, x, y, strict=True):
-            f.write(f"{int(line)},{int(col)},{xi:.6f},{yi:.6f},{dx:.1f},{dy:.1f},"
-                    f"{dx * sx:.3f},{dy * sy:.3f},{conf:.6f}\n")
+            f.write(f"{int(line)},{int(col)},{xi:.6f},{yi:.6f},{fixed(dx, 1)},{fixed(dy, 1)},"
+                    f"{fixed(dx * sx, 3)},{fixed(dy * sy, 3)},{conf:.6f}\n")

@@ -13,7 +13,7 @@ import math
 from typing import Any
 
 from ..errors import OptionsError
-from ..options import PARALLAX_CHOICES, Geolocation, SearchMethod, choices
+from ..options import PARALLAX_CHOICES, Geolocation, OrthoOptions, SearchMethod, choices
 from ._options import (
     add_bands_option,
     add_grid_options,
@@ -42,8 +42,10 @@ def register(subparsers: Any) -> None:
     add_grid_options(p, "EPSG:4326")
     add_bands_option(p, "bands to map, e.g. 3,5,7 (default all 15)")
     add_sampling_option(p, "resampling (default nearest, as MERSYN)")
-    p.add_argument("--tolerance", type=float, default=0.01, metavar="PX",
-                   help="prediction/correction tolerance in product pixels (MERSYN: 0.1)")
+    p.add_argument("--tolerance", type=float, default=OrthoOptions.tolerance, metavar="PX",
+                   help="prediction/correction tolerance in product pixels (default "
+                   f"{OrthoOptions.tolerance:g}, a tenth of MERSYN's 0.1: the loop ends "
+                   "closer to the antecedent)")
     p.add_argument("--parallax", choices=choices(PARALLAX_CHOICES), default="handbook",
                    help="parallax model: handbook sphere R=6370997 m or WGS84 radii")
     p.add_argument("--geolocation", choices=choices(Geolocation), default=None,
