@@ -24,6 +24,8 @@ from ._options import (
 )
 
 log = logging.getLogger("napari_meris_ortho")
+#: the ``software`` tag of the files ``map`` writes
+SOFTWARE = "napari-meris-ortho map"
 
 
 def register(subparsers: Any) -> None:
@@ -106,7 +108,7 @@ def _map(args: argparse.Namespace, grid: Any) -> Any:
             log.warning("warning: DEM %s contributed no height (outside the product, wrong "
                         "CRS, or only no data / heights outside -500..9000 m)", dem)
         write_map(args.output, ante, dtype=args.dtype, compress=args.compress,
-                  diagnostics=args.diagnostics, software="napari-meris-ortho map",
+                  diagnostics=args.diagnostics, software=SOFTWARE,
                   progress=progress, order=args.bands)
     return ante
 
@@ -114,6 +116,7 @@ def _map(args: argparse.Namespace, grid: Any) -> Any:
 def run(args: argparse.Namespace) -> int:
     """Run ``meris-ortho map``."""
     from .._atomic import atomic_path
+    from ..ortho.writing import describe_mapped, stats_document
     from ..warmup import compile_late_in_background, stop
 
     grid = _check(args)
@@ -123,9 +126,10 @@ def run(args: argparse.Namespace) -> int:
     finally:
         stop(late)
     stats = ante.finish()
-    if args.stats_json:
+    if args.stats_json:  # the bands in file order, described as the file describes them
+        described = describe_mapped(ante, args.dtype, order=args.bands, software=SOFTWARE)
         with atomic_path(args.stats_json) as tmp:
-            tmp.write_text(json.dumps(stats.to_dict(), indent=2, default=str))
+            tmp.write_text(json.dumps(stats_document(stats, described), indent=2, default=str))
     for line in stats.log_lines(grid is None and args.pixel_size is None):
         log.info(line)
     log.info("wrote %s (%d x %d, %d bands)", args.output, ante.grid.width, ante.grid.height,

@@ -71,6 +71,7 @@ class OrthoResult:
         mapping ``spatial_ref`` (rioxarray reads it). Needs xarray (extra ``xarray``)."""
         from ..flags import FLAG_NAMES
         from ..output.dataset import grid_dataset, require_xarray
+        from .writing import describe_map
 
         require_xarray()
         bands = sorted(self.bands)
@@ -92,11 +93,9 @@ class OrthoResult:
         }
         for name, values in self.diagnostics.items():
             variables[name] = (("y", "x"), values, {"long_name": f"diagnostics: {name}"})
-        s = self.stats
-        attrs = {"product": s.product, "product_name": s.product_name,
-                 "elevation": s.elevation, "parallax": s.parallax,
-                 "geolocation": s.geolocation, "sampling": s.sampling,
-                 "tolerance_px": s.tolerance, "software": "napari-meris-ortho"}
+        described = describe_map(self.stats, bands, "float32")  # the files' tags
+        attrs = {**{k: v for k, v in described.tags().items() if k != "radiance"},
+                 **described.run}
         return grid_dataset(self.grid, variables, bands=bands,
                             wavelengths=[meta[b].get("wavelength_nm") for b in bands],
                             attrs={k: str(v) if not isinstance(v, int | float) else v
