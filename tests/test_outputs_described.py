@@ -122,3 +122,18 @@ def test_export_dtype_of_an_integer_layer_is_refused(store, tmp_path, capsys):
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and err.startswith("meris-ortho: error: the count layer keeps")
     assert not out.exists()
+
+
+def test_xarray_of_the_store_and_of_a_result_say_the_same(store, scene):
+    pytest.importorskip("xarray")
+    from napari_meris_ortho.ortho import orthorectify
+
+    ds = open_synthesis(store).to_xarray()
+    assert list(ds.band.values) == [7, 13]
+    assert ds.attrs["dems"] == "dem_truth.tif (ellipsoid)" and ds.attrs["elevation"] == "dem"
+    assert ds.attrs["software_version"] == __version__ and ds.attrs["tolerance_px"] == 0.01
+    product, dem = scene
+    result = orthorectify(product, dems=[dem], bands=[7], crs="utm")
+    attrs = result.to_xarray().attrs
+    assert attrs["dems"] == "dem_truth.tif (ellipsoid)" and attrs["search"] == "primary"
+    assert attrs["software_version"] == __version__ and attrs["tolerance_px"] == 0.01

@@ -26,6 +26,8 @@ from ._options import (
 log = logging.getLogger("napari_meris_ortho")
 #: the ``software`` tag of the files ``map`` writes
 SOFTWARE = "napari-meris-ortho map"
+#: the output CRS without --crs or --like (MERSYN's geographic grid)
+DEFAULT_CRS = "EPSG:4326"
 
 
 def register(subparsers: Any) -> None:
@@ -41,7 +43,7 @@ def register(subparsers: Any) -> None:
         p, dem_help="DEM (repeatable; tried in order at each point, then the tie points)",
         elevation_help="elevation source (default: dem with a --dem, else the tie points; "
         "dem given explicitly needs a --dem)")
-    add_grid_options(p, "EPSG:4326")
+    add_grid_options(p)
     add_bands_option(p, "bands to map, e.g. 3,5,7 (default all 15)")
     add_sampling_option(p, "resampling (default nearest, as MERSYN)")
     p.add_argument("--tolerance", type=float, default=OrthoOptions.tolerance, metavar="PX",
@@ -81,7 +83,7 @@ def _check(args: argparse.Namespace) -> Any:
     check_outputs({"-o": args.output, "--stats-json": args.stats_json,
                    "the diagnostics output": (diagnostics_path(args.output)
                                               if args.diagnostics else None)},
-                  [args.product], args.dem)
+                  [args.product], args.dem, references=[args.like] if args.like else [])
     check_geotiff_name("-o", args.output)
     if not (math.isfinite(args.tolerance) and args.tolerance > 0):
         raise OptionsError(f"--tolerance must be > 0 product pixels, got {args.tolerance}")
@@ -100,7 +102,8 @@ def _map(args: argparse.Namespace, grid: Any) -> Any:
     show = log.isEnabledFor(logging.INFO)
     with tqdm_progress("map", enabled=show, unit="step") as progress:
         ante = precompute(args.product, grid=grid, dems=args.dem, options=args.options,
-                          progress=progress, crs=args.crs, pixel_size=args.pixel_size,
+                          progress=progress, crs=args.crs or DEFAULT_CRS,
+                          pixel_size=args.pixel_size,
                           max_pixels=args.max_pixels)
         for text in ante.stats.gap_warnings():
             log.warning("warning: %s", text)
@@ -116,7 +119,8 @@ def _map(args: argparse.Namespace, grid: Any) -> Any:
 def run(args: argparse.Namespace) -> int:
     """Run ``meris-ortho map``."""
     from .._atomic import atomic_path
-    from ..ortho.writing import describe_mapped, stats_document
+    from ..ortho.description import stats_document
+    from ..ortho.writing import describe_mapped
     from ..warmup import compile_late_in_background, stop
 
     grid = _check(args)

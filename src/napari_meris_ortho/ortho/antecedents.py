@@ -22,10 +22,9 @@ from ..geometry.grid import OutputGrid, check_grid_size
 from ..options import OrthoOptions, Sampling
 from ..products.protocol import MerisProduct
 from ..progress import ProgressCallback
+from .description import RADIANCE_UNITS, describe_map
 from .stats import RunStats
 
-#: unit of the radiances of the output bands (counts x sf_rad, Scaling Factor GADS)
-RADIANCE_UNITS = "W m-2 sr-1 um-1"
 #: bands sampled together when they are streamed to a writer (``writing.write_map``: one pass
 #: over the antecedent index for several bands)
 GATHER_GROUP = 4
@@ -71,7 +70,6 @@ class OrthoResult:
         mapping ``spatial_ref`` (rioxarray reads it). Needs xarray (extra ``xarray``)."""
         from ..flags import FLAG_NAMES
         from ..output.dataset import grid_dataset, require_xarray
-        from .writing import describe_map
 
         require_xarray()
         bands = sorted(self.bands)

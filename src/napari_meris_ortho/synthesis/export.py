@@ -23,7 +23,7 @@ from ..errors import OptionsError
 from ..geometry.grid import OutputGrid
 from ..progress import ProgressCallback
 from . import store as st
-from .reading import SynthesisStore
+from .reading import SynthesisStore, run_tags
 
 #: compression of the exported COGs (DEFLATE: read by every GDAL build)
 COMPRESS = "deflate"
@@ -62,7 +62,7 @@ class _StoreBands:
         self.stored = {b: st.stored_scale(st.open_layer(session.store, st.band_layer(b)))
                        for b in bands}
         self.scale_factors = {b: self.stored[b] or st.BAND_SCALES[b] for b in bands}
-        self.run, self.dems = _run_tags(store)
+        self.run, self.dems = run_tags(store)
 
     @property
     def grid(self) -> OutputGrid:
@@ -93,23 +93,6 @@ class _StoreBands:
         return out
 
 
-def _run_tags(store: SynthesisStore) -> tuple[dict[str, Any], list[dict[str, str]]]:
-    """The options of the store's runs (the same for every commit that recorded them, else
-    said to differ) and the DEMs any of them used, in the order first used."""
-    commits = [c.run for c in reversed(store.history()) if c.run]
-    options: list[dict[str, Any]] = [dict(c["options"]) for c in commits if c.get("options")]
-    run: dict[str, Any] = {}
-    if options and all(o == options[0] for o in options):
-        run = dict(options[0])
-    elif options:
-        run = {"options": "differ between the commits (meris-ortho synthesis-log)"}
-    dems: dict[str, dict[str, str]] = {}
-    for c in commits:
-        for d in c.get("dems", []):
-            dems.setdefault(str(d.get("path")), dict(d))
-    return run, list(dems.values())
-
-
 def export_cog(store: SynthesisStore, out: str | os.PathLike[str], *,
                bands: Sequence[int] | None = None, layer: str | None = None,
                dtype: str | None = None,
@@ -119,7 +102,8 @@ def export_cog(store: SynthesisStore, out: str | os.PathLike[str], *,
     ``dtype``: "uint16" (default: counts, NDVI codes, with GDAL scale/offset) or "float32"
     (radiances, NDVI), for the bands and the NDVI only."""
     from .._atomic import check_distinct
-    from ..ortho.writing import DTYPES, check_geotiff_name, write_map
+    from ..ortho.description import DTYPES
+    from ..ortho.writing import check_geotiff_name, write_map
 
     check_distinct({"output": out}, {"synthesis store": [store.path]})
     check_geotiff_name("output", out)
@@ -161,7 +145,7 @@ def _write_layer(store: SynthesisStore, out: str | os.PathLike[str], layer: str,
     and product in their own type, 0 = background."""
     from ..engine.resample import overview_level
     from ..engine.synthesis import NDVI_FACTOR, NDVI_SHIFT, ndvi_decode
-    from ..ortho.writing import software_version
+    from ..ortho.description import software_version
     from ..output.geotiff import write_cog
 
     tags = {**tags, "software": "napari-meris-ortho export",

@@ -1000,7 +1000,7 @@ class Synthesis:
         """What a commit records of the run: its options, the DEMs used with their vertical
         datums (``ortho.writing``'s names) and the software version."""
         from ..dem.stack import dem_datums
-        from ..ortho.writing import dem_list, options_tags, software_version
+        from ..ortho.description import dem_list, options_tags, software_version
 
         dems: tuple[dict[str, str], ...] = ()
         if self.options.elevation.value == "dem" and self.dems:
