@@ -111,6 +111,7 @@ def test_export_ndvi_reads_as_ndvi(store, tmp_path):
         assert ds.dtypes == ("float32",) and np.isnan(ds.nodata)
         assert ds.scales == (1.0,) and ds.offsets == (0.0,)
         assert "NaN = background" in ds.tags()["ndvi"]
+        assert ds.tags()["dems"] == "dem_truth.tif (ellipsoid)"
         values = ds.read(1)
     assert np.array_equal(values, ndvi, equal_nan=True)
 

@@ -145,11 +145,12 @@ def _write_layer(store: SynthesisStore, out: str | os.PathLike[str], layer: str,
     and product in their own type, 0 = background."""
     from ..engine.resample import overview_level
     from ..engine.synthesis import NDVI_FACTOR, NDVI_SHIFT, ndvi_decode
-    from ..ortho.description import software_version
+    from ..ortho.description import dems_text, software_version
     from ..output.geotiff import write_cog
 
-    tags = {**tags, "software": "napari-meris-ortho export",
-            "software_version": software_version()}
+    run, dems = run_tags(store)
+    tags = {**tags, **{k: str(v) for k, v in run.items()}, "dems": dems_text(dems),
+            "software": "napari-meris-ortho export", "software_version": software_version()}
     kwargs: dict[str, Any] = {"dtype": st.layer_dtype(layer), "nodata": 0}
     if layer == "ndvi":
         tags["ndvi"] = NDVI_NOTE[dtype]
