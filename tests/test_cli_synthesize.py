@@ -78,7 +78,7 @@ def test_synthesis_log_and_export(products, tmp_path, capsys) -> None:
     assert text.splitlines()[0].endswith("2 product(s), codec zstd")
     assert text.index(names[1]) < text.index(names[0])  # newest first
     assert main(["-q", "export", str(out), "-o", str(tmp_path / "old.tif"), "--bands", "13",
-                 "--at", first]) == 0
+                 "--at", first, "--dtype", "float32"]) == 0
     import rasterio
 
     with rasterio.open(tmp_path / "old.tif") as ds:

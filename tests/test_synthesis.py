@@ -448,11 +448,16 @@ def test_product_table_and_cog_export_carry_band_and_scaling_metadata(products,
     assert table[0]["sensing_start"] == str(clear.first_line_time)
     out = export_cog(store, tmp_path / "s.tif", bands=[13])
     with rasterio.open(out) as ds:
-        assert ds.count == 1 and ds.descriptions[0] == "MERIS band 13"
+        assert ds.count == 1 and ds.descriptions[0] == "MERIS band 13 (864.8 nm)"
         assert ds.tags()["products"].split() == [clear.product_name, cloudy.product_name]
         assert ds.overviews(1) and ds.profile["blockxsize"] == 512  # the COG block of write_map
         assert (ds.width, ds.height) == (GRID.width, GRID.height)
         assert ds.transform.c == GRID.x0 and ds.transform.f == GRID.y0
+        assert ds.dtypes[0] == "uint16" and ds.scales[0] == st.BAND_SCALES[13]
+        radiance = ds.read(1).astype(np.float32) * np.float32(ds.scales[0])
+        assert radiance.tobytes() == store.band(13).tobytes()
+    out = export_cog(store, tmp_path / "f.tif", bands=[13], dtype="float32")
+    with rasterio.open(out) as ds:
         assert ds.read(1).tobytes() == store.band(13).tobytes()
     winner = export_cog(store, tmp_path / "w.tif", layer="product")
     with rasterio.open(winner) as ds:

@@ -128,7 +128,8 @@ def test_synthesis_as_a_lazy_dataset(product, tmp_path, codec) -> None:
     assert ds.attrs["snapshot"] == store.snapshot
     rioxarray = pytest.importorskip("rioxarray")
     cog = tmp_path / "export.tif"
-    assert main(["-q", "export", str(out), "-o", str(cog), "--bands", "7,13"]) == 0
+    assert main(["-q", "export", str(out), "-o", str(cog), "--bands", "7,13",
+                 "--dtype", "float32"]) == 0
     tif = rioxarray.open_rasterio(cog)
     assert ds.rio.crs == tif.rio.crs and ds.rio.crs.to_epsg() == 4326
     assert ds.rio.transform() == tif.rio.transform()

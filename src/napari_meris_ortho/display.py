@@ -1,5 +1,6 @@
-"""Display scaling of rasters (no Qt, no napari): 1-99 % contrast limits and the 8-bit
-stretch of quick-looks, for the napari front end's layers."""
+"""Display of values (no Qt, no napari): 1-99 % contrast limits and the 8-bit stretch of
+quick-looks, for the napari front end's layers; numbers as text without a negative zero, for
+the logs, reports and status bar."""
 
 from __future__ import annotations
 
@@ -10,6 +11,16 @@ import numpy as np
 #: contrast limits come from at most about this many pixels (a regular decimation, as the
 #: reader's coarsest level): 1-99 percentiles of a 7 Mpixel band in 0.01 s instead of 0.13 s
 LIMIT_SAMPLES = 1 << 20
+
+
+def fixed(value: float, digits: int = 2, *, sign: bool = False) -> str:
+    """``value`` with ``digits`` decimals (``sign``: always signed), a value that rounds to
+    zero written as zero: ``fixed(-0.001)`` is "0.00", never "-0.00"."""
+    spec = f"{'+' if sign else ''}.{int(digits)}f"
+    text = format(float(value), spec)
+    if float(text) == 0.0:  # -0.004 rounds to "-0.00": the sign of nothing
+        text = format(0.0, spec)
+    return text
 
 
 def contrast_limits(values: np.ndarray, background: float | None = 0.0,

@@ -53,9 +53,15 @@ def add_sampling_option(p: Any, help: str) -> None:
     p.add_argument("--sampling", choices=choices(Sampling), default="nearest", help=help)
 
 
-def add_grid_options(p: Any, crs_default: str | None) -> None:
-    """``--crs``, ``--pixel-size``, ``--ul X Y``, ``--lr X Y`` (a parser or argument group)."""
-    p.add_argument("--crs", default=crs_default,
+def add_grid_options(p: Any) -> None:
+    """``--like RASTER``, ``--crs``, ``--pixel-size``, ``--ul X Y``, ``--lr X Y`` (a parser or
+    argument group); left out, ``--crs`` is None (``grid_from_args`` tells it apart from a
+    given one)."""
+    p.add_argument("--like", default=None, metavar="REFERENCE.tif",
+                   help="take the CRS, transform and size of this raster (GeoTIFF or any GDAL "
+                   "raster), as rio warp --like: the output is comparable pixel for pixel with "
+                   "it (not with --crs, --pixel-size, --ul, --lr)")
+    p.add_argument("--crs", default=None,
                    help="output CRS: what PROJ reads (EPSG:32632, WKT, a PROJ string), or utm: "
                    "the UTM zone of the (first) product's footprint centre (default EPSG:4326)")
     p.add_argument("--pixel-size", type=float, default=None, metavar="SIZE",
@@ -115,10 +121,21 @@ def ortho_options(args: argparse.Namespace, **values: Any) -> OrthoOptions:
 
 
 def grid_from_args(args: argparse.Namespace, default_crs: str = "EPSG:4326") -> Any:
-    """The ``OutputGrid`` of ``--ul``/``--lr``/``--pixel-size``/``--crs``, or None without
-    corners (then the product footprint sets the extent); checks the pixel size and the CRS."""
+    """The ``OutputGrid`` of ``--like`` (a raster's grid; refused with any other grid option),
+    or of ``--ul``/``--lr``/``--pixel-size``/``--crs``, or None without corners (then the
+    product footprint sets the extent); checks the pixel size and the CRS."""
     from ..geometry.grid import OutputGrid, is_footprint_utm, output_crs
 
+    if getattr(args, "like", None) is not None:
+        from ..output.geotiff import raster_grid
+
+        given = [flag for flag, value in (("--crs", args.crs), ("--pixel-size", args.pixel_size),
+                                          ("--ul", args.ul), ("--lr", args.lr))
+                 if value is not None]
+        if given:
+            raise OptionsError(f"--like takes the CRS, transform and size from {args.like}: "
+                               f"leave out {', '.join(given)}")
+        return raster_grid(args.like)
     if args.pixel_size is not None and not (math.isfinite(args.pixel_size)
                                             and args.pixel_size > 0):
         raise OptionsError(f"--pixel-size must be > 0, got {args.pixel_size}")

@@ -74,6 +74,13 @@ def _read_band(path: str, band: int) -> tuple[np.ndarray, Any, Any]:
     return data, transform, crs
 
 
+def same_grid_hint(first: str) -> str:
+    """How to bring an image onto the grid of ``first``: the end of the grid error."""
+    return (f": the two images must be on the same grid; map the product with --like {first} "
+            f"(meris-ortho map PRODUCT --like {first} -o B.tif), or warp B with "
+            f"gdalwarp/rio warp --like {first}")
+
+
 def pixel_size_metres(transform: Any, crs: Any, height: int) -> tuple[float, float] | None:
     """(x, y) pixel size in metres: projected units, or degrees on the handbook sphere at the
     grid's centre latitude; None without a CRS."""
@@ -105,10 +112,11 @@ def run(args: argparse.Namespace) -> int:
     a, transform, crs = _read_band(args.first, band_a)
     b, transform_b, _ = _read_band(args.second, band_b)
     if a.shape != b.shape:
-        raise OptionsError(f"{args.second}: grid {b.shape} differs from {args.first} {a.shape}")
+        raise OptionsError(f"{args.second}: grid {b.shape} differs from {args.first} {a.shape}"
+                           f"{same_grid_hint(args.first)}")
     if not transform.almost_equals(transform_b):
-        raise OptionsError(f"{args.second}: georeferencing differs from {args.first} "
-                           "(the two images must be on the same grid)")
+        raise OptionsError(f"{args.second}: georeferencing differs from {args.first}"
+                           f"{same_grid_hint(args.first)}")
     if args.pixel_size and not all(math.isfinite(v) and v > 0 for v in args.pixel_size):
         raise OptionsError(f"--pixel-size must be two sizes > 0 in metres, got "
                            f"{' '.join(f'{v:g}' for v in args.pixel_size)}")
@@ -131,6 +139,7 @@ def run(args: argparse.Namespace) -> int:
 
 def _write_vectors(path: str, result: Any, transform: Any) -> None:
     from .._atomic import atomic_path
+    from ..display import fixed
 
     v = result.vectors()
     x = transform.c + (v[:, 1] + 0.5) * transform.a + (v[:, 0] + 0.5) * transform.b
@@ -139,5 +148,5 @@ def _write_vectors(path: str, result: Any, transform: Any) -> None:
     with atomic_path(path) as tmp, open(tmp, "w") as f:
         f.write("line,column,x,y,dx_px,dy_px,dx_m,dy_m,confidence\n")
         for (line, col, dx, dy, conf), xi, yi in zip(v, x, y, strict=True):
-            f.write(f"{int(line)},{int(col)},{xi:.6f},{yi:.6f},{dx:.1f},{dy:.1f},"
-                    f"{dx * sx:.3f},{dy * sy:.3f},{conf:.6f}\n")
+            f.write(f"{int(line)},{int(col)},{xi:.6f},{yi:.6f},{fixed(dx, 1)},{fixed(dy, 1)},"
+                    f"{fixed(dx * sx, 3)},{fixed(dy * sy, 3)},{conf:.6f}\n")

@@ -23,6 +23,11 @@ def register(subparsers: Any) -> None:
     add_bands_option(p, "bands to write, e.g. 7,13 (default: every band of the synthesis)")
     p.add_argument("--layer", choices=("ndvi", "count", "product"), default=None,
                    help="write this layer instead of bands")
+    p.add_argument("--dtype", choices=("uint16", "float32"), default=None,
+                   help="band values: uint16 counts with GDAL scale (default, as map writes "
+                   "them; GDAL, QGIS, rasterio read radiances) or float32 radiances; NDVI: "
+                   "uint16 Appendix C codes with the GDAL scale and offset that give -1..1 "
+                   "(default) or float32 NDVI with nodata NaN")
     p.add_argument("--at", metavar="SNAPSHOT", default=None,
                    help="export this snapshot (see synthesis-log) instead of the latest commit")
     p.set_defaults(func=run)
@@ -35,6 +40,7 @@ def run(args: argparse.Namespace) -> int:
 
     store = open_synthesis(args.store, at=args.at)
     with tqdm_progress("tiles", enabled=not args.quiet, unit="tile") as progress:
-        out = export_cog(store, args.out, bands=args.bands, layer=args.layer, progress=progress)
+        out = export_cog(store, args.out, bands=args.bands, layer=args.layer, dtype=args.dtype,
+                         progress=progress)
     log.info("%s written (snapshot %s)", out, store.snapshot)
     return 0

@@ -13,7 +13,7 @@ import math
 from typing import Any
 
 from ..errors import OptionsError
-from ..options import PARALLAX_CHOICES, Geolocation, SearchMethod, choices
+from ..options import PARALLAX_CHOICES, Geolocation, OrthoOptions, SearchMethod, choices
 from ._options import (
     add_bands_option,
     add_grid_options,
@@ -24,6 +24,10 @@ from ._options import (
 )
 
 log = logging.getLogger("napari_meris_ortho")
+#: the ``software`` tag of the files ``map`` writes
+SOFTWARE = "napari-meris-ortho map"
+#: the output CRS without --crs or --like (MERSYN's geographic grid)
+DEFAULT_CRS = "EPSG:4326"
 
 
 def register(subparsers: Any) -> None:
@@ -39,11 +43,13 @@ def register(subparsers: Any) -> None:
         p, dem_help="DEM (repeatable; tried in order at each point, then the tie points)",
         elevation_help="elevation source (default: dem with a --dem, else the tie points; "
         "dem given explicitly needs a --dem)")
-    add_grid_options(p, "EPSG:4326")
+    add_grid_options(p)
     add_bands_option(p, "bands to map, e.g. 3,5,7 (default all 15)")
     add_sampling_option(p, "resampling (default nearest, as MERSYN)")
-    p.add_argument("--tolerance", type=float, default=0.01, metavar="PX",
-                   help="prediction/correction tolerance in product pixels (MERSYN: 0.1)")
+    p.add_argument("--tolerance", type=float, default=OrthoOptions.tolerance, metavar="PX",
+                   help="prediction/correction tolerance in product pixels (default "
+                   f"{OrthoOptions.tolerance:g}, a tenth of MERSYN's 0.1: the loop ends "
+                   "closer to the antecedent)")
     p.add_argument("--parallax", choices=choices(PARALLAX_CHOICES), default="handbook",
                    help="parallax model: handbook sphere R=6370997 m or WGS84 radii")
     p.add_argument("--geolocation", choices=choices(Geolocation), default=None,
@@ -77,7 +83,7 @@ def _check(args: argparse.Namespace) -> Any:
     check_outputs({"-o": args.output, "--stats-json": args.stats_json,
                    "the diagnostics output": (diagnostics_path(args.output)
                                               if args.diagnostics else None)},
-                  [args.product], args.dem)
+                  [args.product], args.dem, references=[args.like] if args.like else [])
     check_geotiff_name("-o", args.output)
     if not (math.isfinite(args.tolerance) and args.tolerance > 0):
         raise OptionsError(f"--tolerance must be > 0 product pixels, got {args.tolerance}")
@@ -96,7 +102,8 @@ def _map(args: argparse.Namespace, grid: Any) -> Any:
     show = log.isEnabledFor(logging.INFO)
     with tqdm_progress("map", enabled=show, unit="step") as progress:
         ante = precompute(args.product, grid=grid, dems=args.dem, options=args.options,
-                          progress=progress, crs=args.crs, pixel_size=args.pixel_size,
+                          progress=progress, crs=args.crs or DEFAULT_CRS,
+                          pixel_size=args.pixel_size,
                           max_pixels=args.max_pixels)
         for text in ante.stats.gap_warnings():
             log.warning("warning: %s", text)
@@ -104,7 +111,7 @@ def _map(args: argparse.Namespace, grid: Any) -> Any:
             log.warning("warning: DEM %s contributed no height (outside the product, wrong "
                         "CRS, or only no data / heights outside -500..9000 m)", dem)
         write_map(args.output, ante, dtype=args.dtype, compress=args.compress,
-                  diagnostics=args.diagnostics, software="napari-meris-ortho map",
+                  diagnostics=args.diagnostics, software=SOFTWARE,
                   progress=progress, order=args.bands)
     return ante
 
@@ -112,6 +119,8 @@ def _map(args: argparse.Namespace, grid: Any) -> Any:
 def run(args: argparse.Namespace) -> int:
     """Run ``meris-ortho map``."""
     from .._atomic import atomic_path
+    from ..ortho.description import stats_document
+    from ..ortho.writing import describe_mapped
     from ..warmup import compile_late_in_background, stop
 
     grid = _check(args)
@@ -121,9 +130,10 @@ def run(args: argparse.Namespace) -> int:
     finally:
         stop(late)
     stats = ante.finish()
-    if args.stats_json:
+    if args.stats_json:  # the bands in file order, described as the file describes them
+        described = describe_mapped(ante, args.dtype, order=args.bands, software=SOFTWARE)
         with atomic_path(args.stats_json) as tmp:
-            tmp.write_text(json.dumps(stats.to_dict(), indent=2, default=str))
+            tmp.write_text(json.dumps(stats_document(stats, described), indent=2, default=str))
     for line in stats.log_lines(grid is None and args.pixel_size is None):
         log.info(line)
     log.info("wrote %s (%d x %d, %d bands)", args.output, ante.grid.width, ante.grid.height,

@@ -79,7 +79,7 @@ def register(subparsers: Any) -> None:
                         "$DASK_SCHEDULER_ADDRESS); the store and products must be on storage "
                         "all workers see")
     grid = p.add_argument_group("grid of a new synthesis (refused with --input)")
-    add_grid_options(grid, None)
+    add_grid_options(grid)
     p.set_defaults(func=run)
 
 
@@ -88,9 +88,10 @@ def run(args: argparse.Namespace) -> int:
     from ..synthesis.api import synthesize
 
     if args.input is not None and (args.ul or args.lr or args.crs or args.pixel_size
-                                   or args.bands or args.codec):
-        raise OptionsError("when --input is given, --crs, --pixel-size, --ul, --lr, --bands "
-                           "and --codec come from the input synthesis and shall not be given")
+                                   or args.like or args.bands or args.codec):
+        raise OptionsError("when --input is given, --like, --crs, --pixel-size, --ul, --lr, "
+                           "--bands and --codec come from the input synthesis and shall not be "
+                           "given")
     options = ortho_options(args, geolocation=args.geolocation)
     grid = grid_from_args(args)
     if args.scheduler and args.workers is not None:

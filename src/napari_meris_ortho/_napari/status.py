@@ -17,6 +17,7 @@ from typing import Any
 
 import numpy as np
 
+from ..display import fixed
 from ..geometry.grid import crs_facts
 from .geometry_layers import facet_at
 from .world import GEO_KEY, TIE_GRID_KEY, world_crs
@@ -32,7 +33,7 @@ def map_position(world_row: float, world_col: float, geographic: bool, label: st
     if geographic:
         return (f"{abs(y):.5f}° {'N' if y >= 0 else 'S'}, "
                 f"{abs(x):.5f}° {'E' if x >= 0 else 'W'} ({label})")
-    return f"E {x:.0f} m, N {y:.0f} m ({label})"
+    return f"E {fixed(x, 0)} m, N {fixed(y, 0)} m ({label})"
 
 
 def wrap_status(layer: Any) -> None:

@@ -25,6 +25,7 @@ from magicgui.types import FileDialogMode
 from magicgui.widgets import ComboBox, Container, FileEdit, FloatSpinBox, PushButton, SpinBox
 
 from .._atomic import atomic_path
+from ..display import fixed
 from ..errors import MerisOrthoError, OptionsError
 from ..geometry.grid import OutputGrid
 from ..placement import Warp, warp
@@ -497,4 +498,5 @@ def _disparity_summary(result: Any) -> str:
     if n == 0:
         return "no candidate point above the confidence threshold"
     dx, dy = result.global_displacement
-    return f"global displacement dX = {dx:+.2f} px, dY = {dy:+.2f} px ({n} points)"
+    return (f"global displacement dX = {fixed(dx, 2, sign=True)} px, "
+            f"dY = {fixed(dy, 2, sign=True)} px ({n} points)")

@@ -35,6 +35,7 @@ from .._atomic import atomic_path, check_input_file
 from ..dem.base import METHODS, DemSource
 from ..dem.geoid import EGM96, ELLIPSOID, GEOID_GRID, split_datum
 from ..dem.stack import DemStack, open_dem
+from ..display import fixed
 from ..errors import OptionsError
 
 __all__ = [
@@ -354,7 +355,8 @@ def plot_histogram(result: DemCheckResult, path: str | os.PathLike[str],
         counts, _ = np.histogram(d, bins=edges)
         s = check.statistics
         ax.plot(centres, counts, marker="o", ms=3,
-                label=f"{METHOD_TITLES[check.method]} (N={s.n}, mean {s.arithmetic_mean:+.1f} m, "
+                label=f"{METHOD_TITLES[check.method]} (N={s.n}, "
+                      f"mean {fixed(s.arithmetic_mean, 1, sign=True)} m, "
                       f"std {s.standard_deviation:.1f} m)")
     ax.axvline(0.0, color="grey", lw=0.8)
     ax.set_xlabel("H - h: GPS height minus DEM height (m)")

@@ -38,6 +38,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numba import njit, prange
 
+from ..display import fixed
 from ..errors import OptionsError
 from ..progress import ProgressCallback
 
@@ -265,8 +266,8 @@ def displacement_statistics(result: DisparityResult, total_pixels: int | None = 
     return stats
 
 
-def _vs(label: str, image: float, cand: float, fmt: str = "{:.6f}") -> str:
-    return f"{label}\t= {fmt.format(image)} vs. {fmt.format(cand)} (*)"
+def _vs(label: str, image: float, cand: float, digits: int = 6) -> str:
+    return f"{label}\t= {fixed(image, digits)} vs. {fixed(cand, digits)} (*)"
 
 
 def _moment_lines(image: dict, cand: dict) -> list[str]:
@@ -275,7 +276,7 @@ def _moment_lines(image: dict, cand: dict) -> list[str]:
         _vs("MINIMUM", image["minimum"], cand["minimum"]),
         _vs("MAXIMUM", image["maximum"], cand["maximum"]),
         _vs("MEAN", image["mean"], cand["mean"]),
-        _vs("STANDARD DEVIATION", image["std"], cand["std"], "{:.3f}"),
+        _vs("STANDARD DEVIATION", image["std"], cand["std"], 3),
     ]
 
 
@@ -315,9 +316,10 @@ def format_report(stats: dict, title: str | None = None) -> str:
             lines += ["ORIGINAL VALUES:", ""]
             lines += _moment_lines(entry["image_m"], entry["candidates_m"]) + [""]
     g = stats["global_displacement"]
-    text = f"GLOBAL DISPLACEMENT (dX, dY) = ({g['dx']:.6f}, {g['dy']:.6f}) pixels"
+    text = f"GLOBAL DISPLACEMENT (dX, dY) = ({fixed(g['dx'], 6)}, {fixed(g['dy'], 6)}) pixels"
     if "modulus_m" in g:
-        text += f" = ({g['dx_m']:.3f}, {g['dy_m']:.3f}) m, MODULUS = {g['modulus_m']:.3f} m"
+        text += (f" = ({fixed(g['dx_m'], 3)}, {fixed(g['dy_m'], 3)}) m, "
+                 f"MODULUS = {fixed(g['modulus_m'], 3)} m")
     lines.append(text)
     return "\n".join(lines) + "\n"
 

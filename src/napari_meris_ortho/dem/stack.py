@@ -194,6 +194,19 @@ def open_dem(path: str | os.PathLike[str]) -> DemSource:
     return src
 
 
+def dem_datums(entries: Sequence[str | os.PathLike[str]]) -> list[str | None]:
+    """The vertical datum of each DEM entry's heights as read (``open_dem``; None: tiles of
+    several datums)."""
+    out = []
+    for entry in entries:
+        src = open_dem(entry)
+        try:
+            out.append(src.datum)
+        finally:
+            src.close()
+    return out
+
+
 def _datums(src: DemSource) -> set[str | None]:
     """Vertical datums of a source and of its parts (a CompositeSource of tiles)."""
     parts = getattr(src, "sources", None)

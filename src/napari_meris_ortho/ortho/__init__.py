@@ -1,6 +1,6 @@
 """Orthorectified mapping of a MERIS L1b product (MERSYN use case 3, handbook sections 3.1-3.4).
 
-``orthorectify`` is the glue between the products, the DEMs and the engine, in four rooms:
+``orthorectify`` is the glue between the products, the DEMs and the engine, in these rooms:
 
 - ``core``: the orchestration: product and DEMs opened and checked, segment boundary and
   output grid (``product_grid``, the one default grid), the prediction/correction of every
@@ -10,6 +10,9 @@
 - ``antecedents``: the antecedents and the bands, flags and diagnostics sampled there
   (``Antecedents``, ``OrthoResult``);
 - ``stats``: the run's statistics (``RunStats``) and the Appendix B log that prints them;
+- ``description``: what a mapped product's file says of its bands and of the run
+  (``describe_map``, ``MapDescription``: band order, wavelengths, units, scale/offset, options,
+  DEMs, software version), for the GeoTIFF tags, ``--stats-json`` and xarray alike;
 - ``writing``: a mapped product as a file (``write_map``: the COG of ``meris-ortho map``, the
   widget and the synthesis export).
 

@@ -22,10 +22,9 @@ from ..geometry.grid import OutputGrid, check_grid_size
 from ..options import OrthoOptions, Sampling
 from ..products.protocol import MerisProduct
 from ..progress import ProgressCallback
+from .description import RADIANCE_UNITS, describe_map
 from .stats import RunStats
 
-#: unit of the radiances of the output bands (counts x sf_rad, Scaling Factor GADS)
-RADIANCE_UNITS = "W m-2 sr-1 um-1"
 #: bands sampled together when they are streamed to a writer (``writing.write_map``: one pass
 #: over the antecedent index for several bands)
 GATHER_GROUP = 4
@@ -92,11 +91,9 @@ class OrthoResult:
         }
         for name, values in self.diagnostics.items():
             variables[name] = (("y", "x"), values, {"long_name": f"diagnostics: {name}"})
-        s = self.stats
-        attrs = {"product": s.product, "product_name": s.product_name,
-                 "elevation": s.elevation, "parallax": s.parallax,
-                 "geolocation": s.geolocation, "sampling": s.sampling,
-                 "tolerance_px": s.tolerance, "software": "napari-meris-ortho"}
+        described = describe_map(self.stats, bands, "float32")  # the files' tags
+        attrs = {**{k: v for k, v in described.tags().items() if k != "radiance"},
+                 **described.run}
         return grid_dataset(self.grid, variables, bands=bands,
                             wavelengths=[meta[b].get("wavelength_nm") for b in bands],
                             attrs={k: str(v) if not isinstance(v, int | float) else v

@@ -666,6 +666,8 @@ def _stats(job: _Job, *, search: dict[str, int], hist: np.ndarray, processed: in
         sampling=opts.sampling.value, geolocation=opts.geolocation.value,
         tolerance=opts.tolerance, method=opts.method.value, margin_px=job.margin_px,
         points_in_boundary=job.points_in_boundary, dems=list(job.dems),
+        dem_datums=[] if job.stack is None else [getattr(s, "datum", None)
+                                                 for s in job.stack.sources],
         dem_gaps={k: list(v) for k, v in job.dem_gaps.items()})
 
 

@@ -69,6 +69,9 @@ class RunStats:
     margin_px: int
     points_in_boundary: int
     dems: list[str] = field(default_factory=list)
+    #: vertical datum of each DEM's heights as read ("ellipsoid", "egm96", "egm2008"; None:
+    #: tiles of several datums)
+    dem_datums: list[str | None] = field(default_factory=list)
     #: DEM name -> the tiles of its tiling under the footprint it lacks (their points took
     #: the next DEM or the tie points)
     dem_gaps: dict[str, list[str]] = field(default_factory=dict)

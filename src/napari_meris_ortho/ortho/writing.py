@@ -1,11 +1,14 @@
 """A mapped product as a file: ``write_map``, the one writer of mapped bands.
 
-``meris-ortho map``, the napari widget and the synthesis export all write through it: a
-Cloud-Optimized GeoTIFF (``output.geotiff.write_cog``) with one band per MERIS band, streamed
-one band at a time; uint16 counts with GDAL scale = sf_rad (GDAL, QGIS and rasterio read
-radiances) or float32 radiances; band descriptions, wavelengths and units; the run's options as
-dataset tags; overviews averaged with nodata 0 ignored (``engine.resample.overview_level``);
-optionally the diagnostics as ``OUT_diagnostics.tif``.
+``meris-ortho map``, the napari widget and the synthesis export all write through
+``write_map``: a Cloud-Optimized GeoTIFF (``output.geotiff.write_cog``) with one band per MERIS
+band, streamed one band at a time; uint16 counts with GDAL scale = sf_rad (GDAL, QGIS and
+rasterio read radiances) or float32 radiances; overviews averaged with nodata 0 ignored
+(``engine.resample.overview_level``); optionally the diagnostics as ``OUT_diagnostics.tif``.
+What the file says of its bands and of the run (band order, wavelengths, units, scale/offset,
+nodata, options, DEMs with their vertical datums, software version) is a ``MapDescription``
+(``ortho.description``): the GeoTIFF tags, the ``--stats-json`` file and the xarray attributes
+are all written from it.
 """
 
 from __future__ import annotations
@@ -20,19 +23,12 @@ import numpy as np
 from ..engine.resample import overview_level
 from ..errors import OptionsError
 from ..geometry.grid import OutputGrid
-from ..output.geotiff import COMPRESSIONS, meris_band_description, write_cog
+from ..output.geotiff import COMPRESSIONS, write_cog
 from ..progress import ProgressCallback
-from .antecedents import GATHER_GROUP, RADIANCE_UNITS, band_metadata
+from .antecedents import GATHER_GROUP
+from .description import DTYPES, MapDescription, describe_map
 from .stats import RunStats
 
-#: dataset tag explaining the band values and the per-band ``sf_rad`` tags
-RADIANCE_NOTE = {
-    "uint16": "TOA radiance = counts x scale (GDAL scale = sf_rad of the source product, "
-              "Scaling Factor GADS); counts 0 = background (nodata)",
-    "float32": "TOA radiance (float32, 0 = background) = counts x sf_rad of the source "
-               "product (Scaling Factor GADS); no further scaling applies",
-}
-DTYPES = tuple(RADIANCE_NOTE)
 #: the diagnostics layers of ``OUT_diagnostics.tif``, in band order
 DIAGNOSTICS = ("line", "col", "elevation", "elevation_source", "iterations", "shift_east_m",
                "shift_north_m")
@@ -62,16 +58,18 @@ def diagnostics_path(out: str | os.PathLike[str]) -> Path:
 
 def check_outputs(outputs: Mapping[str, str | os.PathLike[str] | None],
                   products: Sequence[str | os.PathLike[str]],
-                  dems: Sequence[str | os.PathLike[str]] = ()) -> None:
+                  dems: Sequence[str | os.PathLike[str]] = (), *,
+                  references: Sequence[str | os.PathLike[str]] = ()) -> None:
     """Before any work: every output (name -> path, None: not requested) distinct from the
-    others, never an input product or a DEM of the list (``PATH[:DATUM]``), never a special
-    file, in a writable directory; OutputError naming the output otherwise. The one output
-    check of the CLI and the widget."""
+    others, never an input product, a DEM of the list (``PATH[:DATUM]``) or a grid reference
+    raster (``--like``), never a special file, in a writable directory; OutputError naming the
+    output otherwise. The one output check of the CLI and the widget."""
     from .._atomic import check_distinct, check_writable_dir
     from ..dem.geoid import split_datum
 
     check_distinct(dict(outputs), {"input product": list(products),
-                                   "DEM": [split_datum(d)[0] for d in dems]})
+                                   "DEM": [split_datum(d)[0] for d in dems],
+                                   "grid reference": list(references)})
     for out in outputs.values():
         if out is not None:
             check_writable_dir(out)
@@ -105,28 +103,24 @@ def write_map(path: str | os.PathLike[str], mapped: Mapped, *, dtype: str = "uin
     if compress not in COMPRESSIONS:
         raise OptionsError(f"unknown compression {compress!r}: choose "
                            f"{', '.join(COMPRESSIONS)}")
-    bands = band_order(mapped.bands, order)
-    stats = mapped.stats
     counts = dtype == "uint16"
     if counts and not hasattr(mapped, "counts"):
         raise OptionsError("uint16 output needs the product counts: write float32 radiances")
-    wl = stats.wavelengths if stats is not None else {}
-    tags: dict[str, Any] = {}
-    if stats is not None:
-        tags = {"product": stats.product, "product_name": stats.product_name,
-                "radiance": RADIANCE_NOTE[dtype], "elevation": stats.elevation,
-                "parallax": stats.parallax, "geolocation": stats.geolocation,
-                "tolerance_px": stats.tolerance, "sampling": stats.sampling}
-    else:
-        tags = {"radiance": RADIANCE_NOTE[dtype]}
-    tags = {**tags, **(metadata or {}), "software": software}
+    described = describe_mapped(mapped, dtype, order=order, software=software)
+    if counts and any(b.scale is None for b in described.bands):
+        raise OptionsError("uint16 output needs the radiance scale of every band: write "
+                           "float32 radiances")
+    bands = described.band_numbers
     write_cog(
         Path(path), _streamed(mapped, bands, counts, progress), mapped.grid, count=len(bands),
-        dtype=dtype, scales=[stats.scale_factors[b] for b in bands] if counts and stats else None,
-        offsets=[0.0] * len(bands) if counts else None, units=[RADIANCE_UNITS] * len(bands),
-        descriptions=[meris_band_description(b, wl.get(b)) for b in bands],
-        band_metadata=band_metadata(stats, bands) if stats is not None else None,
-        compress=compress, halve=overview_level, metadata=tags)
+        dtype=dtype, nodata=described.nodata,
+        scales=[b.scale for b in described.bands] if counts else None,  # type: ignore[misc]
+        offsets=[b.offset for b in described.bands] if counts else None,  # type: ignore[misc]
+        units=[b.units for b in described.bands],
+        descriptions=[b.description for b in described.bands],
+        band_metadata=[b.tags() for b in described.bands],
+        compress=compress, halve=overview_level,
+        metadata={**described.tags(), **(metadata or {})})
     if diagnostics:
         arrays = (np.nan_to_num(mapped.diagnostics[n].astype(np.float32), nan=0.0)
                   for n in DIAGNOSTICS)
@@ -135,6 +129,19 @@ def write_map(path: str | os.PathLike[str], mapped: Mapped, *, dtype: str = "uin
                   compress=compress, overview_resampling="nearest", halve=overview_level,
                   metadata={"elevation_source": "k >= 0: DEM k; -1: tie points; -2: none"})
     return Path(path)
+
+
+def describe_mapped(mapped: Mapped, dtype: str = "uint16", *,
+                    order: Sequence[int] | None = None,
+                    software: str = "napari-meris-ortho") -> MapDescription:
+    """The ``MapDescription`` of ``write_map(path, mapped, dtype=..., order=...)``: the bands
+    in file order (``band_order``), their facts from ``mapped.stats`` or, without a run, from
+    ``mapped.scale_factors`` (a synthesis's), ``mapped.run`` and ``mapped.dems``."""
+    bands = band_order(mapped.bands, order)
+    return describe_map(mapped.stats, bands, dtype,
+                        scales=getattr(mapped, "scale_factors", None),
+                        run=getattr(mapped, "run", None), dems=getattr(mapped, "dems", None),
+                        software=software)
 
 
 def band_order(available: Iterable[int], order: Sequence[int] | None) -> list[int]:

@@ -241,6 +241,32 @@ def _band_info(ds: Any, descriptions: Sequence[str] | None,
             ds.set_band_unit(i, str(units[i - 1]))
 
 
+def raster_grid(path: str | Path) -> OutputGrid:
+    """The grid of a raster (GeoTIFF or any GDAL raster): its CRS, transform and size, no pixel
+    read (``--like``, as ``rio warp --like``). OptionsError when it cannot be read, has no CRS or
+    is not north-up."""
+    import rasterio
+    from rasterio.errors import RasterioError
+
+    from .._atomic import check_input_file
+    from ..errors import OptionsError
+
+    check_input_file(path, "grid reference raster")
+    try:
+        with rasterio.open(path) as ds:
+            t, crs, width, height = ds.transform, ds.crs, ds.width, ds.height
+    except (RasterioError, OSError) as exc:
+        raise OptionsError(f"{path}: cannot read the grid reference raster ({exc})") from exc
+    if crs is None:
+        raise OptionsError(f"{path}: the grid reference raster has no coordinate reference "
+                           "system")
+    if t.b != 0 or t.d != 0 or t.a <= 0 or t.e >= 0:
+        raise OptionsError(f"{path}: the grid reference raster is not north-up (rotated or "
+                           "flipped): only north-up grids are written")
+    return OutputGrid(pyproj.CRS.from_user_input(crs.to_wkt()), t.c, t.f, t.a, -t.e, width,
+                      height)
+
+
 def read_geotiff(path: str | Path, bands: Sequence[int] | None = None, *, scaled: bool = False
                  ) -> tuple[list[np.ndarray], OutputGrid, dict[str, Any]]:
     """Read a north-up GeoTIFF: (arrays, OutputGrid, metadata) (module docstring).

@@ -102,9 +102,9 @@ class SynthesisStore:
 
         from ..engine.synthesis import ndvi_decode
         from ..ortho.antecedents import RADIANCE_UNITS
+        from ..ortho.description import dems_text, software_version
         from ..output.dataset import grid_dataset, require_xarray
         from ..products.n1.format import APPENDIX_A_WAVELENGTHS
-
         require_xarray()
         session = self.session
 
@@ -133,9 +133,11 @@ class SynthesisStore:
                                                                      dtype=np.float32),
                                  {"long_name": "NDVI of the selected product (Appendix C)"})
         names = self.product_names()
+        run, dems = run_tags(self)  # as export's tags say them
         attrs = {"algorithm": self.algorithm, "snapshot": self.snapshot,
                  "products": [names.get(k, "") for k in range(1, max(names, default=0) + 1)],
-                 "software": "napari-meris-ortho"}
+                 **run, "dems": dems_text(dems), "software": "napari-meris-ortho",
+                 "software_version": software_version()}
         return grid_dataset(self.grid, variables, bands=bands,
                             wavelengths=[APPENDIX_A_WAVELENGTHS[b - 1] for b in bands],
                             attrs=attrs)
@@ -248,6 +250,23 @@ class DecodedStack:
 
     def __len__(self) -> int:
         return self.shape[0]
+
+
+def run_tags(store: SynthesisStore) -> tuple[dict[str, Any], list[dict[str, str]]]:
+    """The options of the store's runs (the same for every commit that recorded them, else
+    said to differ) and the DEMs any of them used, in the order first used."""
+    commits = [c.run for c in reversed(store.history()) if c.run]
+    options: list[dict[str, Any]] = [dict(c["options"]) for c in commits if c.get("options")]
+    run: dict[str, Any] = {}
+    if options and all(o == options[0] for o in options):
+        run = dict(options[0])
+    elif options:
+        run = {"options": "differ between the commits (meris-ortho synthesis-log)"}
+    dems: dict[str, dict[str, str]] = {}
+    for c in commits:
+        for d in c.get("dems", []):
+            dems.setdefault(str(d.get("path")), dict(d))
+    return run, list(dems.values())
 
 
 def open_synthesis(path: str | os.PathLike[str], at: str | None = None) -> SynthesisStore:

@@ -996,6 +996,18 @@ class Synthesis:
         failed |= newly
         return newly
 
+    def _run_facts(self) -> dict[str, Any]:
+        """What a commit records of the run: its options, the DEMs used with their vertical
+        datums (``ortho.writing``'s names) and the software version."""
+        from ..dem.stack import dem_datums
+        from ..ortho.description import dem_list, options_tags, software_version
+
+        dems: tuple[dict[str, str], ...] = ()
+        if self.options.elevation.value == "dem" and self.dems:
+            dems = dem_list(self.dems, dem_datums(self.dems))
+        return {"options": options_tags(self.options), "dems": [dict(d) for d in dems],
+                "software_version": software_version()}
+
     def _commit(self, session: Any, merged: list[_Product], reports: list[ProductReport],
                 base: str, move_main: bool = False) -> str:
         """One commit: the product table grows by the merged products; the commit metadata
@@ -1009,7 +1021,7 @@ class Synthesis:
         message = f"synthesize: {len(merged)} product(s) merged ({names})" + (
             f"; {others} skipped or failed" if others else "")
         metadata = {st.COMMIT_KEY: {"products": [r.commit_entry() for r in reports],
-                                    "algorithm": self.algorithm}}
+                                    "algorithm": self.algorithm, **self._run_facts()}}
         try:
             with st.store_errors(self.target.path, "the commit failed"):
                 snapshot = session.commit(message, metadata=metadata)

@@ -41,7 +41,7 @@ import math
 import os
 import warnings
 from collections.abc import Iterator, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -342,10 +342,11 @@ def undecodable(what: str, exc: BaseException) -> OutputError:
                        "damaged")
 
 
-def read_window(store: Any, names: Sequence[str], window: Window, level: int = 1
-                ) -> dict[str, np.ndarray]:
+def read_window(store: Any, names: Sequence[str], window: Window, level: int = 1, *,
+                decode: bool = True) -> dict[str, np.ndarray]:
     """Arrays ``names`` over ``window`` (rows/columns of the full grid; at overview ``level``
-    the window is in that level's pixels)."""
+    the window is in that level's pixels); compact band layers decoded to float32 radiances
+    unless ``decode`` is False (their uint16 counts)."""
     r0, r1, c0, c1 = window
     out = {}
     for n in names:
@@ -356,7 +357,7 @@ def read_window(store: Any, names: Sequence[str], window: Window, level: int = 1
         except (RuntimeError, ValueError) as exc:  # zarr's codecs: "Zstd decompression error"
             raise undecodable(f"layer {n}", exc) from None
         scale = stored_scale(array)
-        out[n] = values if scale is None else decode_band(values, scale)
+        out[n] = values if scale is None or not decode else decode_band(values, scale)
     return out
 
 
@@ -692,6 +693,9 @@ class Commit:
     written_at: Any
     message: str
     products: list[dict[str, Any]]
+    #: the run's options, DEMs (path, name, vertical datum) and software version, as
+    #: ``ortho.writing`` names them (empty for commits that did not record them)
+    run: dict[str, Any] = field(default_factory=dict)
 
 
 def history(repo: Any, branch: str = BRANCH, snapshot: str | None = None) -> list[Commit]:
@@ -702,7 +706,9 @@ def history(repo: Any, branch: str = BRANCH, snapshot: str | None = None) -> lis
         meta = (info.metadata or {}).get(COMMIT_KEY)
         if meta is not None:
             out.append(Commit(info.id, info.written_at, info.message,
-                              list(meta.get("products", []))))
+                              list(meta.get("products", [])),
+                              {k: meta[k] for k in ("options", "dems", "software_version")
+                               if k in meta}))
     return out
 
 
