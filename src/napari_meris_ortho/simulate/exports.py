@@ -16,7 +16,8 @@ All exports are resampled from the truth DEM (bilinear between its posts, ellips
   (h - N, ``dem.geoid``).
 - ``copernicus`` (Copernicus DEM GLO-90 COG tiles, ``dem.copernicus``): 1 x 1 deg float32
   ``Copernicus_DSM_COG_30_N46_00_E010_00_DEM.tif``, posts every 3" on whole multiples of the
-  spacing (origin half a post north-west of the corner), heights above the EGM96 geoid
+  spacing (origin half a post north-west of the corner), heights above the EGM2008 geoid (EGM96
+  where PROJ has no EGM2008 grid), as the Copernicus reader takes them
   (h - N), -32767 outside the scene.
 - ``geotiff_utm``: a 250 m UTM GeoTIFF like the handbook's "DEM Italy" (float32, -9999 nodata).
   The GeoTIFF DEMs carry the tag ``VERTICAL_DATUM=ellipsoid``.

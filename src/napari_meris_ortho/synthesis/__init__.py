@@ -1,11 +1,11 @@
 """Synthesis of many MERIS products (MERSYN use cases 1 and 2, handbook section 3.1, Appendix C).
 
 A synthesis is an Icechunk repository holding Zarr v3 arrays chunked inside the output tile
-(:mod:`.store`). The work is split into tasks: one per (product,
-output tile) pair -- orthorectify the product on the tile and make its contribution
-(:func:`engine.synthesis.segment_state`) -- and one per tile -- merge the contributions into
-the stored tile with the associative, commutative rule of :func:`engine.synthesis.combine`
-(ties: sensing time, then name) and write it. Tasks run in this process (``workers=0``), on an
+(:mod:`.store`). The work is split into one task per output tile: each product's piece of the
+tile is orthorectified and made a contribution (:func:`engine.synthesis.segment_state`), one
+after the other, and merged into the stored tile as it comes with the associative, commutative
+rule of :func:`engine.synthesis.combine` (ties: sensing time, then name); then the tile is
+written. Tasks run in this process (``workers=0``), on an
 embedded ``distributed.LocalCluster`` or on an existing dask cluster (``scheduler``); each tile
 task writes into its own fork of the Icechunk session, the forks are merged and the run ends in
 one commit listing the products. Only the tiles the products touch are read, and only the
