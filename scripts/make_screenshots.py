@@ -301,7 +301,7 @@ def main(argv: list[str] | None = None) -> int:
     viewer.layers[-1].visible = False
     viewer.window.resize(1900, 1150)
     viewer.reset_view()
-    _close_toasts(viewer)  # e.g. the PyQt5 deprecation notice over the canvas
+    _close_toasts(viewer)  # any notification napari shows over the canvas
     viewer.screenshot(str(args.out / "widgets.png"), canvas_only=False, flash=False)
     wrote.append("widgets.png")
 
