@@ -16,6 +16,7 @@ from typing import Any
 from ..errors import OptionsError
 from ..options import PARALLAX_CHOICES, Geolocation, OrthoOptions, SearchMethod, choices
 from ._options import (
+    DEFAULT_GRID,
     add_bands_option,
     add_grid_options,
     add_height_options,
@@ -36,7 +37,7 @@ def register(subparsers: Any) -> None:
     p = subparsers.add_parser(
         "map", help="orthorectify one product to a GeoTIFF",
         description="Orthorectify a MERIS L1b product onto a map grid (handbook sections 3.1-3.4, "
-        "MERSYN use case 3) and write the radiances as a GeoTIFF.")
+        "MERSYN use case 3) and write the radiances as a GeoTIFF. " + DEFAULT_GRID)
     p.add_argument("product", metavar="PRODUCT", help="MERIS L1b product: N1 file or .SEN3 "
                    "directory")
     p.add_argument("-o", "--output", required=True, metavar="OUT.tif", help="output GeoTIFF")

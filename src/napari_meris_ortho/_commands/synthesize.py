@@ -19,6 +19,7 @@ from ..cores import usable_cores
 from ..errors import OptionsError
 from ..options import Geolocation, MergeRule, StoreCodec, choices
 from ._options import (
+    DEFAULT_GRID,
     add_bands_option,
     add_grid_options,
     add_height_options,
@@ -78,7 +79,8 @@ def register(subparsers: Any) -> None:
                         help="use this existing dask scheduler (default: "
                         "$DASK_SCHEDULER_ADDRESS); the store and products must be on storage "
                         "all workers see")
-    grid = p.add_argument_group("grid of a new synthesis (refused with --input)")
+    grid = p.add_argument_group("grid of a new synthesis (refused with --input)",
+                                DEFAULT_GRID.replace("product's", "first product's"))
     add_grid_options(grid)
     p.set_defaults(func=run)
 
