@@ -107,6 +107,20 @@ def test_help_tells_the_dem_entries_and_the_handbook_search(capsys):
     assert "the outer half pixel and, on high relief, terrain within one parallax shift" in out
 
 
+@pytest.mark.parametrize("command", ["map", "synthesize"])
+def test_help_states_the_default_grid_and_the_widgets(capsys, command):
+    """Where a user chooses the grid, the help gives the default (EPSG:4326, 0.002338 deg FR),
+    the widget's (the footprint's UTM zone) and why."""
+    with pytest.raises(SystemExit) as exc:
+        main([command, "--help"])
+    out = " ".join(capsys.readouterr().out.split())
+    assert exc.value.code == 0
+    assert "Default grid: EPSG:4326, MERSYN's geographic grid" in out
+    assert "0.002338 deg FR, 0.009353 deg RR" in out
+    assert "The napari widget defaults to the UTM zone of the footprint" in out
+    assert "rounded out to a multiple of the pixel size" in out
+
+
 @pytest.mark.parametrize(("cut", "reason"), [
     (0.5, "Read error"),  # in the heights: the tile opens, its read fails
     (500, 'IO error during reading of "GeoPixelScale"'),  # in the header: half its tags

@@ -70,3 +70,90 @@ def test_no_progress_bar_fragments_on_a_pipe(tmp_path):
     assert proc.returncode == 0, err
     assert "\r" not in err and "\x1b" not in err
     assert "wrote " in err  # the log itself is there
+
+
+def _in_a_terminal(args: list[str], cols: int = 100) -> str:
+    """What ``meris-ortho ARGS`` writes to a pseudo-terminal ``cols`` wide (stdout and stderr)."""
+    import fcntl
+    import pty
+    import struct
+    import termios
+
+    master, slave = pty.openpty()
+    fcntl.ioctl(slave, termios.TIOCSWINSZ, struct.pack("HHHH", 30, cols, 0, 0))
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(sys.path))
+    proc = subprocess.Popen([sys.executable, "-m", "napari_meris_ortho.cli", *args],
+                            stdin=slave, stdout=slave, stderr=slave, env=env)
+    os.close(slave)
+    chunks = []
+    while True:
+        try:
+            data = os.read(master, 65536)
+        except OSError:  # the child closed the terminal
+            break
+        if not data:
+            break
+        chunks.append(data)
+    os.close(master)
+    assert proc.wait(timeout=600) == 0, b"".join(chunks).decode(errors="replace")
+    return b"".join(chunks).decode(errors="replace")
+
+
+def _screen(raw: str) -> list[str]:
+    """The lines a terminal shows of ``raw`` (carriage returns overwrite, escapes dropped)."""
+    import re
+
+    lines: list[str] = []
+    for line in re.sub(r"\x1b\[[0-9;?]*[A-Za-z]", "", raw).replace("\r\n", "\n").split("\n"):
+        shown: list[str] = []
+        col = 0
+        for part in re.split(r"(\r)", line):
+            if part == "\r":
+                col = 0
+                continue
+            shown[col:col + len(part)] = part
+            col += len(part)
+        lines.append("".join(shown).rstrip())
+    return lines
+
+
+def _bars(raw: str) -> str:
+    """Every state a bar was drawn in (the text between carriage returns)."""
+    return "\n".join(raw.replace("\r\n", "\n").replace("\r", "\n").split("\n"))
+
+
+def test_map_in_a_terminal_has_a_bar_per_stage_then_the_report(tmp_path):
+    """Bars name the stages (reading, locating, writing band k of n) and count rows and
+    bands; each is cleared before the Appendix B report, whose lines start at column 0."""
+    prod = make_product(tmp_path / "p.N1", height=130, width=321, lon0=15.0, nadir_col=-800.0)
+    out = tmp_path / "out.tif"
+    raw = _in_a_terminal(["map", str(prod), "-o", str(out), "--bands", "1,2,3",
+                          "--elevation", "tiepoints"])
+    bars = _bars(raw)
+    assert "reading the product and DEMs" in bars
+    assert "locating (prediction/correction)" in bars and " rows [" in bars
+    assert "resampling, writing band 1 of 3" in bars and "3/3 bands" in bars
+    assert "step" not in bars
+    screen = _screen(raw)
+    assert "SETTING PIXEL SIZE DEFAULT VALUES" in screen  # a line of its own, at column 0
+    assert f"wrote {out} (" in "\n".join(screen)
+    assert any(line.startswith(f"wrote {out} (") for line in screen)
+    assert not any("%|" in line for line in screen)  # no bar left on screen
+
+
+def test_synthesize_in_a_terminal_shows_the_run_from_the_start(tmp_path):
+    """The synthesis bar shows from the start (reading the products, then the tasks with their
+    total) and is cleared before the per-product report."""
+    products = [str(make_product(tmp_path / f"p{k}.N1", height=130, width=321, lon0=15.0 + k,
+                                 nadir_col=-800.0)) for k in range(2)]
+    raw = _in_a_terminal(["synthesize", *products, "--out", str(tmp_path / "store"),
+                          "--bands", "7,13", "--workers", "0", "--elevation", "tiepoints"])
+    bars = _bars(raw)
+    assert "reading 2 product(s)" in bars
+    assert "orthorectifying 2 product(s), merging tiles:   0%" in bars  # its total at once
+    screen = _screen(raw)
+    reports = [line for line in screen if line.startswith("PRODUCT ")]
+    assert len(reports) == 2  # the second, of the same name, is reported as already merged
+    assert all(r.startswith(f"PRODUCT {p}") for r, p in zip(reports, products, strict=True))
+    assert any(line.startswith("synthesis ") and "committed to" in line for line in screen)
+    assert not any("%|" in line for line in screen)

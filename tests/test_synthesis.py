@@ -468,15 +468,15 @@ def test_product_table_and_cog_export_carry_band_and_scaling_metadata(products,
 
 
 def test_progress_per_task_and_cancel_leave_the_store_untouched(products, tmp_path) -> None:
-    """``progress(done, total)`` after each product's piece of a tile and each merged tile (in
-    process); an exception raised by it (napari's Cancel) stops the run: no commit, a new store
-    is not left behind."""
+    """``progress(done, total)`` once before the first task (the total shown from the start),
+    then after each product's piece of a tile and each merged tile (in process); an exception
+    raised by it (napari's Cancel) stops the run: no commit, a new store is not left behind."""
     calls: list[tuple[int, int]] = []
     out = tmp_path / "s"
     synthesize([products["cloudy1"]], out, grid=GRID, bands=(13,), tile=256,
                elevation="tiepoints", progress=lambda d, t: calls.append((d, t)))
     total = calls[-1][1]
-    assert [d for d, _ in calls] == list(range(1, total + 1))
+    assert [d for d, _ in calls] == list(range(0, total + 1))
     # a piece and a merge for each tile the product touches (of 3 x 2)
     assert total % 2 == 0 and 2 <= total <= 12
     before = layers(out)

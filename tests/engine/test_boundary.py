@@ -163,3 +163,28 @@ def test_huge_margin_is_bounded():
     g = default_grid(b, 5000.0, "EPSG:32633")
     spans = row_spans(b, g, 0, 30, margin=200_000)
     assert spans.n_rows == 30 and spans.count == 30 * g.width
+
+
+@pytest.mark.parametrize(("crs", "size"), [("EPSG:32633", 260.0), ("EPSG:3035", 1040.0),
+                                           ("EPSG:32633", 300.5)])
+def test_projected_default_origin_is_a_multiple_of_the_pixel(crs, size):
+    """A projected default grid starts on a multiple of its pixel size (the grids of
+    different products line up) and still holds the whole segment boundary."""
+    lat, lon = tilted_footprint(n_lines=12)
+    b = segment_boundary(lat, lon)
+    g = default_grid(b, size, crs)
+    assert g.x0 % size == 0.0 and g.y0 % size == 0.0
+    (x, y), = b.polygons(g.crs)
+    assert g.x0 <= x.min() < g.x0 + size and g.y0 - size < y.max() <= g.y0
+    assert x.max() <= g.x0 + g.width * size and y.min() >= g.y0 - g.height * size
+    shifted = default_grid(segment_boundary(lat + 0.01, lon + 0.013), size, crs)
+    assert (shifted.x0 - g.x0) % size == 0.0 and (shifted.y0 - g.y0) % size == 0.0
+
+
+def test_geographic_default_origin_is_the_boundary_corner():
+    """EPSG:4326 keeps MERSYN's origin: the corner of the boundary's bounding rectangle."""
+    lat, lon = tilted_footprint(n_lines=12)
+    b = segment_boundary(lat, lon)
+    g = default_grid(b, 260.0, "EPSG:4326")
+    (x, y), = b.polygons(g.crs)
+    assert (g.x0, g.y0) == (float(x.min()), float(y.max()))

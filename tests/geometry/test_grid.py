@@ -127,8 +127,10 @@ def test_default_grid_mersyn_size_reproduces_appendix_b_log():
     g = default_grid(poly, 260.0, "EPSG:32662", mersyn_size=True)
     assert (g.height, g.width) == (2943, 3755)
     assert (g.x0, g.y0) == (1025533.1875, pytest.approx(y_ul, abs=1e-6))
-    g = default_grid(poly, 260.0, "EPSG:32662")
-    assert (g.height, g.width) == (math.ceil((y_max - y_min) / 260), 3756)
+    g = default_grid(poly, 260.0, "EPSG:32662")  # projected: the origin on multiples of 260 m
+    y0 = math.ceil(y_max / 260) * 260.0
+    assert (g.x0, g.y0) == (3944 * 260.0, y0)  # 1025440 m: 93.19 m west of the boundary
+    assert (g.height, g.width) == (math.ceil((y0 - y_min) / 260), 3757)
     assert g.y0 - g.height * g.dy <= y_min and g.x0 + g.width * g.dx >= 2002024.5
 
 

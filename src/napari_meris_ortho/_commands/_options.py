@@ -53,6 +53,18 @@ def add_sampling_option(p: Any, help: str) -> None:
     p.add_argument("--sampling", choices=choices(Sampling), default="nearest", help=help)
 
 
+#: the default grid of ``map`` and a new synthesis, as their --help states it
+DEFAULT_GRID = (
+    "Default grid: EPSG:4326, MERSYN's geographic grid, with square pixels of the product's "
+    "column spacing at nadir as an angle on the sphere R = 6370997 m (0.002338 deg FR, "
+    "0.009353 deg RR; 260 m north-south, about 180 m east-west at 46 N), its upper-left corner "
+    "the corner of the smallest rectangle holding the product's segment. The napari widget "
+    "defaults to the UTM zone of the footprint instead (--crs utm here): square metric pixels "
+    "of 260 m / 1040 m, which is what a viewer measures distances and areas on. In a projected "
+    "CRS the default upper-left corner is rounded out to a multiple of the pixel size, so that "
+    "the grids of different products line up.")
+
+
 def add_grid_options(p: Any) -> None:
     """``--like RASTER``, ``--crs``, ``--pixel-size``, ``--ul X Y``, ``--lr X Y`` (a parser or
     argument group); left out, ``--crs`` is None (``grid_from_args`` tells it apart from a
@@ -63,9 +75,11 @@ def add_grid_options(p: Any) -> None:
                    "it (not with --crs, --pixel-size, --ul, --lr)")
     p.add_argument("--crs", default=None,
                    help="output CRS: what PROJ reads (EPSG:32632, WKT, a PROJ string), or utm: "
-                   "the UTM zone of the (first) product's footprint centre (default EPSG:4326)")
+                   "the UTM zone of the (first) product's footprint centre (default EPSG:4326, "
+                   "MERSYN's; the napari widget's: utm)")
     p.add_argument("--pixel-size", type=float, default=None, metavar="SIZE",
-                   help="pixel size in CRS units (default: 260 m FR / 1040 m RR)")
+                   help="pixel size in CRS units (default: the column spacing at nadir, 260 m "
+                   "FR / 1040 m RR; in degrees 0.002338 FR / 0.009353 RR)")
     p.add_argument("--ul", type=float, nargs=2, default=None, metavar=("X", "Y"),
                    help="upper-left corner of the output (CRS units)")
     p.add_argument("--lr", type=float, nargs=2, default=None, metavar=("X", "Y"),

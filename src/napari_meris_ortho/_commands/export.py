@@ -39,7 +39,7 @@ def run(args: argparse.Namespace) -> int:
     from ..synthesis.reading import open_synthesis
 
     store = open_synthesis(args.store, at=args.at)
-    with tqdm_progress("tiles", enabled=not args.quiet, unit="tile") as progress:
+    with tqdm_progress("tiles", enabled=not args.quiet, unit="tiles") as progress:
         out = export_cog(store, args.out, bands=args.bands, layer=args.layer, dtype=args.dtype,
                          progress=progress)
     log.info("%s written (snapshot %s)", out, store.snapshot)

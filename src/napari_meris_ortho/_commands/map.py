@@ -10,11 +10,13 @@ import argparse
 import json
 import logging
 import math
+import os
 from typing import Any
 
 from ..errors import OptionsError
 from ..options import PARALLAX_CHOICES, Geolocation, OrthoOptions, SearchMethod, choices
 from ._options import (
+    DEFAULT_GRID,
     add_bands_option,
     add_grid_options,
     add_height_options,
@@ -35,7 +37,7 @@ def register(subparsers: Any) -> None:
     p = subparsers.add_parser(
         "map", help="orthorectify one product to a GeoTIFF",
         description="Orthorectify a MERIS L1b product onto a map grid (handbook sections 3.1-3.4, "
-        "MERSYN use case 3) and write the radiances as a GeoTIFF.")
+        "MERSYN use case 3) and write the radiances as a GeoTIFF. " + DEFAULT_GRID)
     p.add_argument("product", metavar="PRODUCT", help="MERIS L1b product: N1 file or .SEN3 "
                    "directory")
     p.add_argument("-o", "--output", required=True, metavar="OUT.tif", help="output GeoTIFF")
@@ -94,25 +96,39 @@ def _check(args: argparse.Namespace) -> Any:
 
 
 def _map(args: argparse.Namespace, grid: Any) -> Any:
-    """Precompute the antecedents and stream the bands into the output (``Antecedents``)."""
+    """Precompute the antecedents and stream the bands into the output (``Antecedents``), a
+    bar per stage: reading, locating (output rows), resampling and writing (bands)."""
     from ..ortho import precompute
     from ..ortho.writing import write_map
-    from ..progress import tqdm_progress
+    from ..progress import stages
 
-    show = log.isEnabledFor(logging.INFO)
-    with tqdm_progress("map", enabled=show, unit="step") as progress:
+    n = len(args.bands or args.options.bands)
+    with stages(enabled=log.isEnabledFor(logging.INFO)) as bars:
+        bars.show("reading the product and DEMs")
+        # the engine counts the output rows, then the bands: each stage counts its own
+        locate = bars.stage("locating (prediction/correction)", "rows",
+                            count=lambda done, total: (min(done, total - n), total - n))
         ante = precompute(args.product, grid=grid, dems=args.dem, options=args.options,
-                          progress=progress, crs=args.crs or DEFAULT_CRS,
+                          progress=locate, crs=args.crs or DEFAULT_CRS,
                           pixel_size=args.pixel_size,
                           max_pixels=args.max_pixels)
+        bars.close()
         for text in ante.stats.gap_warnings():
             log.warning("warning: %s", text)
         for dem in ante.stats.unused_dems():
             log.warning("warning: DEM %s contributed no height (outside the product, wrong "
                         "CRS, or only no data / heights outside -500..9000 m)", dem)
+        bands = len(ante.bands) if args.bands is None else n
+        write = bars.stage(
+            "resampling, writing band", "bands",
+            count=lambda done, total: (done - (total - bands), bands),
+            describe=lambda done, total: (f"resampling, writing band {done + 1} of {total}"
+                                          if done < total else
+                                          f"finishing {os.path.basename(args.output)}"))
+        write(0, bands)  # drawn before the first band is sampled
         write_map(args.output, ante, dtype=args.dtype, compress=args.compress,
                   diagnostics=args.diagnostics, software=SOFTWARE,
-                  progress=progress, order=args.bands)
+                  progress=write, order=args.bands)
     return ante
 
 

@@ -19,6 +19,7 @@ from ..cores import usable_cores
 from ..errors import OptionsError
 from ..options import Geolocation, MergeRule, StoreCodec, choices
 from ._options import (
+    DEFAULT_GRID,
     add_bands_option,
     add_grid_options,
     add_height_options,
@@ -78,13 +79,14 @@ def register(subparsers: Any) -> None:
                         help="use this existing dask scheduler (default: "
                         "$DASK_SCHEDULER_ADDRESS); the store and products must be on storage "
                         "all workers see")
-    grid = p.add_argument_group("grid of a new synthesis (refused with --input)")
+    grid = p.add_argument_group("grid of a new synthesis (refused with --input)",
+                                DEFAULT_GRID.replace("product's", "first product's"))
     add_grid_options(grid)
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..progress import tqdm_progress
+    from ..progress import stages
     from ..synthesis.api import synthesize
 
     if args.input is not None and (args.ul or args.lr or args.crs or args.pixel_size
@@ -98,13 +100,20 @@ def run(args: argparse.Namespace) -> int:
         raise OptionsError("--workers and --scheduler exclude each other (the cluster of the "
                            "scheduler has its own workers)")
     workers = usable_cores() if args.workers is None else args.workers
-    with tqdm_progress("tasks", enabled=not args.quiet, unit="task") as progress:
+    n = len(args.products)
+    with stages(enabled=not args.quiet) as bars:
+        bars.show(f"reading {n} product(s)")
+        # a task per piece (a product's part of a tile) and per tile merged
+        merge = bars.stage(
+            "orthorectifying and merging", "tasks",
+            describe=lambda done, total: (f"orthorectifying {n} product(s), merging tiles"
+                                          if done < total else "committing the synthesis"))
         result = synthesize(
             args.products, args.out, algorithm=args.algorithm, input=args.input, grid=grid,
             crs=None if grid is not None else args.crs,
             pixel_size=None if grid is not None else args.pixel_size, dems=args.dem,
             options=options, bands=args.bands, reject_bright=args.reject_bright,
-            tile=args.tile, progress=progress, workers=0 if args.scheduler else workers,
+            tile=args.tile, progress=merge, workers=0 if args.scheduler else workers,
             scheduler=args.scheduler or None, max_pixels=args.max_pixels, codec=args.codec,
             keep=args.keep)
     if result.snapshot is not None:

@@ -735,6 +735,9 @@ def default_grid(
     The size is rounded up to whole pixels; ``mersyn_size=True`` reproduces MERSYN instead
     (Appendix C "COMPUTING IMAGE SIZE AND ORIGIN", Appendix B logs: y_max grows by 1/10000 of the
     height, lines = int((y_max - y_min + 1) / dy), columns = int((x_max - x_min) / dx)).
+    In a projected CRS the upper-left corner moves out to the next multiples of the pixel size
+    (``aligned_origin``), so that the default grids of different products line up pixel for
+    pixel; a geographic grid keeps MERSYN's origin, the boundary's corner.
     """
     crs = output_crs(crs)
     if pixel_size is None:
@@ -763,6 +766,15 @@ def default_grid(
         height = int((y_max - y_min + 1.0) / dy)
         width = int((x_max - x_min) / dx)
     else:
+        if crs.is_projected:
+            x_min, y_max = aligned_origin(x_min, y_max, dx, dy)
         height = math.ceil((y_max - y_min) / dy - 1e-9)
         width = math.ceil((x_max - x_min) / dx - 1e-9)
     return OutputGrid(crs, x_min, y_max, dx, dy, max(width, 1), max(height, 1))
+
+
+def aligned_origin(x_min: float, y_max: float, dx: float, dy: float) -> tuple[float, float]:
+    """The upper-left corner (``x_min``, ``y_max``) moved west and north to the nearest
+    multiples of the pixel size (``dx``, ``dy``): less than a pixel, so the rectangle still
+    holds what it held."""
+    return math.floor(x_min / dx + 1e-9) * dx, math.ceil(y_max / dy - 1e-9) * dy

@@ -56,8 +56,9 @@ def synthesize(products: Sequence[str | os.PathLike[str]], out: str | os.PathLik
     ``workers``: 0 runs the tasks in this process, N > 0 on an embedded LocalCluster of N
     worker processes; ``scheduler``: address of an existing dask scheduler (the store path and
     the products must then be on storage every worker sees: absolute paths). ``progress(done,
-    total)`` is called after each task; an exception raised by it cancels the run (nothing is
-    committed). ``options`` (``OrthoOptions``) and/or its fields as keywords (``modes``:
+    total)`` is called with 0 done before the first task, then after each task; an exception
+    raised by it cancels the run (nothing is committed). ``options`` (``OrthoOptions``) and/or
+    its fields as keywords (``modes``:
     ``elevation``, ``sampling``, ``geolocation``, ``parallax``, ``tolerance``, ``method``; as
     ``orthorectify``, checked by ``OrthoOptions.of``): how each product is orthorectified
     (geolocation "pixel": the products' per-pixel geolocation, a product without one fails);

@@ -951,6 +951,7 @@ class Synthesis:
             if self.progress is not None:
                 self.progress(count[0], total)
 
+        advance(0)  # the total known before the first piece
         # in process: the writer thread, and progress (and Cancel) after every piece
         extra: tuple[Any, ...] = ((runner.writer, lambda: advance(1))
                                   if isinstance(runner, InProcess) else ())
