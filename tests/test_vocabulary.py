@@ -36,9 +36,8 @@ RULES: tuple[tuple[str, re.Pattern[str]], ...] = (
     ("a numbered development round",
      re.compile(r"\b(?:stops?|rounds?|sitt[i]ngs?)\s+\d+\b", re.I)),
     ("an issue by number (cite another project's by URL)",
-     re.compile(r"(?<![/\w])(?:issues?\s+#?\d+(?:\s*(?:,|and)\s*#?\d+)*\b"
-                r"(?!\.\d|\s+revision\b)"  # a document's edition ("issue 2.1") is no history
-                r"|#\d{1,5}\b(?![0-9a-f]))", re.I)),
+     re.compile(r"(?<![/\w])(?:issues?\s+#?\d+(?:\s*(?:,|and)\s*#?\d+)*\b|#\d{1,5}\b(?![0-9a-f]))",
+                re.I)),
     ("an issue of another project by number (cite it by URL)",
      re.compile(r"(?<![/\w])gh-\d+\b", re.I)),
     ("the review of a round", re.compile(r"\bQA\s+of\b", re.I)),
@@ -148,7 +147,6 @@ CLEAN = [
     "sha256 = 9f86d081884c7d659a2feaa0c55ad015a3bf4f1b2b0b822cd15d6c15b0f00a08",
     "A 2241 x 2241 FR scene at 09:23 on 2003-09-21, tie points every 64 pixels.",
     "The session's first layer; the viewer's load is shown as a progress bar.",
-    "MERIS Product Handbook, issue 2.1; the Geometry Handbook, issue 1 revision 5.",
 ]
 
 
