@@ -32,6 +32,12 @@ DTYPES = tuple(RADIANCE_NOTE)
 NODATA = 0
 
 
+def check_dtype(dtype: str) -> None:
+    """OptionsError unless ``dtype`` is an output type of mapped bands (``DTYPES``)."""
+    if dtype not in DTYPES:
+        raise OptionsError(f"unknown output type {dtype!r}: choose {', '.join(DTYPES)}")
+
+
 def software_version() -> str:
     """The version of this software (``napari_meris_ortho.__version__``)."""
     from .. import __version__
@@ -97,11 +103,10 @@ class MapDescription:
 
     def tags(self) -> dict[str, str]:
         """The dataset tags of the GeoTIFF (also the xarray attributes)."""
-        out = {"radiance": self.values, **{k: str(v) for k, v in self.run.items()},
+        return {"radiance": self.values, **{k: str(v) for k, v in self.run.items()},
                "bands": ",".join(str(b) for b in self.band_numbers),
                "dems": dems_text(self.dems), "software": self.software,
                "software_version": self.version}
-        return out
 
     def to_dict(self) -> dict[str, Any]:
         """The description as plain values (``--stats-json``'s ``output``)."""
@@ -140,11 +145,18 @@ def dem_list(entries: Sequence[str], datums: Sequence[str | None]
     return tuple(out)
 
 
-def options_tags(opts: Any) -> dict[str, Any]:
-    """The options of a run (``OrthoOptions``) as the file's tags name them."""
-    return {"elevation": opts.elevation.value, "parallax": opts.parallax.value,
-            "geolocation": opts.geolocation.value, "tolerance_px": opts.tolerance,
-            "sampling": opts.sampling.value, "search": opts.method.value}
+#: the options of a run as the file's tags name them: (tag, attribute of ``OrthoOptions`` and
+#: of ``RunStats``)
+OPTION_TAGS = (("elevation", "elevation"), ("parallax", "parallax"),
+               ("geolocation", "geolocation"), ("tolerance_px", "tolerance"),
+               ("sampling", "sampling"), ("search", "method"))
+
+
+def options_tags(source: Any) -> dict[str, Any]:
+    """The options of a run (``OrthoOptions``, its enums as their values, or ``RunStats``) as
+    the file's tags name them."""
+    values = {tag: getattr(source, attr) for tag, attr in OPTION_TAGS}
+    return {tag: getattr(v, "value", v) for tag, v in values.items()}
 
 
 def describe_map(stats: RunStats | None, bands: Sequence[int], dtype: str = "uint16", *,
@@ -158,8 +170,7 @@ def describe_map(stats: RunStats | None, bands: Sequence[int], dtype: str = "uin
     DEMs from ``stats`` unless ``run``/``dems`` are given (a synthesis's)."""
     from ..products.n1.format import APPENDIX_A_BANDWIDTHS, APPENDIX_A_WAVELENGTHS
 
-    if dtype not in DTYPES:
-        raise OptionsError(f"unknown output type {dtype!r}: choose {', '.join(DTYPES)}")
+    check_dtype(dtype)
     if stats is not None:
         wl, bw, sf = stats.wavelengths, stats.bandwidths, stats.scale_factors
     else:
@@ -180,9 +191,7 @@ def describe_map(stats: RunStats | None, bands: Sequence[int], dtype: str = "uin
 def run_options(stats: RunStats) -> dict[str, Any]:
     """The product and the options of a mapping run, as the file's tags name them."""
     return {"product": stats.product, "product_name": stats.product_name,
-            "elevation": stats.elevation, "parallax": stats.parallax,
-            "geolocation": stats.geolocation, "tolerance_px": stats.tolerance,
-            "sampling": stats.sampling, "search": stats.method}
+            **options_tags(stats)}
 
 
 def stats_document(stats: RunStats, description: MapDescription) -> dict[str, Any]:

@@ -26,7 +26,7 @@ from ..geometry.grid import OutputGrid
 from ..output.geotiff import COMPRESSIONS, write_cog
 from ..progress import ProgressCallback
 from .antecedents import GATHER_GROUP
-from .description import DTYPES, MapDescription, describe_map
+from .description import MapDescription, check_dtype, describe_map
 from .stats import RunStats
 
 #: the diagnostics layers of ``OUT_diagnostics.tif``, in band order
@@ -98,8 +98,7 @@ def write_map(path: str | os.PathLike[str], mapped: Mapped, *, dtype: str = "uin
     ``metadata``: more dataset tags; ``order``: the bands' order in the file (the user's
     ``--bands 7,5,2``: an RGB composite in any viewer; default ascending; repeats dropped).
     Atomic (tmp file + rename); OutputError/OptionsError."""
-    if dtype not in DTYPES:
-        raise OptionsError(f"unknown output type {dtype!r}: choose {', '.join(DTYPES)}")
+    check_dtype(dtype)
     if compress not in COMPRESSIONS:
         raise OptionsError(f"unknown compression {compress!r}: choose "
                            f"{', '.join(COMPRESSIONS)}")

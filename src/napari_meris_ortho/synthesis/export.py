@@ -102,15 +102,15 @@ def export_cog(store: SynthesisStore, out: str | os.PathLike[str], *,
     ``dtype``: "uint16" (default: counts, NDVI codes, with GDAL scale/offset) or "float32"
     (radiances, NDVI), for the bands and the NDVI only."""
     from .._atomic import check_distinct
-    from ..ortho.description import DTYPES
+    from ..ortho.description import check_dtype
     from ..ortho.writing import check_geotiff_name, write_map
 
     check_distinct({"output": out}, {"synthesis store": [store.path]})
     check_geotiff_name("output", out)
     if layer is not None and bands is not None:
         raise OptionsError("choose bands or one other layer, not both")
-    if dtype is not None and dtype not in DTYPES:
-        raise OptionsError(f"unknown output type {dtype!r}: choose {', '.join(DTYPES)}")
+    if dtype is not None:
+        check_dtype(dtype)
     if dtype is not None and layer in ("count", "product"):
         raise OptionsError(f"the {layer} layer keeps its integer type: the output type applies "
                            "to the bands and the NDVI")
