@@ -23,7 +23,7 @@ from ..errors import OptionsError
 from ..geometry.grid import OutputGrid
 from ..progress import ProgressCallback
 from . import store as st
-from .reading import SynthesisStore, run_tags
+from .reading import SynthesisStore, run_tags, runs_described
 
 #: compression of the exported COGs (DEFLATE: read by every GDAL build)
 COMPRESS = "deflate"
@@ -145,12 +145,10 @@ def _write_layer(store: SynthesisStore, out: str | os.PathLike[str], layer: str,
     and product in their own type, 0 = background."""
     from ..engine.resample import overview_level
     from ..engine.synthesis import NDVI_FACTOR, NDVI_SHIFT, ndvi_decode
-    from ..ortho.description import dems_text, software_version
     from ..output.geotiff import write_cog
 
-    run, dems = run_tags(store)
-    tags = {**tags, **{k: str(v) for k, v in run.items()}, "dems": dems_text(dems),
-            "software": "napari-meris-ortho export", "software_version": software_version()}
+    described = runs_described(store, "napari-meris-ortho export")
+    tags = {**tags, **{k: str(v) for k, v in described.items()}}
     kwargs: dict[str, Any] = {"dtype": st.layer_dtype(layer), "nodata": 0}
     if layer == "ndvi":
         tags["ndvi"] = NDVI_NOTE[dtype]

@@ -102,7 +102,6 @@ class SynthesisStore:
 
         from ..engine.synthesis import ndvi_decode
         from ..ortho.antecedents import RADIANCE_UNITS
-        from ..ortho.description import dems_text, software_version
         from ..output.dataset import grid_dataset, require_xarray
         from ..products.n1.format import APPENDIX_A_WAVELENGTHS
         require_xarray()
@@ -133,11 +132,9 @@ class SynthesisStore:
                                                                      dtype=np.float32),
                                  {"long_name": "NDVI of the selected product (Appendix C)"})
         names = self.product_names()
-        run, dems = run_tags(self)  # as export's tags say them
         attrs = {"algorithm": self.algorithm, "snapshot": self.snapshot,
                  "products": [names.get(k, "") for k in range(1, max(names, default=0) + 1)],
-                 **run, "dems": dems_text(dems), "software": "napari-meris-ortho",
-                 "software_version": software_version()}
+                 **runs_described(self, "napari-meris-ortho")}
         return grid_dataset(self.grid, variables, bands=bands,
                             wavelengths=[APPENDIX_A_WAVELENGTHS[b - 1] for b in bands],
                             attrs=attrs)
@@ -250,6 +247,17 @@ class DecodedStack:
 
     def __len__(self) -> int:
         return self.shape[0]
+
+
+def runs_described(store: SynthesisStore, software: str) -> dict[str, Any]:
+    """What the store's runs recorded (``run_tags``: options, DEMs with their datums) and the
+    software describing them, with its version: the tags of an export, the attributes of
+    ``to_xarray``."""
+    from ..ortho.description import dems_text, software_version
+
+    run, dems = run_tags(store)
+    return {**run, "dems": dems_text(dems), "software": software,
+            "software_version": software_version()}
 
 
 def run_tags(store: SynthesisStore) -> tuple[dict[str, Any], list[dict[str, str]]]:
