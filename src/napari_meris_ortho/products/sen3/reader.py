@@ -773,7 +773,7 @@ def _tie_altitude_of_pixels(members: Members, shape: tuple[int, int], df: int, d
     pixels, attrs = _variables(members, GEO_FILE, ["altitude"], image)
     lines = np.minimum(np.arange(shape[0]) * df, image[0] - 1)
     columns = np.arange(shape[1]) * dj
-    (log.info if expected else log.warning)(
+    (log.debug if expected else log.warning)(
         "%s: %s has no tie-point altitude: taken from %s at the tie points",
         members.path.name, TIE_GEO_FILE, GEO_FILE)
     return pixels["altitude"][np.ix_(lines, columns)], attrs["altitude"]
