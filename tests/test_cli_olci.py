@@ -35,20 +35,22 @@ def flat_dem(tmp_path_factory):
     return path
 
 
-def _hits(out, band: int) -> float:
+def _hits(out, band: int, kind: str = "ERR", rows: int = ROWS) -> float:
     """Share of sampled product pixels whose centre falls on an output pixel holding their
     count of ``band``."""
     from pyproj import Transformer
 
     arrays, grid, _ = read_geotiff(out)
-    geo = samples.err_geometry(ROWS)
-    rows, cols = np.meshgrid(np.arange(3, ROWS - 3, 3), np.arange(40, 1180, 23), indexing="ij")
-    lat, lon = geo["latitude"][rows, cols], geo["longitude"][rows, cols]
+    geo = samples.err_geometry(rows, kind)
+    width = geo["latitude"].shape[1]
+    r0, c0 = np.meshgrid(np.arange(3, rows - 3, 3), np.arange(40, width - 40, width // 50),
+                         indexing="ij")
+    lat, lon = geo["latitude"][r0, c0], geo["longitude"][r0, c0]
     x, y = Transformer.from_crs("EPSG:4326", grid.crs, always_xy=True).transform(lon, lat)
     c = np.floor((x - grid.x0) / grid.dx).astype(int)
     r = np.floor((grid.y0 - y) / grid.dy).astype(int)
     got = arrays[0][r, c]
-    expected = samples.counts_pattern(ROWS, band)[rows, cols]
+    expected = samples.counts_pattern(rows, band, width)[r0, c0]
     return float(np.mean(got == expected))
 
 
@@ -66,6 +68,17 @@ def test_map_puts_each_pixel_where_its_geolocation_says(product, flat_dem, tmp_p
                "EPSG:32632", "--pixel-size", "400", *extra])
     assert rc == 0, capsys.readouterr().err
     assert _hits(out, 8) == 1.0
+
+
+@pytest.mark.parametrize("mode", [["--geolocation", "pixel"], ["--elevation", "tiepoints"]])
+def test_map_a_full_resolution_product(tmp_path, capsys, mode):
+    """EFR: 4865 columns, tie points every 64 columns and every row."""
+    product = samples.write_err(tmp_path, rows=24, kind="EFR")
+    out = tmp_path / "efr.tif"
+    rc = main(["-q", "map", str(product), "-o", str(out), "--bands", "17", "--crs",
+               "EPSG:32632", "--pixel-size", "100", *mode])
+    assert rc == 0, capsys.readouterr().err
+    assert _hits(out, 17, "EFR", 24) == 1.0
 
 
 def test_all_21_bands_by_default_and_band_21(product, tmp_path, capsys):

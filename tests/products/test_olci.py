@@ -171,3 +171,14 @@ def test_bad_arguments_write_nothing(tmp_path):
         samples.write_err(tmp_path / "c.nc", **good)
     assert not any(tmp_path.iterdir())
     assert ERR.width == 1217
+
+
+def test_flags_without_their_coding_take_the_per_band_table(tmp_path):
+    (tmp_path / "p").mkdir()
+    written = samples.write_err(tmp_path / "p", rows=8)
+    with netCDF4.Dataset(written / "qualityFlags.nc", "a") as ds:
+        ds["quality_flags"].delncattr("flag_masks")
+        ds["quality_flags"].delncattr("flag_meanings")
+    p = read_product(written)
+    assert p.quality_coding == flag_table(FlagBaseline.PER_BAND)
+    assert p.flags[0, 0] == FLAG_LAND_OCEAN and p.saturated[5, 7] == 1 << 16
