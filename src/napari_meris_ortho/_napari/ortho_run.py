@@ -38,6 +38,8 @@ GEOLOCATIONS = ("tiepoints", "pixel")
 CRS_UTM = "UTM zone of the footprint"
 CRS_GEOGRAPHIC = "geographic (EPSG:4326)"
 CRS_EPSG = "EPSG code"
+#: the CRS, pixel size and grid of an open geocoded layer (CLI ``--like REFERENCE.tif``)
+CRS_LIKE = "like a layer"
 LayerData = tuple[Any, dict[str, Any], str]
 
 
@@ -56,6 +58,8 @@ class RunSettings:
     sampling: str = "nearest"
     crs: str = CRS_UTM
     epsg: int | None = None
+    #: the grid of the layer chosen with ``CRS_LIKE``: outputs on it pixel for pixel
+    like: OutputGrid | None = None
     pixel_size_m: float = 0.0  # 0: the nominal FR 260 m / RR 1040 m
     bands: tuple[int, ...] | None = (7, 5, 2)
     #: location model: "tiepoints" (with the parallax) or "pixel" (FRG/FSG/SEN3 per-pixel
@@ -123,6 +127,9 @@ class RunSettings:
         if missing:
             raise OptionsError(f"N1 product not found: {', '.join(missing)}")
         self.options()
+        if self.crs == CRS_LIKE and self.like is None:
+            raise OptionsError("output CRS 'like a layer' needs a layer: open a GeoTIFF or an "
+                               "orthorectified product and choose it")
         if not self.pixel and self.elevation == Elevation.DEM and not self.dems:
             raise OptionsError("elevation 'dem' needs a DEM: add one, or choose elevation "
                                "'tiepoints' (the product's tie-point heights) or 'none'")
@@ -158,9 +165,12 @@ parse_bands = parse_band_list
 
 
 def output_crs(options: RunSettings, tie_points: Mapping[str, np.ndarray]) -> Any:
-    """The output CRS: the UTM zone of the footprint centre, EPSG:4326 or the given EPSG code."""
+    """The output CRS: the UTM zone of the footprint centre (the default), EPSG:4326, the
+    given EPSG code or the chosen layer's."""
     from ..geometry.grid import footprint_utm, parse_crs
 
+    if options.crs == CRS_LIKE and options.like is not None:
+        return options.like.crs
     if options.crs == CRS_GEOGRAPHIC:
         return parse_crs("EPSG:4326")
     if options.crs == CRS_EPSG:
@@ -259,7 +269,8 @@ def _run_mapping(options: RunSettings, progress: ProgressCallback | None) -> Ort
             if progress is not None:
                 progress(k * 1000 + int(1000 * done / max(total, 1)), n * 1000)
 
-        grid = product_grid(product, crs, _pixel_size(options, product, crs))
+        grid = options.like if options.crs == CRS_LIKE and options.like is not None else \
+            product_grid(product, crs, _pixel_size(options, product, crs))
         ante = precompute(product, grid, options.dem_list, options=opts, progress=part,
                           hold_bands=True)  # the layers hold every band (``result``)
         warnings += ante.stats.gap_warnings()
@@ -314,6 +325,8 @@ def _run_synthesis(options: RunSettings, progress: ProgressCallback | None) -> O
         crs = output_crs(options, products[0].tie_points)
         grid_options = {"crs": crs, "pixel_size": _pixel_size(options, products[0], crs),
                         "bands": options.bands}  # an update keeps its store's bands
+        if options.crs == CRS_LIKE and options.like is not None:
+            grid_options.update(grid=options.like, crs=None, pixel_size=None)
     temporary = options.output is None and options.input_store is None
     out = (Path(options.output) if options.output is not None
            else Path(options.input_store) if options.input_store is not None
@@ -471,6 +484,7 @@ def _item_layers(item: dict[str, Any], frame: OutputGrid, opts: RunSettings) -> 
     return layers
 
 
-__all__ = ["ALGORITHMS", "CRS_EPSG", "CRS_GEOGRAPHIC", "CRS_UTM", "GEOLOCATIONS", "Cancelled",
+__all__ = ["ALGORITHMS", "CRS_EPSG", "CRS_GEOGRAPHIC", "CRS_LIKE", "CRS_UTM", "GEOLOCATIONS",
+           "Cancelled",
            "OrthoRun", "RunSettings", "output_crs", "parse_bands", "run_layers",
            "run_orthorectify"]
