@@ -101,11 +101,17 @@ __all__ = ["CRS_EPSG", "CRS_GEOGRAPHIC", "CRS_UTM", "Cancelled", "RunSettings", 
            "OrthorectifyWidget", "output_crs", "parse_bands", "run_layers", "run_orthorectify"]
 
 
-def warm_up_in_background() -> None:
-    """Compile the engine's numba kernels in a background thread (``warmup``)."""
-    from ..warmup import warm_up_in_background as start
+def _start_warm_up(widget: OrthorectifyWidget) -> None:
+    """The dock's warm-up in idle turns, held back while a run goes on (``warm``)."""
+    from .warm import start_warm_up
 
-    start()
+    ref = weakref.ref(widget)
+
+    def paused() -> bool:
+        alive = ref()
+        return alive is None or alive.running or bool(alive._queue)
+
+    start_warm_up(paused, widget.native)
 
 
 def _import_engine() -> None:
@@ -333,7 +339,7 @@ class OrthorectifyWidget(ScrolledForm):
         in_turns([_while_open(this, OrthorectifyWidget._prepare_glyphs),
                   *dash_pattern_steps(),
                   _while_open(this, OrthorectifyWidget._freeze_when_idle),
-                  _while_open(this, lambda _w: warm_up_in_background())])
+                  _while_open(this, _start_warm_up)])
 
     # ---------------------------------------------------------------- output grid
     def _crs_changed(self, value: str) -> None:
