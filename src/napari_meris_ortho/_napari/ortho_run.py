@@ -26,7 +26,14 @@ from ..options import Elevation, MergeRule, OrthoOptions, choices, parse_band_li
 from ..progress import ProgressCallback
 from ..pyramid import level_factors, memory_levels
 from .geometry_layers import geometry_layers
-from .product_layers import band_layers, diagnostic_layers
+from .product_layers import (
+    NDVI_LEGEND,
+    band_layers,
+    count_legend,
+    diagnostic_layers,
+    one_image_shown,
+    zero_transparent,
+)
 from .world import geo_image_kwargs, move_to_frame
 
 #: "mapping" orthorectifies every product on its own; the merge rules build a synthesis
@@ -240,7 +247,8 @@ class OrthoRun:
 
 def _item(product: Any, prefix: str = "ortho", **values: Any) -> dict[str, Any]:
     meta = {"product": getattr(product, "product_name", ""), "path": str(product.path),
-            "product_type": str(getattr(product, "product_type", "")).strip("_")}
+            "product_type": str(getattr(product, "product_type", "")).strip("_"),
+            "acquired": product_stamp(product)}
     return {"prefix": prefix, "suffix": f" · {product_stamp(product)}", "meta": meta,
             "tie_points": product.tie_points, "bands": {}, "extra": [], "valid": None,
             "diagnostics": {}, "stats": {}, **values}
@@ -375,11 +383,13 @@ def _synthesis_item(path: Path, products: list[Any]) -> dict[str, Any]:
         extra.append((levels if len(levels) > 1 else ndvi, geo_image_kwargs(
             grid, name=f"{prefix} NDVI", colormap="RdYlGn", contrast_limits=(-1.0, 1.0),
             visible=False, multiscale=len(levels) > 1,
-            metadata={"units": "NDVI (band 13 - band 7) / (band 13 + band 7)"}), "image"))
+            metadata={"units": "NDVI (band 13 - band 7) / (band 13 + band 7)",
+                      "legend": NDVI_LEGEND}), "image"))
+    top = float(max(int(count.max()), 1))
     extra.append((count, geo_image_kwargs(
-        grid, name=f"{prefix} count", colormap="viridis", visible=False,
-        contrast_limits=(0.0, float(max(int(count.max()), 1))),
-        metadata={"units": "products"}), "image"))
+        grid, name=f"{prefix} count", colormap=zero_transparent("viridis", top), visible=False,
+        contrast_limits=(0.0, top),
+        metadata={"units": "products", "legend": count_legend(top)}), "image"))
     return {"prefix": prefix, "suffix": "", "meta": {"synthesis": str(path),
                                                      "algorithm": algorithm,
                                                      "window": list(window)},
@@ -389,7 +399,8 @@ def _synthesis_item(path: Path, products: list[Any]) -> dict[str, Any]:
 
 
 def run_layers(run: OrthoRun, world: OutputGrid | None = None) -> list[LayerData]:
-    """napari layer tuples of a run: bands, diagnostics and geometry, in the world frame;
+    """napari layer tuples of a run: bands, diagnostics and geometry, in the world frame, the
+    newest image alone visible and the geometry above (``one_image_shown``);
     rasters bigger than ``MAX_LEVEL_SIDE`` multiscale (``multiscale_layer``).
 
     ``world``: the viewer's frame; results in another CRS are moved into it (reprojected).
@@ -403,7 +414,7 @@ def run_layers(run: OrthoRun, world: OutputGrid | None = None) -> list[LayerData
             item_layers = [move_to_frame(layer, frame, world) for layer in item_layers]
         key = run_key(item)
         layers += [_tagged(multiscale_layer(layer), key) for layer in item_layers]
-    return layers
+    return one_image_shown(layers)
 
 
 #: layer metadata key: the product (or synthesis store) a run's layer shows

@@ -164,7 +164,7 @@ def build_layers(options: RunSettings, report: Any, check: Any, world: Any,
     the insertions."""
     from napari.layers import Layer
 
-    from .status import wrap_status
+    from .status import wrap_status, wrap_tooltip
 
     run = run_orthorectify(options, report)
     layers = []
@@ -173,6 +173,7 @@ def build_layers(options: RunSettings, report: Any, check: Any, world: Any,
             check()
             layer = Layer.create(data, kwargs, kind)
             wrap_status(layer)  # here, not at its insertion on the Qt thread
+            wrap_tooltip(layer)
             layers.append(layer)
     run.release()
     if not any(layer.name in replacing for layer in layers):
@@ -575,6 +576,7 @@ class OrthorectifyWidget(ScrolledForm):
                          if type(layer).__name__ == "Labels"),
                        (self._scene_graph, False),
                        *((self._activate, layer) for layer in layers[-1:]),
+                       (self._hide_others, layers),
                        (self._frame_result, shown), (self._canvas_updates, True),
                        *(step for layer in shown
                          for step in ((self._show, layer), (self._draw, layer)))]
@@ -584,6 +586,17 @@ class OrthorectifyWidget(ScrolledForm):
         self._summary = run.summary()
         self._canvas_updates(False)
         self._schedule_step()
+
+    def _hide_others(self, layers: list[Any]) -> None:
+        """The first view of a run: its newest image alone visible; the images and labels
+        layers shown before it (a product's quick-look, an earlier run's) hidden, ready to
+        toggle or flicker."""
+        ours = set(map(id, layers))
+        for layer in self.viewer.layers:
+            if (id(layer) not in ours and layer.visible
+                    and type(layer).__name__ in ("Image", "Labels")):
+                layer.visible = False
+                self._removed.append((-1, layer))  # shown again by a Cancel
 
     def _prepare_glyphs(self) -> None:
         """The legend's glyphs rendered beforehand (``legend.prepare_glyphs``), not in a run."""
@@ -682,7 +695,9 @@ class OrthorectifyWidget(ScrolledForm):
                 self.viewer.layers.remove(layer)
                 undone += 1
         for index, layer in reversed(self._removed):
-            if layer not in self.viewer.layers:
+            if index < 0:  # hidden by ``_hide_others``
+                layer.visible = True
+            elif layer not in self.viewer.layers:
                 self.viewer.layers.insert(min(index, len(self.viewer.layers)), layer)
                 undone += 1
         self._hidden = [x for x in self._hidden if x in self.viewer.layers]
