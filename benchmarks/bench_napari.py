@@ -259,7 +259,7 @@ def _warm_up_done() -> bool:
     warm-up thread)."""
     import sys
 
-    warm = sys.modules.get("napari_meris_ortho._napari.warm")
+    warm = sys.modules.get("napari_meris_ortho._napari._qt.warm")
     if warm is not None and getattr(warm, "_STARTED", None) is not None:
         return bool(warm._STARTED.done.is_set())
     from napari_meris_ortho import warmup

@@ -46,7 +46,11 @@ def _viewer():
 
 
 def _select(viewer, prefix: str) -> None:
-    """Show and select the newest layer whose name starts with ``prefix`` (its key shows)."""
+    """Show and select the newest layer whose name starts with ``prefix`` (its key shows); the
+    layer selected before it hidden again, unless it is a geometry layer."""
+    before = viewer.layers.selection.active
+    if before is not None and type(before).__name__ != "Vectors":
+        before.visible = False
     layer = next(x for x in reversed(viewer.layers) if x.name.startswith(prefix))
     layer.visible = True
     viewer.layers.selection.active = layer

@@ -10,7 +10,7 @@ from napari.layers import Image, Labels, Vectors
 
 from napari_meris_ortho._napari.product_layers import one_image_shown
 
-STAMP = " · 2003-09-21 09:23"
+STAMP = " · 09-21 09:23"
 
 
 def test_one_image_shown_keeps_the_newest_and_puts_geometry_on_top():

@@ -42,7 +42,7 @@ def test_sample_small_in_viewer(make_napari_viewer):
     assert corr_ortho > 0.95 and corr_flat < 0.7
     dem = viewer.layers["DEM"].data
     assert dem[m].max() > 2000.0  # the high range is in the small scene
-    assert len(vec.data) > 100
+    assert len(vec.data) >= 50  # a readable field: about ten arrows across the scene
     # shift lengths (exaggerated) against heights: higher points move further
     length = np.hypot(vec.data[:, 1, 0], vec.data[:, 1, 1])
     h = vec.features["height"].to_numpy()

@@ -48,7 +48,7 @@ class GilProbe:
 def test_dock_warm_up_yields_to_the_user(make_napari_viewer, qtbot, monkeypatch):
     from qtpy.QtCore import QTimer
 
-    from napari_meris_ortho._napari import warm
+    from napari_meris_ortho._napari._qt import warm
     from napari_meris_ortho._napari.widget_ortho import OrthorectifyWidget
 
     monkeypatch.delenv("MERIS_ORTHO_NO_WARMUP", raising=False)

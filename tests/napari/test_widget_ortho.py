@@ -20,7 +20,7 @@ from napari_meris_ortho.geometry.grid import OutputGrid, default_grid
 from napari_meris_ortho.products.n1 import read_product
 from qt_paints import paints_of
 
-STAMP = " · 2003-09-21 09:23"  # first line time of the tiny product
+STAMP = " · 09-21 09:23"  # first line time of the tiny product
 
 
 def _run(widget, qtbot, timeout=60_000):

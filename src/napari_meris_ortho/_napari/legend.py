@@ -5,7 +5,7 @@ vectors (height, viridis; ``geometry_layers.parallax_layer_data``), iterations, 
 elevation source (``product_layers.diagnostic_layers``), a synthesis's NDVI and count. The key
 of the selected layer, while it is visible, is napari's canvas text overlay in the top left
 corner (napari's notifications come up in the bottom right):
-"parallax ×10 · 2003-09-21 09:23: colour = height, purple 412 m → yellow 2391 m".
+"parallax ×10 · 09-21 09:23: colour = height, purple 412 m → yellow 2391 m".
 """
 
 from __future__ import annotations
@@ -64,7 +64,7 @@ def update_legend(viewer: Any) -> None:
         _SHOWING.discard(viewer)
 
 
-#: the characters of a legend line (``legend_line``: "parallax ×10 · 2003-09-21 09:23: colour =
+#: the characters of a legend line (``legend_line``: "parallax ×10 · 09-21 09:23: colour =
 #: height, purple 412 m → yellow 2391 m")
 GLYPHS = "0123456789 abcdefghijklmnopqrstuvwxyz:=,.-×·→()+/NDVIEMR"
 #: glyphs rendered per turn of the event loop (10-20 ms each)

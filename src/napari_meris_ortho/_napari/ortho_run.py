@@ -2,10 +2,10 @@
 product (MERSYN use case 3) or a synthesis (use cases 1-2, handbook section 3.1), and the napari
 layer tuples of the result in the viewer's world frame (``world``).
 
-Layer names are short and distinct: "ortho b7 · 2003-09-21 09:23" (the product's first line
-time), "footprint · ...", "parallax ×10 · ..."; with the per-pixel geolocation
-"ortho b7 (pixel geolocation) · ..."; the full product name and path are in the layer metadata
-("product", "path").
+Layer names are short and distinct: "ortho b7 · 09-21 09:23" (the product's first line
+time without the year: the names fit the layer list), "footprint · ...", "parallax ×10 · ...";
+with the per-pixel geolocation "ortho b7 (pixel geolocation) · ..."; the full product name,
+path and time are in the layer metadata ("product", "path", "acquired") and the tooltip.
 """
 
 from __future__ import annotations
@@ -195,6 +195,13 @@ def _pixel_size(options: RunSettings, product: Any, crs: Any) -> float:
     return pixel_size_for(metres, crs)
 
 
+def name_stamp(product: Any) -> str:
+    """'09-21 09:23': the first line time of a product in its layers' names, without the year
+    (``product_stamp`` in the tooltip and metadata); its file stem if unknown."""
+    stamp = product_stamp(product)
+    return stamp[5:] if getattr(product, "first_line_time", None) is not None else stamp
+
+
 def product_stamp(product: Any) -> str:
     """'2003-09-21 09:23': the first line time of a product (its file stem if unknown)."""
     t = getattr(product, "first_line_time", None)
@@ -249,7 +256,7 @@ def _item(product: Any, prefix: str = "ortho", **values: Any) -> dict[str, Any]:
     meta = {"product": getattr(product, "product_name", ""), "path": str(product.path),
             "product_type": str(getattr(product, "product_type", "")).strip("_"),
             "acquired": product_stamp(product)}
-    return {"prefix": prefix, "suffix": f" · {product_stamp(product)}", "meta": meta,
+    return {"prefix": prefix, "suffix": f" · {name_stamp(product)}", "meta": meta,
             "tie_points": product.tie_points, "bands": {}, "extra": [], "valid": None,
             "diagnostics": {}, "stats": {}, **values}
 
@@ -290,7 +297,7 @@ def _run_mapping(options: RunSettings, progress: ProgressCallback | None) -> Ort
         result = ante.result()
         # the model after the band ("ortho b7 (pixel geolocation) · ..."): names differ within
         # the width the layer list shows, and differ from the tie-point run's
-        extra = {"suffix": f" (pixel geolocation) · {product_stamp(product)}"} \
+        extra = {"suffix": f" (pixel geolocation) · {name_stamp(product)}"} \
             if options.pixel else {}
         items.append(_item(product, bands=result.bands, grid=result.grid,
                            valid=result.valid, diagnostics=result.diagnostics,

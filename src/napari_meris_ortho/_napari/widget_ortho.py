@@ -103,7 +103,7 @@ __all__ = ["CRS_EPSG", "CRS_GEOGRAPHIC", "CRS_UTM", "Cancelled", "RunSettings", 
 
 def _start_warm_up(widget: OrthorectifyWidget) -> None:
     """The dock's warm-up in idle turns, held back while a run goes on (``warm``)."""
-    from .warm import start_warm_up
+    from ._qt.warm import start_warm_up
 
     ref = weakref.ref(widget)
 

@@ -8,7 +8,7 @@ What a user's first open and first Run would otherwise pay, prepared while they 
   a child at the lowest priority fills numba's on-disk cache, or reads it when warm), then
   loaded from the cache one specialisation per piece (``warmup.load_kernel``).
 
-The pieces run through ``_qt.idle.IdlePieces``: one per idle turn of the event loop, none
+The pieces run through ``idle.IdlePieces``: one per idle turn of the event loop, none
 while napari opens a file or a run is under way.
 """
 
@@ -21,7 +21,7 @@ import threading
 from collections.abc import Callable
 from typing import Any
 
-from ._qt.idle import IdlePieces, run_when_idle
+from .idle import IdlePieces, run_when_idle
 
 #: modules napari imports at its first image layer, leaves first (each import a piece; a
 #: missing one is skipped)
@@ -46,7 +46,7 @@ def warm_up_pieces() -> list[Callable[[], Any]]:
     """The pieces of the warm-up: the child process started, napari's first-layer imports,
     the child's kernels waited for, then loaded one per piece (appended to the list as the
     child answers: ``IdlePieces`` runs them in order)."""
-    from .. import warmup
+    from ... import warmup
 
     pieces: list[Callable[[], Any]] = []
     found: list[Any] = []
@@ -55,7 +55,7 @@ def warm_up_pieces() -> list[Callable[[], Any]]:
 
     def wait_for_kernels() -> None:
         child.join()  # no GIL held while the child process works
-        from .._process import start_numba_without_blas
+        from ..._process import start_numba_without_blas
 
         pieces.append(start_numba_without_blas)
         pieces.extend(functools.partial(warmup.load_kernel, s) for s in found)
