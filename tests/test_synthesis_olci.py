@@ -296,3 +296,40 @@ def test_xarray_and_export_name_the_sensors_and_oa_bands(meris, olci, tmp_path) 
     xr_only = open_synthesis(only).to_xarray()
     assert list(xr_only["band_name"].values) == ["Oa08", "Oa17", "Oa21"]
     np.testing.assert_allclose(xr_only["wavelength"].values, [665.0, 865.0, 1020.0])
+
+
+def test_cli_synthesize_and_export_olci_products(meris, olci, tmp_path, capsys) -> None:
+    """``meris-ortho synthesize`` takes OLCI products (an OLCI store, ``--bands`` of its band
+    set), ``export`` names its bands Oa..; bands beyond the band set and a MERIS product for
+    an OLCI store: one error line, exit 2, nothing written."""
+    from napari_meris_ortho.cli import main
+
+    grid = ["--crs", "EPSG:4326", "--ul", "13.45", "46.70", "--lr", "14.26", "46.19",
+            "--pixel-size", "0.0015", "--elevation", "tiepoints", "--tile", "256",
+            "--workers", "0"]
+    out = tmp_path / "olci"
+    assert main(["-q", "synthesize", *olci, "--out", str(out), "--bands", "8,17,21",
+                 *grid]) == 0
+    assert open_synthesis(out).band_names == ["Oa08", "Oa17", "Oa21"]
+    tif = tmp_path / "olci.tif"
+    assert main(["-q", "export", str(out), "-o", str(tif), "--bands", "21,8"]) == 0
+    with rasterio.open(tif) as src:
+        assert src.descriptions == ("Oa21 (1020.0 nm)", "Oa08 (665.0 nm)")
+    capsys.readouterr()
+    cases = [
+        ([meris[0], olci[0], "--out", str(tmp_path / "a"), "--bands", "7,16", *grid],
+         "the synthesis holds MERIS bands (MERIS bands are 1..15"),
+        ([*olci, "--out", str(tmp_path / "b"), "--bands", "17", "--band-set", "meris", *grid],
+         "MERIS bands are 1..15"),
+        ([meris[0], "--input", str(out), "--out", str(out), "--workers", "0",
+          "--elevation", "tiepoints"], "a MERIS product cannot join a synthesis of OLCI bands"),
+        ([olci[0], "--input", str(out), "--out", str(out), "--band-set", "OLCI"],
+         "shall not be given"),
+    ]
+    snapshot = open_synthesis(out).snapshot
+    for args, message in cases:
+        assert main(["-q", "synthesize", *args]) == 2, message
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and err[0].startswith("meris-ortho: error:") and message in err[0]
+    assert not (tmp_path / "a").exists() and not (tmp_path / "b").exists()
+    assert open_synthesis(out).snapshot == snapshot

@@ -88,7 +88,8 @@ def synthesize(products: Sequence[str | os.PathLike[str]], out: str | os.PathLik
         _check_keep(keep)
     if "bands" in modes:
         raise OptionsError("give the bands of the synthesis as bands=, not in the options")
-    opts = OrthoOptions.of(options, n_dems=len(dems), **modes)
+    # the options' bands are not the synthesis's (each product's are set by its band plan)
+    opts = OrthoOptions.of(options, n_dems=len(dems), n_bands=MAX_BANDS, **modes)
     asked = parse_band_set(band_set)
     source_path = _check_options(products, out_dir, algorithm, input, grid, crs, pixel_size,
                                  bands, tile, dems, workers, scheduler, codec, asked)

@@ -839,7 +839,14 @@ class Synthesis:
 
         if self.target.synthesis is None:
             self.sensor = band_set_of((Sensor(i.product.sensor) for i in items), self.sensor)
-            self.bands = check_bands(self._asked_bands, band_table(self.sensor).n_bands)
+            n_bands = band_table(self.sensor).n_bands
+            bad = [b for b in self._asked_bands or () if not 1 <= b <= n_bands]
+            if bad:
+                raise OptionsError(
+                    f"bands {list(self._asked_bands or ())}: the synthesis holds "
+                    f"{self.sensor.value} bands ({self.sensor.value} bands are 1..{n_bands}; "
+                    "a synthesis of OLCI products only holds OLCI bands 1..21)")
+            self.bands = check_bands(self._asked_bands, n_bands)
         for item in items:
             if self._sensor is Sensor.OLCI and Sensor(item.product.sensor) is not Sensor.OLCI:
                 raise OptionsError(refusal(self._sensor, item.report.path))
