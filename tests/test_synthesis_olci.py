@@ -251,7 +251,7 @@ def test_max_ndvi_takes_each_sensors_own_red_and_near_infrared(olci, tmp_path) -
 def test_band_set_and_bands_checked(meris, olci, tmp_path) -> None:
     with pytest.raises(OptionsError, match="band set 'landsat'"):
         synthesize(olci, tmp_path / "a", band_set="landsat", **COMMON)
-    with pytest.raises(OptionsError, match="bands must be 1..15"):
+    with pytest.raises(OptionsError, match=r"bands \[7, 17\]: the synthesis holds MERIS bands"):
         synthesize([meris[0], olci[0]], tmp_path / "b", grid=GRID, bands=(7, 17), tile=256,
                    elevation="tiepoints")
     assert not (tmp_path / "b").exists()
@@ -333,3 +333,28 @@ def test_cli_synthesize_and_export_olci_products(meris, olci, tmp_path, capsys) 
         assert len(err) == 1 and err[0].startswith("meris-ortho: error:") and message in err[0]
     assert not (tmp_path / "a").exists() and not (tmp_path / "b").exists()
     assert open_synthesis(out).snapshot == snapshot
+
+
+def test_meris_store_records_nothing_new_until_olci_joins(meris, olci, tmp_path) -> None:
+    """A store of MERIS products, made and updated, has the attributes of every store before
+    OLCI products were read (no ``sensor``, no band matching; readers take it as MERIS);
+    an OLCI product merged into it adds its own ``sensor`` entry and the band matching."""
+    import zarr
+
+    out = tmp_path / "s"
+    synthesize([meris[0]], out, **COMMON)
+    synthesize([meris[1]], out, input=out, elevation="tiepoints")
+
+    def raw(path: Path) -> dict:
+        store = open_synthesis(path)
+        return dict(zarr.open_group(store.session.store, mode="r", zarr_format=3).attrs)
+
+    attrs = raw(out)
+    assert not {"sensor", "olci_bands", "approximate_bands", "band_matching"} & set(attrs)
+    assert all("sensor" not in p for p in attrs["products"])
+    assert open_synthesis(out).product_sensors() == {1: "MERIS", 2: "MERIS"}
+    synthesize([olci[0]], out, input=out, elevation="tiepoints")
+    attrs = raw(out)
+    assert "sensor" not in attrs and attrs["olci_bands"] == {"M07": "Oa08", "M13": "Oa17"}
+    assert [p.get("sensor") for p in attrs["products"]] == [None, None, "OLCI"]
+    assert open_synthesis(out).product_sensors() == {1: "MERIS", 2: "MERIS", 3: "OLCI"}

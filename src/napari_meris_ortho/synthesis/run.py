@@ -795,7 +795,8 @@ class Synthesis:
         self.max_pixels = max_pixels
         self.codec = codec
         self.progress = progress
-        self.table: list[dict[str, Any]] = old.products if old else []
+        # the table as stored (``SynthesisStore.products`` adds each sensor for readers)
+        self.table: list[dict[str, Any]] = list(old.attrs.get("products", [])) if old else []
         self._branch: str | None = None  # run branch of a new synthesis
 
     # ---------------------------------------------------------------- products
