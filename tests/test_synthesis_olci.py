@@ -316,6 +316,10 @@ def test_cli_synthesize_and_export_olci_products(meris, olci, tmp_path, capsys) 
     with rasterio.open(tif) as src:
         assert src.descriptions == ("Oa21 (1020.0 nm)", "Oa08 (665.0 nm)")
     capsys.readouterr()
+    assert main(["synthesis-log", str(out)]) == 0
+    log = capsys.readouterr().out
+    assert "OLCI bands [8, 17, 21] (Oa08, Oa17, Oa21)" in log.splitlines()[0]
+    assert log.count(" OLCI index ") == 2
     cases = [
         ([meris[0], olci[0], "--out", str(tmp_path / "a"), "--bands", "7,16", *grid],
          "the synthesis holds MERIS bands (MERIS bands are 1..15"),

@@ -112,7 +112,7 @@ class SynthesisStore:
 
     def sensor_codes(self) -> np.ndarray:
         """Lookup table of the per-pixel sensor: ``codes[product index]`` is the
-        :data:`SENSOR_CODES` code of the product's sensor (index 0, background: 0)."""
+        ``SENSOR_CODES`` code of the product's sensor (index 0, background: 0)."""
         sensors = self.product_sensors()
         codes = np.zeros(max(sensors, default=0) + 1, np.uint8)
         for index, sensor in sensors.items():
@@ -120,7 +120,7 @@ class SynthesisStore:
         return codes
 
     def sensor_of_pixels(self, window: tuple[int, int, int, int] | None = None) -> np.ndarray:
-        """Which sensor each pixel's winning product came from: :data:`SENSOR_CODES` (uint8;
+        """Which sensor each pixel's winning product came from: ``SENSOR_CODES`` (uint8;
         0 = background), from the ``product`` layer and the product table."""
         return sensor_of(self.read("product", window), self.sensor_codes())
 
