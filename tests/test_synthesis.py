@@ -602,12 +602,13 @@ def test_a_products_own_counts_are_merged_as_they_are(products, sampling) -> Non
     radiances = antecedents.result().bands
     scales = {b: float(product.scaling.radiance[b - 1]) for b in (5, 7, 13)}
     spec = _spec(sampling)
-    assert counts_as_stored(spec, scales) == (sampling == "nearest")
-    assert not counts_as_stored(spec, {**scales, 5: scales[5] * 1.5})
-    assert not counts_as_stored(replace(spec, compact=False), scales)
-    sampled = _Sampled.of(antecedents, spec)
+    plan = spec.plan(product.sensor)
+    assert counts_as_stored(spec, plan, scales) == (sampling == "nearest")
+    assert not counts_as_stored(spec, plan, {**scales, 5: scales[5] * 1.5})
+    assert not counts_as_stored(replace(spec, compact=False), plan, scales)
+    sampled = _Sampled.of(antecedents, spec, plan)
     assert sampled.counts == (sampling == "nearest")
-    valid = sampled.validated(spec)
+    valid = sampled.validated(spec, plan)
     assert valid.sum() > 50_000
     red, nir = (sampled.radiance(b, (0, GRID.height, 0, GRID.width)) for b in (7, 13))
     np.testing.assert_array_equal(red, radiances[7])
@@ -1018,8 +1019,8 @@ def test_bands_read_where_a_product_wins_give_the_layers_of_whole_pieces(
     seen: list[bool] = []
     real = run.gathers_winners
 
-    def observed(spec, product):
-        seen.append(real(spec, product))
+    def observed(spec, plan, product):
+        seen.append(real(spec, plan, product))
         return seen[-1]
 
     def merge(out) -> dict[str, np.ndarray]:
@@ -1033,7 +1034,7 @@ def test_bands_read_where_a_product_wins_give_the_layers_of_whole_pieces(
     monkeypatch.setattr(run, "gathers_winners", observed)
     lazy = merge(tmp_path / "lazy")
     assert seen and all(seen)
-    monkeypatch.setattr(run, "gathers_winners", lambda spec, product: False)
+    monkeypatch.setattr(run, "gathers_winners", lambda spec, plan, product: False)
     whole = merge(tmp_path / "whole")
     assert sorted(lazy) == sorted(whole)
     assert all(lazy[k].tobytes() == whole[k].tobytes() for k in lazy)
@@ -1070,9 +1071,9 @@ def test_in_process_the_sen3_bands_of_a_tiles_products_decode_ahead_once(tmp_pat
     events: list[tuple[str, str]] = []
     ahead, segment = run._decode_ahead, run.segment_task
 
-    def asked(path: str, bands) -> None:
+    def asked(path: str, spec) -> None:
         events.append(("ahead", Path(path).name))
-        ahead(path, bands)
+        ahead(path, spec)
 
     def piece(spec, index, path, *args):
         events.append(("piece", Path(path).name))
@@ -1092,7 +1093,7 @@ def test_in_process_the_sen3_bands_of_a_tiles_products_decode_ahead_once(tmp_pat
     assert sorted((n, b) for n, b, _ in seen) == [(n, b) for n in names for b in (2, 7, 13)]
     assert all(thread.startswith("sen3-") for _, _, thread in seen)  # never this thread
     seen.clear()
-    monkeypatch.setattr(run, "_decode_ahead", lambda path, bands: None)
+    monkeypatch.setattr(run, "_decode_ahead", lambda path, spec: None)
     synthesize([str(first), str(second)], tmp_path / "plain", **options)
     assert len(seen) == 6
     left, right = layers(tmp_path / "ahead"), layers(tmp_path / "plain")

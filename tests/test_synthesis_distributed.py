@@ -1,6 +1,7 @@
 """Synthesis on dask.distributed workers (synthesis/: api, run): a real LocalCluster
-gives the bytes of the in-process run in any product order; an unreachable scheduler, two
-concurrent runs on one store and a corrupt product among many end cleanly."""
+gives the bytes of the in-process run in any product order, MERIS and OLCI products mixed;
+an unreachable scheduler, two concurrent runs on one store and a corrupt product among many
+end cleanly."""
 
 from __future__ import annotations
 
@@ -102,6 +103,41 @@ def test_one_task_per_tile_and_nothing_moves_between_workers(products, cluster,
     assert 2 <= len(keys) <= grid_tiles
     moved = [ss for r in records for ss in r["startstops"] if ss["action"] == "transfer"]
     assert not moved, moved
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("algorithm", ["max-ndvi", "min-radiance"])
+def test_mixed_meris_olci_synthesis_is_the_same_bytes_on_workers_in_any_order(
+        products, cluster, tmp_path, algorithm) -> None:
+    """Two MERIS and two OLCI dates (a store of MERIS bands): the layers of the in-process run
+    in one order are those of the cluster in two others and of an embedded cluster
+    (``workers=2``); both sensors win pixels. A kill-safe update on the cluster (two runs) gives
+    the same bands, NDVI and counts."""
+    from test_synthesis_olci import write_olci_over_grid
+
+    olci = [str(write_olci_over_grid(tmp_path, seed=k, day=10 + k)) for k in (1, 2)]
+    mixed = [products[0], olci[0], products[1], olci[1]]
+    single = tmp_path / "single"
+    result = synthesize(mixed, single, algorithm=algorithm, **COMMON)
+    assert len(result.merged) == 4 and not result.failed
+    store = open_synthesis(single)
+    sensors = store.sensor_of_pixels()
+    assert (sensors == 1).sum() > 1000 and (sensors == 2).sum() > 1000  # MERIS, OLCI
+    runs = [(mixed[::-1], dict(scheduler=cluster.scheduler_address)),
+            ([mixed[k] for k in (1, 3, 0, 2)], dict(scheduler=cluster.scheduler_address)),
+            ([mixed[k] for k in (3, 2, 1, 0)], dict(workers=2))]
+    for k, (order, where) in enumerate(runs):
+        out = tmp_path / f"run{k}"
+        assert len(synthesize(order, out, algorithm=algorithm, **where, **COMMON).merged) == 4
+        _same(single, out)
+    update = tmp_path / "update"
+    synthesize(mixed[1::2], update, algorithm=algorithm, band_set="MERIS",
+               scheduler=cluster.scheduler_address, **COMMON)
+    synthesize(mixed[::2], update, input=update, scheduler=cluster.scheduler_address,
+               elevation="tiepoints")
+    for key, value in layers(update).items():
+        if key != "product":  # indices follow the order products came in
+            assert value.tobytes() == layers(single)[key].tobytes(), key
 
 
 @pytest.mark.slow

@@ -166,3 +166,17 @@ def test_a_sparse_store_opened_into_an_empty_viewer_frames_its_data(tmp_path, ma
     viewer.open(str(out), plugin="napari-meris-ortho")
     qtbot.wait(200)
     assert camera_of(viewer).zoom == whole
+
+
+def test_an_olci_store_names_its_bands_oa(tmp_path) -> None:
+    """A store of OLCI bands opens with its band axis named Oa01.. at OLCI's centres."""
+    from test_synthesis_olci import write_olci_over_grid
+
+    product = write_olci_over_grid(tmp_path, seed=1, day=11)
+    out = tmp_path / "olci"
+    synthesize([str(product)], out, grid=GRID, bands=(8, 9, 10), tile=256,
+               elevation="tiepoints")
+    radiance, kwargs, _ = read_store(str(out))[0]
+    labels = kwargs["metadata"]["band_names"]
+    assert len(labels) == 21 and labels[7] == "Oa08 (665 nm)" and labels[20] == "Oa21 (1020 nm)"
+    assert kwargs["translate"][0] == 8.0  # the band axis is the Oa band number

@@ -7,6 +7,7 @@ import argparse
 import logging
 from typing import Any
 
+from ..bands import MAX_BANDS
 from ._options import add_bands_option
 
 log = logging.getLogger("napari_meris_ortho")
@@ -20,7 +21,9 @@ def register(subparsers: Any) -> None:
         "synthesis store as a Cloud-Optimized GeoTIFF.")
     p.add_argument("store", metavar="STORE", help="synthesis store")
     p.add_argument("-o", "--out", required=True, metavar="OUT.tif", help="output COG")
-    add_bands_option(p, "bands to write, e.g. 7,13 (default: every band of the synthesis)")
+    add_bands_option(p, "bands to write, numbers of the synthesis's band set (MERIS 1..15, "
+                     "OLCI 1..21), e.g. 7,13 (default: every band of the synthesis)",
+                     n_bands=MAX_BANDS)
     p.add_argument("--layer", choices=("ndvi", "count", "product"), default=None,
                    help="write this layer instead of bands")
     p.add_argument("--dtype", choices=("uint16", "float32"), default=None,

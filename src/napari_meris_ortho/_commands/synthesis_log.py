@@ -23,7 +23,10 @@ def run(args: argparse.Namespace) -> int:
 
     store = open_synthesis(args.store, at=args.at)
     grid = store.grid
-    print(f"synthesis {args.store}: {store.algorithm}, bands {list(store.bands)}, "
+    bands = f"bands {list(store.bands)}"
+    if store.sensor.value != "MERIS":  # a store of another band set names its bands
+        bands = f"{store.sensor.value} {bands} ({', '.join(store.band_names)})"
+    print(f"synthesis {args.store}: {store.algorithm}, {bands}, "
           f"{grid.width} x {grid.height} pixels, {len(store.products)} product(s), "
           f"codec {store.codec}")
     for commit in store.history():
@@ -36,6 +39,8 @@ def run(args: argparse.Namespace) -> int:
                          f"added {p.get('added')}")
             elif p.get("error"):
                 extra = f" ({p['error']})"
+            if p.get("sensor"):  # a product of another sensor than MERIS
+                extra = f" {p['sensor']}{extra}"
             print(f"    {p.get('status', '?'):>24s}  {p.get('product_name') or p.get('product')}"
                   f"  {p.get('sensing_start', '')}{extra}")
     return 0

@@ -15,6 +15,7 @@ import os
 import sys
 from typing import Any
 
+from ..bands import MAX_BANDS, Sensor
 from ..cores import usable_cores
 from ..errors import OptionsError
 from ..options import Geolocation, MergeRule, StoreCodec, choices
@@ -36,10 +37,13 @@ def register(subparsers: Any) -> None:
     """Add the ``synthesize`` subcommand."""
     p = subparsers.add_parser(
         "synthesize", help="orthorectify products and merge them into a synthesis",
-        description="Orthorectify MERIS L1b products onto a synthesis grid and merge them by "
-        "minimum radiance or maximum NDVI (handbook section 3.1, Appendix C).")
+        description="Orthorectify MERIS L1b and OLCI L1B products onto a synthesis grid and "
+        "merge them by minimum radiance or maximum NDVI (handbook section 3.1, Appendix C). A "
+        "synthesis of OLCI products only holds the 21 OLCI bands; with MERIS products it holds "
+        "the 15 MERIS bands, which OLCI products feed with their matching bands.")
     p.add_argument("products", nargs="+", metavar="PRODUCT",
-                   help="MERIS L1b products (N1 files or .SEN3 directories)")
+                   help="MERIS L1b products (N1 files or .SEN3 directories) and OLCI L1B "
+                   "products (.SEN3 directories or zips)")
     p.add_argument("--algorithm", choices=choices(MergeRule), default=None,
                    help="selection algorithm (new synthesis: min-radiance; update: the input's)")
     p.add_argument("--out", required=True, metavar="STORE",
@@ -56,7 +60,12 @@ def register(subparsers: Any) -> None:
     p.add_argument("--geolocation", choices=choices(Geolocation), default=None,
                    help="location model: tie points (bilinear, ecef; default) or pixel, the "
                    "products' per-pixel terrain-corrected geolocation (FRG/FSG N1, .SEN3)")
-    add_bands_option(p, "bands of a new synthesis, e.g. 3,5,7,13 (default all 15)")
+    add_bands_option(p, "bands of a new synthesis, numbers of its band set, e.g. 3,5,7,13 "
+                     "(default all: 15 MERIS, 21 OLCI)", n_bands=MAX_BANDS)
+    p.add_argument("--band-set", type=str.upper, choices=[s.value for s in Sensor], default=None,
+                   help="bands of a new synthesis: MERIS (M01..M15; OLCI products feed them "
+                   "with their matching bands) or OLCI (Oa01..Oa21; OLCI products only); "
+                   "default OLCI when every product is OLCI, else MERIS")
     p.add_argument("--reject-bright", action="store_true",
                    help="keep BRIGHT-flagged pixels (clouds) out as well")
     p.add_argument("--tile", type=int, default=1024, metavar="PX",
@@ -90,11 +99,12 @@ def run(args: argparse.Namespace) -> int:
     from ..synthesis.api import synthesize
 
     if args.input is not None and (args.ul or args.lr or args.crs or args.pixel_size
-                                   or args.like or args.bands or args.codec):
+                                   or args.like or args.bands or args.codec or args.band_set):
         raise OptionsError("when --input is given, --like, --crs, --pixel-size, --ul, --lr, "
-                           "--bands and --codec come from the input synthesis and shall not be "
-                           "given")
-    options = ortho_options(args, geolocation=args.geolocation)
+                           "--bands, --band-set and --codec come from the input synthesis and "
+                           "shall not be given")
+    # the bands of the band set, checked once the products are read
+    options = ortho_options(args, n_bands=MAX_BANDS, geolocation=args.geolocation)
     grid = grid_from_args(args)
     if args.scheduler and args.workers is not None:
         raise OptionsError("--workers and --scheduler exclude each other (the cluster of the "
@@ -121,7 +131,7 @@ def run(args: argparse.Namespace) -> int:
             options=options, bands=args.bands, reject_bright=args.reject_bright,
             tile=args.tile, progress=merge, workers=0 if args.scheduler else workers,
             scheduler=args.scheduler or None, max_pixels=args.max_pixels, codec=args.codec,
-            keep=args.keep, merged=merged)
+            keep=args.keep, merged=merged, band_set=args.band_set)
     if result.snapshot is not None:
         log.info("synthesis %s (%s) committed to %s: %d product(s) merged", result.snapshot,
                  result.algorithm, result.path, len(result.merged))

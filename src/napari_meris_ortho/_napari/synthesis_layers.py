@@ -65,6 +65,17 @@ def coarse_limits(pyramids: dict[str, list[DecodedLayer]]) -> dict[str, tuple[fl
     return out
 
 
+def _band_labels(store: SynthesisStore) -> list[str]:
+    """The band axis labels of a store's band set: "band 7 (665 nm)" (MERIS, Appendix A),
+    "Oa08 (665 nm)" (a store of OLCI bands)."""
+    from ..bands import Sensor, band_table
+
+    if store.sensor is Sensor.MERIS:
+        return [f"band {b} ({w:.0f} nm)" for b, w in enumerate(APPENDIX_A_WAVELENGTHS, 1)]
+    table = band_table(store.sensor)
+    return [f"{n} ({w:.0f} nm)" for n, w in zip(table.names, table.centres, strict=True)]
+
+
 def store_layers(path: str | Path, at: str | None = None) -> list[LayerData]:
     """The radiance of the synthesis ``path`` (at snapshot ``at``), its NDVI, count and
     winning product. Bands evenly spaced (all 15, the default; one; 7 and 13) go in one
@@ -88,8 +99,7 @@ def store_layers(path: str | Path, at: str | None = None) -> list[LayerData]:
         stack = [DecodedStack([names[n][k] for n in band_names])
                  for k in range(len(names[band_names[0]]))]
         kwargs = geo_image_kwargs(grid, name=f"{stem} radiance", metadata={
-            **meta, "band_names": [f"band {b} ({w:.0f} nm)"
-                                   for b, w in enumerate(APPENDIX_A_WAVELENGTHS, 1)]},
+            **meta, "band_names": _band_labels(store)},
             multiscale=len(stack) > 1, colormap="gray",
             contrast_limits=(min(limits[n][0] for n in band_names),
                              max(limits[n][1] for n in band_names)))

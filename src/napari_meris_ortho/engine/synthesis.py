@@ -29,10 +29,6 @@ NDVI_MAX_PIXEL = 65535
 NDVI_FACTOR = 2.0 / (NDVI_MAX_PIXEL - NDVI_MIN_PIXEL)  # radioFactor
 NDVI_SHIFT = (-1.0 * NDVI_MAX_PIXEL - 1.0 * NDVI_MIN_PIXEL) / (NDVI_MAX_PIXEL - NDVI_MIN_PIXEL)
 
-#: bands of the NDVI (handbook section 3.1): red = band 7, near infrared = band 13.
-NDVI_RED_BAND = 7
-NDVI_NIR_BAND = 13
-
 #: largest count of a radiance stored on 16 bits (a compact store's band layers; 0 =
 #: background)
 MAX_COUNT = 65535
@@ -40,7 +36,8 @@ MAX_COUNT = 65535
 
 @njit(cache=True)
 def ndvi_value(red: float, nir: float) -> float:
-    """NDVI = (R13 - R7) / (R13 + R7), 0 when the sum is 0 (section 3.1; Appendix C)."""
+    """NDVI = (NIR - R) / (NIR + R), 0 when the sum is 0 (section 3.1, MERIS bands 13 and 7;
+    Appendix C): the caller picks the bands (``bands.BandTable.ndvi``: 865 and 665 nm)."""
     total = nir + red
     if total == 0.0:
         return 0.0
@@ -151,7 +148,8 @@ def _count_plane(out: np.ndarray, plane: np.ndarray, valid: np.ndarray, r0: int,
 
 @njit(cache=True, parallel=True)
 def _ndvi_codes(red: np.ndarray, nir: np.ndarray, valid: np.ndarray) -> np.ndarray:
-    """16-bit NDVI (float32 from R7, R13; Appendix C coding) of the valid pixels, 0 elsewhere."""
+    """16-bit NDVI (float32 from red and near infrared; Appendix C coding) of the valid pixels,
+    0 elsewhere."""
     rows, cols = valid.shape
     out = np.zeros((rows, cols), np.uint16)
     for i in prange(rows):
@@ -227,8 +225,8 @@ def segment_counts_state(planes: list[np.ndarray], origin: tuple[int, int],
 def segment_state(segment: np.ndarray, valid: np.ndarray, index: int,
                   red: np.ndarray | None = None, nir: np.ndarray | None = None) -> TileState:
     """One product's contribution: ``segment`` (n_bands, rows, cols) radiances, ``valid`` the
-    validated pixels, ``index`` the product's 1-based index; with ``red``/``nir`` (bands 7 and
-    13) the 16-bit NDVI of the maximum-NDVI rule."""
+    validated pixels, ``index`` the product's 1-based index; with ``red``/``nir`` (665 and 865
+    nm: MERIS bands 7 and 13, OLCI Oa08 and Oa17) the 16-bit NDVI of the maximum-NDVI rule."""
     valid = np.ascontiguousarray(valid, dtype=np.bool_)
     state = TileState.empty(segment.shape[0], valid.shape, red is not None)
     _segment_fill(state.bands, state.winner, np.ascontiguousarray(segment, np.float32), valid,
@@ -322,8 +320,9 @@ class WinnerBands:
     uint16: the product window of each stored band, flattened; ``index`` (rows, cols) the
     flat pixel of each point of the state (its nearest antecedent; -1: none); ``fills``
     (n_bands,) int64: the band's no-data count (-1: none), which is taken as 0 (background);
-    ``saturated`` (rows, cols) uint16 saturation bits of the point (shape (0, 0): none) and
-    ``bits`` (n_bands,) uint16 each band's bit in them: a saturated band is taken as 0."""
+    ``saturated`` (rows, cols) saturation bits of the point, uint16 (MERIS) or uint32 (OLCI's
+    21 bands) (shape (0, 0): none) and ``bits`` (n_bands,) of the same type, each band's bit
+    in them: a saturated band is taken as 0."""
 
     pixels: np.ndarray
     index: np.ndarray

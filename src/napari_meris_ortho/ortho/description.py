@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from ..bands import BandTable
 from ..errors import OptionsError
 from ..output.geotiff import meris_band_description
 from .stats import RunStats
@@ -58,14 +59,22 @@ class BandFacts:
     scale: float | None
     offset: float | None
     sf_rad: float | None
+    #: the band's name when it is no MERIS band (``Oa08``: an OLCI store's export)
+    name: str | None = None
 
     @property
     def description(self) -> str:
+        if self.name is not None:
+            where = "" if self.wavelength_nm is None else f" ({self.wavelength_nm:.1f} nm)"
+            return f"{self.name}{where}"
         return meris_band_description(self.band, self.wavelength_nm)
 
     def tags(self) -> dict[str, Any]:
-        """The band's GDAL metadata tags."""
-        out: dict[str, Any] = {"meris_band": self.band, "units": self.units}
+        """The band's GDAL metadata tags (``meris_band``, or ``band_name`` and ``band`` for
+        bands of another sensor)."""
+        out: dict[str, Any] = ({"meris_band": self.band} if self.name is None
+                               else {"band_name": self.name, "band": self.band})
+        out["units"] = self.units
         for key in ("wavelength_nm", "bandwidth_nm", "sf_rad"):
             value = getattr(self, key)
             if value is not None:
@@ -163,23 +172,28 @@ def describe_map(stats: RunStats | None, bands: Sequence[int], dtype: str = "uin
                  scales: Mapping[int, float] | None = None,
                  run: Mapping[str, Any] | None = None,
                  dems: Sequence[Mapping[str, str]] | None = None,
-                 software: str = "napari-meris-ortho") -> MapDescription:
+                 software: str = "napari-meris-ortho",
+                 table: BandTable | None = None) -> MapDescription:
     """The ``MapDescription`` of ``bands`` (file order) written as ``dtype``: wavelengths,
     bandwidths and ``sf_rad`` from the run's ``stats`` (the product's own), else the
-    *MERIS Product Handbook*'s nominal Appendix A values and ``scales``; the run's options and
-    DEMs from ``stats`` unless ``run``/``dems`` are given (a synthesis's)."""
-    from ..products.n1.format import APPENDIX_A_BANDWIDTHS, APPENDIX_A_WAVELENGTHS
+    nominal values of ``table`` (default MERIS: Appendix A's) and ``scales``; bands of a
+    ``table`` other than MERIS's named (``Oa08``); the run's options and DEMs from ``stats``
+    unless ``run``/``dems`` are given (a synthesis's)."""
+    from ..bands import MERIS, Sensor
 
     check_dtype(dtype)
+    table = table or MERIS
     if stats is not None:
         wl, bw, sf = stats.wavelengths, stats.bandwidths, stats.scale_factors
     else:
-        wl = {b: APPENDIX_A_WAVELENGTHS[b - 1] for b in bands}
-        bw = {b: APPENDIX_A_BANDWIDTHS[b - 1] for b in bands}
+        wl = {b: table.centres[b - 1] for b in bands}
+        bw = {b: table.widths[b - 1] for b in bands}
         sf = dict(scales or {})
     counts = dtype == "uint16"
+    named = table.sensor is not Sensor.MERIS
     facts = tuple(BandFacts(int(b), wl.get(b), bw.get(b), RADIANCE_UNITS,
-                            sf.get(b) if counts else None, 0.0 if counts else None, sf.get(b))
+                            sf.get(b) if counts else None, 0.0 if counts else None, sf.get(b),
+                            table.name(int(b)) if named else None)
                   for b in bands)
     if run is None:
         run = {} if stats is None else run_options(stats)

@@ -140,7 +140,7 @@ def describe_mapped(mapped: Mapped, dtype: str = "uint16", *,
     return describe_map(mapped.stats, bands, dtype,
                         scales=getattr(mapped, "scale_factors", None),
                         run=getattr(mapped, "run", None), dems=getattr(mapped, "dems", None),
-                        software=software)
+                        software=software, table=getattr(mapped, "band_table", None))
 
 
 def band_order(available: Iterable[int], order: Sequence[int] | None) -> list[int]:

@@ -75,10 +75,13 @@ def _axis_attrs(grid: OutputGrid) -> dict[str, dict[str, Any]]:
 
 def grid_dataset(grid: OutputGrid, variables: Mapping[str, Variable], *,
                  bands: Sequence[int] = (), wavelengths: Sequence[float | None] = (),
-                 attrs: Mapping[str, Any] | None = None) -> Any:
+                 attrs: Mapping[str, Any] | None = None, band_names: Sequence[str] = (),
+                 band_label: str = "MERIS band") -> Any:
     """An ``xarray.Dataset`` of ``variables`` (dimensions among ``band``, ``y``, ``x``) on
     ``grid``, with the coordinates and grid mapping of the module docstring; ``bands`` and
-    ``wavelengths`` (nm; None: unknown, NaN) label the ``band`` dimension."""
+    ``wavelengths`` (nm; None: unknown, NaN) label the ``band`` dimension, ``band_label`` its
+    numbers ("OLCI band"), and ``band_names`` (``M07``, ``Oa08``; optional) a
+    ``band_name`` coordinate."""
     xr = require_xarray()
     x, y = pixel_centres(grid)
     axes = _axis_attrs(grid)
@@ -87,7 +90,10 @@ def grid_dataset(grid: OutputGrid, variables: Mapping[str, Variable], *,
         GRID_MAPPING: ((), np.int64(0), grid_mapping_attrs(grid)),
     }
     if bands:
-        coords["band"] = ("band", np.asarray(bands, np.int64), {"long_name": "MERIS band"})
+        coords["band"] = ("band", np.asarray(bands, np.int64), {"long_name": band_label})
+        if band_names:
+            coords["band_name"] = ("band", np.asarray(list(band_names), str),
+                                   {"long_name": "band name"})
         wl = [np.nan if w is None else float(w) for w in wavelengths] or [np.nan] * len(bands)
         coords["wavelength"] = ("band", np.asarray(wl, np.float64),
                                 {"long_name": "central wavelength", "units": "nm"})

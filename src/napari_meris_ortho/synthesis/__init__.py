@@ -1,4 +1,5 @@
-"""Synthesis of many MERIS products (MERSYN use cases 1 and 2, handbook section 3.1, Appendix C).
+"""Synthesis of many MERIS and OLCI products (MERSYN use cases 1 and 2, handbook section 3.1,
+Appendix C).
 
 A synthesis is an Icechunk repository holding Zarr v3 arrays chunked inside the output tile
 (:mod:`.store`). The work is split into one task per output tile: each product's piece of the
@@ -14,7 +15,11 @@ chunks whose values change are written.
 A run killed or failed before its commit leaves the store at its previous commit. A product
 already in the synthesis (same product name and sensing time) is reported and skipped.
 
-Rooms: ``store`` (the Icechunk/Zarr layout, tile read/write, lock, history), ``tiling`` (grid
+A store holds the bands of one sensor, MERIS or OLCI; OLCI products feed a store of MERIS
+bands with their matching bands (``bandsets``).
+
+Rooms: ``store`` (the Icechunk/Zarr layout, tile read/write, lock, history), ``bandsets`` (the
+band set of a store, the product bands feeding it), ``tiling`` (grid
 and tile arithmetic), ``reports`` (Appendix B statistics), ``reading`` (``open_synthesis``),
 ``run`` (one run: tasks in process or on dask.distributed), ``api`` (``synthesize``),
 ``export`` (``export_cog``).

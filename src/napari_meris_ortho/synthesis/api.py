@@ -11,6 +11,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from .._atomic import check_writable_dir
+from ..bands import MAX_BANDS, Sensor, band_table
 from ..errors import OptionsError, OutputError
 from ..options import MergeRule, OrthoOptions, StoreCodec, check_bands, choices, parse
 from ..progress import ProgressCallback
@@ -19,9 +20,10 @@ from . import store as st
 if TYPE_CHECKING:
     from ..dem.base import DemSource
     from ..geometry.grid import OutputGrid
+from .bandsets import parse_band_set
 from .reading import is_synthesis, open_synthesis
 from .reports import SynthesisResult
-from .tiling import ALL_BANDS, BLOCK, DEFAULT_TILE, check_new_grid_size
+from .tiling import BLOCK, DEFAULT_TILE, check_new_grid_size
 
 log = logging.getLogger("napari_meris_ortho.synthesis")
 
@@ -42,14 +44,21 @@ def synthesize(products: Sequence[str | os.PathLike[str]], out: str | os.PathLik
                workers: int = 0, scheduler: str | None = None,
                max_pixels: int | None = None, codec: StoreCodec | str | None = None,
                keep: int | None = None, merged: ProgressCallback | None = None,
+               band_set: Sensor | str | None = None,
                **modes: Any) -> SynthesisResult:
     """Orthorectify ``products`` onto the synthesis grid and merge them (section 3.1 use cases
     1-2, Appendix C) into the synthesis store ``out``: one Icechunk commit.
 
     A new synthesis (no ``input``) takes ``grid``, or the footprint of the earliest readable
     product (sensing time, then name; with ``crs``/``pixel_size``; ``crs`` "utm": its UTM
-    zone), and ``bands`` (default all 15). With ``input`` (may equal ``out``: update in place;
-    else ``input`` is copied to ``out`` first), grid and bands come from the input synthesis;
+    zone), and ``bands`` (default all of its band set). The band set (``bandsets``): OLCI
+    bands ``Oa01``..``Oa21`` when every product is an OLCI one, else MERIS bands ``M01``..
+    ``M15``, which OLCI products feed with their matching bands; ``band_set`` ("MERIS",
+    "OLCI") chooses it for a new synthesis (MERIS: a store of OLCI products that MERIS
+    products may join later); a MERIS product for a store of OLCI bands is refused
+    (OptionsError). ``bands`` are numbers of the band set. With ``input`` (may equal
+    ``out``: update in place; else ``input`` is copied to ``out`` first), grid, bands and
+    band set come from the input synthesis;
     giving grid options or bands too is refused as MERSYN refuses them. A product that cannot
     be read or orthorectified is reported in ``result.failed`` and skipped; one already in the
     synthesis in ``result.skipped``.
@@ -82,11 +91,14 @@ def synthesize(products: Sequence[str | os.PathLike[str]], out: str | os.PathLik
         _check_keep(keep)
     if "bands" in modes:
         raise OptionsError("give the bands of the synthesis as bands=, not in the options")
-    opts = OrthoOptions.of(options, n_dems=len(dems), **modes)
+    # the options' bands are not the synthesis's (each product's are set by its band plan)
+    opts = OrthoOptions.of(options, n_dems=len(dems), n_bands=MAX_BANDS, **modes)
+    asked = parse_band_set(band_set)
     source_path = _check_options(products, out_dir, algorithm, input, grid, crs, pixel_size,
-                                 bands, tile, dems, workers, scheduler, codec)
-    if grid is not None and source_path is None:
-        check_new_grid_size(grid, len(bands or ALL_BANDS), max_pixels)
+                                 bands, tile, dems, workers, scheduler, codec, asked)
+    if grid is not None and source_path is None:  # again with the band set once known
+        n_bands = band_table(asked or Sensor.MERIS).n_bands
+        check_new_grid_size(grid, len(bands or range(n_bands)), max_pixels)
     paths = [str(Path(p).absolute()) if scheduler else str(p) for p in products]
     with run.engine(workers, scheduler) as runner:
         created = _make_dir(out_dir)
@@ -104,7 +116,8 @@ def synthesize(products: Sequence[str | os.PathLike[str]], out: str | os.PathLik
                     pixel_size=pixel_size, dems=[str(d) for d in dems], options=opts,
                     bands=bands, reject_bright=reject_bright, tile=tile,
                     progress=progress, merged=merged, max_pixels=max_pixels,
-                    codec=parse(StoreCodec, codec or StoreCodec.ZSTD)).run(runner)
+                    codec=parse(StoreCodec, codec or StoreCodec.ZSTD),
+                    band_set=asked).run(runner)
             except BaseException:
                 _undo(out_dir, created, was_empty)
                 raise
@@ -241,12 +254,15 @@ def _check_not_an_input(out_dir: Path, products: Sequence[Any], input: Any,
 def _check_options(products: Sequence[Any], out_dir: Path, algorithm: str | None,
                    input: Any, grid: OutputGrid | None, crs: Any, pixel_size: float | None,
                    bands: Sequence[int] | None, tile: int, dems: Sequence[Any],
-                   workers: int, scheduler: str | None, codec: Any = None) -> Path | None:
-    """MERSYN's parameter consistency checks (Appendix C), before any work."""
+                   workers: int, scheduler: str | None, codec: Any = None,
+                   band_set: Sensor | None = None) -> Path | None:
+    """MERSYN's parameter consistency checks (Appendix C), before any work; the bands
+    within the band set asked for, else within 1..21 (checked against the band set once
+    the products are read)."""
     if algorithm is not None:
         parse(MergeRule, algorithm)
     if not products:
-        raise OptionsError("no MERIS product given")
+        raise OptionsError("no product given")
     if tile < BLOCK or tile % BLOCK:
         raise OptionsError(f"tile size {tile}: must be a positive multiple of {BLOCK}")
     if workers < 0:
@@ -255,7 +271,7 @@ def _check_options(products: Sequence[Any], out_dir: Path, algorithm: str | None
         raise OptionsError(f"{out_dir}: with a dask scheduler the store must be on storage "
                            "every worker sees: give an absolute path")
     if bands is not None:
-        check_bands(bands)
+        check_bands(bands, MAX_BANDS if band_set is None else band_table(band_set).n_bands)
     if pixel_size is not None and not pixel_size > 0:
         raise OptionsError(f"pixel size {pixel_size}: must be positive")
     if crs is not None:
@@ -269,7 +285,8 @@ def _check_options(products: Sequence[Any], out_dir: Path, algorithm: str | None
     if input is None:
         _check_not_an_input(out_dir, products, input, dems)
         return None
-    if grid is not None or crs is not None or pixel_size is not None or bands is not None:
+    if (grid is not None or crs is not None or pixel_size is not None or bands is not None
+            or band_set is not None):
         raise OptionsError("when an input synthesis is given, the grid (CRS, extent, pixel "
                            "size) and the bands come from it and shall not be given")
     if codec is not None:

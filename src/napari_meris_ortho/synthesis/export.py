@@ -1,13 +1,15 @@
 """``export_cog``: layers of a synthesis store as a Cloud-Optimized GeoTIFF.
 
 The bands go through ``ortho.writing.write_map``, the writer of every mapped product: uint16
-counts with the GDAL scale of the store's band (``store.BAND_SCALES``), or float32 radiances on
+counts with the GDAL scale of the store's band (``store.band_scales``), or float32 radiances on
 request, described as ``meris-ortho map`` describes its bands (wavelengths, units, nodata 0)
-with the options and DEMs its runs recorded. The NDVI of a maximum-NDVI synthesis is written as
-a value a user reads directly: its Appendix C uint16 codes with the GDAL scale and offset that
-give NDVI in -1..1 (GDAL, QGIS, rasterio ``masked=True`` then scaled), or float32 NDVI with
-nodata NaN. The count and product layers keep their integer type. Every layer streams from the
-store one at a time.
+with the options and DEMs its runs recorded; an OLCI store's bands are named ``Oa01``..
+(``band_name`` tags), and the tags say the sensor of each product (``product_sensors``) and,
+for a MERIS store holding OLCI products, the Oa band feeding each band. The NDVI of a
+maximum-NDVI synthesis is written as a value a user reads directly: its Appendix C uint16 codes with
+the GDAL scale and offset that give NDVI in -1..1 (GDAL, QGIS, rasterio ``masked=True`` then
+scaled), or float32 NDVI with nodata NaN. The count and product layers keep their integer type.
+Every layer streams from the store one at a time.
 """
 
 from __future__ import annotations
@@ -40,6 +42,8 @@ NDVI_NOTE = {
 #: band descriptions of the other layers
 LAYER_DESCRIPTIONS = {
     "ndvi": "NDVI (band 13 - band 7) / (band 13 + band 7) of the selected product",
+    "ndvi-olci": "NDVI (865 nm - 665 nm) / (865 nm + 665 nm) of the selected product (MERIS "
+                 "bands 13 and 7, OLCI Oa17 and Oa08)",
     "count": "number of products with a valid pixel (0 = background)",
     "product": "index (1-based) of the selected product in the products tag (0 = background)",
 }
@@ -55,13 +59,18 @@ class _StoreBands:
 
     def __init__(self, store: SynthesisStore, bands: list[int],
                  progress: ProgressCallback | None) -> None:
+        from ..bands import Sensor, band_table
+
         self.store, self.bands, self.progress = store, bands, progress
         session = store.session
         #: the scale of each band's counts: the compact store's ``scale_factor`` (None: a
         #: float32 store, whose radiances are encoded with ``BAND_SCALES``)
         self.stored = {b: st.stored_scale(st.open_layer(session.store, st.band_layer(b)))
                        for b in bands}
-        self.scale_factors = {b: self.stored[b] or st.BAND_SCALES[b] for b in bands}
+        scales = st.band_scales(store.sensor)
+        self.scale_factors = {b: self.stored[b] or scales[b] for b in bands}
+        #: the bands' names and nominal facts (None: MERIS, Appendix A)
+        self.band_table = None if store.sensor is Sensor.MERIS else band_table(store.sensor)
         self.run, self.dems = run_tags(store)
 
     @property
@@ -115,7 +124,7 @@ def export_cog(store: SynthesisStore, out: str | os.PathLike[str], *,
         raise OptionsError(f"the {layer} layer keeps its integer type: the output type applies "
                            "to the bands and the NDVI")
     tags = {"algorithm": store.algorithm, "snapshot": store.snapshot,
-            "products": " ".join(store.product_names().values())}
+            "products": " ".join(store.product_names().values()), **_sensor_tags(store)}
     if layer is not None:
         others = [n for n in store.layers() if not n.startswith("band_")]
         if layer not in others:
@@ -139,6 +148,21 @@ def export_cog(store: SynthesisStore, out: str | os.PathLike[str], *,
     return path
 
 
+def _sensor_tags(store: SynthesisStore) -> dict[str, str]:
+    """The band set, each product's sensor (in the order of ``products``) and, for a MERIS
+    store holding OLCI products, the band matching; nothing for a store of MERIS bands and
+    products."""
+    from ..bands import Sensor
+    from .reading import band_matching
+
+    sensors = store.product_sensors()
+    if store.sensor is Sensor.MERIS and all(s == Sensor.MERIS.value for s in sensors.values()):
+        return {}
+    return {"band_set": store.sensor.value,
+            "product_sensors": " ".join(sensors[k] for k in sorted(sensors)),
+            **band_matching(store.attrs)}
+
+
 def _write_layer(store: SynthesisStore, out: str | os.PathLike[str], layer: str,
                  tags: dict[str, Any], dtype: str) -> Path:
     """One other layer (nearest overviews): the NDVI as ``dtype`` (module docstring), count
@@ -150,6 +174,7 @@ def _write_layer(store: SynthesisStore, out: str | os.PathLike[str], layer: str,
     described = runs_described(store, "napari-meris-ortho export")
     tags = {**tags, **{k: str(v) for k, v in described.items()}}
     kwargs: dict[str, Any] = {"dtype": st.layer_dtype(layer), "nodata": 0}
+    key = "ndvi-olci" if layer == "ndvi" and "product_sensors" in tags else layer
     if layer == "ndvi":
         tags["ndvi"] = NDVI_NOTE[dtype]
         if dtype == "float32":
@@ -162,5 +187,5 @@ def _write_layer(store: SynthesisStore, out: str | os.PathLike[str], layer: str,
         yield ndvi_decode(values) if kwargs["dtype"] == "float32" else values
 
     return write_cog(Path(out), one(), store.grid, count=1, halve=overview_level,
-                     descriptions=[LAYER_DESCRIPTIONS[layer]], metadata=tags,
+                     descriptions=[LAYER_DESCRIPTIONS[key]], metadata=tags,
                      compress=COMPRESS, overview_resampling="nearest", **kwargs)

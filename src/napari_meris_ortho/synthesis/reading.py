@@ -9,8 +9,10 @@ from typing import Any
 
 import numpy as np
 
+from ..bands import Sensor, band_table
 from ..errors import OptionsError
 from . import store as st
+from .bandsets import product_sensor, store_sensor
 from .tiling import grid_from_dict
 
 # --------------------------------------------------------------------------- reading a store
@@ -38,6 +40,18 @@ class SynthesisStore:
         return tuple(int(b) for b in self.attrs["bands"])
 
     @property
+    def sensor(self) -> Sensor:
+        """The band set: whose bands the store holds (MERIS ``M01``.., OLCI ``Oa01``..;
+        ``bandsets``)."""
+        return store_sensor(self.attrs)
+
+    @property
+    def band_names(self) -> list[str]:
+        """``M07``, ``Oa08``, ...: the names of :attr:`bands`."""
+        table = band_table(self.sensor)
+        return [table.name(b) for b in self.bands]
+
+    @property
     def grid(self) -> Any:
         return grid_from_dict(self.attrs["grid"])
 
@@ -51,8 +65,9 @@ class SynthesisStore:
 
     @property
     def products(self) -> list[dict[str, Any]]:
-        """The product table: entry k - 1 is the product of index k in the ``product`` layer."""
-        return list(self.attrs.get("products", []))
+        """The product table: entry k - 1 is the product of index k in the ``product`` layer,
+        with its ``sensor`` ("MERIS", "OLCI")."""
+        return [{**p, "sensor": product_sensor(p).value} for p in self.attrs.get("products", [])]
 
     @property
     def codec(self) -> str:
@@ -91,6 +106,24 @@ class SynthesisStore:
         """Index in the ``product`` layer -> product name."""
         return {int(p["index"]): str(p["product_name"]) for p in self.products}
 
+    def product_sensors(self) -> dict[int, str]:
+        """Index in the ``product`` layer -> the product's sensor ("MERIS", "OLCI")."""
+        return {int(p["index"]): str(p["sensor"]) for p in self.products}
+
+    def sensor_codes(self) -> np.ndarray:
+        """Lookup table of the per-pixel sensor: ``codes[product index]`` is the
+        ``SENSOR_CODES`` code of the product's sensor (index 0, background: 0)."""
+        sensors = self.product_sensors()
+        codes = np.zeros(max(sensors, default=0) + 1, np.uint8)
+        for index, sensor in sensors.items():
+            codes[index] = SENSOR_CODES[Sensor(sensor)]
+        return codes
+
+    def sensor_of_pixels(self, window: tuple[int, int, int, int] | None = None) -> np.ndarray:
+        """Which sensor each pixel's winning product came from: ``SENSOR_CODES`` (uint8;
+        0 = background), from the ``product`` layer and the product table."""
+        return sensor_of(self.read("product", window), self.sensor_codes())
+
     def to_xarray(self) -> Any:
         """The synthesis as a lazy ``xarray.Dataset`` (dask arrays chunked as the store;
         ``output.dataset.grid_dataset``): ``radiance`` (band, y, x; NaN = background) with the
@@ -103,7 +136,6 @@ class SynthesisStore:
         from ..engine.synthesis import ndvi_decode
         from ..ortho.antecedents import RADIANCE_UNITS
         from ..output.dataset import grid_dataset, require_xarray
-        from ..products.n1.format import APPENDIX_A_WAVELENGTHS
         require_xarray()
         session = self.session
 
@@ -127,21 +159,59 @@ class SynthesisStore:
                         {"long_name": "index (1-based) of the selected product in the "
                          "products attribute (0: background)"}),
         }
+        codes = self.sensor_codes()
+        variables["sensor"] = (("y", "x"), lazy("product").map_blocks(
+            sensor_of, codes, dtype=np.uint8), {
+                "long_name": "sensor of the selected product",
+                "flag_values": np.array([0, *SENSOR_CODES.values()], np.uint8),
+                "flag_meanings": " ".join(["background", *(s.value for s in SENSOR_CODES)])})
         if self.algorithm == "max-ndvi":
             variables["ndvi"] = (("y", "x"), lazy("ndvi").map_blocks(ndvi_decode,
                                                                      dtype=np.float32),
                                  {"long_name": "NDVI of the selected product (Appendix C)"})
-        names = self.product_names()
+        names, sensors = self.product_names(), self.product_sensors()
+        span = range(1, max(names, default=0) + 1)
+        table = band_table(self.sensor)
         attrs = {"algorithm": self.algorithm, "snapshot": self.snapshot,
-                 "products": [names.get(k, "") for k in range(1, max(names, default=0) + 1)],
+                 "products": [names.get(k, "") for k in span],
+                 "product_sensors": [sensors.get(k, "") for k in span],
+                 "band_set": self.sensor.value, **band_matching(self.attrs),
                  **runs_described(self, "napari-meris-ortho")}
         return grid_dataset(self.grid, variables, bands=bands,
-                            wavelengths=[APPENDIX_A_WAVELENGTHS[b - 1] for b in bands],
-                            attrs=attrs)
+                            wavelengths=[table.centres[b - 1] for b in bands],
+                            attrs=attrs, band_names=self.band_names,
+                            band_label=f"{self.sensor.value} band")
 
     def history(self) -> list[st.Commit]:
         """The synthesis commits up to this snapshot, newest first."""
         return st.history(self.repo, snapshot=self.snapshot)
+
+
+#: the per-pixel sensor codes (``SynthesisStore.sensor_of_pixels``; 0 = background)
+SENSOR_CODES: dict[Sensor, int] = {Sensor.MERIS: 1, Sensor.OLCI: 2}
+
+
+def sensor_of(product: np.ndarray, codes: np.ndarray) -> np.ndarray:
+    """The sensor code of each pixel of a ``product`` layer block (``codes``: the lookup
+    table of ``SynthesisStore.sensor_codes``; an index beyond it: 0)."""
+    index = np.asarray(product)
+    inside = (index >= 0) & (index < codes.size)
+    return np.where(inside, codes[np.clip(index, 0, codes.size - 1)], 0).astype(np.uint8)
+
+
+def band_matching(attrs: dict[str, Any]) -> dict[str, Any]:
+    """What a store of MERIS bands holding OLCI products says of its bands (``bandsets``:
+    the Oa band feeding each, the approximate matches), as text attributes."""
+    from .bandsets import APPROXIMATE_KEY, OLCI_BANDS_KEY
+
+    if OLCI_BANDS_KEY not in attrs:
+        return {}
+    pairs = dict(attrs[OLCI_BANDS_KEY])
+    out = {"olci_bands": " ".join(f"{m}={o}" for m, o in pairs.items()),
+           "approximate_bands": " ".join(attrs.get(APPROXIMATE_KEY, []))}
+    if "band_matching" in attrs:
+        out["band_matching"] = str(attrs["band_matching"])
+    return out
 
 
 class DecodedLayer:

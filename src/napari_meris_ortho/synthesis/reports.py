@@ -39,6 +39,8 @@ class ProductReport:
     status: str = STATUS_MERGED
     index: int = 0  # 1-based index in the product table (0: not merged)
     sf_rad: dict[int, float] = field(default_factory=dict)  # radiance factor per band
+    #: the product's sensor ("MERIS", "OLCI")
+    sensor: str = "MERIS"
 
     @property
     def product(self) -> str:
@@ -68,15 +70,21 @@ class ProductReport:
         ]
 
     def table_entry(self) -> dict[str, Any]:
-        """The product table entry of a merged product."""
+        """The product table entry of a merged product: ``sf_rad`` per band of the store
+        (the factor of the product band feeding it); ``sensor`` for a product of another
+        sensor than MERIS (``bandsets``)."""
         return {"index": self.index, "product_name": self.product_name,
                 "product": self.product, "sensing_start": self.sensing_start,
-                "sf_rad": {str(b): v for b, v in self.sf_rad.items()}}
+                "sf_rad": {str(b): v for b, v in self.sf_rad.items()}, **self._sensor()}
+
+    def _sensor(self) -> dict[str, str]:
+        return {} if self.sensor == "MERIS" else {"sensor": self.sensor}
 
     def commit_entry(self) -> dict[str, Any]:
         """What the commit metadata says of this product."""
         out: dict[str, Any] = {"product_name": self.product_name, "product": self.product,
-                               "sensing_start": self.sensing_start, "status": self.status}
+                               "sensing_start": self.sensing_start, "status": self.status,
+                               **self._sensor()}
         if self.status == STATUS_MERGED:
             out.update(index=self.index, processed=self.processed, validated=self.validated,
                        added=self.added)

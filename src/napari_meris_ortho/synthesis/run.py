@@ -24,11 +24,20 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from .._process import keep_task_arrays, task_arrays_kept
-from ..engine.synthesis import NDVI_NIR_BAND, NDVI_RED_BAND, TileState, WinnerBands
+from ..bands import Sensor
+from ..engine.synthesis import TileState, WinnerBands
 from ..errors import DemError, MerisOrthoError, OptionsError, OutputError
 from ..options import OrthoOptions, Sampling, StoreCodec
 from ..progress import ProgressCallback
 from . import store as st
+from .bandsets import (
+    BandPlan,
+    band_plan,
+    band_set_of,
+    matching_attributes,
+    product_sensor,
+    refusal,
+)
 from .reading import SynthesisStore
 from .reports import (
     RADIANCE_NOTE,
@@ -41,7 +50,6 @@ from .reports import (
 )
 from .store import Window
 from .tiling import (
-    ALL_BANDS,
     check_new_grid_size,
     check_write_size,
     footprint_window,
@@ -277,16 +285,27 @@ class Spec:
     #: the snapshot the tile tasks' forks start from (``Run._session``: no uncommitted
     #: changes): its arrays' metadata is read once per process (``store._open_array``)
     layout: str = ""
+    #: the band set of the store (``bandsets``): whose bands ``bands`` are
+    sensor: str = Sensor.MERIS.value
 
     @property
-    def needed(self) -> tuple[int, ...]:
-        return _needed(self.bands, self.algorithm)
+    def ndvi(self) -> bool:
+        """Whether the products' NDVI is computed (maximum-NDVI rule)."""
+        return self.algorithm == "max-ndvi"
 
+    @property
+    def scales(self) -> dict[int, float]:
+        """The scale of each band's counts in the store (``store.band_scales``)."""
+        return st.band_scales(self.sensor)
 
-def _needed(bands: Sequence[int], algorithm: str) -> tuple[int, ...]:
-    """The bands a product is sampled in: the synthesis's and the NDVI's (max-NDVI rule)."""
-    ndvi = {NDVI_RED_BAND, NDVI_NIR_BAND} if algorithm == "max-ndvi" else set()
-    return tuple(sorted(set(bands) | ndvi))
+    def plan(self, sensor: Sensor | str) -> BandPlan:
+        """How a product of ``sensor`` feeds the store's bands (``bandsets.band_plan``)."""
+        return band_plan(self.sensor, sensor, self.bands)
+
+    def needed(self, sensor: Sensor | str) -> tuple[int, ...]:
+        """The bands a product of ``sensor`` is sampled in: those feeding the store's bands,
+        and its NDVI bands (maximum-NDVI rule)."""
+        return self.plan(sensor).needed(self.ndvi)
 
 
 @dataclass
@@ -357,12 +376,15 @@ def _segment(spec: Spec, path: str, extent: Window) -> Any:
     whole ``extent`` of the grid), built once per worker process and product."""
     from ..ortho import open_segment
 
+    product = _product(path)
+    options = replace(spec.options, bands=spec.needed(product.sensor))
+
     def make() -> Any:
-        segment = open_segment(_product(path), list(spec.dems), spec.options)
+        segment = open_segment(product, list(spec.dems), options)
         segment.prepare_dems(_grid(spec).window(*extent))
         return segment
 
-    key = (path, extent, spec.grid, spec.dems, spec.options)
+    key = (path, extent, spec.grid, spec.dems, options, spec.sensor, spec.bands)
     return _cached(_SEGMENTS, key, make)
 
 
@@ -376,37 +398,40 @@ def segment_task(spec: Spec, index: int, path: str, window: Window,
     _keep_bands(spec)
     try:
         segment = _segment(spec, path, window if extent is None else extent)
-        _prepare_bands(segment.prod, spec.needed)  # the workers of a host decode them together
+        plan = spec.plan(segment.prod.sensor)
+        needed = plan.needed(spec.ndvi)
+        _prepare_bands(segment.prod, needed)  # the workers of a host decode them together
         antecedents = segment.precompute(_grid(spec).window(*window), allow_empty=True,
                                          hold_bands=True)
-        gathering = gathers_winners(spec, segment.prod)
+        gathering = gathers_winners(spec, plan, segment.prod)
         # (first: the NDVI bands are then gathered from the windows it copies)
-        source = antecedents.nearest_source(spec.needed) if gathering else None
-        sampled = _Sampled.of(antecedents, spec, _NDVI_BANDS if gathering else None)
+        source = antecedents.nearest_source(needed) if gathering else None
+        sampled = _Sampled.of(antecedents, spec, plan, plan.ndvi if gathering else None)
         _release_pages(segment.prod)
     except DemError as exc:
         return Piece(index, window, None, dem_error=message_of(exc))
     except (MerisOrthoError, OSError, ValueError) as exc:
         return Piece(index, window, None, error=message_of(exc))
-    valid = sampled.validated(spec)
+    valid = sampled.validated(spec, plan)
     piece = Piece(index, window, None, int(sampled.inside.sum()), int(valid.sum()))
     rows, cols = np.flatnonzero(valid.any(axis=1)), np.flatnonzero(valid.any(axis=0))
     if rows.size == 0:
         return piece
     r0, r1, c0, c1 = int(rows[0]), int(rows[-1]) + 1, int(cols[0]), int(cols[-1]) + 1
     red = nir = None
-    if spec.algorithm == "max-ndvi":
-        red = sampled.radiance(NDVI_RED_BAND, (r0, r1, c0, c1))
-        nir = sampled.radiance(NDVI_NIR_BAND, (r0, r1, c0, c1))
+    if spec.ndvi:  # 665 and 865 nm of the product's own sensor (``BandTable.ndvi``)
+        red = sampled.radiance(plan.ndvi[0], (r0, r1, c0, c1))
+        nir = sampled.radiance(plan.ndvi[1], (r0, r1, c0, c1))
     if source is not None and red is not None and nir is not None:  # bands read at the merge
         piece.state = winner_state(valid[r0:r1, c0:c1], index, red, nir)
-        piece.source = _winner_bands(segment.prod, spec, source, sampled, (r0, r1, c0, c1))
+        piece.source = _winner_bands(segment.prod, plan, source, sampled, (r0, r1, c0, c1))
         piece.window = (window[0] + r0, window[0] + r1, window[2] + c0, window[2] + c1)
         return piece
-    planes = [sampled.bands[b] for b in spec.bands]
+    planes = [sampled.bands[b] for b in plan.sources]  # the product bands, in store order
     if spec.compact:  # the store's counts: half the bytes to ship and hold until the merge
+        scales = spec.scales
         divisors = (None if sampled.counts  # already the store's counts: copied where valid
-                    else [st.count_divisor(st.BAND_SCALES[b]) for b in spec.bands])
+                    else [st.count_divisor(scales[b]) for b in spec.bands])
         piece.state = segment_counts_state(planes, (r0, c0), divisors, valid[r0:r1, c0:c1],
                                            index, red, nir)
     else:
@@ -416,34 +441,33 @@ def segment_task(spec: Spec, index: int, path: str, window: Window,
     return piece
 
 
-_NDVI_BANDS = (NDVI_RED_BAND, NDVI_NIR_BAND)
-
-
-def gathers_winners(spec: Spec, product: Any) -> bool:
+def gathers_winners(spec: Spec, plan: BandPlan, product: Any) -> bool:
     """Whether a piece of ``product`` reads its bands where it wins only, at its merge
     (``engine.synthesis.WinnerBands``): under the maximum-NDVI rule (a pixel's bands follow
     its NDVI) when its counts at the nearest pixel are the store's (``counts_as_stored``)."""
-    scales = {b: float(product.scaling.radiance[b - 1]) for b in spec.needed}
-    return spec.algorithm == "max-ndvi" and counts_as_stored(spec, scales)
+    scales = {b: float(product.scaling.radiance[b - 1]) for b in plan.needed(spec.ndvi)}
+    return spec.ndvi and counts_as_stored(spec, plan, scales)
 
 
-def _winner_bands(product: Any, spec: Spec, source: tuple[np.ndarray, np.ndarray, Window],
-                  sampled: _Sampled, box: Window) -> WinnerBands:
+def _winner_bands(product: Any, plan: BandPlan,
+                  source: tuple[np.ndarray, np.ndarray, Window], sampled: _Sampled,
+                  box: Window) -> WinnerBands:
     """The ``WinnerBands`` of a piece cropped to ``box`` of its tile (rows r0:r1, columns
-    c0:c1; inside the extent of ``Antecedents.nearest_source`` of ``spec.needed``): the
-    windows of the stored bands, its index and saturation bits there, each band's fill and
-    bit."""
+    c0:c1; inside the extent of ``Antecedents.nearest_source`` of the bands ``plan`` needs):
+    the windows of the product bands feeding the store's, its index and saturation bits
+    there (the product's type: uint16 MERIS, uint32 OLCI), each band's fill and bit."""
     pixels, index, extent = source
-    if spec.needed != spec.bands:  # the NDVI bands were copied for the NDVI only
-        pixels = pixels[[spec.needed.index(b) for b in spec.bands]]
+    needed = plan.needed(True)
+    if needed != plan.sources:  # the NDVI bands were copied for the NDVI only
+        pixels = pixels[[needed.index(b) for b in plan.sources]]
     r0, r1, c0, c1 = box
     rows, cols = slice(r0 - extent[0], r1 - extent[0]), slice(c0 - extent[2], c1 - extent[2])
-    fills = [product.no_data_count(b) for b in spec.bands]
+    fills = [product.no_data_count(b) for b in plan.sources]
+    saturated = (np.zeros((0, 0), np.uint16) if sampled.saturated is None
+                 else sampled.saturated[r0:r1, c0:c1])
     return WinnerBands(
         pixels, index[rows, cols], np.array([-1 if f is None else f for f in fills], np.int64),
-        (np.zeros((0, 0), np.uint16) if sampled.saturated is None
-         else sampled.saturated[r0:r1, c0:c1]),
-        np.array([1 << (b - 1) for b in spec.bands], np.uint16))
+        saturated, np.array([1 << (b - 1) for b in plan.sources], saturated.dtype))
 
 
 @dataclass
@@ -460,39 +484,43 @@ class _Sampled:
     scales: dict[int, float]
 
     @classmethod
-    def of(cls, antecedents: Antecedents, spec: Spec,
+    def of(cls, antecedents: Antecedents, spec: Spec, plan: BandPlan,
            only: Sequence[int] | None = None) -> _Sampled:
-        """``only``: these bands only (the product's counts are the store's)."""
+        """``plan``: the product bands to sample (keys of ``bands``: product bands);
+        ``only``: these bands only (the product's counts are the store's)."""
         prod = antecedents.prod
-        scales = {b: float(prod.scaling.radiance[b - 1]) for b in spec.needed}
-        counts = counts_as_stored(spec, scales)
+        scales = {b: float(prod.scaling.radiance[b - 1]) for b in plan.needed(spec.ndvi)}
+        counts = counts_as_stored(spec, plan, scales)
         if counts:
-            needed = spec.needed if only is None else tuple(only)
+            needed = plan.needed(spec.ndvi) if only is None else tuple(only)
             values = antecedents.counts(needed)
             bands = {b: values[k] for k, b in enumerate(needed)}
         else:
             result = antecedents.result()
             bands = result.bands
             if spec.compact:
-                _quantize(bands, spec)
+                _quantize(bands, spec, plan)
         return cls(bands, counts, np.ascontiguousarray(antecedents.valid, dtype=np.bool_),
                    np.ascontiguousarray(antecedents.flags(), dtype=np.uint8),
                    antecedents.saturated(), scales)
 
-    def validated(self, spec: Spec) -> np.ndarray:
+    def validated(self, spec: Spec, plan: BandPlan) -> np.ndarray:
         """The pixels the merge takes (``validated_pixels``); saturated pixels of a band
-        (``saturated_Mnn``, .SEN3) are no data (0) for that band; the maximum-NDVI rule takes
-        only pixels with both NDVI bands (a fill there is no data)."""
+        (``saturated_Mnn``, ``saturated_OaNN``: bit b - 1 of the product's uint16 or uint32
+        bits) are no data (0) for that band; the maximum-NDVI rule takes only pixels with
+        both NDVI bands (a fill there is no data)."""
         from ..engine.synthesis import validated_pixels
 
         valid = validated_pixels(self.inside, self.flags, spec.reject_bright)
         if self.saturated is not None:
-            for b in set(spec.needed) & set(self.bands):
-                hit = (self.saturated & np.uint16(1 << (b - 1))) != 0
+            bit = self.saturated.dtype.type
+            for b in set(plan.needed(spec.ndvi)) & set(self.bands):
+                hit = (self.saturated & bit(1 << (b - 1))) != 0
                 if hit.any():
                     self.bands[b][hit] = 0
-        if spec.algorithm == "max-ndvi":
-            valid &= (self.bands[NDVI_RED_BAND] > 0) & (self.bands[NDVI_NIR_BAND] > 0)
+        if spec.ndvi:
+            red, nir = plan.ndvi
+            valid &= (self.bands[red] > 0) & (self.bands[nir] > 0)
         return valid
 
     def radiance(self, band: int, box: Window) -> np.ndarray:
@@ -503,11 +531,14 @@ class _Sampled:
         return st.decode_band(values, self.scales[band]) if self.counts else values
 
 
-def counts_as_stored(spec: Spec, scales: dict[int, float]) -> bool:
+def counts_as_stored(spec: Spec, plan: BandPlan, scales: dict[int, float]) -> bool:
     """Whether a product's counts at the nearest pixel are the compact store's counts: its
-    scale of every stored band is the store's (Appendix A factor; both as float32)."""
+    scale (``scales``: per product band) of every band feeding a stored band is the store's
+    (``Spec.scales``; both as float32)."""
+    stored = spec.scales
     return (spec.compact and spec.options.sampling is Sampling.NEAREST
-            and all(np.float32(scales[b]) == np.float32(st.BAND_SCALES[b]) for b in spec.bands))
+            and all(np.float32(scales[p]) == np.float32(stored[b])
+                    for b, p in zip(plan.bands, plan.sources, strict=True)))
 
 
 def _keep_bands(spec: Spec) -> None:
@@ -518,12 +549,13 @@ def _keep_bands(spec: Spec) -> None:
     keep_decoded_bands(spec.layout if _in_worker() else "")
 
 
-def _decode_ahead(path: str, bands: Sequence[int]) -> None:
-    """Start decoding ``bands`` of the product at ``path`` (not kept yet) in the background, for
-    a product that reads its bands whole (``read_ahead`` of a .SEN3); nothing for others or
-    when it cannot be opened (its task says why)."""
+def _decode_ahead(path: str, spec: Spec) -> None:
+    """Start decoding the bands the run needs of the product at ``path`` (not kept yet) in
+    the background, for a product that reads its bands whole (``read_ahead`` of a .SEN3);
+    nothing for others or when it cannot be opened (its task says why)."""
     try:
         product = _product(path)
+        bands = spec.needed(product.sensor)
     except (MerisOrthoError, OSError, ValueError):
         return
     read_ahead = getattr(product, "read_ahead", None)
@@ -549,10 +581,12 @@ def _release_pages(product: Any) -> None:
         release()
 
 
-def _quantize(bands: dict[int, np.ndarray], spec: Spec) -> None:
-    """The radiances of ``bands`` as a compact store holds them (``store.quantized``)."""
-    for b in spec.bands:
-        bands[b] = st.quantized(bands[b], st.BAND_SCALES[b])
+def _quantize(bands: dict[int, np.ndarray], spec: Spec, plan: BandPlan) -> None:
+    """The radiances of the product ``bands`` feeding the store's as a compact store holds
+    them (``store.quantized`` of the store band's scale)."""
+    scales = spec.scales
+    for b, p in zip(plan.bands, plan.sources, strict=True):
+        bands[p] = st.quantized(bands[p], scales[b])
 
 
 def tile_work(pixels: dict[int, int], exclude: frozenset[int] = frozenset()) -> int:
@@ -585,7 +619,7 @@ def tile_job(fork: Any, spec: Spec, window: Window, jobs: Sequence[Job], rank: n
     if writer is not None:  # in process: the bands of the products after the first decode
         _keep_bands(spec)  # while the first ones are orthorectified, and are kept
         for job in todo:
-            _decode_ahead(job[1], spec.needed)
+            _decode_ahead(job[1], spec)
 
     def pieces() -> Iterator[Piece]:
         for index, path, piece, extent in todo:
@@ -744,12 +778,16 @@ class Synthesis:
                  bands: Sequence[int] | None, reject_bright: bool, tile: int,
                  progress: ProgressCallback | None, max_pixels: int | None = None,
                  codec: StoreCodec = StoreCodec.ZSTD,
-                 merged: ProgressCallback | None = None) -> None:
+                 merged: ProgressCallback | None = None,
+                 band_set: Sensor | None = None) -> None:
         self.target = target
         self.paths = paths
         old = target.synthesis
         self.algorithm = old.algorithm if old else (algorithm or "min-radiance")
-        self.bands = old.bands if old else tuple(sorted({int(b) for b in bands or ALL_BANDS}))
+        #: the store's band set: an update's; a new store's once its products are read
+        self.sensor: Sensor | None = old.sensor if old else band_set
+        self._asked_bands = None if bands is None else tuple(int(b) for b in bands)
+        self.bands: tuple[int, ...] = old.bands if old else ()
         self.tile = old.tile if old else int(tile)
         self.grid = old.grid if old else grid
         self.crs, self.pixel_size = crs, pixel_size
@@ -760,7 +798,8 @@ class Synthesis:
         self.codec = codec
         self.progress = progress
         self.merged = merged  # (products whose every tile is merged, products to merge)
-        self.table: list[dict[str, Any]] = old.products if old else []
+        # the table as stored (``SynthesisStore.products`` adds each sensor for readers)
+        self.table: list[dict[str, Any]] = list(old.attrs.get("products", [])) if old else []
         self._branch: str | None = None  # run branch of a new synthesis
 
     # ---------------------------------------------------------------- products
@@ -781,14 +820,44 @@ class Synthesis:
             when = item.product.first_line_time
             item.report.product_name = item.product.product_name or os.path.basename(path)
             item.report.sensing_start = "" if when is None else str(when)
-            item.report.sf_rad = {b: float(item.product.scaling.radiance[b - 1])
-                                  for b in self.bands}
+            item.report.sensor = Sensor(item.product.sensor).value
             if item.key in seen:
                 item.report.status = STATUS_ALREADY
                 item.product = None
                 continue
             seen.add(item.key)
+        self._band_set([i for i in out if i.product is not None])
+        for item in out:
+            if item.product is not None:
+                plan = band_plan(self._sensor, item.product.sensor, self.bands)
+                item.report.sf_rad = {b: float(item.product.scaling.radiance[p - 1])
+                                      for b, p in zip(plan.bands, plan.sources, strict=True)}
         return out
+
+    def _band_set(self, items: list[_Product]) -> None:
+        """The store's band set and bands: an update's own; a new store's from its products
+        (``bandsets.band_set_of``) and the bands asked for (default all of the set). A MERIS
+        product for a store of OLCI bands: OptionsError before any work."""
+        from ..bands import band_table
+        from ..options import check_bands
+
+        if self.target.synthesis is None:
+            self.sensor = band_set_of((Sensor(i.product.sensor) for i in items), self.sensor)
+            n_bands = band_table(self.sensor).n_bands
+            bad = [b for b in self._asked_bands or () if not 1 <= b <= n_bands]
+            if bad:
+                raise OptionsError(
+                    f"bands {list(self._asked_bands or ())}: the synthesis holds "
+                    f"{self.sensor.value} bands ({self.sensor.value} bands are 1..{n_bands}; "
+                    "a synthesis of OLCI products only holds OLCI bands 1..21)")
+            self.bands = check_bands(self._asked_bands, n_bands)
+        for item in items:
+            if self._sensor is Sensor.OLCI and Sensor(item.product.sensor) is not Sensor.OLCI:
+                raise OptionsError(refusal(self._sensor, item.report.path))
+
+    @property
+    def _sensor(self) -> Sensor:
+        return Sensor.MERIS if self.sensor is None else Sensor(self.sensor)
 
     def _plan(self, items: list[_Product]) -> list[_Product]:
         """Indices (canonical order: sensing time, then name) and footprints of the products
@@ -798,6 +867,7 @@ class Synthesis:
             from ..ortho import product_grid
 
             self.grid = product_grid(todo[0].product, self.crs or "EPSG:4326", self.pixel_size)
+        if self.target.synthesis is None and todo:  # with the bands of the band set
             check_new_grid_size(self.grid, len(self.bands), self.max_pixels)
         for k, item in enumerate(todo):
             item.report.index = len(self.table) + k + 1
@@ -886,13 +956,14 @@ class Synthesis:
 
     def _spec(self) -> Spec:
         shape = (self.grid.height, self.grid.width)
-        needed = _needed(self.bands, self.algorithm)
+        needed = band_plan(self._sensor, self._sensor, self.bands).needed(
+            self.algorithm == "max-ndvi")  # each product's own: ``Spec.needed``
         return Spec(tuple(grid_to_dict(self.grid).items()), self.bands, self.algorithm,
                     tuple(self.dems), replace(self.options, bands=needed, diagnostics=False),
                     self.reject_bright,
                     self.tile, tuple(st.layer_names(self.bands, self.algorithm)),
                     tuple(st.overview_factors(shape[1], shape[0], self.tile)),
-                    self._version >= 3)
+                    self._version >= 3, sensor=self._sensor.value)
 
     def _session(self, spec: Spec) -> tuple[Any, Callable[..., str]]:
         """A writable session without uncommitted changes (forks need one) and the function
@@ -910,7 +981,8 @@ class Synthesis:
         base = repo.lookup_branch(st.BRANCH)
         layout = repo.writable_session(st.BRANCH)
         st.create_layout(layout.store, self._attributes([]), (self.grid.height, self.grid.width),
-                         self.tile, spec.names, spec.overviews, st.CHUNK, self.codec)
+                         self.tile, spec.names, spec.overviews, st.CHUNK, self.codec,
+                         self._sensor)
         snapshot = layout.flush("synthesis layout: grid, bands, empty arrays")
         self._branch = f"{st.RUN_BRANCH_PREFIX}{uuid.uuid4().hex[:12]}"
         repo.create_branch(self._branch, snapshot)
@@ -929,11 +1001,18 @@ class Synthesis:
         return st.VERSION if old is None else int(old.attrs.get("version", 2))
 
     def _attributes(self, table: list[dict[str, Any]]) -> dict[str, Any]:
+        """The root attributes; the band set and matching as ``bandsets`` records them
+        (nothing more for a store of MERIS bands and products)."""
         shape = (self.grid.height, self.grid.width)
-        return {"format": st.FORMAT, "version": self._version, "algorithm": self.algorithm,
-                "bands": list(self.bands), "grid": grid_to_dict(self.grid), "tile": self.tile,
-                "overviews": st.overview_factors(shape[1], shape[0], self.tile),
-                "radiance": RADIANCE_NOTE, "products": table}
+        attrs = {"format": st.FORMAT, "version": self._version, "algorithm": self.algorithm,
+                 "bands": list(self.bands), "grid": grid_to_dict(self.grid), "tile": self.tile,
+                 "overviews": st.overview_factors(shape[1], shape[0], self.tile),
+                 "radiance": RADIANCE_NOTE, "products": table}
+        if self._sensor is not Sensor.MERIS:
+            attrs["sensor"] = self._sensor.value
+        elif any(product_sensor(p) is Sensor.OLCI for p in table):
+            attrs.update(matching_attributes(self.bands))
+        return attrs
 
     def _execute(self, runner: InProcess | Dask, session: Any, spec: Spec,
                  jobs: dict[Window, list[Job]], work: dict[Window, dict[int, int]],

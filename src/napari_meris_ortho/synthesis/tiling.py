@@ -20,7 +20,6 @@ if TYPE_CHECKING:
     from ..geometry.tiepoints import ProductGeometry
 BLOCK = 256  # tiles are multiples of it
 DEFAULT_TILE = 1024
-ALL_BANDS = tuple(range(1, 16))
 #: terrain parallax a tile must be within to be orthorectified: ``geometry.earth.MAX_TERRAIN_M``
 #: seen at 45 deg view zenith or the product's largest one if larger (section 3.1)
 SKIP_VIEW_ZENITH_DEG = 45.0
