@@ -1,6 +1,8 @@
-"""Ground hidden from the sensor by the relief, for the pixel geolocation with DEMs: such an
-output point has no antecedent (the pixel whose line of sight passes through it shows the
-ridge in front), so it is reported ``OCCLUDED`` and left no data.
+"""Ground hidden from the sensor by the relief, in every mode with DEMs (tie-point geolocation,
+both parallax models and searches; pixel geolocation): such an output point has no true
+antecedent (the pixel whose line of sight passes through it shows the ridge in front: mapped,
+the ridge appears twice), so with hidden ``mask`` it is reported ``OCCLUDED`` and left no
+data, with ``keep`` mapped as MERSYN maps it; in both it is in the hidden-ground mask.
 
 An output point T (lon, lat) at the DEM height h is seen when no terrain rises above its line
 of sight towards the satellite. The ray leaves T along the view azimuth va of the tie points
@@ -227,23 +229,37 @@ def _march(stack: DemStack, ray: tuple[np.ndarray, ...], ceiling: float, step: f
     return out
 
 
-def report_hidden(sight: Sightlines, kernel_args: tuple, lon: np.ndarray, lat: np.ndarray,
-                  h: np.ndarray, res: dict) -> None:
-    """The antecedents in ``res`` (``pixeldem.solve_pixel_dem`` of a block of output points
-    ``lon``, ``lat`` with DEM heights ``h``) of hidden ground dropped: line and column NaN,
-    iterations ``OCCLUDED``, counted in its "occluded" search count. Points without a DEM
-    height were located on the product's own terrain points, which report their hidden ground
-    already."""
+def hidden_ground(sight: Sightlines, kernel_args: tuple, lon: np.ndarray, lat: np.ndarray,
+                  h: np.ndarray, res: dict) -> np.ndarray:
+    """Where the output points of a block (``lon``, ``lat`` with DEM heights ``h``) solved in
+    ``res`` (``predcorr.solve``, ``pixeldem.solve_pixel_dem``: line, col, iterations) are hidden
+    by the terrain (bool, the block's shape): every mode with DEMs the same way, the ray along
+    the view angles of the tie points at the point's antecedent. Points without an antecedent
+    or a DEM height (no DEM has data there: the tie points' height) are not marched; a pixel
+    geolocation's own ``OCCLUDED`` points are hidden."""
     iters = res["iterations"]
+    out = np.asarray(iters == OCCLUDED).copy()
     test = np.flatnonzero(((iters >= 0) & np.isfinite(h)).reshape(-1))
     if test.size == 0:
-        return
+        return out
     _, _, coef, df, dj = kernel_args
-    flon, flat, fh, fline, fcol = (a.reshape(-1) for a in (lon, lat, h, res["line"],
-                                                          res["col"]))
+    flon, flat, fh, fline, fcol = (np.asarray(a).reshape(-1) for a in (lon, lat, h, res["line"],
+                                                                      res["col"]))
     gone = test[sight.hidden(flon[test], flat[test], fh[test].astype(np.float64), fline[test],
                              fcol[test], coef, df, dj)]
-    fline[gone] = np.nan
-    fcol[gone] = np.nan
-    iters.reshape(-1)[gone] = OCCLUDED
-    res["search"]["occluded"] = res["search"].get("occluded", 0) + int(gone.size)
+    out.reshape(-1)[gone] = True
+    return out
+
+
+def drop_hidden(res: dict, hidden: np.ndarray) -> None:
+    """The antecedents in ``res`` of the ``hidden`` points dropped (hidden ``mask``): line and
+    column NaN, iterations ``OCCLUDED``, counted in its "occluded" search count."""
+    iters = res["iterations"]
+    gone = hidden & (iters >= 0)
+    n = int(np.count_nonzero(gone))
+    if n == 0:
+        return
+    res["line"][gone] = np.nan
+    res["col"][gone] = np.nan
+    iters[gone] = OCCLUDED
+    res["search"]["occluded"] = res["search"].get("occluded", 0) + n
