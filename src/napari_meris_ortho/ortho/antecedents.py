@@ -131,8 +131,9 @@ def bytes_per_output_pixel(opts: OrthoOptions, *, hold_bands: bool = True,
     columns the segment reaches, ``Antecedents.area``) is ``area_share`` of it.
 
     Over the area: the antecedent line and column (float32), iterations, nearest-pixel index
-    and the hidden-ground mask (17 bytes); streamed to a writer (``writing.write_map``), the ``GATHER_GROUP`` uint16
-    bands gathered at a time and the previous group still in the writer (2 x min(bands, 8)).
+    and the hidden-ground mask (17 bytes); streamed to a writer (``writing.write_map``), the
+    ``GATHER_GROUP`` uint16 bands gathered at a time and the previous group still in the
+    writer (2 x min(bands, 8)).
     Over the whole grid: ``hold_bands`` (``orthorectify``, ``Antecedents.result``), every band
     as float32 with its resampling buffer, the flags and the saturation (8 x bands + 3), else
     the writer's overview levels of its bands in flight (2); the diagnostics layers and their

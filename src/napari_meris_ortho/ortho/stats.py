@@ -122,7 +122,7 @@ class RunStats:
         if primary is not None:
             out.append(f"points predicted from the primary grid = {primary}")
         if s.hidden_points is not None or occluded is not None:  # DEMs or pixel geolocation
-            n = s.hidden_points if s.hidden_points is not None else occluded
+            n = s.hidden_points if s.hidden_points is not None else int(occluded or 0)
             what = "mapped, hidden keep" if s.hidden == "keep" else "no antecedent"
             out.append(f"points hidden by the relief ({what}) = {n}")
         sec = s.seconds

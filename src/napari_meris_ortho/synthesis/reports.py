@@ -39,6 +39,7 @@ class ProductReport:
     status: str = STATUS_MERGED
     index: int = 0  # 1-based index in the product table (0: not merged)
     sf_rad: dict[int, float] = field(default_factory=dict)  # radiance factor per band
+    hidden: int = 0  # output pixels on ground hidden from it by the relief (never merged)
 
     @property
     def product(self) -> str:
@@ -65,6 +66,7 @@ class ProductReport:
             f"({100.0 * self.validated / total:.1f}% of synthesis)",
             f"NUMBER OF ADDED POINTS IN SYNTHESIS = {self.added} "
             f"({100.0 * self.added / total:.1f}% of synthesis)",
+            f"NUMBER OF POINTS HIDDEN BY THE RELIEF = {self.hidden} (not merged)",
         ]
 
     def table_entry(self) -> dict[str, Any]:
@@ -79,7 +81,7 @@ class ProductReport:
                                "sensing_start": self.sensing_start, "status": self.status}
         if self.status == STATUS_MERGED:
             out.update(index=self.index, processed=self.processed, validated=self.validated,
-                       added=self.added)
+                       added=self.added, hidden=self.hidden)
         if self.error is not None:
             out["error"] = self.error
         return out
