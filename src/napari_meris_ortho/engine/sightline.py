@@ -24,6 +24,8 @@ from .threads import split_range
 
 #: posts per side of the tiles of the march's height bounds, largest first
 TILES = (32, 8, 2)
+#: posts per side of the tiles of ``reachable``'s bounds, smallest first
+REACH_TILES = (4, 8, 16, 32, 64, 128, 256, 512)
 #: results of ``march``
 SEEN, HIDDEN, UNDECIDED = 0, 1, 2
 
@@ -130,6 +132,66 @@ def _march_range(lo, hi, lon, lat, h, e, n, data, inv, lattice, wrap_centre, t0,
                     out[k] = HIDDEN
                     break
             d += span + 1e-3  # (1 mm into the next cell)
+
+
+@njit(cache=True, nogil=True)
+def _reachable_range(lo, hi, lon, lat, h, inv, lattice, shape, wrap_centre, levels, sizes,
+                     ceiling, reach, tol, out):  # pragma: no cover
+    """Points [lo, hi) of ``reachable``."""
+    n_win_r, n_win_c = shape[0], shape[1]
+    r_off, c_off = lattice[0], lattice[1]
+    a, c, e_, f = inv[0], inv[2], inv[4], inv[5]
+    for k in range(lo, hi):
+        out[k] = False
+        if math.isnan(h[k]):
+            continue
+        x0 = lon[k]
+        if abs(wrap_centre - x0) > 180.0:
+            x0 = x0 + 360.0 * np.rint((wrap_centre - x0) / 360.0)
+        r = int(math.floor(e_ * lat[k] + f - 0.5)) - r_off
+        cc = int(math.floor(a * x0 + c - 0.5)) - c_off
+        if r < 0 or cc < 0 or r >= n_win_r or cc >= n_win_c:
+            out[k] = True  # beyond the window: the march decides
+            continue
+        top = ceiling
+        while True:
+            if top <= h[k] + tol:
+                break  # no terrain within reach rises above the ray by more than tol
+            posts = (top - h[k]) * reach  # posts the ray crosses below ``top``
+            level = -1
+            for i in range(sizes.shape[0]):
+                if sizes[i] - 2 >= posts:
+                    level = i
+                    break
+            if level < 0:
+                out[k] = True
+                break
+            t = sizes[level]
+            bound = levels[level][r // t, cc // t]
+            if bound >= top:
+                out[k] = True  # terrain within reach may rise above the ray: march it
+                break
+            top = bound
+
+
+def reachable(lon: np.ndarray, lat: np.ndarray, h: np.ndarray, inv: np.ndarray,
+              lattice: np.ndarray, shape: tuple[int, int], wrap_centre: float,
+              levels: tuple[np.ndarray, ...], ceiling: float, reach: float, tol: float
+              ) -> np.ndarray:
+    """True where terrain of a geographic north-up window might rise more than ``tol`` above
+    the line of sight of a point (flat float64 ``lon``, ``lat``, ``h``): the points ``march``
+    must decide, the others are seen. The ray rises at least 1 / tan vz per metre, so below
+    a height ``top`` it crosses at most (top - h) ``reach`` posts (``reach``: the largest
+    tan vz of the product per shortest post, m); the highest post of the tiles around the
+    point that hold them (``levels``: ``tile_maxima`` of each of ``REACH_TILES``) lowers
+    ``top`` until it is below h + tol (seen) or no tile holds the ray's way (march it): a few
+    look-ups a point, no look vector, no march on plains and seas."""
+    out = np.empty(lon.size, np.bool_)
+    sizes = np.array(REACH_TILES[:len(levels)], np.int64)
+    args = (lon, lat, h, inv, lattice, np.array(shape, np.int64), float(wrap_centre), levels,
+            sizes, float(ceiling), float(reach), float(tol), out)
+    split_range(lambda lo, hi: _reachable_range(lo, hi, *args), lon.size, min_size=1 << 14)
+    return out
 
 
 def march(lon: np.ndarray, lat: np.ndarray, h: np.ndarray, e: np.ndarray, n: np.ndarray,

@@ -76,9 +76,13 @@ class Sightlines:
     tmax: tuple[np.ndarray, ...] = ()
     post: float = 0.0
     gaps: bool = False
+    #: the largest tan vz of the product (None: not given): with a geographic window, only
+    #: the points ``sightline.reachable`` leaves are marched
+    tan_vz: float | None = None
+    levels: tuple[np.ndarray, ...] = ()
 
     @classmethod
-    def of(cls, stack: DemStack, lat: float) -> Sightlines:
+    def of(cls, stack: DemStack, lat: float, tan_vz: float | None = None) -> Sightlines:
         """The ceiling and step of ``stack`` (``STEP_OF_POST`` of its finest post spacing at
         latitude ``lat``), the window ``engine.sightline`` marches: the first lattice of the
         stack when it is geographic, north-up and in memory, its heights made ellipsoidal
@@ -128,6 +132,10 @@ class Sightlines:
             out.tmax = tuple(sightline.tile_maxima(window.data, t, out.gaps)
                              for t in sightline.TILES)
             out.post = 0.99 * shortest
+            if window.transform is None and tan_vz is not None and math.isfinite(tan_vz):
+                out.tan_vz = tan_vz
+                out.levels = tuple(sightline.tile_maxima(window.data, t, out.gaps)
+                                   for t in sightline.REACH_TILES)
         return out
 
     def hidden(self, lon: np.ndarray, lat: np.ndarray, h: np.ndarray, line: np.ndarray,
@@ -136,11 +144,27 @@ class Sightlines:
         (``line``, ``col``) is hidden by the terrain (module docstring); ``coef``, ``df``,
         ``dj``: the tie-point grid's ``kernel_args``. In the window: ``engine.sightline``
         every ``step / FINE``; elsewhere two marches of the stack: every ``step`` with a slack
-        of ``MARGIN_M`` finds the candidates, every ``step / FINE`` decides them."""
-        e, n = look_vectors(np.asarray(line, np.float64), np.asarray(col, np.float64), coef,
-                            float(df), float(dj))
-        ray = (np.asarray(lon, np.float64), np.asarray(lat, np.float64),
-               np.asarray(h, np.float64), e, n)
+        of ``MARGIN_M`` finds the candidates, every ``step / FINE`` decides them. With the
+        product's largest tan vz (``tan_vz``), only the points whose ray terrain within its
+        reach might rise above are marched (``sightline.reachable``)."""
+        lon, lat, h = (np.ascontiguousarray(a, np.float64) for a in (lon, lat, h))
+        out = np.zeros(lon.shape, bool)
+        line, col = np.asarray(line, np.float64), np.asarray(col, np.float64)
+        if self.levels and self.window is not None and self.tan_vz is not None:
+            w = self.window
+            maybe = np.flatnonzero(sightline.reachable(
+                lon, lat, h, w.inv, w.lattice, w.data.shape, w.wrap_centre, self.levels,
+                self.ceiling, self.tan_vz / self.post, TOLERANCE_M))
+            out[maybe] = self._marched(lon[maybe], lat[maybe], h[maybe], line[maybe],
+                                       col[maybe], coef, df, dj)
+            return out
+        return self._marched(lon, lat, h, line, col, coef, df, dj)
+
+    def _marched(self, lon: np.ndarray, lat: np.ndarray, h: np.ndarray, line: np.ndarray,
+                 col: np.ndarray, coef: np.ndarray, df: float, dj: float) -> np.ndarray:
+        """``hidden`` of every point given, each ray marched."""
+        e, n = look_vectors(line, col, coef, float(df), float(dj))
+        ray = (lon, lat, h, e, n)
         out = np.zeros(e.shape, bool)
         todo = np.arange(e.size)
         if self.window is not None:
@@ -161,6 +185,17 @@ class Sightlines:
             out[maybe] = _march(self.stack, tuple(a[maybe] for a in ray), self.ceiling,
                                 self.step / FINE, TOLERANCE_M)
         return out
+
+
+#: the look vectors of antecedents beyond the tie-point grid (the search's margin) are
+#: extrapolated: their tan vz bounded by the grid's largest times this
+TAN_VZ_SLACK = 1.05
+
+
+def largest_tan_vz(view_zenith: np.ndarray) -> float:
+    """The largest tan vz of a product's lines of sight (its tie points' view zenith, deg),
+    with ``TAN_VZ_SLACK``: the bound of the ground a ray crosses per metre it rises."""
+    return TAN_VZ_SLACK * math.tan(math.radians(float(np.nanmax(view_zenith))))
 
 
 def _projected_track(window: LatticeWindow, lon: np.ndarray, lat: np.ndarray, h: np.ndarray,
