@@ -24,8 +24,9 @@ from .threads import split_range
 
 #: posts per side of the tiles of the march's height bounds, largest first
 TILES = (32, 8, 2)
-#: posts per side of the tiles of ``reachable``'s bounds, smallest first
-REACH_TILES = (4, 8, 16, 32, 64, 128, 256, 512)
+#: a relative bound (m) of ``horizon_bound`` at or below this: the terrain cannot rise
+#: above the ray (the callers' tolerance is larger)
+TOLERANCE_FREE = 0.0
 #: results of ``march``
 SEEN, HIDDEN, UNDECIDED = 0, 1, 2
 
@@ -135,61 +136,135 @@ def _march_range(lo, hi, lon, lat, h, e, n, data, inv, lattice, wrap_centre, t0,
 
 
 @njit(cache=True, nogil=True)
-def _reachable_range(lo, hi, lon, lat, h, inv, lattice, shape, wrap_centre, levels, sizes,
-                     ceiling, reach, tol, out):  # pragma: no cover
+def _horizon_sweep(posts, step, ceiling, low, col_m, row_m, tan_vz, out_abs,
+                   out_rel):  # pragma: no cover
+    """One direction (``step`` +1: east, -1: west) of ``horizon_bound`` on the transposed
+    posts (column, row), its point bounds folded into ``out_abs``/``out_rel`` (cells,
+    transposed) by their maximum."""
+    n_c, n_r = posts.shape[0] - 1, posts.shape[1] - 1
+    rise = col_m / tan_vz
+    rel_edge = ceiling - low
+    prev_abs = np.full(n_r, ceiling)
+    prev_rel = np.full(n_r, rel_edge)
+    top = np.empty(n_r)
+    span = np.empty(n_r)
+    steep = np.empty(n_r)
+    hi = np.empty(n_r)
+    lo = np.empty(n_r)
+    slope = np.empty(n_r)
+    near_abs = np.empty(n_r)
+    near_rel = np.empty(n_r)
+    c = n_c - 1 if step > 0 else 0
+    while 0 <= c < n_c:
+        for r in range(n_r):
+            v00, v01 = posts[c, r], posts[c + 1, r]
+            v10, v11 = posts[c, r + 1], posts[c + 1, r + 1]
+            hi[r] = max(max(v00, v01), max(v10, v11))
+            lo[r] = min(min(v00, v01), min(v10, v11))
+            gx = max(abs(v01 - v00), abs(v11 - v10)) / col_m
+            gy = max(abs(v10 - v00), abs(v11 - v01)) / row_m
+            g = math.sqrt(gx * gx + gy * gy)
+            slope[r] = g if g == g else math.inf
+        for r in range(n_r):  # the cell and its neighbours north and south
+            if r == 0 or r == n_r - 1:
+                top[r], span[r], steep[r] = ceiling, rel_edge, math.inf
+            else:
+                top[r] = max(max(hi[r - 1], hi[r]), hi[r + 1])
+                span[r] = top[r] - min(min(lo[r - 1], lo[r]), lo[r + 1])
+                if not span[r] < rel_edge:
+                    span[r] = rel_edge
+                steep[r] = max(max(slope[r - 1], slope[r]), slope[r + 1])
+            # the next column's bounds at the rows the line of sight may enter it at
+            a, b = prev_abs[r], prev_rel[r]
+            if r > 0:
+                a, b = max(a, prev_abs[r - 1]), max(b, prev_rel[r - 1])
+            else:
+                a, b = ceiling, rel_edge
+            if r < n_r - 1:
+                a, b = max(a, prev_abs[r + 1]), max(b, prev_rel[r + 1])
+            else:
+                a, b = ceiling, rel_edge
+            near_abs[r], near_rel[r] = a, b
+        for r in range(n_r):
+            rises = steep[r] * tan_vz >= 1.0
+            # a point of the cell: the terrain of its column, then the next column's bounds
+            pa = max(top[r], near_abs[r])
+            pr = max(near_rel[r], 0.0) + (span[r] if rises else 0.0)
+            out_abs[c, r] = max(out_abs[c, r], pa)
+            out_rel[c, r] = max(out_rel[c, r], min(pr, rel_edge))
+            # crossing the whole column: the ray rises at least ``rise``; the terrain gains
+            # at most its span (steep) or (slope - 1 / tan vz) x width (gentle) on it
+            prev_abs[r] = min(max(top[r], near_abs[r] - rise), ceiling)
+            if rises:
+                gain = span[r] - rise
+                within = span[r]
+            else:
+                gain = (steep[r] - 1.0 / tan_vz) * col_m
+                within = 0.0
+            prev_rel[r] = min(max(within, near_rel[r] + gain), rel_edge)
+        c -= step
+
+
+def horizon_bound(data: np.ndarray, ceiling: float, east: bool, west: bool, gaps: bool,
+                  spacing: tuple[float, float], tan_vz: float) -> np.ndarray:
+    """Per cell of a window (posts r..r+1, c..c+1; float32, one row and column fewer than
+    ``data``): a height such that a point of the cell above it (by the tolerance) is seen,
+    -inf where every point of it is (``reachable``: no march there).
+
+    Lines of sight go east and/or west (``east``, ``west``) within 45 degrees of a row of
+    cells (they cross less than a row while they cross a column, ``spacing`` = the shortest
+    (column, row) post spacing, m, holds them in the cell's column and its neighbours north
+    and south) and rise at least 1 / ``tan_vz`` per metre. Two bounds, swept against the
+    direction column by column: the highest terrain the ray can meet less the least it has
+    risen by then (a column's width / ``tan_vz`` a column), and the most the terrain can rise
+    above the ray relative to the point: nothing across columns whose bilinear slopes less
+    than the ray rises (the ray leaves such terrain), their span elsewhere. Beyond the
+    window and, with ``gaps``, on posts without data (the next DEM of a stack has heights
+    there) the terrain may reach ``ceiling``."""
+    valid = (data >= MIN_TERRAIN_M) & (data <= MAX_TERRAIN_M)
+    low = float(np.min(data[valid])) if valid.any() else 0.0
+    posts = np.ascontiguousarray(
+        np.where(valid, data, ceiling if gaps else -np.inf).astype(np.float64).T)
+    shape = (max(posts.shape[0] - 1, 0), max(posts.shape[1] - 1, 0))
+    out_abs = np.full(shape, -np.inf)
+    out_rel = np.full(shape, -np.inf)
+    for step, wanted in ((1, east), (-1, west)):
+        if wanted and out_abs.size:
+            _horizon_sweep(posts, step, float(ceiling), low, float(spacing[0]),
+                           float(spacing[1]), float(tan_vz), out_abs, out_rel)
+    out_abs[out_rel <= TOLERANCE_FREE] = -np.inf
+    return np.ascontiguousarray(out_abs.T.astype(np.float32))
+
+
+@njit(cache=True, nogil=True)
+def _reachable_range(lo, hi, lon, lat, h, inv, lattice, wrap_centre, bound, tol,
+                     out):  # pragma: no cover
     """Points [lo, hi) of ``reachable``."""
-    n_win_r, n_win_c = shape[0], shape[1]
+    n_r, n_c = bound.shape
     r_off, c_off = lattice[0], lattice[1]
     a, c, e_, f = inv[0], inv[2], inv[4], inv[5]
     for k in range(lo, hi):
-        out[k] = False
-        if math.isnan(h[k]):
-            continue
         x0 = lon[k]
         if abs(wrap_centre - x0) > 180.0:
             x0 = x0 + 360.0 * np.rint((wrap_centre - x0) / 360.0)
         r = int(math.floor(e_ * lat[k] + f - 0.5)) - r_off
         cc = int(math.floor(a * x0 + c - 0.5)) - c_off
-        if r < 0 or cc < 0 or r >= n_win_r or cc >= n_win_c:
+        if r < 0 or cc < 0 or r >= n_r or cc >= n_c:
             out[k] = True  # beyond the window: the march decides
-            continue
-        top = ceiling
-        while True:
-            if top <= h[k] + tol:
-                break  # no terrain within reach rises above the ray by more than tol
-            posts = (top - h[k]) * reach  # posts the ray crosses below ``top``
-            level = -1
-            for i in range(sizes.shape[0]):
-                if sizes[i] - 2 >= posts:
-                    level = i
-                    break
-            if level < 0:
-                out[k] = True
-                break
-            t = sizes[level]
-            bound = levels[level][r // t, cc // t]
-            if bound >= top:
-                out[k] = True  # terrain within reach may rise above the ray: march it
-                break
-            top = bound
+        else:
+            out[k] = bound[r, cc] > h[k] + tol
 
 
 def reachable(lon: np.ndarray, lat: np.ndarray, h: np.ndarray, inv: np.ndarray,
-              lattice: np.ndarray, shape: tuple[int, int], wrap_centre: float,
-              levels: tuple[np.ndarray, ...], ceiling: float, reach: float, tol: float
+              lattice: np.ndarray, wrap_centre: float, bound: np.ndarray, tol: float
               ) -> np.ndarray:
-    """True where terrain of a geographic north-up window might rise more than ``tol`` above
-    the line of sight of a point (flat float64 ``lon``, ``lat``, ``h``): the points ``march``
-    must decide, the others are seen. The ray rises at least 1 / tan vz per metre, so below
-    a height ``top`` it crosses at most (top - h) ``reach`` posts (``reach``: the largest
-    tan vz of the product per shortest post, m); the highest post of the tiles around the
-    point that hold them (``levels``: ``tile_maxima`` of each of ``REACH_TILES``) lowers
-    ``top`` until it is below h + tol (seen) or no tile holds the ray's way (march it): a few
-    look-ups a point, no look vector, no march on plains and seas."""
+    """True where terrain might rise more than ``tol`` above the line of sight of a point
+    (flat float64 ``lon``, ``lat``, ``h`` on a geographic north-up window, as ``march``
+    takes them; ``bound``: ``horizon_bound`` of the window): the points ``march`` must
+    decide; the others are seen. One look-up a point: no march on plains, seas and the
+    slopes that face the sensor."""
     out = np.empty(lon.size, np.bool_)
-    sizes = np.array(REACH_TILES[:len(levels)], np.int64)
-    args = (lon, lat, h, inv, lattice, np.array(shape, np.int64), float(wrap_centre), levels,
-            sizes, float(ceiling), float(reach), float(tol), out)
+    args = (lon, lat, h, inv, lattice, float(wrap_centre), bound, float(tol), out)
     split_range(lambda lo, hi: _reachable_range(lo, hi, *args), lon.size, min_size=1 << 14)
     return out
 

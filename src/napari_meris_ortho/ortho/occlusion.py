@@ -76,18 +76,20 @@ class Sightlines:
     tmax: tuple[np.ndarray, ...] = ()
     post: float = 0.0
     gaps: bool = False
-    #: the largest tan vz of the product (None: not given): with a geographic window, only
-    #: the points ``sightline.reachable`` leaves are marched
-    tan_vz: float | None = None
-    levels: tuple[np.ndarray, ...] = ()
+    #: ``sightline.horizon_bound`` of the window (None: every point is marched): only the
+    #: points ``sightline.reachable`` leaves are
+    bound: np.ndarray | None = None
 
     @classmethod
-    def of(cls, stack: DemStack, lat: float, tan_vz: float | None = None) -> Sightlines:
+    def of(cls, stack: DemStack, lat: float,
+           view: tuple[np.ndarray, np.ndarray] | None = None) -> Sightlines:
         """The ceiling and step of ``stack`` (``STEP_OF_POST`` of its finest post spacing at
         latitude ``lat``), the window ``engine.sightline`` marches: the first lattice of the
         stack when it is geographic, north-up and in memory, its heights made ellipsoidal
         once (posts + geoid N, ``_ellipsoidal``); with DEMs or lattices after it, a cell
-        without data there ends its march (the stack marches on)."""
+        without data there ends its march (the stack marches on). ``view``: the product's
+        tie-point view zenith and azimuth (deg), for the bound of the terrain its lines of
+        sight can meet (``horizon``)."""
         top, post = -math.inf, math.inf
         windows = []
         for dem in stack.sources:
@@ -132,29 +134,40 @@ class Sightlines:
             out.tmax = tuple(sightline.tile_maxima(window.data, t, out.gaps)
                              for t in sightline.TILES)
             out.post = 0.99 * shortest
-            if window.transform is None and tan_vz is not None and math.isfinite(tan_vz):
-                out.tan_vz = tan_vz
-                out.levels = tuple(sightline.tile_maxima(window.data, t, out.gaps)
-                                   for t in sightline.REACH_TILES)
+            if window.transform is None and view is not None:
+                out.bound = _horizon(window, out.ceiling, out.gaps, *view)
         return out
 
+    def candidates(self, lon: np.ndarray, lat: np.ndarray, h: np.ndarray
+                   ) -> np.ndarray | None:
+        """Of a block of points (``lon``, ``lat`` float64, heights ``h``), those a ray must be
+        marched for: terrain within its reach might rise above it (``sightline.reachable``
+        on the window's ``bound``); None: every point (no bound)."""
+        if self.bound is None or self.window is None:
+            return None
+        w = self.window
+        flat = sightline.reachable(
+            np.ascontiguousarray(lon, np.float64).reshape(-1),
+            np.ascontiguousarray(lat, np.float64).reshape(-1),
+            np.ascontiguousarray(h).reshape(-1), w.inv, w.lattice, w.wrap_centre, self.bound,
+            TOLERANCE_M)
+        return flat.reshape(np.shape(lon))
+
     def hidden(self, lon: np.ndarray, lat: np.ndarray, h: np.ndarray, line: np.ndarray,
-               col: np.ndarray, coef: np.ndarray, df: float, dj: float) -> np.ndarray:
+               col: np.ndarray, coef: np.ndarray, df: float, dj: float,
+               cleared: bool = False) -> np.ndarray:
         """True where the point (``lon``, ``lat``, height ``h``; flat) with the antecedent
         (``line``, ``col``) is hidden by the terrain (module docstring); ``coef``, ``df``,
         ``dj``: the tie-point grid's ``kernel_args``. In the window: ``engine.sightline``
         every ``step / FINE``; elsewhere two marches of the stack: every ``step`` with a slack
         of ``MARGIN_M`` finds the candidates, every ``step / FINE`` decides them. With the
-        product's largest tan vz (``tan_vz``), only the points whose ray terrain within its
-        reach might rise above are marched (``sightline.reachable``)."""
+        window's ``bound``, only the ``candidates`` are marched (``cleared``: the points given
+        are candidates already)."""
         lon, lat, h = (np.ascontiguousarray(a, np.float64) for a in (lon, lat, h))
         out = np.zeros(lon.shape, bool)
         line, col = np.asarray(line, np.float64), np.asarray(col, np.float64)
-        if self.levels and self.window is not None and self.tan_vz is not None:
-            w = self.window
-            maybe = np.flatnonzero(sightline.reachable(
-                lon, lat, h, w.inv, w.lattice, w.data.shape, w.wrap_centre, self.levels,
-                self.ceiling, self.tan_vz / self.post, TOLERANCE_M))
+        if not cleared and (maybe := self.candidates(lon, lat, h)) is not None:
+            maybe = np.flatnonzero(maybe)
             out[maybe] = self._marched(lon[maybe], lat[maybe], h[maybe], line[maybe],
                                        col[maybe], coef, df, dj)
             return out
@@ -192,10 +205,37 @@ class Sightlines:
 TAN_VZ_SLACK = 1.05
 
 
-def largest_tan_vz(view_zenith: np.ndarray) -> float:
-    """The largest tan vz of a product's lines of sight (its tie points' view zenith, deg),
-    with ``TAN_VZ_SLACK``: the bound of the ground a ray crosses per metre it rises."""
-    return TAN_VZ_SLACK * math.tan(math.radians(float(np.nanmax(view_zenith))))
+def _horizon(window: LatticeWindow, ceiling: float, gaps: bool, view_zenith: np.ndarray,
+             view_azimuth: np.ndarray) -> np.ndarray | None:
+    """``sightline.horizon_bound`` of a geographic window for a product's lines of sight
+    (tie-point view zenith and azimuth, deg): they rise at least a column's width (its
+    shortest, at the window's latitude furthest from the equator) over the largest tan vz
+    (with ``TAN_VZ_SLACK``) per column they cross; east and/or west as their azimuths go.
+    None when some line of sight that can cross a post runs closer to north-south than a
+    cell's diagonal (the sweep's rows would not hold it: every point is marched)."""
+    rows = window.lattice[0] + np.array([0.0, window.data.shape[0]])
+    lats = (rows - window.inv[5]) / window.inv[4]
+    cos = math.cos(math.radians(min(float(np.max(np.abs(lats))), 89.0)))
+    col_m = _DEGREE_M * cos / abs(window.inv[0])
+    row_m = _DEGREE_M / abs(window.inv[4])
+    tz = np.tan(np.radians(np.asarray(view_zenith, np.float64))).ravel()
+    va = np.radians(np.asarray(view_azimuth, np.float64)).ravel()
+    ok = np.isfinite(tz) & np.isfinite(va)
+    tz, va = tz[ok], va[ok]
+    if not tz.size:
+        return None
+    tan_vz = TAN_VZ_SLACK * float(tz.max())
+    valid = np.isfinite(window.data)
+    low = float(np.min(window.data[valid])) if valid.any() else 0.0
+    # lines of sight that stay within a post of their point: any direction will do
+    short = tz * max(ceiling - low, 1.0) < min(col_m, row_m)
+    east, north = np.sin(va), np.cos(va)
+    if np.any(~short & (np.abs(north) * col_m > np.abs(east) * row_m)):
+        return None
+    go_east = bool(np.any(short | (east > 0)))
+    go_west = bool(np.any(short | (east < 0)))
+    return sightline.horizon_bound(window.data, ceiling, go_east, go_west, gaps,
+                                   (col_m, row_m), tan_vz)
 
 
 def _projected_track(window: LatticeWindow, lon: np.ndarray, lat: np.ndarray, h: np.ndarray,
@@ -270,18 +310,23 @@ def hidden_ground(sight: Sightlines, kernel_args: tuple, lon: np.ndarray, lat: n
     ``res`` (``predcorr.solve``, ``pixeldem.solve_pixel_dem``: line, col, iterations) are hidden
     by the terrain (bool, the block's shape): every mode with DEMs the same way, the ray along
     the view angles of the tie points at the point's antecedent. Points without an antecedent
-    or a DEM height (no DEM has data there: the tie points' height) are not marched; a pixel
-    geolocation's own ``OCCLUDED`` points are hidden."""
+    or a DEM height (no DEM has data there: the tie points' height) are not marched, nor the
+    points ``Sightlines.candidates`` clears; a pixel geolocation's own ``OCCLUDED`` points are
+    hidden."""
     iters = res["iterations"]
     out = np.asarray(iters == OCCLUDED).copy()
-    test = np.flatnonzero(((iters >= 0) & np.isfinite(h)).reshape(-1))
-    if test.size == 0:
+    test = (iters >= 0) & np.isfinite(h)
+    maybe = sight.candidates(lon, lat, h)
+    if maybe is not None:
+        test &= maybe
+    index = np.flatnonzero(test.reshape(-1))
+    if index.size == 0:
         return out
     _, _, coef, df, dj = kernel_args
     flon, flat, fh, fline, fcol = (np.asarray(a).reshape(-1) for a in (lon, lat, h, res["line"],
                                                                       res["col"]))
-    gone = test[sight.hidden(flon[test], flat[test], fh[test].astype(np.float64), fline[test],
-                             fcol[test], coef, df, dj)]
+    gone = index[sight.hidden(flon[index], flat[index], fh[index].astype(np.float64),
+                              fline[index], fcol[index], coef, df, dj, cleared=True)]
     out.reshape(-1)[gone] = True
     return out
 
