@@ -143,6 +143,7 @@ def _horizon_sweep(posts, step, ceiling, low, col_m, row_m, tan_vz, out_abs,
     transposed) by their maximum."""
     n_c, n_r = posts.shape[0] - 1, posts.shape[1] - 1
     rise = col_m / tan_vz
+    path = math.hypot(col_m, row_m)  # the longest way of a ray across a column
     rel_edge = ceiling - low
     prev_abs = np.full(n_r, ceiling)
     prev_rel = np.full(n_r, rel_edge)
@@ -189,15 +190,16 @@ def _horizon_sweep(posts, step, ceiling, low, col_m, row_m, tan_vz, out_abs,
             rises = steep[r] * tan_vz >= 1.0
             # a point of the cell: the terrain of its column, then the next column's bounds
             pa = max(top[r], near_abs[r])
-            pr = max(near_rel[r], 0.0) + (span[r] if rises else 0.0)
+            pr = max(near_rel[r], 0.0) + (
+                min(span[r], (steep[r] - 1.0 / tan_vz) * path) if rises else 0.0)
             out_abs[c, r] = max(out_abs[c, r], pa)
             out_rel[c, r] = max(out_rel[c, r], min(pr, rel_edge))
             # crossing the whole column: the ray rises at least ``rise``; the terrain gains
             # at most its span (steep) or (slope - 1 / tan vz) x width (gentle) on it
             prev_abs[r] = min(max(top[r], near_abs[r] - rise), ceiling)
-            if rises:
-                gain = span[r] - rise
-                within = span[r]
+            if rises:  # the ray's way in the column is at most ``path`` long
+                within = min(span[r], (steep[r] - 1.0 / tan_vz) * path)
+                gain = within
             else:
                 gain = (steep[r] - 1.0 / tan_vz) * col_m
                 within = 0.0

@@ -536,7 +536,7 @@ def _run(job: _Job, progress: ProgressCallback | None) -> Antecedents:
         bounds = lonlat_bounds(grid)
         march = occlusion.Sightlines.of(
             stack, 0.5 * (bounds[1] + bounds[3]) if bounds is not None else 0.0,
-            view=(job.tp.view_zenith, job.tp.view_azimuth))
+            view=(job.tp.view_zenith, job.tp.view_azimuth, float(job.tp.kernel_args()[4])))
     blocks = _Blocks.empty(area, opts.diagnostics, len(stack.sources) if stack is not None else 0,
                            hidden=march is not None or job.pixel is not None)
     for r0 in range(0, nr, _BLOCK_ROWS):

@@ -79,17 +79,20 @@ class Sightlines:
     #: ``sightline.horizon_bound`` of the window (None: every point is marched): only the
     #: points ``sightline.reachable`` leaves are
     bound: np.ndarray | None = None
+    #: product columns [first, last] whose lines of sight ``bound`` leaves out (near nadir:
+    #: they may go either way): always marched
+    near_nadir: tuple[float, float] = (math.inf, -math.inf)
 
     @classmethod
     def of(cls, stack: DemStack, lat: float,
-           view: tuple[np.ndarray, np.ndarray] | None = None) -> Sightlines:
+           view: tuple[np.ndarray, np.ndarray, float] | None = None) -> Sightlines:
         """The ceiling and step of ``stack`` (``STEP_OF_POST`` of its finest post spacing at
         latitude ``lat``), the window ``engine.sightline`` marches: the first lattice of the
         stack when it is geographic, north-up and in memory, its heights made ellipsoidal
         once (posts + geoid N, ``_ellipsoidal``); with DEMs or lattices after it, a cell
         without data there ends its march (the stack marches on). ``view``: the product's
-        tie-point view zenith and azimuth (deg), for the bound of the terrain its lines of
-        sight can meet (``horizon``)."""
+        tie-point view zenith and azimuth (deg) and the pixels between tie-point columns,
+        for the bound of the terrain its lines of sight can meet (``_horizon``)."""
         top, post = -math.inf, math.inf
         windows = []
         for dem in stack.sources:
@@ -135,7 +138,9 @@ class Sightlines:
                              for t in sightline.TILES)
             out.post = 0.99 * shortest
             if window.transform is None and view is not None:
-                out.bound = _horizon(window, out.ceiling, out.gaps, *view)
+                horizon = _horizon(window, out.ceiling, out.gaps, *view)
+                if horizon is not None:
+                    out.bound, out.near_nadir = horizon
         return out
 
     def candidates(self, lon: np.ndarray, lat: np.ndarray, h: np.ndarray
@@ -167,7 +172,8 @@ class Sightlines:
         out = np.zeros(lon.shape, bool)
         line, col = np.asarray(line, np.float64), np.asarray(col, np.float64)
         if not cleared and (maybe := self.candidates(lon, lat, h)) is not None:
-            maybe = np.flatnonzero(maybe)
+            lo, hi = self.near_nadir
+            maybe = np.flatnonzero(maybe | ((col >= lo) & (col <= hi)))
             out[maybe] = self._marched(lon[maybe], lat[maybe], h[maybe], line[maybe],
                                        col[maybe], coef, df, dj)
             return out
@@ -206,36 +212,41 @@ TAN_VZ_SLACK = 1.05
 
 
 def _horizon(window: LatticeWindow, ceiling: float, gaps: bool, view_zenith: np.ndarray,
-             view_azimuth: np.ndarray) -> np.ndarray | None:
+             view_azimuth: np.ndarray, dj: float
+             ) -> tuple[np.ndarray, tuple[float, float]] | None:
     """``sightline.horizon_bound`` of a geographic window for a product's lines of sight
-    (tie-point view zenith and azimuth, deg): they rise at least a column's width (its
-    shortest, at the window's latitude furthest from the equator) over the largest tan vz
-    (with ``TAN_VZ_SLACK``) per column they cross; east and/or west as their azimuths go.
-    None when some line of sight that can cross a post runs closer to north-south than a
-    cell's diagonal (the sweep's rows would not hold it: every point is marched)."""
+    (tie-point view zenith and azimuth, deg; ``dj`` pixels between tie-point columns): they
+    rise at least 1 / tan vz per metre (the largest tan vz, with ``TAN_VZ_SLACK``), east or
+    west as their azimuths go; and the product columns near nadir whose lines of sight
+    reach less than a post (either way: they are marched). None when some line of sight
+    that reaches further runs closer to north-south than a cell's diagonal (the sweep's
+    rows would not hold it: every point is marched)."""
     rows = window.lattice[0] + np.array([0.0, window.data.shape[0]])
     lats = (rows - window.inv[5]) / window.inv[4]
     cos = math.cos(math.radians(min(float(np.max(np.abs(lats))), 89.0)))
     col_m = _DEGREE_M * cos / abs(window.inv[0])
     row_m = _DEGREE_M / abs(window.inv[4])
-    tz = np.tan(np.radians(np.asarray(view_zenith, np.float64))).ravel()
-    va = np.radians(np.asarray(view_azimuth, np.float64)).ravel()
+    tz = np.tan(np.radians(np.asarray(view_zenith, np.float64)))
+    va = np.radians(np.asarray(view_azimuth, np.float64))
     ok = np.isfinite(tz) & np.isfinite(va)
-    tz, va = tz[ok], va[ok]
-    if not tz.size:
+    if not ok.any():
         return None
-    tan_vz = TAN_VZ_SLACK * float(tz.max())
+    tan_vz = TAN_VZ_SLACK * float(tz[ok].max())
     valid = np.isfinite(window.data)
     low = float(np.min(window.data[valid])) if valid.any() else 0.0
-    # lines of sight that stay within a post of their point: any direction will do
-    short = tz * max(ceiling - low, 1.0) < min(col_m, row_m)
+    # lines of sight that stay within a post of their point (near nadir)
+    short = ok & (tz * max(ceiling - low, 1.0) < min(col_m, row_m))
+    far = ok & ~short
     east, north = np.sin(va), np.cos(va)
-    if np.any(~short & (np.abs(north) * col_m > np.abs(east) * row_m)):
+    if np.any(far & (np.abs(north) * col_m > np.abs(east) * row_m)):
         return None
-    go_east = bool(np.any(short | (east > 0)))
-    go_west = bool(np.any(short | (east < 0)))
-    return sightline.horizon_bound(window.data, ceiling, go_east, go_west, gaps,
-                                   (col_m, row_m), tan_vz)
+    go_east, go_west = bool(np.any(far & (east > 0))), bool(np.any(far & (east < 0)))
+    columns = np.flatnonzero(short.any(axis=0)) if short.ndim == 2 else np.zeros(0, int)
+    near = ((float(columns.min() - 1) * dj, float(columns.max() + 1) * dj) if columns.size
+            else (math.inf, -math.inf))
+    bound = sightline.horizon_bound(window.data, ceiling, go_east, go_west, gaps,
+                                    (col_m, row_m), tan_vz)
+    return bound, near
 
 
 def _projected_track(window: LatticeWindow, lon: np.ndarray, lat: np.ndarray, h: np.ndarray,
@@ -318,7 +329,9 @@ def hidden_ground(sight: Sightlines, kernel_args: tuple, lon: np.ndarray, lat: n
     test = (iters >= 0) & np.isfinite(h)
     maybe = sight.candidates(lon, lat, h)
     if maybe is not None:
-        test &= maybe
+        lo, hi = sight.near_nadir
+        col = res["col"]
+        test &= maybe | ((col >= lo) & (col <= hi))
     index = np.flatnonzero(test.reshape(-1))
     if index.size == 0:
         return out
