@@ -31,17 +31,34 @@ TOLERANCE_FREE = 0.0
 SEEN, HIDDEN, UNDECIDED = 0, 1, 2
 
 
-def tile_maxima(data: np.ndarray, tile: int, gaps: bool = False) -> np.ndarray:
+@njit(cache=True, nogil=True)
+def _post_tiles(data, tile, gaps, out):  # pragma: no cover
+    """The highest valid post of each ``tile`` x ``tile`` tile of ``data`` into ``out``
+    (-inf: none; a post without data +inf with ``gaps``)."""
+    nr, nc = data.shape
+    for i in range(out.shape[0]):
+        for j in range(out.shape[1]):
+            out[i, j] = -np.inf
+    for r in range(nr):
+        i = r // tile
+        for c in range(nc):
+            v = data[r, c]
+            if v >= MIN_TERRAIN_M and v <= MAX_TERRAIN_M:
+                if v > out[i, c // tile]:
+                    out[i, c // tile] = v
+            elif gaps:
+                out[i, c // tile] = np.inf
+
+
+def tile_maxima(data: np.ndarray, tile: int, gaps: bool = False,
+                raw: np.ndarray | None = None, raw_tile: int = 1) -> np.ndarray:
     """The highest post (float64, -inf: none) of every ``tile`` x ``tile`` tile of the window
     and its 8 neighbours: the bound of the terrain of any cell within tile - 1 posts of it.
     ``gaps``: a post without data counts as +inf (the next DEM of a stack has heights there:
-    the march must not jump over it)."""
-    valid = (data >= MIN_TERRAIN_M) & (data <= MAX_TERRAIN_M)
-    posts = np.where(valid, data, np.inf if gaps else -np.inf).astype(np.float64)
-    nr, nc = -(-posts.shape[0] // tile), -(-posts.shape[1] // tile)
-    padded = np.full((nr * tile, nc * tile), -np.inf)
-    padded[:posts.shape[0], :posts.shape[1]] = posts
-    tiles = padded.reshape(nr, tile, nc, tile).max(axis=(1, 3))
+    the march must not jump over it). ``raw``: the tiles' own maxima of a smaller tile
+    ``raw_tile`` dividing ``tile`` (``tile_raw``), to start from."""
+    tiles = tile_raw(data, tile, gaps, raw, raw_tile)
+    nr, nc = tiles.shape
     grown = np.full((nr + 2, nc + 2), -np.inf)
     grown[1:-1, 1:-1] = tiles
     out = tiles.copy()
@@ -49,6 +66,21 @@ def tile_maxima(data: np.ndarray, tile: int, gaps: bool = False) -> np.ndarray:
         for dc in (0, 1, 2):
             np.maximum(out, grown[dr:dr + nr, dc:dc + nc], out=out)
     return out
+
+
+def tile_raw(data: np.ndarray, tile: int, gaps: bool = False, raw: np.ndarray | None = None,
+             raw_tile: int = 1) -> np.ndarray:
+    """The highest post of every ``tile`` x ``tile`` tile (its own, no neighbours; as
+    ``tile_maxima``), from ``raw`` (of tiles ``raw_tile``) when given."""
+    nr, nc = -(-data.shape[0] // tile), -(-data.shape[1] // tile)
+    if raw is None:
+        out = np.empty((nr, nc))
+        _post_tiles(data, tile, gaps, out)
+        return out
+    k = tile // raw_tile
+    padded = np.full((nr * k, nc * k), -np.inf)
+    padded[:raw.shape[0], :raw.shape[1]] = raw
+    return padded.reshape(nr, k, nc, k).max(axis=(1, 3))
 
 
 @njit(cache=True, nogil=True)
@@ -135,13 +167,20 @@ def _march_range(lo, hi, lon, lat, h, e, n, data, inv, lattice, wrap_centre, t0,
             d += span + 1e-3  # (1 mm into the next cell)
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _post(v, gap):  # pragma: no cover
+    """A post's height, ``gap`` without data."""
+    return v if v >= MIN_TERRAIN_M and v <= MAX_TERRAIN_M else gap
+
+
 @njit(cache=True, nogil=True)
-def _horizon_sweep(posts, step, ceiling, low, col_m, row_m, tan_vz, out_abs,
+def _horizon_sweep(posts, gaps, step, ceiling, low, col_m, row_m, tan_vz, out_abs,
                    out_rel):  # pragma: no cover
     """One direction (``step`` +1: east, -1: west) of ``horizon_bound`` on the transposed
     posts (column, row), its point bounds folded into ``out_abs``/``out_rel`` (cells,
     transposed) by their maximum."""
     n_c, n_r = posts.shape[0] - 1, posts.shape[1] - 1
+    gap = ceiling if gaps else -np.inf
     rise = col_m / tan_vz
     path = math.hypot(col_m, row_m)  # the longest way of a ray across a column
     rel_edge = ceiling - low
@@ -158,8 +197,8 @@ def _horizon_sweep(posts, step, ceiling, low, col_m, row_m, tan_vz, out_abs,
     c = n_c - 1 if step > 0 else 0
     while 0 <= c < n_c:
         for r in range(n_r):
-            v00, v01 = posts[c, r], posts[c + 1, r]
-            v10, v11 = posts[c, r + 1], posts[c + 1, r + 1]
+            v00, v01 = _post(posts[c, r], gap), _post(posts[c + 1, r], gap)
+            v10, v11 = _post(posts[c, r + 1], gap), _post(posts[c + 1, r + 1], gap)
             hi[r] = max(max(v00, v01), max(v10, v11))
             lo[r] = min(min(v00, v01), min(v10, v11))
             gx = max(abs(v01 - v00), abs(v11 - v10)) / col_m
@@ -209,9 +248,9 @@ def _horizon_sweep(posts, step, ceiling, low, col_m, row_m, tan_vz, out_abs,
 
 def horizon_bound(data: np.ndarray, ceiling: float, east: bool, west: bool, gaps: bool,
                   spacing: tuple[float, float], tan_vz: float) -> np.ndarray:
-    """Per cell of a window (posts r..r+1, c..c+1; float32, one row and column fewer than
-    ``data``): a height such that a point of the cell above it (by the tolerance) is seen,
-    -inf where every point of it is (``reachable``: no march there).
+    """Per cell of a window (posts r..r+1, c..c+1; float32, indexed [c, r]: column first,
+    one row and column fewer than ``data``): a height such that a point of the cell above it
+    (by the tolerance) is seen, -inf where every point of it is (``reachable``: no march).
 
     Lines of sight go east and/or west (``east``, ``west``) within 45 degrees of a row of
     cells (they cross less than a row while they cross a column, ``spacing`` = the shortest
@@ -223,26 +262,26 @@ def horizon_bound(data: np.ndarray, ceiling: float, east: bool, west: bool, gaps
     than the ray rises (the ray leaves such terrain), their span elsewhere. Beyond the
     window and, with ``gaps``, on posts without data (the next DEM of a stack has heights
     there) the terrain may reach ``ceiling``."""
-    valid = (data >= MIN_TERRAIN_M) & (data <= MAX_TERRAIN_M)
-    low = float(np.min(data[valid])) if valid.any() else 0.0
-    posts = np.ascontiguousarray(
-        np.where(valid, data, ceiling if gaps else -np.inf).astype(np.float64).T)
+    with np.errstate(invalid="ignore"):
+        low = float(np.nanmin(np.where(data >= MIN_TERRAIN_M, data, np.nan), initial=np.inf))
+    low = low if math.isfinite(low) else 0.0
+    posts = np.ascontiguousarray(np.asarray(data, np.float32).T)
     shape = (max(posts.shape[0] - 1, 0), max(posts.shape[1] - 1, 0))
-    out_abs = np.full(shape, -np.inf)
-    out_rel = np.full(shape, -np.inf)
+    out_abs = np.full(shape, -np.inf, np.float32)
+    out_rel = np.full(shape, -np.inf, np.float32)
     for step, wanted in ((1, east), (-1, west)):
         if wanted and out_abs.size:
-            _horizon_sweep(posts, step, float(ceiling), low, float(spacing[0]),
+            _horizon_sweep(posts, bool(gaps), step, float(ceiling), low, float(spacing[0]),
                            float(spacing[1]), float(tan_vz), out_abs, out_rel)
     out_abs[out_rel <= TOLERANCE_FREE] = -np.inf
-    return np.ascontiguousarray(out_abs.T.astype(np.float32))
+    return out_abs
 
 
 @njit(cache=True, nogil=True)
 def _reachable_range(lo, hi, lon, lat, h, inv, lattice, wrap_centre, bound, tol,
                      out):  # pragma: no cover
     """Points [lo, hi) of ``reachable``."""
-    n_r, n_c = bound.shape
+    n_c, n_r = bound.shape  # (column, row)
     r_off, c_off = lattice[0], lattice[1]
     a, c, e_, f = inv[0], inv[2], inv[4], inv[5]
     for k in range(lo, hi):
@@ -254,7 +293,7 @@ def _reachable_range(lo, hi, lon, lat, h, inv, lattice, wrap_centre, bound, tol,
         if r < 0 or cc < 0 or r >= n_r or cc >= n_c:
             out[k] = True  # beyond the window: the march decides
         else:
-            out[k] = bound[r, cc] > h[k] + tol
+            out[k] = bound[cc, r] > h[k] + tol
 
 
 def reachable(lon: np.ndarray, lat: np.ndarray, h: np.ndarray, inv: np.ndarray,
@@ -263,8 +302,8 @@ def reachable(lon: np.ndarray, lat: np.ndarray, h: np.ndarray, inv: np.ndarray,
     """True where terrain might rise more than ``tol`` above the line of sight of a point
     (flat float64 ``lon``, ``lat``, ``h`` on a geographic north-up window, as ``march``
     takes them; ``bound``: ``horizon_bound`` of the window): the points ``march`` must
-    decide; the others are seen. One look-up a point: no march on plains, seas and the
-    slopes that face the sensor."""
+    decide; the others are seen. One look-up a point (``bound`` indexed [column, row]): no
+    march on plains, seas and the slopes that face the sensor."""
     out = np.empty(lon.size, np.bool_)
     args = (lon, lat, h, inv, lattice, float(wrap_centre), bound, float(tol), out)
     split_range(lambda lo, hi: _reachable_range(lo, hi, *args), lon.size, min_size=1 << 14)

@@ -134,8 +134,12 @@ class Sightlines:
                 shortest = min(1.0 / abs(window.inv[0]), 1.0 / abs(window.inv[4]))
             out.window = window
             out.gaps = len(windows) > 1
-            out.tmax = tuple(sightline.tile_maxima(window.data, t, out.gaps)
-                             for t in sightline.TILES)
+            raw, raw_tile, tmax = None, 1, {}
+            for t in sorted(sightline.TILES):  # each from the next smaller tile's maxima
+                raw = sightline.tile_raw(window.data, t, out.gaps, raw, raw_tile)
+                raw_tile = t
+                tmax[t] = sightline.tile_maxima(window.data, t, out.gaps, raw, t)
+            out.tmax = tuple(tmax[t] for t in sightline.TILES)
             out.post = 0.99 * shortest
             if window.transform is None and view is not None:
                 horizon = _horizon(window, out.ceiling, out.gaps, *view)
