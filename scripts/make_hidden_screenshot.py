@@ -20,7 +20,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from make_screenshots import (  # noqa: E402 (the script's own directory, above)
+from make_screenshots import (
     ROOT,
     _centre_on,
     _close_toasts,
@@ -42,7 +42,6 @@ def main(argv: list[str] | None = None) -> int:
     os.environ["NAPARI_CONFIG"] = str(Path(tempfile.mkdtemp(prefix="napari-")) / "settings.yaml")
 
     import napari
-
     from napari_meris_ortho.simulate.scene import generate_scene
 
     scene = generate_scene("fr-steep")
