@@ -74,11 +74,11 @@ def test_map_counts_the_bands_it_streams_and_orthorectify_those_it_holds(product
 
     every = OrthoOptions.of(None)
     assert len(every.bands) == 15
-    assert bytes_per_output_pixel(every, hold_bands=False) == 2 + 16 + 16
-    assert bytes_per_output_pixel(every, hold_bands=False, area_share=0.25) == 2 + 32 / 4
-    assert bytes_per_output_pixel(every) == 16 + 8 * 15 + 3
+    assert bytes_per_output_pixel(every, hold_bands=False) == 2 + 17 + 16
+    assert bytes_per_output_pixel(every, hold_bands=False, area_share=0.25) == 2 + 33 / 4
+    assert bytes_per_output_pixel(every) == 17 + 8 * 15 + 3
     three = OrthoOptions.of(None, bands=[7, 5, 2], diagnostics=True)
-    assert bytes_per_output_pixel(three, hold_bands=False) == 2 + 48 + 16 + 6
+    assert bytes_per_output_pixel(three, hold_bands=False) == 2 + 48 + 17 + 6
 
     grid = OutputGrid("EPSG:4326", 11.0, 47.0, 0.001, 0.001, 2000, 1000)
     ante = precompute(product, grid, elevation="none", max_pixels=2_000_000)

@@ -50,7 +50,8 @@ def test_map_writes_geotiff_log_and_stats(files, tmp_path, caplog):
         (arrays[0] == 0) & (arrays[1] > 0)) + np.count_nonzero((arrays[0] == 0) & (arrays[1] == 0)
                                                               & (arrays[2] > 0)))
     diag, dgrid, dmeta = read_geotiff(tmp_path / "out_diagnostics.tif")
-    assert dmeta["descriptions"][:2] == ["line", "col"] and len(diag) == 7
+    assert dmeta["descriptions"][:2] == ["line", "col"] and len(diag) == 8
+    assert dmeta["descriptions"][7] == "hidden"
     ok = arrays[2] > 0
     assert np.all(diag[4][ok] >= 1)  # iterations
 

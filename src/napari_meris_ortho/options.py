@@ -91,6 +91,15 @@ class MergeRule(StrEnum):
     MAX_NDVI = "max-ndvi"
 
 
+class Hidden(StrEnum):
+    """What becomes of output points on ground hidden from the sensor by the relief in front
+    of it (a line of sight to the satellite marched over the DEMs, ``ortho.occlusion``): the
+    pixel whose line of sight passes through such a point shows that relief, a second time."""
+
+    MASK = "mask"  # no data, counted and flagged in the hidden-ground mask
+    KEEP = "keep"  # mapped as MERSYN maps them, counted and flagged in the mask
+
+
 class StoreCodec(StrEnum):
     """Codec pipeline of a new synthesis store's full-resolution bands and NDVI: zstd alone
     (Zarr v3 core codecs: every Zarr reader) or a delta filter then zstd (``numcodecs.delta``:
@@ -108,7 +117,8 @@ E = TypeVar("E", bound=StrEnum)
 
 _WHAT = {Elevation: "elevation source", Parallax: "parallax model",
          Geolocation: "geolocation interpolation", SearchMethod: "search method",
-         Sampling: "sampling method", MergeRule: "algorithm", StoreCodec: "store codec"}
+         Sampling: "sampling method", Hidden: "hidden-ground choice", MergeRule: "algorithm",
+         StoreCodec: "store codec"}
 
 
 def choices(enum: Iterable[E]) -> list[str]:
@@ -144,13 +154,14 @@ class OrthoOptions:
     tolerance: float = 0.01
     bands: tuple[int, ...] = tuple(range(1, MERIS_BAND_COUNT + 1))
     diagnostics: bool = False
+    hidden: Hidden = Hidden.MASK
 
     @classmethod
     def parse(cls, *, elevation: object = "dem", sampling: object = "nearest",
               parallax: object = "handbook", geolocation: object | None = None,
               method: object = "primary", tolerance: object = 0.01,
               bands: Sequence[int] | None = None, diagnostics: bool = False,
-              n_dems: int = 0, n_bands: int = 15) -> OrthoOptions:
+              hidden: object = "mask", n_dems: int = 0, n_bands: int = 15) -> OrthoOptions:
         """Options from user values; OptionsError on the first inconsistent one; ``n_bands``:
         the product's bands (15 MERIS, 21 OLCI; ``bands`` None: all of them)."""
         elev = parse(Elevation, elevation)
@@ -165,7 +176,8 @@ class OrthoOptions:
         geo = (Geolocation.default_for(par) if geolocation is None
                else parse(Geolocation, geolocation))
         return cls(elev, parse(Sampling, sampling), par, geo, parse(SearchMethod, method),
-                   float(tolerance), check_bands(bands, n_bands), bool(diagnostics))
+                   float(tolerance), check_bands(bands, n_bands), bool(diagnostics),
+                   parse(Hidden, hidden))
 
     @classmethod
     def of(cls, options: OrthoOptions | None = None, *, n_dems: int = 0, n_bands: int = 15,
@@ -188,7 +200,7 @@ class OrthoOptions:
         return {"elevation": self.elevation, "sampling": self.sampling,
                 "parallax": self.parallax, "geolocation": self.geolocation,
                 "method": self.method, "tolerance": self.tolerance, "bands": self.bands,
-                "diagnostics": self.diagnostics}
+                "diagnostics": self.diagnostics, "hidden": self.hidden}
 
 
 def _sensor_of(n_bands: int) -> str:

@@ -15,7 +15,7 @@ from typing import Any
 
 from ..bands import MAX_BANDS
 from ..errors import OptionsError
-from ..options import PARALLAX_CHOICES, Geolocation, OrthoOptions, SearchMethod, choices
+from ..options import PARALLAX_CHOICES, Geolocation, Hidden, OrthoOptions, SearchMethod, choices
 from ._options import (
     DEFAULT_GRID,
     add_bands_option,
@@ -68,6 +68,13 @@ def register(subparsers: Any) -> None:
                    "MERSYN, it leaves background where the zero-height position or the first "
                    "correction falls outside the tie-point grid: the outer half pixel and, on "
                    "high relief, terrain within one parallax shift of the near-nadir edge)")
+    p.add_argument("--hidden", choices=choices(Hidden), default=OrthoOptions.hidden.value,
+                   help="ground hidden from the sensor by the relief in front of it (the line of "
+                   "sight to the satellite marched over the DEMs; with a --dem): mask leaves it "
+                   "no data (default; the pixel that would be taken shows the relief in front "
+                   "a second time), keep maps it as MERSYN does; both count it in the log "
+                   "(points hidden by the relief), --stats-json and the tags, and flag it in "
+                   "the diagnostics' hidden band")
     p.add_argument("--dtype", choices=("uint16", "float32"), default="uint16",
                    help="band values: uint16 counts with GDAL scale = sf_rad (default; GDAL, "
                    "QGIS, rasterio read radiances) or float32 radiances")
@@ -75,7 +82,7 @@ def register(subparsers: Any) -> None:
                    help="Cloud-Optimized GeoTIFF compression, with a predictor (default zstd)")
     p.add_argument("--diagnostics", action="store_true",
                    help="also write OUT_diagnostics.tif: antecedent line/column, elevation, its "
-                   "source, iterations, parallax shift east/north (m)")
+                   "source, iterations, parallax shift east/north (m), hidden ground (1)")
     p.add_argument("--stats-json", default=None, metavar="FILE", help="write statistics as JSON")
     p.set_defaults(func=run)
 
@@ -93,7 +100,8 @@ def _check(args: argparse.Namespace) -> Any:
         raise OptionsError(f"--tolerance must be > 0 product pixels, got {args.tolerance}")
     args.options = ortho_options(args, n_bands=MAX_BANDS, tolerance=args.tolerance,
                                  parallax=args.parallax, geolocation=args.geolocation,
-                                 method=args.search, diagnostics=args.diagnostics)
+                                 method=args.search, diagnostics=args.diagnostics,
+                                 hidden=args.hidden)
     return grid_from_args(args)
 
 

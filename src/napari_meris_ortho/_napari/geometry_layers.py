@@ -14,7 +14,11 @@ from ..engine.boundary import segment_boundary
 from ..geometry.earth import MEAN_EARTH_RADIUS
 from ..geometry.grid import OutputGrid, crs_wkt, lonlat_to_crs
 from ..placement import to_world
-from .world import TIE_GRID_KEY, WORLD_KEY, geo_metadata, world_axes
+from .world import TIE_GRID_KEY, WORLD_KEY, geo_image_kwargs, geo_metadata, world_axes
+
+#: colour of the ground hidden from the sensor by the relief (labels layer, semi-transparent)
+HIDDEN_COLOUR = "magenta"
+HIDDEN_OPACITY = 0.6
 
 
 def footprint_polygons(tp_lat: np.ndarray, tp_lon: np.ndarray, crs: Any,
@@ -244,6 +248,23 @@ def parallax_layer_data(frame: OutputGrid, shift_east: np.ndarray, shift_north: 
         **world_axes(frame.crs),
     }
     return vectors, kwargs, "vectors"
+
+
+def hidden_layer_data(frame: OutputGrid, hidden: np.ndarray, name: str = "hidden ground"
+                      ) -> tuple[np.ndarray, dict, str]:
+    """A labels layer tuple of the ground hidden from the sensor by the relief (label 1,
+    ``HIDDEN_COLOUR``, semi-transparent over the bands; elsewhere transparent): with hidden
+    ``mask`` the holes of the map, with ``keep`` the points mapped from the relief in front."""
+    labels = (np.asarray(hidden) != 0).astype(np.uint8)
+    n = int(np.count_nonzero(labels))
+    kwargs = geo_image_kwargs(
+        frame, name=name, opacity=HIDDEN_OPACITY,
+        colormap={0: "transparent", 1: HIDDEN_COLOUR, None: "transparent"},
+        features={"index": [0, 1], "ground": ["", "hidden by the relief"]},
+        metadata={"hidden_points": n,
+                  "legend": f"{HIDDEN_COLOUR}: ground hidden from the sensor by the relief "
+                            f"({n} points)"})
+    return labels, kwargs, "labels"
 
 
 def geometry_layers(tie_points: Mapping[str, np.ndarray], frame: OutputGrid, suffix: str = "",

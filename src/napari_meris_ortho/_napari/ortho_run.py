@@ -25,7 +25,7 @@ from ..geometry.grid import OutputGrid, same_crs
 from ..options import Elevation, MergeRule, OrthoOptions, choices, parse_band_list
 from ..progress import ProgressCallback
 from ..pyramid import level_factors, memory_levels
-from .geometry_layers import geometry_layers
+from .geometry_layers import geometry_layers, hidden_layer_data
 from .product_layers import (
     NDVI_LEGEND,
     band_layers,
@@ -89,6 +89,9 @@ class RunSettings:
     #: one parallax vector every this many output pixels; 0: about 60 across the grid
     #: (``geometry_layers.vector_step_for``)
     vector_step: int = 0
+    #: ground hidden from the sensor by the relief: "mask" (no data) or "keep" (mapped; CLI
+    #: ``--hidden``); shown in both as the "hidden ground" layer
+    hidden: str = "mask"
 
     @property
     def pixel(self) -> bool:
@@ -124,7 +127,7 @@ class RunSettings:
                                sampling=self.sampling, bands=self.bands,
                                geolocation="pixel" if self.pixel else None,
                                parallax=self.parallax, method=self.search,
-                               diagnostics=self.geometry)
+                               diagnostics=self.geometry, hidden=self.hidden)
 
     def check(self) -> None:
         """OptionsError/OutputError naming the first missing or inconsistent input."""
@@ -227,7 +230,7 @@ class OrthoRun:
         """Drop the arrays of every item (bands, diagnostics, masks, extra layers) once they are
         in layers: a finished run keeps its grids, tie points, statistics and names only."""
         for item in self.items:
-            item.update(bands={}, extra=[], valid=None, diagnostics={})
+            item.update(bands={}, extra=[], valid=None, diagnostics={}, hidden=None)
 
     def summary(self) -> str:
         """The status line of a finished run."""
@@ -301,7 +304,7 @@ def _run_mapping(options: RunSettings, progress: ProgressCallback | None) -> Ort
             if options.pixel else {}
         items.append(_item(product, bands=result.bands, grid=result.grid,
                            valid=result.valid, diagnostics=result.diagnostics,
-                           stats=result.stats, **extra))
+                           stats=result.stats, hidden=result.hidden, **extra))
     return OrthoRun(items, options, written, warnings=warnings)
 
 
@@ -492,6 +495,9 @@ def _item_layers(item: dict[str, Any], frame: OutputGrid, opts: RunSettings) -> 
         layers += band_layers(item["bands"], frame, item["prefix"], meta, item["valid"],
                               suffix=item["suffix"])
     layers += item["extra"]
+    hidden = item.get("hidden")
+    if hidden is not None and np.any(hidden):  # the ground the sensor cannot see
+        layers.append(hidden_layer_data(frame, hidden, name=f"hidden ground{item['suffix']}"))
     if opts.geometry and item["diagnostics"]:
         layers += diagnostic_layers(item["diagnostics"], frame, item["suffix"],
                                     [Path(d).name for d in opts.dems])

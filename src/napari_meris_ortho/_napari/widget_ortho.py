@@ -41,7 +41,15 @@ from magicgui.widgets import (
 
 from .._process import unit_registry_from_disk
 from ..errors import MerisOrthoError, OptionsError
-from ..options import PARALLAX_CHOICES, Elevation, Parallax, Sampling, SearchMethod, choices
+from ..options import (
+    PARALLAX_CHOICES,
+    Elevation,
+    Hidden,
+    Parallax,
+    Sampling,
+    SearchMethod,
+    choices,
+)
 from ._qt.closing import OnClose
 from ._qt.insertion import (
     SHOW_STEP_MS,
@@ -241,6 +249,12 @@ class OrthorectifyWidget(ScrolledForm):
         self.sampling = ComboBox(label="sampling", choices=choices(Sampling),
                                  value=Sampling.NEAREST.value,
                                  tooltip="resampling of the product at the antecedents")
+        self.hidden = ComboBox(label="hidden ground", choices=choices(Hidden),
+                               value=Hidden.MASK.value,
+                               tooltip="ground the sensor cannot see behind the relief (with "
+                                       "DEMs): mask leaves it no data, keep maps it as MERSYN "
+                                       "does; both show it as the hidden-ground layer "
+                                       "(CLI --hidden)")
         self.crs = ComboBox(label="output CRS", choices=[CRS_UTM, CRS_GEOGRAPHIC, CRS_EPSG,
                                                          CRS_LIKE],
                             value=CRS_UTM, tooltip=CRS_TOOLTIP)
@@ -276,7 +290,8 @@ class OrthorectifyWidget(ScrolledForm):
         super().__init__(widgets=[
             self.products, self.dem_kind, self.dem_path, self.dem_add, self.dem_list,
             dem_buttons, self.elevation, self.geolocation, self.algorithm, self.input_store,
-            self.keep, self.parallax, self.search, self.sampling, self.crs, self.epsg, self.like,
+            self.keep, self.parallax, self.search, self.sampling, self.hidden, self.crs,
+            self.epsg, self.like,
             self.pixel_size, self.bands, self.geometry, self.exaggeration, self.vector_step,
             self.output,
         ], footer=[self.mode, self.run_button, self.cancel_button, self.progress_bar,
@@ -301,7 +316,8 @@ class OrthorectifyWidget(ScrolledForm):
         self.last_run: OrthoRun | None = None
         remembered = {"elevation": self.elevation, "geolocation": self.geolocation,
                       "algorithm": self.algorithm, "parallax": self.parallax,
-                      "search": self.search, "sampling": self.sampling, "crs": self.crs,
+                      "search": self.search, "sampling": self.sampling,
+                      "hidden": self.hidden, "crs": self.crs,
                       "epsg": self.epsg,
                       "pixel_size": self.pixel_size, "bands": self.bands,
                       "geometry": self.geometry, "exaggeration": self.exaggeration,
@@ -450,7 +466,8 @@ class OrthorectifyWidget(ScrolledForm):
             like=self.like_grid() if self.crs.value == CRS_LIKE else None,
             pixel_size_m=float(self.pixel_size.value), bands=parse_bands(self.bands.value),
             output=output, geometry=self.geometry.value,
-            exaggeration=float(self.exaggeration.value), vector_step=int(self.vector_step.value))
+            exaggeration=float(self.exaggeration.value), vector_step=int(self.vector_step.value),
+            hidden=self.hidden.value)
         options.check()
         for path in options.map_outputs():  # as File > Save refuses it (``writer``)
             readers = layers_reading(self.viewer, path)

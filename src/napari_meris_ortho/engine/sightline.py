@@ -24,21 +24,41 @@ from .threads import split_range
 
 #: posts per side of the tiles of the march's height bounds, largest first
 TILES = (32, 8, 2)
+#: a relative bound (m) of ``horizon_bound`` at or below this: the terrain cannot rise
+#: above the ray (the callers' tolerance is larger)
+TOLERANCE_FREE = 0.0
 #: results of ``march``
 SEEN, HIDDEN, UNDECIDED = 0, 1, 2
 
 
-def tile_maxima(data: np.ndarray, tile: int, gaps: bool = False) -> np.ndarray:
+@njit(cache=True, nogil=True)
+def _post_tiles(data, tile, gaps, out):  # pragma: no cover
+    """The highest valid post of each ``tile`` x ``tile`` tile of ``data`` into ``out``
+    (-inf: none; a post without data +inf with ``gaps``)."""
+    nr, nc = data.shape
+    for i in range(out.shape[0]):
+        for j in range(out.shape[1]):
+            out[i, j] = -np.inf
+    for r in range(nr):
+        i = r // tile
+        for c in range(nc):
+            v = data[r, c]
+            if v >= MIN_TERRAIN_M and v <= MAX_TERRAIN_M:
+                if v > out[i, c // tile]:
+                    out[i, c // tile] = v
+            elif gaps:
+                out[i, c // tile] = np.inf
+
+
+def tile_maxima(data: np.ndarray, tile: int, gaps: bool = False,
+                raw: np.ndarray | None = None, raw_tile: int = 1) -> np.ndarray:
     """The highest post (float64, -inf: none) of every ``tile`` x ``tile`` tile of the window
     and its 8 neighbours: the bound of the terrain of any cell within tile - 1 posts of it.
     ``gaps``: a post without data counts as +inf (the next DEM of a stack has heights there:
-    the march must not jump over it)."""
-    valid = (data >= MIN_TERRAIN_M) & (data <= MAX_TERRAIN_M)
-    posts = np.where(valid, data, np.inf if gaps else -np.inf).astype(np.float64)
-    nr, nc = -(-posts.shape[0] // tile), -(-posts.shape[1] // tile)
-    padded = np.full((nr * tile, nc * tile), -np.inf)
-    padded[:posts.shape[0], :posts.shape[1]] = posts
-    tiles = padded.reshape(nr, tile, nc, tile).max(axis=(1, 3))
+    the march must not jump over it). ``raw``: the tiles' own maxima of a smaller tile
+    ``raw_tile`` dividing ``tile`` (``tile_raw``), to start from."""
+    tiles = tile_raw(data, tile, gaps, raw, raw_tile)
+    nr, nc = tiles.shape
     grown = np.full((nr + 2, nc + 2), -np.inf)
     grown[1:-1, 1:-1] = tiles
     out = tiles.copy()
@@ -46,6 +66,21 @@ def tile_maxima(data: np.ndarray, tile: int, gaps: bool = False) -> np.ndarray:
         for dc in (0, 1, 2):
             np.maximum(out, grown[dr:dr + nr, dc:dc + nc], out=out)
     return out
+
+
+def tile_raw(data: np.ndarray, tile: int, gaps: bool = False, raw: np.ndarray | None = None,
+             raw_tile: int = 1) -> np.ndarray:
+    """The highest post of every ``tile`` x ``tile`` tile (its own, no neighbours; as
+    ``tile_maxima``), from ``raw`` (of tiles ``raw_tile``) when given."""
+    nr, nc = -(-data.shape[0] // tile), -(-data.shape[1] // tile)
+    if raw is None:
+        out = np.empty((nr, nc))
+        _post_tiles(data, tile, gaps, out)
+        return out
+    k = tile // raw_tile
+    padded = np.full((nr * k, nc * k), -np.inf)
+    padded[:raw.shape[0], :raw.shape[1]] = raw
+    return padded.reshape(nr, k, nc, k).max(axis=(1, 3))
 
 
 @njit(cache=True, nogil=True)
@@ -130,6 +165,149 @@ def _march_range(lo, hi, lon, lat, h, e, n, data, inv, lattice, wrap_centre, t0,
                     out[k] = HIDDEN
                     break
             d += span + 1e-3  # (1 mm into the next cell)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _post(v, gap):  # pragma: no cover
+    """A post's height, ``gap`` without data."""
+    return v if v >= MIN_TERRAIN_M and v <= MAX_TERRAIN_M else gap
+
+
+@njit(cache=True, nogil=True)
+def _horizon_sweep(posts, gaps, step, ceiling, low, col_m, row_m, tan_vz, out_abs,
+                   out_rel):  # pragma: no cover
+    """One direction (``step`` +1: east, -1: west) of ``horizon_bound`` on the transposed
+    posts (column, row), its point bounds folded into ``out_abs``/``out_rel`` (cells,
+    transposed) by their maximum."""
+    n_c, n_r = posts.shape[0] - 1, posts.shape[1] - 1
+    gap = ceiling if gaps else -np.inf
+    rise = col_m / tan_vz
+    path = math.hypot(col_m, row_m)  # the longest way of a ray across a column
+    rel_edge = ceiling - low
+    prev_abs = np.full(n_r, ceiling)
+    prev_rel = np.full(n_r, rel_edge)
+    top = np.empty(n_r)
+    span = np.empty(n_r)
+    steep = np.empty(n_r)
+    hi = np.empty(n_r)
+    lo = np.empty(n_r)
+    slope = np.empty(n_r)
+    near_abs = np.empty(n_r)
+    near_rel = np.empty(n_r)
+    c = n_c - 1 if step > 0 else 0
+    while 0 <= c < n_c:
+        for r in range(n_r):
+            v00, v01 = _post(posts[c, r], gap), _post(posts[c + 1, r], gap)
+            v10, v11 = _post(posts[c, r + 1], gap), _post(posts[c + 1, r + 1], gap)
+            hi[r] = max(max(v00, v01), max(v10, v11))
+            lo[r] = min(min(v00, v01), min(v10, v11))
+            gx = max(abs(v01 - v00), abs(v11 - v10)) / col_m
+            gy = max(abs(v10 - v00), abs(v11 - v01)) / row_m
+            g = math.sqrt(gx * gx + gy * gy)
+            slope[r] = g if g == g else math.inf
+        for r in range(n_r):  # the cell and its neighbours north and south
+            if r == 0 or r == n_r - 1:
+                top[r], span[r], steep[r] = ceiling, rel_edge, math.inf
+            else:
+                top[r] = max(max(hi[r - 1], hi[r]), hi[r + 1])
+                span[r] = top[r] - min(min(lo[r - 1], lo[r]), lo[r + 1])
+                if not span[r] < rel_edge:
+                    span[r] = rel_edge
+                steep[r] = max(max(slope[r - 1], slope[r]), slope[r + 1])
+            # the next column's bounds at the rows the line of sight may enter it at
+            a, b = prev_abs[r], prev_rel[r]
+            if r > 0:
+                a, b = max(a, prev_abs[r - 1]), max(b, prev_rel[r - 1])
+            else:
+                a, b = ceiling, rel_edge
+            if r < n_r - 1:
+                a, b = max(a, prev_abs[r + 1]), max(b, prev_rel[r + 1])
+            else:
+                a, b = ceiling, rel_edge
+            near_abs[r], near_rel[r] = a, b
+        for r in range(n_r):
+            rises = steep[r] * tan_vz >= 1.0
+            # a point of the cell: the terrain of its column, then the next column's bounds
+            pa = max(top[r], near_abs[r])
+            pr = max(near_rel[r], 0.0) + (
+                min(span[r], (steep[r] - 1.0 / tan_vz) * path) if rises else 0.0)
+            out_abs[c, r] = max(out_abs[c, r], pa)
+            out_rel[c, r] = max(out_rel[c, r], min(pr, rel_edge))
+            # crossing the whole column: the ray rises at least ``rise``; the terrain gains
+            # at most its span (steep) or (slope - 1 / tan vz) x width (gentle) on it
+            prev_abs[r] = min(max(top[r], near_abs[r] - rise), ceiling)
+            if rises:  # the ray's way in the column is at most ``path`` long
+                within = min(span[r], (steep[r] - 1.0 / tan_vz) * path)
+                gain = within
+            else:
+                gain = (steep[r] - 1.0 / tan_vz) * col_m
+                within = 0.0
+            prev_rel[r] = min(max(within, near_rel[r] + gain), rel_edge)
+        c -= step
+
+
+def horizon_bound(data: np.ndarray, ceiling: float, east: bool, west: bool, gaps: bool,
+                  spacing: tuple[float, float], tan_vz: float) -> np.ndarray:
+    """Per cell of a window (posts r..r+1, c..c+1; float32, indexed [c, r]: column first,
+    one row and column fewer than ``data``): a height such that a point of the cell above it
+    (by the tolerance) is seen, -inf where every point of it is (``reachable``: no march).
+
+    Lines of sight go east and/or west (``east``, ``west``) within 45 degrees of a row of
+    cells (they cross less than a row while they cross a column, ``spacing`` = the shortest
+    (column, row) post spacing, m, holds them in the cell's column and its neighbours north
+    and south) and rise at least 1 / ``tan_vz`` per metre. Two bounds, swept against the
+    direction column by column: the highest terrain the ray can meet less the least it has
+    risen by then (a column's width / ``tan_vz`` a column), and the most the terrain can rise
+    above the ray relative to the point: nothing across columns whose bilinear slopes less
+    than the ray rises (the ray leaves such terrain), their span elsewhere. Beyond the
+    window and, with ``gaps``, on posts without data (the next DEM of a stack has heights
+    there) the terrain may reach ``ceiling``."""
+    with np.errstate(invalid="ignore"):
+        low = float(np.nanmin(np.where(data >= MIN_TERRAIN_M, data, np.nan), initial=np.inf))
+    low = low if math.isfinite(low) else 0.0
+    posts = np.ascontiguousarray(np.asarray(data, np.float32).T)
+    shape = (max(posts.shape[0] - 1, 0), max(posts.shape[1] - 1, 0))
+    out_abs = np.full(shape, -np.inf, np.float32)
+    out_rel = np.full(shape, -np.inf, np.float32)
+    for step, wanted in ((1, east), (-1, west)):
+        if wanted and out_abs.size:
+            _horizon_sweep(posts, bool(gaps), step, float(ceiling), low, float(spacing[0]),
+                           float(spacing[1]), float(tan_vz), out_abs, out_rel)
+    out_abs[out_rel <= TOLERANCE_FREE] = -np.inf
+    return out_abs
+
+
+@njit(cache=True, nogil=True)
+def _reachable_range(lo, hi, lon, lat, h, inv, lattice, wrap_centre, bound, tol,
+                     out):  # pragma: no cover
+    """Points [lo, hi) of ``reachable``."""
+    n_c, n_r = bound.shape  # (column, row)
+    r_off, c_off = lattice[0], lattice[1]
+    a, c, e_, f = inv[0], inv[2], inv[4], inv[5]
+    for k in range(lo, hi):
+        x0 = lon[k]
+        if abs(wrap_centre - x0) > 180.0:
+            x0 = x0 + 360.0 * np.rint((wrap_centre - x0) / 360.0)
+        r = int(math.floor(e_ * lat[k] + f - 0.5)) - r_off
+        cc = int(math.floor(a * x0 + c - 0.5)) - c_off
+        if r < 0 or cc < 0 or r >= n_r or cc >= n_c:
+            out[k] = True  # beyond the window: the march decides
+        else:
+            out[k] = bound[cc, r] > h[k] + tol
+
+
+def reachable(lon: np.ndarray, lat: np.ndarray, h: np.ndarray, inv: np.ndarray,
+              lattice: np.ndarray, wrap_centre: float, bound: np.ndarray, tol: float
+              ) -> np.ndarray:
+    """True where terrain might rise more than ``tol`` above the line of sight of a point
+    (flat float64 ``lon``, ``lat``, ``h`` on a geographic north-up window, as ``march``
+    takes them; ``bound``: ``horizon_bound`` of the window): the points ``march`` must
+    decide; the others are seen. One look-up a point (``bound`` indexed [column, row]): no
+    march on plains, seas and the slopes that face the sensor."""
+    out = np.empty(lon.size, np.bool_)
+    args = (lon, lat, h, inv, lattice, float(wrap_centre), bound, float(tol), out)
+    split_range(lambda lo, hi: _reachable_range(lo, hi, *args), lon.size, min_size=1 << 14)
+    return out
 
 
 def march(lon: np.ndarray, lat: np.ndarray, h: np.ndarray, e: np.ndarray, n: np.ndarray,

@@ -48,6 +48,9 @@ class OrthoResult:
     stats: RunStats
     diagnostics: dict[str, np.ndarray] = field(default_factory=dict)
     saturated: np.ndarray | None = None
+    #: ground hidden from the sensor by the relief (bool; the lines of sight marched over the
+    #: DEMs): no data with hidden "mask", mapped with "keep"; None: not looked for (no DEM)
+    hidden: np.ndarray | None = None
 
     @property
     def crs(self) -> pyproj.CRS:
@@ -66,7 +69,8 @@ class OrthoResult:
         """The result as an ``xarray.Dataset`` (``output.dataset.grid_dataset``): ``radiance``
         (band, y, x; W m-2 sr-1 um-1, NaN where no antecedent is inside the product) with the
         band numbers and central wavelengths as coordinates, ``flags`` (L1b flag bits, CF
-        ``flag_masks``), ``valid`` and the diagnostics layers (y, x); the CRS as the CF grid
+        ``flag_masks``), ``valid``, ``hidden`` (ground hidden by the relief, with DEMs) and the
+        diagnostics layers (y, x); the CRS as the CF grid
         mapping ``spatial_ref`` (rioxarray reads it). Needs xarray (extra ``xarray``)."""
         from ..flags import FLAG_NAMES
         from ..output.dataset import grid_dataset, require_xarray
@@ -89,8 +93,13 @@ class OrthoResult:
             "valid": (("y", "x"), np.asarray(self.valid), {
                 "long_name": "antecedent inside the product"}),
         }
+        if self.hidden is not None:
+            variables["hidden"] = (("y", "x"), np.asarray(self.hidden, bool), {
+                "long_name": "ground hidden from the sensor by the relief",
+                "hidden": self.stats.hidden})
         for name, values in self.diagnostics.items():
-            variables[name] = (("y", "x"), values, {"long_name": f"diagnostics: {name}"})
+            if name != "hidden" or self.hidden is None:
+                variables[name] = (("y", "x"), values, {"long_name": f"diagnostics: {name}"})
         described = describe_map(self.stats, bands, "float32")  # the files' tags
         attrs = {**{k: v for k, v in described.tags().items() if k != "radiance"},
                  **described.run}
@@ -121,15 +130,16 @@ def bytes_per_output_pixel(opts: OrthoOptions, *, hold_bands: bool = True,
     """Memory an output pixel costs, on average over a grid whose search area (the rows and
     columns the segment reaches, ``Antecedents.area``) is ``area_share`` of it.
 
-    Over the area: the antecedent line and column (float32), iterations and nearest-pixel
-    index (16 bytes); streamed to a writer (``writing.write_map``), the ``GATHER_GROUP`` uint16
-    bands gathered at a time and the previous group still in the writer (2 x min(bands, 8)).
+    Over the area: the antecedent line and column (float32), iterations, nearest-pixel index
+    and the hidden-ground mask (17 bytes); streamed to a writer (``writing.write_map``), the
+    ``GATHER_GROUP`` uint16 bands gathered at a time and the previous group still in the
+    writer (2 x min(bands, 8)).
     Over the whole grid: ``hold_bands`` (``orthorectify``, ``Antecedents.result``), every band
     as float32 with its resampling buffer, the flags and the saturation (8 x bands + 3), else
     the writer's overview levels of its bands in flight (2); the diagnostics layers and their
     float32 copies for writing (48)."""
     n = len(opts.bands)
-    area = 16 + (0 if hold_bands else 2 * min(n, 2 * GATHER_GROUP))
+    area = 17 + (0 if hold_bands else 2 * min(n, 2 * GATHER_GROUP))
     whole = (_held_band_bytes(n) if hold_bands else 2) + (48 if opts.diagnostics else 0)
     return whole + area * float(area_share)
 
@@ -210,6 +220,8 @@ class Antecedents:
     whole_grid: dict[str, np.ndarray] = field(default_factory=dict, repr=False)
     #: the bands of ``nearest_source`` and their windows' copy (bands, lines, cols)
     _held: tuple[tuple[int, ...], np.ndarray] | None = field(default=None, repr=False)
+    #: ground hidden by the relief over the ``area`` (bool), None: not looked for (no DEM)
+    area_hidden: np.ndarray | None = None
 
     @property
     def line(self) -> np.ndarray:
@@ -232,6 +244,17 @@ class Antecedents:
             self.whole_grid[name] = on_whole_grid(part, self.grid.shape, self.area,
                                               BACKGROUND[name])
         return self.whole_grid[name]
+
+    @property
+    def hidden(self) -> np.ndarray | None:
+        """Ground hidden from the sensor by the relief (bool, the whole grid; no data with
+        hidden "mask", mapped with "keep"); None when no DEM was marched."""
+        if self.area_hidden is None:
+            return None
+        if "hidden" not in self.whole_grid:
+            self.whole_grid["hidden"] = on_whole_grid(self.area_hidden, self.grid.shape,
+                                                      self.area, False)
+        return self.whole_grid["hidden"]
 
     @property
     def valid(self) -> np.ndarray:
@@ -473,6 +496,6 @@ class Antecedents:
             total = self.grid.height + len(self.bands)
             self.progress(total, total)
         return OrthoResult(radiance, self.grid, self.valid, flags, self.finish(),
-                           self.diagnostics, self.saturated())
+                           self.diagnostics, self.saturated(), self.hidden)
 
 

@@ -32,7 +32,7 @@ from ..geometry.grid import (
     terrain_margin_px,
 )
 from ..geometry.tiepoints import TiePointGrid
-from ..options import Elevation, Geolocation, OrthoOptions, SearchMethod
+from ..options import Elevation, Geolocation, Hidden, OrthoOptions, SearchMethod
 from ..products.protocol import MerisProduct
 from ..progress import ProgressCallback
 from . import occlusion
@@ -478,18 +478,21 @@ class _Blocks:
     diag: dict[str, np.ndarray]
     sources: np.ndarray
     search: dict[str, int] = field(default_factory=dict)
+    #: ground hidden by the relief (the lines of sight marched over the DEMs), else None
+    hidden: np.ndarray | None = None
 
     @classmethod
-    def empty(cls, area: tuple[int, int, int, int], diagnostics: bool, n_dems: int
-              ) -> _Blocks:
+    def empty(cls, area: tuple[int, int, int, int], diagnostics: bool, n_dems: int,
+              hidden: bool = False) -> _Blocks:
         shape = (area[1] - area[0], area[3] - area[2])
         diag: dict[str, np.ndarray] = {}
         if diagnostics:
             diag = {name: _background(name, shape) for name in _LAYERS
-                    if name not in BACKGROUND}
+                    if name not in BACKGROUND and name != "hidden"}
         # line, col, iterations: not searched (rows or columns without spans) until ``add``
         return cls(area, _background("line", shape), _background("col", shape),
-                   _background("iterations", shape), diag, np.zeros(n_dems + 1, np.int64))
+                   _background("iterations", shape), diag, np.zeros(n_dems + 1, np.int64),
+                   hidden=np.zeros(shape, bool) if hidden else None)
 
     def rows(self, r0: int, r1: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(line, col, iterations) of grid rows [r0, r1) over the area's columns (views)."""
@@ -497,13 +500,15 @@ class _Blocks:
         return self.line[r0 - a0:r1 - a0], self.col[r0 - a0:r1 - a0], self.iters[r0 - a0:r1 - a0]
 
     def add(self, window: tuple[int, int, int, int], res: dict[str, Any],
-            src: np.ndarray | None, hmode: int) -> None:
+            src: np.ndarray | None, hmode: int, hidden: np.ndarray | None = None) -> None:
         """Store the solution of grid rows [r0, r1) and columns [c0, c1) (``window``, inside
         the area; ``src``: elevation source per point, None when the heights are not the
-        DEMs')."""
+        DEMs'; ``hidden``: its ground hidden by the relief)."""
         a0, _, b0, _ = self.area
         r0, r1, c0, c1 = window
         r0, r1, c0, c1 = r0 - a0, r1 - a0, c0 - b0, c1 - b0
+        if hidden is not None and self.hidden is not None:
+            self.hidden[r0:r1, c0:c1] = hidden
         for whole, part in ((self.line, res["line"]), (self.col, res["col"]),
                             (self.iters, res["iterations"])):
             if not np.may_share_memory(whole[r0:r1, c0:c1], part):  # (solved in place)
@@ -532,15 +537,17 @@ def _run(job: _Job, progress: ProgressCallback | None) -> Antecedents:
     grid, spans, stack, hmode, opts = job.grid, job.spans, job.stack, job.hmode, job.options
     nr = grid.shape[0]
     area = job.area
-    blocks = _Blocks.empty(area, opts.diagnostics, len(stack.sources) if stack is not None else 0)
     t_dem = t_lonlat = t_engine = 0.0
     total = nr + len(opts.bands)
     march = None
-    if job.pixel is not None and job.ellipsoid is not None:
+    if hmode == predcorr.HEIGHT_GIVEN:  # DEM heights, every mode: hidden ground looked for
         assert stack is not None
         bounds = lonlat_bounds(grid)
         march = occlusion.Sightlines.of(
-            stack, 0.5 * (bounds[1] + bounds[3]) if bounds is not None else 0.0)
+            stack, 0.5 * (bounds[1] + bounds[3]) if bounds is not None else 0.0,
+            view=(job.tp.view_zenith, job.tp.view_azimuth, float(job.tp.kernel_args()[4])))
+    blocks = _Blocks.empty(area, opts.diagnostics, len(stack.sources) if stack is not None else 0,
+                           hidden=march is not None or job.pixel is not None)
     for r0 in range(0, nr, _BLOCK_ROWS):
         r1 = min(r0 + _BLOCK_ROWS, nr)
         p0, p1 = spans.ptr[r0 - spans.row_start], spans.ptr[r1 - spans.row_start]
@@ -567,12 +574,17 @@ def _run(job: _Job, progress: ProgressCallback | None) -> Antecedents:
         res = _solve(job, lon, lat, h, (ptr, start, stop), (r0, c0),
                      blocks.rows(r0, r1) if whole else None)
         t_engine += time.perf_counter() - t0
-        if march is not None:  # pixel geolocation with DEMs: hidden ground reported
-            assert stack is not None and h is not None
+        hidden = None
+        if march is not None:  # the lines of sight marched over the DEMs
+            assert h is not None
             t0 = time.perf_counter()
-            occlusion.report_hidden(march, job.tp.kernel_args(), lon, lat, h, res)
+            hidden = occlusion.hidden_ground(march, job.tp.kernel_args(), lon, lat, h, res)
+            if opts.hidden is Hidden.MASK:
+                occlusion.drop_hidden(res, hidden)
             t_dem += time.perf_counter() - t0
-        blocks.add((r0, r1, c0, c1), res, src, hmode)
+        elif job.pixel is not None:  # the pixel geolocation's own hidden ground
+            hidden = res["iterations"] == pixelgeo.OCCLUDED
+        blocks.add((r0, r1, c0, c1), res, src, hmode, hidden)
         if progress is not None:
             progress(r1, total)
     seconds = {"lonlat": t_lonlat, "dem": t_dem, "prediction_correction": t_engine,
@@ -589,8 +601,11 @@ def _antecedents(job: _Job, blocks: _Blocks, seconds: dict[str, float],
     valid = iters >= 0
     hist = predcorr.iteration_histogram(
         iters, pixelgeo.MAX_PIXEL_ITERATIONS if job.pixel is not None else predcorr.MAX_ITERATIONS)
+    hidden = blocks.hidden
     if opts.diagnostics:
-        diag.update(line=line, col=col, iterations=iters)
+        diag.update(line=line, col=col, iterations=iters,
+                    hidden=(hidden if hidden is not None else np.zeros(iters.shape, bool)
+                            ).astype(np.uint8))
         if hmode == predcorr.HEIGHT_NONE and job.pixel is None:
             diag["elevation"] = np.where(valid, np.float32(0), np.float32(np.nan))
             diag["shift_east_m"] = diag["elevation"].copy()
@@ -599,11 +614,13 @@ def _antecedents(job: _Job, blocks: _Blocks, seconds: dict[str, float],
                 for name, a in diag.items()}
     seconds = {**seconds, "total": time.perf_counter() - job.t_start}
     stats = _stats(job, search=blocks.search, hist=hist, processed=int(valid.sum()),
-                   window=window, sources=blocks.sources, seconds=seconds)
+                   window=window, sources=blocks.sources, seconds=seconds,
+                   hidden=None if hidden is None else int(np.count_nonzero(hidden)))
     return Antecedents(prod, job.grid, blocks.area, line, col, iters, opts.sampling,
                        list(opts.bands), stats, diag, progress, job.t_start,
                        max_pixels=job.max_pixels, bands_counted=job.hold_bands,
-                       whole_grid={k: diag[k] for k in BACKGROUND if k in diag})
+                       whole_grid={k: diag[k] for k in BACKGROUND if k in diag},
+                       area_hidden=hidden)
 
 
 #: background value and type of the diagnostics layers (``OrthoResult.diagnostics``), in
@@ -613,7 +630,7 @@ _LAYERS: dict[str, tuple[float, Any]] = {
     "line": (BACKGROUND["line"], np.float32), "col": (BACKGROUND["col"], np.float32),
     "elevation": (np.nan, np.float32), "elevation_source": (SOURCE_NONE, np.int8),
     "iterations": (BACKGROUND["iterations"], np.int8), "shift_east_m": (np.nan, np.float32),
-    "shift_north_m": (np.nan, np.float32)}
+    "shift_north_m": (np.nan, np.float32), "hidden": (0, np.uint8)}
 
 
 def _background(name: str, shape: tuple[int, int]) -> np.ndarray:
@@ -632,21 +649,23 @@ def _empty_antecedents(job: _Job) -> Antecedents:
     hist = np.zeros(predcorr.MAX_ITERATIONS + 1, np.int64)
     sources = np.zeros(len(stack.sources) + 1 if stack is not None else 1, np.int64)
     seconds = {**dict.fromkeys(TIMINGS, 0.0), "total": time.perf_counter() - job.t_start}
+    looked = job.hmode == predcorr.HEIGHT_GIVEN or job.pixel is not None
     stats = _stats(job, search={}, hist=hist, processed=0, window=(0, 0, 0, 0), sources=sources,
-                   seconds=seconds)
+                   seconds=seconds, hidden=0 if looked else None)
     none = np.zeros((0, 0), np.float32)
     return Antecedents(job.prod, grid, (0, 0, 0, 0), none, none, np.zeros((0, 0), np.int8),
                        job.options.sampling, list(job.options.bands), stats, diag, None,
                        job.t_start, max_pixels=job.max_pixels,
                        bands_counted=job.hold_bands,
-                       whole_grid={k: diag[k] for k in BACKGROUND if k in diag})
+                       whole_grid={k: diag[k] for k in BACKGROUND if k in diag},
+                       area_hidden=np.zeros((0, 0), bool) if looked else None)
 
 
 def _stats(job: _Job, *, search: dict[str, int], hist: np.ndarray, processed: int,
-           window: tuple[int, int, int, int], sources: np.ndarray, seconds: dict[str, float]
-           ) -> RunStats:
+           window: tuple[int, int, int, int], sources: np.ndarray, seconds: dict[str, float],
+           hidden: int | None = None) -> RunStats:
     """The ``RunStats`` of a run (``sources``: points per elevation source, tie points at 0,
-    DEM k at k + 1)."""
+    DEM k at k + 1; ``hidden``: points hidden by the relief, None: not looked for)."""
     prod, grid, opts, band_list = job.prod, job.grid, job.options, list(job.options.bands)
     nr, nc = grid.shape
     names = None if job.stack is None else [
@@ -677,7 +696,8 @@ def _stats(job: _Job, *, search: dict[str, int], hist: np.ndarray, processed: in
         points_in_boundary=job.points_in_boundary, dems=list(job.dems),
         dem_datums=[] if job.stack is None else [getattr(s, "datum", None)
                                                  for s in job.stack.sources],
-        dem_gaps={k: list(v) for k, v in job.dem_gaps.items()})
+        dem_gaps={k: list(v) for k, v in job.dem_gaps.items()},
+        hidden=opts.hidden.value, hidden_points=hidden)
 
 
 def _mark(mask: np.ndarray, ptr: np.ndarray, start: np.ndarray, stop: np.ndarray) -> None:

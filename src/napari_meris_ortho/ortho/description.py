@@ -158,7 +158,7 @@ def dem_list(entries: Sequence[str], datums: Sequence[str | None]
 #: of ``RunStats``)
 OPTION_TAGS = (("elevation", "elevation"), ("parallax", "parallax"),
                ("geolocation", "geolocation"), ("tolerance_px", "tolerance"),
-               ("sampling", "sampling"), ("search", "method"))
+               ("sampling", "sampling"), ("search", "method"), ("hidden", "hidden"))
 
 
 def options_tags(source: Any) -> dict[str, Any]:
@@ -204,8 +204,10 @@ def describe_map(stats: RunStats | None, bands: Sequence[int], dtype: str = "uin
 
 def run_options(stats: RunStats) -> dict[str, Any]:
     """The product and the options of a mapping run, as the file's tags name them."""
-    return {"product": stats.product, "product_name": stats.product_name,
-            **options_tags(stats)}
+    out = {"product": stats.product, "product_name": stats.product_name, **options_tags(stats)}
+    if stats.hidden_points is not None:  # DEMs marched: points hidden by the relief
+        out["hidden_points"] = stats.hidden_points
+    return out
 
 
 def stats_document(stats: RunStats, description: MapDescription) -> dict[str, Any]:

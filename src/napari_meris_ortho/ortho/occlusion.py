@@ -1,6 +1,8 @@
-"""Ground hidden from the sensor by the relief, for the pixel geolocation with DEMs: such an
-output point has no antecedent (the pixel whose line of sight passes through it shows the
-ridge in front), so it is reported ``OCCLUDED`` and left no data.
+"""Ground hidden from the sensor by the relief, in every mode with DEMs (tie-point geolocation,
+both parallax models and searches; pixel geolocation): such an output point has no true
+antecedent (the pixel whose line of sight passes through it shows the ridge in front: mapped,
+the ridge appears twice), so with hidden ``mask`` it is reported ``OCCLUDED`` and left no
+data, with ``keep`` mapped as MERSYN maps it; in both it is in the hidden-ground mask.
 
 An output point T (lon, lat) at the DEM height h is seen when no terrain rises above its line
 of sight towards the satellite. The ray leaves T along the view azimuth va of the tie points
@@ -74,14 +76,23 @@ class Sightlines:
     tmax: tuple[np.ndarray, ...] = ()
     post: float = 0.0
     gaps: bool = False
+    #: ``sightline.horizon_bound`` of the window (None: every point is marched): only the
+    #: points ``sightline.reachable`` leaves are
+    bound: np.ndarray | None = None
+    #: product columns [first, last] whose lines of sight ``bound`` leaves out (near nadir:
+    #: they may go either way): always marched
+    near_nadir: tuple[float, float] = (math.inf, -math.inf)
 
     @classmethod
-    def of(cls, stack: DemStack, lat: float) -> Sightlines:
+    def of(cls, stack: DemStack, lat: float,
+           view: tuple[np.ndarray, np.ndarray, float] | None = None) -> Sightlines:
         """The ceiling and step of ``stack`` (``STEP_OF_POST`` of its finest post spacing at
         latitude ``lat``), the window ``engine.sightline`` marches: the first lattice of the
         stack when it is geographic, north-up and in memory, its heights made ellipsoidal
         once (posts + geoid N, ``_ellipsoidal``); with DEMs or lattices after it, a cell
-        without data there ends its march (the stack marches on)."""
+        without data there ends its march (the stack marches on). ``view``: the product's
+        tie-point view zenith and azimuth (deg) and the pixels between tie-point columns,
+        for the bound of the terrain its lines of sight can meet (``_horizon``)."""
         top, post = -math.inf, math.inf
         windows = []
         for dem in stack.sources:
@@ -123,22 +134,60 @@ class Sightlines:
                 shortest = min(1.0 / abs(window.inv[0]), 1.0 / abs(window.inv[4]))
             out.window = window
             out.gaps = len(windows) > 1
-            out.tmax = tuple(sightline.tile_maxima(window.data, t, out.gaps)
-                             for t in sightline.TILES)
+            raw, raw_tile, tmax = None, 1, {}
+            for t in sorted(sightline.TILES):  # each from the next smaller tile's maxima
+                raw = sightline.tile_raw(window.data, t, out.gaps, raw, raw_tile)
+                raw_tile = t
+                tmax[t] = sightline.tile_maxima(window.data, t, out.gaps, raw, t)
+            out.tmax = tuple(tmax[t] for t in sightline.TILES)
             out.post = 0.99 * shortest
+            if window.transform is None and view is not None:
+                horizon = _horizon(window, out.ceiling, out.gaps, *view)
+                if horizon is not None:
+                    out.bound, out.near_nadir = horizon
         return out
 
+    def candidates(self, lon: np.ndarray, lat: np.ndarray, h: np.ndarray
+                   ) -> np.ndarray | None:
+        """Of a block of points (``lon``, ``lat`` float64, heights ``h``), those a ray must be
+        marched for: terrain within its reach might rise above it (``sightline.reachable``
+        on the window's ``bound``); None: every point (no bound)."""
+        if self.bound is None or self.window is None:
+            return None
+        w = self.window
+        flat = sightline.reachable(
+            np.ascontiguousarray(lon, np.float64).reshape(-1),
+            np.ascontiguousarray(lat, np.float64).reshape(-1),
+            np.ascontiguousarray(h).reshape(-1), w.inv, w.lattice, w.wrap_centre, self.bound,
+            TOLERANCE_M)
+        return flat.reshape(np.shape(lon))
+
     def hidden(self, lon: np.ndarray, lat: np.ndarray, h: np.ndarray, line: np.ndarray,
-               col: np.ndarray, coef: np.ndarray, df: float, dj: float) -> np.ndarray:
+               col: np.ndarray, coef: np.ndarray, df: float, dj: float,
+               cleared: bool = False) -> np.ndarray:
         """True where the point (``lon``, ``lat``, height ``h``; flat) with the antecedent
         (``line``, ``col``) is hidden by the terrain (module docstring); ``coef``, ``df``,
         ``dj``: the tie-point grid's ``kernel_args``. In the window: ``engine.sightline``
         every ``step / FINE``; elsewhere two marches of the stack: every ``step`` with a slack
-        of ``MARGIN_M`` finds the candidates, every ``step / FINE`` decides them."""
-        e, n = look_vectors(np.asarray(line, np.float64), np.asarray(col, np.float64), coef,
-                            float(df), float(dj))
-        ray = (np.asarray(lon, np.float64), np.asarray(lat, np.float64),
-               np.asarray(h, np.float64), e, n)
+        of ``MARGIN_M`` finds the candidates, every ``step / FINE`` decides them. With the
+        window's ``bound``, only the ``candidates`` are marched (``cleared``: the points given
+        are candidates already)."""
+        lon, lat, h = (np.ascontiguousarray(a, np.float64) for a in (lon, lat, h))
+        out = np.zeros(lon.shape, bool)
+        line, col = np.asarray(line, np.float64), np.asarray(col, np.float64)
+        if not cleared and (maybe := self.candidates(lon, lat, h)) is not None:
+            lo, hi = self.near_nadir
+            maybe = np.flatnonzero(maybe | ((col >= lo) & (col <= hi)))
+            out[maybe] = self._marched(lon[maybe], lat[maybe], h[maybe], line[maybe],
+                                       col[maybe], coef, df, dj)
+            return out
+        return self._marched(lon, lat, h, line, col, coef, df, dj)
+
+    def _marched(self, lon: np.ndarray, lat: np.ndarray, h: np.ndarray, line: np.ndarray,
+                 col: np.ndarray, coef: np.ndarray, df: float, dj: float) -> np.ndarray:
+        """``hidden`` of every point given, each ray marched."""
+        e, n = look_vectors(line, col, coef, float(df), float(dj))
+        ray = (lon, lat, h, e, n)
         out = np.zeros(e.shape, bool)
         todo = np.arange(e.size)
         if self.window is not None:
@@ -159,6 +208,49 @@ class Sightlines:
             out[maybe] = _march(self.stack, tuple(a[maybe] for a in ray), self.ceiling,
                                 self.step / FINE, TOLERANCE_M)
         return out
+
+
+#: the look vectors of antecedents beyond the tie-point grid (the search's margin) are
+#: extrapolated: their tan vz bounded by the grid's largest times this
+TAN_VZ_SLACK = 1.05
+
+
+def _horizon(window: LatticeWindow, ceiling: float, gaps: bool, view_zenith: np.ndarray,
+             view_azimuth: np.ndarray, dj: float
+             ) -> tuple[np.ndarray, tuple[float, float]] | None:
+    """``sightline.horizon_bound`` of a geographic window for a product's lines of sight
+    (tie-point view zenith and azimuth, deg; ``dj`` pixels between tie-point columns): they
+    rise at least 1 / tan vz per metre (the largest tan vz, with ``TAN_VZ_SLACK``), east or
+    west as their azimuths go; and the product columns near nadir whose lines of sight
+    reach less than a post (either way: they are marched). None when some line of sight
+    that reaches further runs closer to north-south than a cell's diagonal (the sweep's
+    rows would not hold it: every point is marched)."""
+    rows = window.lattice[0] + np.array([0.0, window.data.shape[0]])
+    lats = (rows - window.inv[5]) / window.inv[4]
+    cos = math.cos(math.radians(min(float(np.max(np.abs(lats))), 89.0)))
+    col_m = _DEGREE_M * cos / abs(window.inv[0])
+    row_m = _DEGREE_M / abs(window.inv[4])
+    tz = np.tan(np.radians(np.asarray(view_zenith, np.float64)))
+    va = np.radians(np.asarray(view_azimuth, np.float64))
+    ok = np.isfinite(tz) & np.isfinite(va)
+    if not ok.any():
+        return None
+    tan_vz = TAN_VZ_SLACK * float(tz[ok].max())
+    valid = np.isfinite(window.data)
+    low = float(np.min(window.data[valid])) if valid.any() else 0.0
+    # lines of sight that stay within a post of their point (near nadir)
+    short = ok & (tz * max(ceiling - low, 1.0) < min(col_m, row_m))
+    far = ok & ~short
+    east, north = np.sin(va), np.cos(va)
+    if np.any(far & (np.abs(north) * col_m > np.abs(east) * row_m)):
+        return None
+    go_east, go_west = bool(np.any(far & (east > 0))), bool(np.any(far & (east < 0)))
+    columns = np.flatnonzero(short.any(axis=0)) if short.ndim == 2 else np.zeros(0, int)
+    near = ((float(columns.min() - 1) * dj, float(columns.max() + 1) * dj) if columns.size
+            else (math.inf, -math.inf))
+    bound = sightline.horizon_bound(window.data, ceiling, go_east, go_west, gaps,
+                                    (col_m, row_m), tan_vz)
+    return bound, near
 
 
 def _projected_track(window: LatticeWindow, lon: np.ndarray, lat: np.ndarray, h: np.ndarray,
@@ -227,23 +319,44 @@ def _march(stack: DemStack, ray: tuple[np.ndarray, ...], ceiling: float, step: f
     return out
 
 
-def report_hidden(sight: Sightlines, kernel_args: tuple, lon: np.ndarray, lat: np.ndarray,
-                  h: np.ndarray, res: dict) -> None:
-    """The antecedents in ``res`` (``pixeldem.solve_pixel_dem`` of a block of output points
-    ``lon``, ``lat`` with DEM heights ``h``) of hidden ground dropped: line and column NaN,
-    iterations ``OCCLUDED``, counted in its "occluded" search count. Points without a DEM
-    height were located on the product's own terrain points, which report their hidden ground
-    already."""
+def hidden_ground(sight: Sightlines, kernel_args: tuple, lon: np.ndarray, lat: np.ndarray,
+                  h: np.ndarray, res: dict) -> np.ndarray:
+    """Where the output points of a block (``lon``, ``lat`` with DEM heights ``h``) solved in
+    ``res`` (``predcorr.solve``, ``pixeldem.solve_pixel_dem``: line, col, iterations) are hidden
+    by the terrain (bool, the block's shape): every mode with DEMs the same way, the ray along
+    the view angles of the tie points at the point's antecedent. Points without an antecedent
+    or a DEM height (no DEM has data there: the tie points' height) are not marched, nor the
+    points ``Sightlines.candidates`` clears; a pixel geolocation's own ``OCCLUDED`` points are
+    hidden."""
     iters = res["iterations"]
-    test = np.flatnonzero(((iters >= 0) & np.isfinite(h)).reshape(-1))
-    if test.size == 0:
-        return
+    out = np.asarray(iters == OCCLUDED).copy()
+    test = (iters >= 0) & np.isfinite(h)
+    maybe = sight.candidates(lon, lat, h)
+    if maybe is not None:
+        lo, hi = sight.near_nadir
+        col = res["col"]
+        test &= maybe | ((col >= lo) & (col <= hi))
+    index = np.flatnonzero(test.reshape(-1))
+    if index.size == 0:
+        return out
     _, _, coef, df, dj = kernel_args
-    flon, flat, fh, fline, fcol = (a.reshape(-1) for a in (lon, lat, h, res["line"],
-                                                          res["col"]))
-    gone = test[sight.hidden(flon[test], flat[test], fh[test].astype(np.float64), fline[test],
-                             fcol[test], coef, df, dj)]
-    fline[gone] = np.nan
-    fcol[gone] = np.nan
-    iters.reshape(-1)[gone] = OCCLUDED
-    res["search"]["occluded"] = res["search"].get("occluded", 0) + int(gone.size)
+    flon, flat, fh, fline, fcol = (np.asarray(a).reshape(-1) for a in (lon, lat, h, res["line"],
+                                                                      res["col"]))
+    gone = index[sight.hidden(flon[index], flat[index], fh[index].astype(np.float64),
+                              fline[index], fcol[index], coef, df, dj, cleared=True)]
+    out.reshape(-1)[gone] = True
+    return out
+
+
+def drop_hidden(res: dict, hidden: np.ndarray) -> None:
+    """The antecedents in ``res`` of the ``hidden`` points dropped (hidden ``mask``): line and
+    column NaN, iterations ``OCCLUDED``, counted in its "occluded" search count."""
+    iters = res["iterations"]
+    gone = hidden & (iters >= 0)
+    n = int(np.count_nonzero(gone))
+    if n == 0:
+        return
+    res["line"][gone] = np.nan
+    res["col"][gone] = np.nan
+    iters[gone] = OCCLUDED
+    res["search"]["occluded"] = res["search"].get("occluded", 0) + n

@@ -75,6 +75,11 @@ class RunStats:
     #: DEM name -> the tiles of its tiling under the footprint it lacks (their points took
     #: the next DEM or the tie points)
     dem_gaps: dict[str, list[str]] = field(default_factory=dict)
+    #: what became of ground hidden by the relief: "mask" (no data) or "keep" (mapped)
+    hidden: str = "mask"
+    #: output points on ground hidden from the sensor by the relief (the lines of sight
+    #: marched over the DEMs; the pixel geolocation's own); None: not looked for (no DEM)
+    hidden_points: int | None = None
 
     def gap_warnings(self) -> list[str]:
         """One sentence per DEM that lacks tiles under the footprint."""
@@ -116,8 +121,10 @@ class RunStats:
                    f"-neighbour= {100 * nb / n:.1f}% -all= {100 * fs.get('all', 0) / n:.1f}%")
         if primary is not None:
             out.append(f"points predicted from the primary grid = {primary}")
-        if occluded is not None:  # pixel geolocation: ground no pixel sees (iterations -2)
-            out.append(f"points hidden by the relief (no antecedent) = {occluded}")
+        if s.hidden_points is not None or occluded is not None:  # DEMs or pixel geolocation
+            n = s.hidden_points if s.hidden_points is not None else int(occluded or 0)
+            what = "mapped, hidden keep" if s.hidden == "keep" else "no antecedent"
+            out.append(f"points hidden by the relief ({what}) = {n}")
         sec = s.seconds
         out.append(f"Total elapsed time={sec['total']:.3f} seconds "
                    f"(prediction/correction {sec['prediction_correction']:.3f} s, "

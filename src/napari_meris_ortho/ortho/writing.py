@@ -4,7 +4,10 @@
 ``write_map``: a Cloud-Optimized GeoTIFF (``output.geotiff.write_cog``) with one band per MERIS
 band, streamed one band at a time; uint16 counts with GDAL scale = sf_rad (GDAL, QGIS and
 rasterio read radiances) or float32 radiances; overviews averaged with nodata 0 ignored
-(``engine.resample.overview_level``); optionally the diagnostics as ``OUT_diagnostics.tif``.
+(``engine.resample.overview_level``); optionally the diagnostics as ``OUT_diagnostics.tif``
+(its band ``hidden``: 1 on ground hidden from the sensor by the relief). Hidden ground left
+no data (hidden ``mask``) is 0, the nodata of every band: GDAL's and QGIS's mask of the file
+leaves it out.
 What the file says of its bands and of the run (band order, wavelengths, units, scale/offset,
 nodata, options, DEMs with their vertical datums, software version) is a ``MapDescription``
 (``ortho.description``): the GeoTIFF tags, the ``--stats-json`` file and the xarray attributes
@@ -31,7 +34,7 @@ from .stats import RunStats
 
 #: the diagnostics layers of ``OUT_diagnostics.tif``, in band order
 DIAGNOSTICS = ("line", "col", "elevation", "elevation_source", "iterations", "shift_east_m",
-               "shift_north_m")
+               "shift_north_m", "hidden")
 
 
 class Mapped(Protocol):
@@ -121,12 +124,16 @@ def write_map(path: str | os.PathLike[str], mapped: Mapped, *, dtype: str = "uin
         compress=compress, halve=overview_level,
         metadata={**described.tags(), **(metadata or {})})
     if diagnostics:
-        arrays = (np.nan_to_num(mapped.diagnostics[n].astype(np.float32), nan=0.0)
-                  for n in DIAGNOSTICS)
+        layers = mapped.diagnostics
+        shape = mapped.grid.shape
+        arrays = (np.nan_to_num(layers[n].astype(np.float32), nan=0.0) if n in layers
+                  else np.zeros(shape, np.float32) for n in DIAGNOSTICS)
         write_cog(diagnostics_path(path), arrays, mapped.grid, count=len(DIAGNOSTICS),
                   nodata=None, descriptions=list(DIAGNOSTICS), dtype="float32",
                   compress=compress, overview_resampling="nearest", halve=overview_level,
-                  metadata={"elevation_source": "k >= 0: DEM k; -1: tie points; -2: none"})
+                  metadata={"elevation_source": "k >= 0: DEM k; -1: tie points; -2: none",
+                            "hidden": "1: ground hidden from the sensor by the relief",
+                            "iterations": "-1: no antecedent; -2: hidden by the relief"})
     return Path(path)
 
 

@@ -41,6 +41,7 @@ class ProductReport:
     sf_rad: dict[int, float] = field(default_factory=dict)  # radiance factor per band
     #: the product's sensor ("MERIS", "OLCI")
     sensor: str = "MERIS"
+    hidden: int = 0  # output pixels on ground hidden from it by the relief (never merged)
 
     @property
     def product(self) -> str:
@@ -67,6 +68,7 @@ class ProductReport:
             f"({100.0 * self.validated / total:.1f}% of synthesis)",
             f"NUMBER OF ADDED POINTS IN SYNTHESIS = {self.added} "
             f"({100.0 * self.added / total:.1f}% of synthesis)",
+            f"NUMBER OF POINTS HIDDEN BY THE RELIEF = {self.hidden} (not merged)",
         ]
 
     def table_entry(self) -> dict[str, Any]:
@@ -87,7 +89,7 @@ class ProductReport:
                                **self._sensor()}
         if self.status == STATUS_MERGED:
             out.update(index=self.index, processed=self.processed, validated=self.validated,
-                       added=self.added)
+                       added=self.added, hidden=self.hidden)
         if self.error is not None:
             out["error"] = self.error
         return out

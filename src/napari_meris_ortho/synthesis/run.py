@@ -27,7 +27,7 @@ from .._process import keep_task_arrays, task_arrays_kept
 from ..bands import Sensor
 from ..engine.synthesis import TileState, WinnerBands
 from ..errors import DemError, MerisOrthoError, OptionsError, OutputError
-from ..options import OrthoOptions, Sampling, StoreCodec
+from ..options import Hidden, OrthoOptions, Sampling, StoreCodec
 from ..progress import ProgressCallback
 from . import store as st
 from .bandsets import (
@@ -325,6 +325,8 @@ class Piece:
     dem_error: str | None = None
     #: the state's bands, read where it wins at its merge (``gathers_winners``), or None
     source: WinnerBands | None = None
+    #: output pixels of the window on ground the product cannot see (hidden by the relief)
+    hidden: int = 0
 
 
 @dataclass
@@ -414,6 +416,8 @@ def segment_task(spec: Spec, index: int, path: str, window: Window,
         return Piece(index, window, None, error=message_of(exc))
     valid = sampled.validated(spec, plan)
     piece = Piece(index, window, None, int(sampled.inside.sum()), int(valid.sum()))
+    piece.hidden = int(np.count_nonzero(antecedents.area_hidden)) if (
+        antecedents.area_hidden is not None) else 0
     rows, cols = np.flatnonzero(valid.any(axis=1)), np.flatnonzero(valid.any(axis=0))
     if rows.size == 0:
         return piece
@@ -667,7 +671,7 @@ def tile_task(fork: Any, spec: Spec, window: Window, pieces: Iterable[Piece],
     try:
         for p in pieces:
             done.pieces.append(Piece(p.index, p.window, None, p.processed, p.validated,
-                                     p.error, p.dem_error))
+                                     p.error, p.dem_error, hidden=p.hidden))
             if p.state is None or p.error is not None or p.dem_error is not None:
                 continue
             if state is None:  # the stored tile, once a piece has something to merge
@@ -792,7 +796,8 @@ class Synthesis:
         self.grid = old.grid if old else grid
         self.crs, self.pixel_size = crs, pixel_size
         self.dems = dems
-        self.options = options
+        # ground a product cannot see never wins: its pixel shows the relief in front
+        self.options = replace(options, hidden=Hidden.MASK)
         self.reject_bright = reject_bright
         self.max_pixels = max_pixels
         self.codec = codec
@@ -1080,7 +1085,7 @@ class Synthesis:
         """Statistics of the run; products that failed on some tile (newly)."""
         by_index = {i.report.index: i.report for i in todo}
         for report in by_index.values():
-            report.processed = report.validated = report.added = 0
+            report.processed = report.validated = report.added = report.hidden = 0
         newly: set[int] = set()
         for tile in done:
             for p in tile.pieces:
@@ -1090,6 +1095,7 @@ class Synthesis:
                     report.status, report.error = STATUS_FAILED, p.error
                 report.processed += p.processed
                 report.validated += p.validated
+                report.hidden += p.hidden
             for index, n in tile.winners.items():
                 by_index[index].added += n
         failed |= newly
