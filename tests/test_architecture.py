@@ -22,7 +22,7 @@ ROOT = Path(napari_meris_ortho.__file__).parent
 #: floor of every room: a room imports only rooms on lower floors
 FLOORS = {
     "errors": 0, "flags": 0, "cores": 0, "_terminal": 0, "_process": 0,
-    "options": 1, "geometry": 1, "progress": 1, "_atomic": 1, "display": 1,
+    "options": 1, "bands": 1, "geometry": 1, "progress": 1, "_atomic": 1, "display": 1,
     "products": 2, "dem": 2, "output": 2, "engine": 2,
     "analysis": 3, "simulate": 3, "pyramid": 3, "placement": 3,
     "ortho": 4,

@@ -31,6 +31,11 @@ class Sen3FormatError(MerisOrthoError, ValueError):
         super().__init__(f"{self.path}: {problem}")
 
 
+class OlciFormatError(Sen3FormatError):
+    """A Sentinel-3 product that is not an OLCI Level 1B (EFR/ERR) one (an OLCI Level 2,
+    SYNERGY or SLSTR product...), or an OLCI Level 1B product that cannot be read."""
+
+
 class DemError(MerisOrthoError):
     """A DEM that cannot be opened or read."""
 

@@ -128,6 +128,10 @@ def parse(enum: type[E], value: object) -> E:
                        f"{', '.join(names[:-1])} or {names[-1]}")
 
 
+#: bands of a MERIS product (the default of ``n_bands``); an OLCI product has 21
+MERIS_BAND_COUNT = 15
+
+
 @dataclass(frozen=True)
 class OrthoOptions:
     """The checked options of one ``orthorectify`` run (MERSYN checks parameters first, 3.1)."""
@@ -138,7 +142,7 @@ class OrthoOptions:
     geolocation: Geolocation = Geolocation.BILINEAR
     method: SearchMethod = SearchMethod.PRIMARY
     tolerance: float = 0.01
-    bands: tuple[int, ...] = tuple(range(1, 16))
+    bands: tuple[int, ...] = tuple(range(1, MERIS_BAND_COUNT + 1))
     diagnostics: bool = False
 
     @classmethod
@@ -146,8 +150,9 @@ class OrthoOptions:
               parallax: object = "handbook", geolocation: object | None = None,
               method: object = "primary", tolerance: object = 0.01,
               bands: Sequence[int] | None = None, diagnostics: bool = False,
-              n_dems: int = 0) -> OrthoOptions:
-        """Options from user values; OptionsError on the first inconsistent one."""
+              n_dems: int = 0, n_bands: int = 15) -> OrthoOptions:
+        """Options from user values; OptionsError on the first inconsistent one; ``n_bands``:
+        the product's bands (15 MERIS, 21 OLCI; ``bands`` None: all of them)."""
         elev = parse(Elevation, elevation)
         if elev is not Elevation.DEM and n_dems > 0:
             raise OptionsError(
@@ -160,16 +165,23 @@ class OrthoOptions:
         geo = (Geolocation.default_for(par) if geolocation is None
                else parse(Geolocation, geolocation))
         return cls(elev, parse(Sampling, sampling), par, geo, parse(SearchMethod, method),
-                   float(tolerance), check_bands(bands), bool(diagnostics))
+                   float(tolerance), check_bands(bands, n_bands), bool(diagnostics))
 
     @classmethod
-    def of(cls, options: OrthoOptions | None = None, *, n_dems: int = 0,
+    def of(cls, options: OrthoOptions | None = None, *, n_dems: int = 0, n_bands: int = 15,
            **values: object) -> OrthoOptions:
         """``options`` (default: the defaults) with ``values`` (the keywords of ``parse``)
-        replacing its fields, all checked again with the number of DEMs: the one check of the
-        options of ``orthorectify``, ``precompute``, ``synthesize``, the CLI and the widget."""
+        replacing its fields, all checked again with the number of DEMs and the product's
+        bands: the one check of the options of ``orthorectify``, ``precompute``,
+        ``synthesize``, the CLI and the widget. For a product of other than 15 bands (OLCI),
+        options that hold the default band list (all 15) and no ``bands`` in ``values`` take
+        all ``n_bands`` bands."""
         base = options.values() if options is not None else {}
-        return cls.parse(**{**base, **values}, n_dems=n_dems)  # type: ignore[arg-type]
+        if n_bands != MERIS_BAND_COUNT and values.get("bands") is None \
+                and base.get("bands", cls.bands) == cls.bands:
+            base = {**base, "bands": None}
+        return cls.parse(**{**base, **values}, n_dems=n_dems,  # type: ignore[arg-type]
+                         n_bands=n_bands)
 
     def values(self) -> dict[str, object]:
         """The options as ``parse`` keywords."""
@@ -179,27 +191,41 @@ class OrthoOptions:
                 "diagnostics": self.diagnostics}
 
 
-def parse_band_list(text: str) -> tuple[int, ...] | None:
+def _sensor_of(n_bands: int) -> str:
+    return {15: "MERIS ", 21: "OLCI "}.get(n_bands, "")
+
+
+def _band_range(n_bands: int) -> str:
+    """How messages name the bands of a product of ``n_bands`` bands."""
+    return f"{_sensor_of(n_bands)}bands are 1..{n_bands}"
+
+
+def parse_band_list(text: str, n_bands: int = MERIS_BAND_COUNT) -> tuple[int, ...] | None:
     """A band list as users type it: "7,5,2" or "7 5 2" -> (7, 5, 2) in that order; "all" or
-    "" -> None (all 15 bands). OptionsError naming the text otherwise (the CLI's ``--bands``
-    and the widget's field)."""
+    "" -> None (all bands of the product). OptionsError naming the text otherwise (the CLI's
+    ``--bands`` and the widget's field); ``n_bands``: the highest band number accepted (15 for
+    MERIS, 21 for OLCI products)."""
     words = text.replace(",", " ").split()
     if not words or (len(words) == 1 and words[0].lower() == "all"):
         return None
     try:
         values = tuple(int(w) for w in words)
     except ValueError:
-        raise OptionsError(f"bands {text!r}: expected MERIS band numbers 1..15 separated by "
+        raise OptionsError(f"bands {text!r}: expected {_sensor_of(n_bands)}band numbers "
+                           f"1..{n_bands} separated by "
                            "commas, e.g. 7,5,2") from None
-    if any(not 1 <= v <= 15 for v in values):
-        raise OptionsError(f"bands {text!r}: MERIS bands are 1..15")
+    if any(not 1 <= v <= n_bands for v in values):
+        raise OptionsError(f"bands {text!r}: {_band_range(n_bands)}")
     return values
 
 
-def check_bands(bands: Sequence[int] | None) -> tuple[int, ...]:
-    """Sorted distinct MERIS bands 1..15 (None: all 15); OptionsError otherwise."""
-    chosen = list(range(1, 16)) if bands is None else [int(b) for b in bands]
-    bad = [b for b in chosen if not 1 <= b <= 15]
+def check_bands(bands: Sequence[int] | None, n_bands: int = MERIS_BAND_COUNT
+                ) -> tuple[int, ...]:
+    """Sorted distinct bands 1..``n_bands`` (None: all of them; 15 for MERIS, 21 for OLCI
+    products); OptionsError otherwise."""
+    chosen = list(range(1, n_bands + 1)) if bands is None else [int(b) for b in bands]
+    bad = [b for b in chosen if not 1 <= b <= n_bands]
     if bad or not chosen:
-        raise OptionsError(f"bands must be 1..15, got {list(bands or [])}")
+        raise OptionsError(f"bands must be 1..{n_bands} ({_band_range(n_bands)}), got "
+                           f"{list(bands or [])}")
     return tuple(sorted(set(chosen)))

@@ -10,27 +10,31 @@ from __future__ import annotations
 
 import argparse
 import math
+from functools import partial
 from typing import Any
 
 from ..errors import OptionsError
 from ..options import Elevation, OrthoOptions, Sampling, choices, parse_band_list
 
 
-def parse_bands(text: str) -> list[int] | None:
-    """argparse type of ``--bands``: "3,5,7" or "3 5 7" -> [3, 5, 7], "all" -> None (all 15
-    MERIS bands); ``options.parse_band_list``."""
+def parse_bands(text: str, n_bands: int = 15) -> list[int] | None:
+    """argparse type of ``--bands``: "3,5,7" or "3 5 7" -> [3, 5, 7], "all" -> None (all
+    bands of the product); ``options.parse_band_list`` with ``n_bands`` (15 MERIS; a command
+    that reads OLCI products too takes 21 here and checks them against the product)."""
     if not text.strip():  # an empty shell variable, not a choice of all bands
-        raise argparse.ArgumentTypeError("no band given: MERIS band numbers 1..15 separated "
+        raise argparse.ArgumentTypeError(f"no band given: band numbers 1..{n_bands} separated "
                                          "by commas, or all")
     try:
-        values = parse_band_list(text)
+        values = parse_band_list(text, n_bands)
     except OptionsError as exc:
         raise argparse.ArgumentTypeError(str(exc)) from None
     return None if values is None else list(values)
 
 
-def add_bands_option(p: Any, help: str) -> None:
-    p.add_argument("--bands", type=parse_bands, default=None, metavar="LIST", help=help)
+def add_bands_option(p: Any, help: str, n_bands: int = 15) -> None:
+    """``--bands LIST``, band numbers 1..``n_bands`` (:func:`parse_bands`)."""
+    p.add_argument("--bands", type=partial(parse_bands, n_bands=n_bands), default=None,
+                   metavar="LIST", help=help)
 
 
 #: what a ``--dem`` entry may be (dem, dem.copernicus, dem.geoid)
@@ -118,7 +122,7 @@ def _pixel_count(text: str) -> int:
     return int(value)
 
 
-def ortho_options(args: argparse.Namespace, **values: Any) -> OrthoOptions:
+def ortho_options(args: argparse.Namespace, n_bands: int = 15, **values: Any) -> OrthoOptions:
     """The checked ``OrthoOptions`` of ``--elevation``, ``--sampling``, ``--bands``, the
     ``--dem`` list and ``values`` (``OrthoOptions.of``: DEMs only with elevation dem, as MERSYN
     refuses -dem with -ort NO). ``--elevation dem`` given without a ``--dem`` is refused: the
@@ -130,8 +134,11 @@ def ortho_options(args: argparse.Namespace, **values: Any) -> OrthoOptions:
     elif elevation == Elevation.DEM.value and not args.dem:
         raise OptionsError("--elevation dem needs a DEM: name one with --dem PATH (or choose "
                            "--elevation tiepoints)")
+    # bands given: checked here up to the most bands of any sensor, against the product's
+    # own count when it is read (``ortho.precompute``)
     return OrthoOptions.of(n_dems=len(args.dem), elevation=elevation,
-                           sampling=args.sampling, bands=args.bands, **values)
+                           sampling=args.sampling, bands=args.bands,
+                           n_bands=n_bands if args.bands else 15, **values)
 
 
 def grid_from_args(args: argparse.Namespace, default_crs: str = "EPSG:4326") -> Any:

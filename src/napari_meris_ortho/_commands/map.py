@@ -13,6 +13,7 @@ import math
 import os
 from typing import Any
 
+from ..bands import MAX_BANDS
 from ..errors import OptionsError
 from ..options import PARALLAX_CHOICES, Geolocation, OrthoOptions, SearchMethod, choices
 from ._options import (
@@ -46,7 +47,8 @@ def register(subparsers: Any) -> None:
         elevation_help="elevation source (default: dem with a --dem, else the tie points; "
         "dem given explicitly needs a --dem)")
     add_grid_options(p)
-    add_bands_option(p, "bands to map, e.g. 3,5,7 (default all 15)")
+    add_bands_option(p, "bands to map, e.g. 3,5,7 (default all: 15 MERIS, 21 OLCI)",
+                     n_bands=MAX_BANDS)
     add_sampling_option(p, "resampling (default nearest, as MERSYN)")
     p.add_argument("--tolerance", type=float, default=OrthoOptions.tolerance, metavar="PX",
                    help="prediction/correction tolerance in product pixels (default "
@@ -89,9 +91,9 @@ def _check(args: argparse.Namespace) -> Any:
     check_geotiff_name("-o", args.output)
     if not (math.isfinite(args.tolerance) and args.tolerance > 0):
         raise OptionsError(f"--tolerance must be > 0 product pixels, got {args.tolerance}")
-    args.options = ortho_options(args, tolerance=args.tolerance, parallax=args.parallax,
-                                 geolocation=args.geolocation, method=args.search,
-                                 diagnostics=args.diagnostics)
+    args.options = ortho_options(args, n_bands=MAX_BANDS, tolerance=args.tolerance,
+                                 parallax=args.parallax, geolocation=args.geolocation,
+                                 method=args.search, diagnostics=args.diagnostics)
     return grid_from_args(args)
 
 

@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from ..bands import MAX_BANDS, MERIS
 from ..engine import pixeldem, pixelgeo, predcorr
 from ..engine.boundary import RowSpans, row_spans, segment_boundary
 from ..errors import DemError, OptionsError
@@ -64,6 +65,11 @@ def _open_product(product: str | os.PathLike[str] | MerisProduct) -> MerisProduc
     if not hasattr(product, "tie_points"):
         raise OptionsError(f"not a MERIS L1b product: {product!r}")
     return product
+
+
+def band_count(product: MerisProduct) -> int:
+    """The bands of a product (``n_bands``: 15 MERIS, 21 OLCI; 15 for one without)."""
+    return int(getattr(product, "n_bands", MERIS.n_bands))
 
 
 def _open_dems(dems: Sequence[DemSource | str | os.PathLike[str]]) -> DemStack | None:
@@ -187,11 +193,14 @@ def precompute(product: ProductLike, grid: OutputGrid | None = None,
     held in memory (``result()``; without ``hold_bands``, ``result()`` checks them before it
     allocates them)."""
     t_start = time.perf_counter()
-    opts = OrthoOptions.of(options, n_dems=len(dems), **modes)
+    # every option checked before the product is read; the bands' range then with its bands
+    OrthoOptions.of(options, n_dems=len(dems), n_bands=MAX_BANDS, **modes)
     if grid is None:
         crs = crs if is_footprint_utm(crs) else parse_crs(crs)  # "utm": from the tie points
         check_pixel_size(pixel_size)
-    segment = open_segment(product, dems, opts)
+    prod = _open_product(product)
+    opts = OrthoOptions.of(options, n_dems=len(dems), n_bands=band_count(prod), **modes)
+    segment = open_segment(prod, dems, opts)
     read_ahead = getattr(segment.prod, "read_ahead", None)  # products that read bands whole
     if read_ahead is not None:
         read_ahead(opts.bands)  # while the antecedents are computed (a .SEN3: 0.05 s a band)

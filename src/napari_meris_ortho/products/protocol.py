@@ -1,10 +1,13 @@
-"""What every MERIS Level 1 product offers, whatever its format (the contract of
-``read_product``): an N1 file (``n1.MerisL1bProduct``) or a ``.SEN3`` directory
-(``sen3.MerisSen3Product``).
+"""What every Level 1 product offers, whatever its sensor and format (the contract of
+``read_product``): a MERIS N1 file (``n1.MerisL1bProduct``) or ``.SEN3`` directory
+(``sen3.MerisSen3Product``), an OLCI Level 1B ``.SEN3`` (``olci.OlciL1bProduct``).
 
+``sensor`` (``bands.Sensor``), ``n_bands`` (MERIS 15, OLCI 21) and ``band_names`` (``M01``..,
+``Oa01``..) say whose bands they are; bands are numbered 1..``n_bands``.
 Arrays are in the stored column order (ARCHITECTURE.md "Conventions"); tie points in physical
 units (``geometry.tiepoints.TiePoints``); ``counts(b)`` are the stored uint16 values of band b
-(1..15), radiance = counts x ``scaling.radiance[b - 1]`` (Scaling Factor GADS, Appendix A),
+(1..n_bands), radiance = counts x ``scaling.radiance[b - 1]`` (Scaling Factor GADS, Appendix A;
+a ``.SEN3``'s ``scale_factor``: one per band),
 except where they equal ``no_data_count(b)`` (no data, kept out of every resampling);
 ``mph``/``sph``: the N1 header records (Appendix A), or their fields a ``.SEN3`` carries.
 """
@@ -17,6 +20,7 @@ from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
+from ..bands import Sensor
 from ..geometry.tiepoints import ProductGeometry, TiePoints
 from .n1.format import Resolution, ScalingFactors
 
@@ -33,8 +37,14 @@ def radiance_of_counts(counts: np.ndarray, scale: float, no_data: int | None) ->
 
 @runtime_checkable
 class MerisProduct(ProductGeometry, Protocol):
-    """A MERIS Level 1 product as the mapping, the synthesis and the viewer read it."""
+    """A Level 1 product as the mapping, the synthesis and the viewer read it."""
 
+    @property
+    def sensor(self) -> Sensor: ...
+    @property
+    def n_bands(self) -> int: ...
+    @property
+    def band_names(self) -> Sequence[str]: ...
     @property
     def path(self) -> Path: ...
     @property
@@ -73,7 +83,9 @@ class MerisProduct(ProductGeometry, Protocol):
     def has_pixel_geolocation(self) -> bool: ...
     @property
     def saturated(self) -> np.ndarray | None:
-        """Per-band saturation bits (uint16 (H, W), bit b-1: band b), or None."""
+        """Per-band saturation bits (H, W), bit b-1: band b: uint16 for MERIS (15 bands),
+        uint32 for OLCI (21 bands; all 0 in products of the single ``saturated`` flag, where
+        saturated samples are the band's fill value), or None."""
 
     def no_data_count(self, band: int) -> int | None:
         """The value ``counts(band)`` holds at no-data pixels (a ``_FillValue``), or None."""

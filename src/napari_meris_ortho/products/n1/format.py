@@ -22,6 +22,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ...bands import BAND_TABLES
+from ...bands import MERIS as MERIS_BANDS
+
 #: size of the Main Product Header (ASCII), all ENVISAT products
 MPH_SIZE = 1247
 #: size of one Data Set Descriptor (ASCII)
@@ -33,7 +36,9 @@ NUM_DSD = 30
 #: size of the per-record header: dsr_time (12 bytes MJD2000) + quality/attachment flag
 RECORD_HEADER_SIZE = 13
 #: number of radiance bands
-NUM_BANDS = 15
+NUM_BANDS = MERIS_BANDS.n_bands
+#: the band counts of the sensors' products (``radiance``/``sun_flux`` of ScalingFactors)
+BAND_COUNTS = frozenset(t.n_bands for t in BAND_TABLES.values())
 #: Quality ADS record: header + range_flag ushort[5] + range_blind_flag ushort[5]
 QUALITY_RECORD_SIZE = 33
 #: Scaling Factor GADS record size
@@ -265,15 +270,9 @@ assert sum(f.size for f in MPH_FIELDS) == MPH_SIZE
 assert sum(f.size for f in SPH_FIELDS) == SPH_TEXT_SIZE
 assert sum(f.size for f in DSD_FIELDS) == DSD_SIZE
 
-#: Appendix A central wavelengths (nm) and bandwidths (nm) of the 15 bands.
-APPENDIX_A_WAVELENGTHS = (
-    412.545, 442.401, 489.744, 509.700, 559.634, 619.620, 664.640, 680.902,
-    708.426, 753.472, 761.606, 778.498, 864.833, 884.849, 899.860,
-)  # fmt: skip
-APPENDIX_A_BANDWIDTHS = (
-    9.930, 9.946, 9.965, 9.971, 9.983, 9.991, 9.994, 7.493,
-    9.996, 7.493, 3.742, 15.000, 19.999, 9.990, 9.989,
-)  # fmt: skip
+#: Appendix A central wavelengths (nm) and bandwidths (nm) of the 15 bands (``bands.MERIS``).
+APPENDIX_A_WAVELENGTHS = MERIS_BANDS.centres
+APPENDIX_A_BANDWIDTHS = MERIS_BANDS.widths
 
 # --------------------------------------------------------------------------------------------
 # Binary records (all big-endian)
@@ -584,7 +583,8 @@ _APPENDIX_A_GAINS = (9, 10, 11, 11, 11, 11, 11, 10, 11, 11, 11, 10, 9, 11, 10, 0
 class ScalingFactors:
     """The Scaling Factor GADS: factors from stored integers to physical units.
 
-    ``radiance[b - 1]`` converts the counts of band ``b`` to W m-2 sr-1 um-1 (= mW m-2 sr-1 nm-1);
+    ``radiance[b - 1]`` converts the counts of band ``b`` to W m-2 sr-1 um-1 (= mW m-2 sr-1 nm-1),
+    one per band of the product (15 MERIS; 21 for an OLCI product, from its ``scale_factor``s);
     the tie-point factors convert DEM altitude and roughness (m), winds (m/s), pressure (hPa),
     ozone (DU) and relative humidity (%). Defaults are the values of Appendix A. Stored as float32
     in the file, so a round trip gives ``float(np.float32(value))``.
@@ -603,8 +603,9 @@ class ScalingFactors:
     sun_flux: tuple[float, ...] = _APPENDIX_A_SUN_FLUX
 
     def __post_init__(self) -> None:
-        if len(self.radiance) != NUM_BANDS or len(self.sun_flux) != NUM_BANDS:
-            raise ValueError("ScalingFactors: radiance and sun_flux need 15 values")
+        if len(self.radiance) not in BAND_COUNTS or len(self.sun_flux) != len(self.radiance):
+            raise ValueError("ScalingFactors: radiance and sun_flux need one value per band "
+                             "(15 MERIS, 21 OLCI)")
         if len(self.gain_settings) != 80:
             raise ValueError("ScalingFactors: gain_settings needs 80 values (5 modules x 16)")
 

@@ -22,6 +22,7 @@ from typing import Any
 
 import numpy as np
 
+from ...bands import MERIS, Sensor
 from ...errors import N1FormatError
 from ...flags import FLAG_INVALID
 from ...geometry.tiepoints import TiePoints
@@ -178,6 +179,9 @@ class MerisL1bProduct:
     FRG/FSG/RRG (AMORGOS) products also have a per-pixel geolocation (``has_pixel_geolocation``,
     ``pixel_longitude()``, ``pixel_latitude()``, ``pixel_altitude()``: MDS(17..19)).
     """
+    sensor = Sensor.MERIS
+    n_bands = MERIS.n_bands
+    band_names = MERIS.names
 
     def __init__(
         self,

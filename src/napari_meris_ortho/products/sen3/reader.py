@@ -16,16 +16,17 @@ import logging
 import math
 import os
 import threading
-from collections.abc import Collection, Iterator, Mapping, Sequence
+from collections.abc import Callable, Collection, Iterator, Mapping, Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
 from contextlib import closing
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from functools import cached_property, partial
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from ...bands import MERIS, Sensor
 from ...cores import usable_threads
 from ...errors import Sen3FormatError
 from ...geometry.earth import MAX_TERRAIN_M, MIN_SEABED_M
@@ -36,6 +37,7 @@ from ..n1.format import (
     APPENDIX_A_BANDWIDTHS,
     APPENDIX_A_WAVELENGTHS,
     NUM_BANDS,
+    Resolution,
     ScalingFactors,
     format_utc,
     tie_columns,
@@ -97,6 +99,11 @@ class MerisSen3Product:
     """
 
     has_pixel_geolocation = True
+    #: the sensor's facts (band members, product types): ``Sen3Kind``, set below the class
+    kind: Sen3Kind
+    sensor = Sensor.MERIS
+    n_bands = MERIS.n_bands
+    band_names = MERIS.names
     dsds: list = []
 
     def __init__(self, members: Members, product_type: str, width: int, height: int, df: int,
@@ -110,7 +117,7 @@ class MerisSen3Product:
         self.mirrored = mirrored
         self.path = members.path
         self.product_type = product_type
-        self.resolution = SEN3_TYPES[product_type]
+        self.resolution = self.kind.types[product_type]
         self.width = width
         self.height = height
         self.lines_per_tie_point = df
@@ -139,13 +146,21 @@ class MerisSen3Product:
                     "SPH_SIZE": 0, "NUM_DSD": 0}
         self.sph = {"FIRST_LINE_TIME": self.mph["SENSING_START"],
                     "LAST_LINE_TIME": self.mph["SENSING_STOP"], "LINE_LENGTH": width,
-                    "LINES_PER_TIE_PT": df, "SAMPLES_PER_TIE_PT": dj, "NUM_BANDS": NUM_BANDS,
+                    "LINES_PER_TIE_PT": df, "SAMPLES_PER_TIE_PT": dj, "NUM_BANDS": self.n_bands,
                     "LINE_TIME_INTERVAL": int(round(self.line_interval_s * 1e6)),
                     "BAND_WAVELEN": tuple(int(round(w * 1000)) for w in wavelengths),
                     "BANDWIDTH": tuple(int(round(w * 1000)) for w in bandwidths)}
 
     def __repr__(self) -> str:
         return f"<MerisSen3Product {self.product_type} {self.width}x{self.height} ({self.path})>"
+
+    def band_file(self, band: int) -> str:
+        """The member holding band ``band`` (``Mnn_radiance.nc``, ``OaNN_radiance.nc``)."""
+        return self.kind.band_file(band)
+
+    def band_variable(self, band: int) -> str:
+        """The variable of band ``band`` (``Mnn_radiance``, ``OaNN_radiance``)."""
+        return self.kind.band_variable(band)
 
     @staticmethod
     def _utc(seconds: float) -> np.datetime64:
@@ -195,10 +210,10 @@ class MerisSen3Product:
     def no_data_count(self, band: int) -> int:
         """The value of a band's no-data pixels in :meth:`counts`: its ``_FillValue`` where
         that is a uint16 value, else 65535 (which no valid value of a 16-bit band takes)."""
-        attrs = self.variables[radiance_variable(band)]
+        attrs = self.variables[self.band_variable(band)]
         fill = attribute_number(attrs, "_FillValue", RADIANCE_FILL)
         # not ``fill in range(65536)``: a float is searched for there, value by value (4 ms)
-        if self.dtypes[radiance_variable(band)] == np.uint16 and fill.is_integer() \
+        if self.dtypes[self.band_variable(band)] == np.uint16 and fill.is_integer() \
                 and 0 <= fill <= 65535:
             return int(fill)
         return RADIANCE_FILL
@@ -208,10 +223,11 @@ class MerisSen3Product:
         read-only; no-data pixels (fill, outside valid_min/valid_max, negative) hold
         ``no_data_count(band)`` (counted in a warning, once per band). Decoded once while a
         run keeps decoded bands (``kept``)."""
+        n = self.n_bands
         if isinstance(band, bool) or not isinstance(band, int | np.integer):
-            raise TypeError(f"band must be an integer 1..15, got {band!r}")
-        if not 1 <= band <= NUM_BANDS:
-            raise ValueError(f"band must be 1..15, got {band}")
+            raise TypeError(f"band must be an integer 1..{n}, got {band!r}")
+        if not 1 <= band <= n:
+            raise ValueError(f"band must be 1..{n}, got {band}")
         kept = self.kept.get(int(band))
         if kept is not None:
             return kept
@@ -223,7 +239,7 @@ class MerisSen3Product:
     def prepare_bands(self, bands: Sequence[int]) -> None:
         """While a run keeps decoded bands: decode ``bands`` (1..15) now, those no other
         process of the run is decoding first (``KeptBands.prepare``)."""
-        self.kept.prepare([int(b) for b in bands if 1 <= int(b) <= NUM_BANDS], self._decoded)
+        self.kept.prepare([int(b) for b in bands if 1 <= int(b) <= self.n_bands], self._decoded)
 
     def _decoded(self, band: int) -> np.ndarray:
         """``band`` decoded: taken from ``read_ahead`` when its thread has begun it (else
@@ -246,7 +262,7 @@ class MerisSen3Product:
         before). A band read is kept while a run keeps bands (``kept``); :meth:`counts` and
         :meth:`prepare_bands` take each band read ahead once (a later call reads it again,
         or takes it kept). Errors are raised by that call."""
-        todo = [int(b) for b in bands if 1 <= int(b) <= NUM_BANDS and int(b) not in self._ahead
+        todo = [int(b) for b in bands if 1 <= int(b) <= self.n_bands and int(b) not in self._ahead
                 and self.kept.get(int(b)) is None]
         if not todo:
             return
@@ -273,7 +289,7 @@ class MerisSen3Product:
         """Stored values of ``band``, whole, in the N1 column order: inflated from its chunks
         here (``chunks``: several bands at once on several cores), or through netCDF4 when
         its storage is not one read so."""
-        name, variable = radiance_file(band), radiance_variable(band)
+        name, variable = self.band_file(band), self.band_variable(band)
         source = self.members.read_bytes(name) if self.members.archived \
             else self.members.path / name
         index = chunk_index(source, variable)
@@ -287,7 +303,7 @@ class MerisSen3Product:
 
     def _counts(self, band: int) -> np.ndarray:
         raw = self._band_values(band)
-        attrs = self.variables[radiance_variable(band)]
+        attrs = self.variables[self.band_variable(band)]
         nd = self.no_data_count(band)
         if raw.dtype == np.uint16 and not any(k in attrs for k in ("valid_min", "valid_max",
                                                                    "valid_range")):
@@ -298,7 +314,7 @@ class MerisSen3Product:
                 bad |= raw < 0
             out = raw.astype(np.uint16, copy=False)
             np.putmask(out, bad, nd)
-        self._warn(f"{radiance_variable(band)} values (fill or outside the valid range)",
+        self._warn(f"{self.band_variable(band)} values (fill or outside the valid range)",
                    int(np.count_nonzero(out == nd)), out.size)
         return out
 
@@ -370,6 +386,10 @@ class MerisSen3Product:
 # ------------------------------------------------------------------------------------------
 
 
+def _meris_widest(res: Resolution) -> int:
+    return MAX_FR_WIDTH if res.name == "FR" else res.width
+
+
 _pool: dict[str, ThreadPoolExecutor] = {}
 _pool_lock = threading.Lock()
 
@@ -398,7 +418,7 @@ def read_sen3(path: str | os.PathLike[str]) -> MerisSen3Product:
     if missing:
         raise Sen3FormatError(members.path, f"missing member file(s): {', '.join(missing)}")
     try:
-        return _read(members)
+        return read_members(members, MERIS_KIND, _product_type(members))
     except OSError as exc:
         raise Sen3FormatError(members.path, f"cannot read: {exc.strerror or exc}") from None
 
@@ -478,13 +498,38 @@ def _product_type(members: Members) -> str:
     return found
 
 
-def _read(members: Members) -> MerisSen3Product:
-    product_type = _product_type(members)
+@dataclass(frozen=True)
+class Sen3Kind:
+    """What tells the ``.SEN3`` products of one sensor apart: band members and their count,
+    product types and their sampling, the widest line of each, spectral defaults (used where
+    ``instrument_data.nc`` has none), the product class, whether the tie files carry an
+    altitude, and the tie points' own adjustment (``None``: as read)."""
+
+    name: str
+    n_bands: int
+    band_file: Callable[[int], str]
+    band_variable: Callable[[int], str]
+    types: Mapping[str, Resolution]
+    widest: Callable[[Resolution], int]
+    wavelengths: tuple[float, ...]
+    bandwidths: tuple[float, ...]
+    sun_flux: tuple[float, ...]
+    product_class: Callable[..., Any]
+    detectors: Mapping[str, int] | None = None
+    tie_altitude: bool = True
+    adjust_tie_points: Callable[[dict[str, np.ndarray], int, bool],
+                                dict[str, np.ndarray]] | None = None
+
+
+def read_members(members: Members, kind: Sen3Kind, product_type: str) -> Any:
+    """The product of ``kind`` held by ``members``, of ``product_type`` (a key of
+    ``kind.types``): every member and variable checked, tie points, times and scale factors
+    decoded (bands and per-pixel geolocation read on demand)."""
     # the image members, each opened once (an archive's read ahead, ``Members.read_ahead``)
-    image_members = [*(radiance_file(b) for b in range(1, NUM_BANDS + 1)), GEO_FILE,
+    image_members = [*(kind.band_file(b) for b in range(1, kind.n_bands + 1)), GEO_FILE,
                      QUALITY_FILE, INSTRUMENT_FILE]
     with closing(members.read_ahead(image_members)) as contents:
-        shape, variables, dtypes = _band_variables(members, product_type, contents)
+        shape, variables, dtypes = _band_variables(members, kind, product_type, contents)
         for name, names in ((GEO_FILE, ("latitude", "longitude", "altitude")),
                             (QUALITY_FILE, ("quality_flags",)),
                             (INSTRUMENT_FILE, ("detector_index",))):
@@ -504,21 +549,23 @@ def _read(members: Members) -> MerisSen3Product:
     times, time_attrs = _variables(members, TIME_FILE, ["time_stamp"], (height,))
     line_times = _line_times(members, product_type, times["time_stamp"],
                              time_attrs["time_stamp"])
-    tie_points, df, dj, mirrored = _tie_points(members, height, width)
-    _check_detectors(members, product_type, spectral)
-    wavelengths = _band_means(spectral.get("lambda0"), APPENDIX_A_WAVELENGTHS)
-    bandwidths = _band_means(spectral.get("FWHM"), APPENDIX_A_BANDWIDTHS)
-    sun_flux = _band_means(spectral.get("solar_flux"), ScalingFactors().sun_flux)
+    tie_points, df, dj, mirrored = _tie_points(members, height, width, kind)
+    if kind.detectors is not None:
+        _check_detectors(members, product_type, spectral, kind)
+    wavelengths = _band_means(spectral.get("lambda0"), kind.wavelengths)
+    bandwidths = _band_means(spectral.get("FWHM"), kind.bandwidths)
+    sun_flux = _band_means(spectral.get("solar_flux"), kind.sun_flux)
     scaling = replace(ScalingFactors(), radiance=tuple(
-        attribute_number(variables[radiance_variable(b)], "scale_factor", 1.0)
-        for b in range(1, NUM_BANDS + 1)), sun_flux=sun_flux)
-    return MerisSen3Product(
+        attribute_number(variables[kind.band_variable(b)], "scale_factor", 1.0)
+        for b in range(1, kind.n_bands + 1)), sun_flux=sun_flux)
+    return kind.product_class(
         members, product_type, width, height, df, dj, tie_points,
         line_times, scaling, wavelengths, bandwidths,
         instrument[""], variables, dtypes, mirrored)
 
 
-def _band_variables(members: Members, product_type: str, contents: Iterator[bytes | None]
+def _band_variables(members: Members, kind: Sen3Kind, product_type: str,
+                    contents: Iterator[bytes | None]
                     ) -> tuple[tuple[int, int], dict[str, dict[str, Any]], dict[str, np.dtype]]:
     """The radiances' shape, attributes and stored types, each band checked (16-bit integers,
     the shape of M01, no add_offset, a positive scale_factor); ``contents``: the band members'
@@ -526,50 +573,53 @@ def _band_variables(members: Members, product_type: str, contents: Iterator[byte
     variables: dict[str, dict[str, Any]] = {}
     dtypes: dict[str, np.dtype] = {}
     shape: tuple[int, int] = (0, 0)
-    for b in range(1, NUM_BANDS + 1):
-        with members.dataset(radiance_file(b), next(contents)) as ds:
-            got, a, dtype = _variable_info(members, radiance_file(b), radiance_variable(b), ds)
+    for b in range(1, kind.n_bands + 1):
+        file, variable = kind.band_file(b), kind.band_variable(b)
+        with members.dataset(file, next(contents)) as ds:
+            got, a, dtype = _variable_info(members, file, variable, ds)
         if b == 1:
             if len(got) != 2 or min(got) < 2:
-                raise Sen3FormatError(members.where(radiance_file(1)), f"M01_radiance has "
-                                      f"shape {got}, a 2-D (rows, columns) image expected")
+                raise Sen3FormatError(members.where(file), f"{variable} has shape {got}, a "
+                                      "2-D (rows, columns) image expected")
             shape = (int(got[0]), int(got[1]))
-            _check_size(members, product_type, *shape)
-        _check_band(members, b, got, shape, a, dtype)
-        dtypes[radiance_variable(b)] = dtype
-        variables[radiance_variable(b)] = a
+            _check_size(members, kind, product_type, *shape)
+        _check_band(members, kind, b, got, shape, a, dtype)
+        dtypes[variable] = dtype
+        variables[variable] = a
     return shape, variables, dtypes
 
 
-def _check_band(members: Members, b: int, got: tuple[int, ...], shape: tuple[int, int],
-                a: dict[str, Any], dtype: np.dtype) -> None:
+def _check_band(members: Members, kind: Sen3Kind, b: int, got: tuple[int, ...],
+                shape: tuple[int, int], a: dict[str, Any], dtype: np.dtype) -> None:
     """Band ``b``'s variable as the format has it (shape ``got``, attributes ``a``, stored
     ``dtype``), or Sen3FormatError naming its member."""
-    where = members.where(radiance_file(b))
+    where = members.where(kind.band_file(b))
+    variable, first = kind.band_variable(b), kind.band_variable(1)
     if dtype.kind not in "iu" or dtype.itemsize > 2:
-        raise Sen3FormatError(where, f"{radiance_variable(b)} is stored as {dtype}: MERIS Level "
+        raise Sen3FormatError(where, f"{variable} is stored as {dtype}: {kind.name} Level "
                               "1 radiances are 16-bit integers with a scale_factor (ESA's "
                               "products: uint16); other types are not supported")
     if got != shape:
-        raise Sen3FormatError(where, f"variable {radiance_variable(b)!r} has shape {got}, "
-                              f"M01_radiance has {shape}")
+        raise Sen3FormatError(where, f"variable {variable!r} has shape {got}, "
+                              f"{first} has {shape}")
     if attribute_number(a, "add_offset", 0.0) != 0.0:
         raise Sen3FormatError(where, "radiances with a non-zero add_offset are not supported")
     scale = attribute_number(a, "scale_factor", 1.0)
     if not (math.isfinite(scale) and scale > 0):
-        raise Sen3FormatError(where, f"scale_factor {scale!r} of {radiance_variable(b)} is not "
+        raise Sen3FormatError(where, f"scale_factor {scale!r} of {variable} is not "
                               "a positive number")
 
 
-def _check_size(members: Members, product_type: str, height: int, width: int) -> None:
+def _check_size(members: Members, kind: Sen3Kind, product_type: str, height: int,
+                width: int) -> None:
     """At most one orbit of lines and the instrument's widest line (``n1.checks``), before any
     array is read: a forged file of a few kB can declare billions of pixels."""
-    res = SEN3_TYPES[product_type]
-    where = members.where(radiance_file(1))
+    res = kind.types[product_type]
+    where = members.where(kind.band_file(1))
     if height > max_lines(res):
         raise Sen3FormatError(where, f"{height} rows: more lines than one orbit "
                               f"({max_lines(res)} {res.name} lines)")
-    widest = MAX_FR_WIDTH if res.name == "FR" else res.width
+    widest = kind.widest(res)
     if width > widest:
         raise Sen3FormatError(where, f"{width} columns: a {product_type} line has at most "
                               f"{widest} columns")
@@ -613,14 +663,15 @@ def _line_times(members: Members, product_type: str, stamps: np.ndarray,
     return out
 
 
-def _check_detectors(members: Members, product_type: str, spectral: dict[str, np.ndarray]
-                     ) -> None:
+def _check_detectors(members: Members, product_type: str, spectral: dict[str, np.ndarray],
+                     kind: Sen3Kind) -> None:
     """The (bands, detectors) arrays of instrument_data.nc must not have the detectors of the
     other resolution (FR 3700, RR 925): a product type contradicted by the data."""
-    res = SEN3_TYPES[product_type].name
+    counts = kind.detectors or {}
+    res = kind.types[product_type].name
     for name, values in spectral.items():
         n = values.shape[-1] if values.ndim == 2 else None
-        other = next((r for r, count in DETECTORS.items() if count == n and r != res), None)
+        other = next((r for r, count in counts.items() if count == n and r != res), None)
         if other is not None:
             raise Sen3FormatError(members.where(INSTRUMENT_FILE), f"a {product_type} product, "
                                   f"but {INSTRUMENT_FILE} has {n} detectors ({other}) in {name}")
@@ -628,15 +679,16 @@ def _check_detectors(members: Members, product_type: str, spectral: dict[str, np
 
 def _band_means(values: np.ndarray | None, default: tuple[float, ...]) -> tuple[float, ...]:
     """Per-band mean over the detectors (bands, detectors), or the default."""
-    if values is None or values.ndim != 2 or values.shape[0] != NUM_BANDS:
+    n = len(default)
+    if values is None or values.ndim != 2 or values.shape[0] != n:
         return tuple(default)
     v = np.where(np.isfinite(values) & (values > 0), values, np.nan)
-    means = np.nanmean(v, axis=1) if np.isfinite(v).any() else np.full(NUM_BANDS, np.nan)
+    means = np.nanmean(v, axis=1) if np.isfinite(v).any() else np.full(n, np.nan)
     return tuple(float(m) if math.isfinite(m) else float(d)
                  for m, d in zip(means, default, strict=True))
 
 
-def _tie_points(members: Members, height: int, width: int
+def _tie_points(members: Members, height: int, width: int, kind: Sen3Kind
                 ) -> tuple[dict[str, np.ndarray], int, int, bool]:
     """Tie points in physical units with the N1 names, N1 column order; (tie points, DF, DJ,
     whether the file's columns were mirrored: ESA's order, ``layout.esa_column_order``)."""
@@ -665,7 +717,7 @@ def _tie_points(members: Members, height: int, width: int
     alt_file = TIE_GEO_FILE
     if "altitude" not in geo:
         geo["altitude"], geo_attrs["altitude"] = _tie_altitude_of_pixels(
-            members, shape, df, dj, (height, width))
+            members, shape, df, dj, (height, width), expected=not kind.tie_altitude)
         alt_file = GEO_FILE
     meteo, meteo_attrs = _variables(members, TIE_METEO_FILE, list(METEO), shape, optional=True
                                     ) if members.exists(TIE_METEO_FILE) else ({}, {})
@@ -704,6 +756,8 @@ def _tie_points(members: Members, height: int, width: int
     tp.update(_meteo(meteo, meteo_attrs, shape))
     if mirrored:  # ESA's columns in the N1 order
         tp = {k: mirror_columns(v) for k, v in tp.items()}
+    if kind.adjust_tie_points is not None:
+        tp = kind.adjust_tie_points(tp, dj, mirrored)
     # the DEM corrections as operational N1 products store them (Appendix E; 0 over sea)
     tp["lat_corr"], tp["lon_corr"] = stored_corrections(
         tp["dem_alt"], tp["view_zenith"], tp["view_azimuth"], tp["latitude"])
@@ -711,7 +765,7 @@ def _tie_points(members: Members, height: int, width: int
 
 
 def _tie_altitude_of_pixels(members: Members, shape: tuple[int, int], df: int, dj: int,
-                            image: tuple[int, int]
+                            image: tuple[int, int], expected: bool = False
                             ) -> tuple[np.ndarray, dict[str, Any]]:
     """``altitude`` of geo_coordinates.nc (and its attributes) at the tie points (line ``k df``,
     column ``j dj`` in the file's order; tie lines past the last image line take the last), for
@@ -719,8 +773,9 @@ def _tie_altitude_of_pixels(members: Members, shape: tuple[int, int], df: int, d
     pixels, attrs = _variables(members, GEO_FILE, ["altitude"], image)
     lines = np.minimum(np.arange(shape[0]) * df, image[0] - 1)
     columns = np.arange(shape[1]) * dj
-    log.warning("%s: %s has no tie-point altitude: taken from %s at the tie points",
-                members.path.name, TIE_GEO_FILE, GEO_FILE)
+    (log.info if expected else log.warning)(
+        "%s: %s has no tie-point altitude: taken from %s at the tie points",
+        members.path.name, TIE_GEO_FILE, GEO_FILE)
     return pixels["altitude"][np.ix_(lines, columns)], attrs["altitude"]
 
 
@@ -767,3 +822,12 @@ def manifest_summary(path: str | os.PathLike[str]) -> dict[str, str]:
             files.append(el.get("href", "").removeprefix("./"))
     out["files"] = " ".join(files)
     return out
+
+
+#: MERIS fourth-reprocessing products
+MERIS_KIND = Sen3Kind(
+    name="MERIS", n_bands=NUM_BANDS, band_file=radiance_file, band_variable=radiance_variable,
+    types=SEN3_TYPES, widest=_meris_widest, wavelengths=APPENDIX_A_WAVELENGTHS,
+    bandwidths=APPENDIX_A_BANDWIDTHS, sun_flux=ScalingFactors().sun_flux,
+    product_class=MerisSen3Product, detectors=DETECTORS)
+MerisSen3Product.kind = MERIS_KIND

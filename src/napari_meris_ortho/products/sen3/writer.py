@@ -103,10 +103,10 @@ def write_sen3(path: str | os.PathLike[str], *, resolution: str,
               "al_subsampling_factor": np.uint16(df), "start_time": str(t0) + "Z",
               "stop_time": str(t_stop) + "Z", "source": "napari-meris-ortho"}
     with atomic_dir(out) as tmp:
-        nc = _NcWriter(tmp, common)
+        nc = NcWriter(tmp, common)
         _write_bands(nc, counts, scaling, progress)
         with nc.dataset(GEO_FILE, {"rows": height, "columns": width}) as ds:
-            _write_geo(nc.var, ds, ("rows", "columns"), pixel_geolocation)
+            write_geo(nc.var, ds, ("rows", "columns"), pixel_geolocation)
         _write_instrument(nc, detector_index, flags, scaling, DETECTORS[resolution])
         _write_tie_points(nc, tie_points)
         with nc.dataset(TIME_FILE, {"rows": height}) as ds:
@@ -120,7 +120,7 @@ def write_sen3(path: str | os.PathLike[str], *, resolution: str,
     return out
 
 
-class _NcWriter:
+class NcWriter:
     """netCDF-4 member files of one product: the global attributes they share, CF variables."""
 
     def __init__(self, directory: Path, common: dict[str, Any]) -> None:
@@ -151,7 +151,7 @@ class _NcWriter:
         return v
 
 
-def _write_bands(nc: _NcWriter, counts: Any, scaling: ScalingFactors,
+def _write_bands(nc: NcWriter, counts: Any, scaling: ScalingFactors,
                  progress: ProgressCallback | None) -> None:
     """``Mnn_radiance.nc``: the counts with the radiance factor as CF ``scale_factor``."""
     height, width = np.shape(counts[0])
@@ -168,7 +168,7 @@ def _write_bands(nc: _NcWriter, counts: Any, scaling: ScalingFactors,
             progress(b, NUM_BANDS + 1)
 
 
-def _write_instrument(nc: _NcWriter, detector_index: np.ndarray, flags: np.ndarray,
+def _write_instrument(nc: NcWriter, detector_index: np.ndarray, flags: np.ndarray,
                       scaling: ScalingFactors, det: int) -> None:
     """``instrument_data.nc`` (detector index, per-detector spectral data) and
     ``qualityFlags.nc`` (the L1b flags as 4th-reprocessing quality bits)."""
@@ -192,7 +192,7 @@ def _write_instrument(nc: _NcWriter, detector_index: np.ndarray, flags: np.ndarr
                flag_meanings=" ".join(n for n, _ in QUALITY_FLAGS))
 
 
-def _write_tie_points(nc: _NcWriter, tie_points: Mapping[str, np.ndarray]) -> None:
+def _write_tie_points(nc: NcWriter, tie_points: Mapping[str, np.ndarray]) -> None:
     """``tie_geo_coordinates.nc``, ``tie_geometries.nc`` (azimuths on (-180, 180]) and
     ``tie_meteo.nc`` (ozone in kg m-2) from N1-named physical tie points."""
     tshape = np.shape(tie_points["latitude"])
@@ -203,7 +203,7 @@ def _write_tie_points(nc: _NcWriter, tie_points: Mapping[str, np.ndarray]) -> No
         return np.asarray(tie_points.get(key, np.zeros(tshape)), np.float64)
 
     with nc.dataset(TIE_GEO_FILE, tdims) as ds:
-        _write_geo(nc.var, ds, tie, {"longitude": get("longitude"), "latitude": get("latitude"),
+        write_geo(nc.var, ds, tie, {"longitude": get("longitude"), "latitude": get("latitude"),
                                      "altitude": get("dem_alt")}, corrected=False)
     with nc.dataset(TIE_GEOMETRY_FILE, tdims) as ds:
         for name, key, long in (("SZA", "sun_zenith", "Sun zenith angle"),
@@ -227,7 +227,7 @@ def _write_tie_points(nc: _NcWriter, tie_points: Mapping[str, np.ndarray]) -> No
                    long_name=name.replace("_", " ").capitalize())
 
 
-def _write_geo(var, ds, dims: tuple[str, str], geo: dict[str, np.ndarray],
+def write_geo(var, ds, dims: tuple[str, str], geo: dict[str, np.ndarray],
                corrected: bool = True) -> None:
     """Latitude, longitude (int32 x 1e-6) and altitude: the per-pixel ones terrain-corrected
     ("DEM corrected latitude"), the tie points' on the ellipsoid (SNAP: "Latitude"); the
