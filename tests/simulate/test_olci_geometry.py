@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 from pyproj import Geod
 
+from napari_meris_ortho.bands import OLCI
 from napari_meris_ortho.simulate import olci, resolve_config, scene_geometry
 from napari_meris_ortho.simulate.olci_product import camera_fan, column_detectors
 from napari_meris_ortho.simulate.orbit import SENTINEL3, ecef_to_geodetic
@@ -107,7 +108,7 @@ def test_instrument_data_is_21_bands_by_3700_detectors():
     inst = olci.instrument_data(seed=1)
     for key in ("lambda0", "FWHM", "solar_flux"):
         assert inst[key].shape == (21, 3700) and inst[key].dtype == np.float32
-    centres = np.asarray(olci.OLCI_WAVELENGTHS)
+    centres = np.asarray(OLCI.centres)
     assert np.all(np.abs(inst["lambda0"] - centres[:, None]) < 1.6)
     assert abs(float(inst["lambda0"][0].mean()) - 400.0) < 1.0
     assert np.all(inst["solar_flux"] > 600.0)

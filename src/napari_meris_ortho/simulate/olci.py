@@ -22,29 +22,20 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..bands import OLCI
+from ..products.olci.layout import CAMERAS as N_CAMERAS
+from ..products.olci.layout import DETECTORS as N_DETECTORS
+from ..products.olci.layout import DETECTORS_PER_CAMERA, EFR
 from .radiometry import CLOUD_SPECTRUM, SPECTRA, WAVELENGTHS
 
-N_CAMERAS = 5
-DETECTORS_PER_CAMERA = 740
-N_DETECTORS = N_CAMERAS * DETECTORS_PER_CAMERA
-#: full-width product grid: EFR columns, and the signed ground distance (m) of the east and west
-#: edges from the nadir track (positive to the right of the flight direction: west on a
-#: descending pass); the field of view of the cameras spans exactly these edges
-EFR_COLUMNS = 4865
+#: the full-width product grid (``products.olci.layout.EFR``): the signed ground distance (m)
+#: of the east and west edges from the nadir track (positive to the right of the flight
+#: direction: west on a descending pass); the field of view of the cameras spans these edges
 EFR_FIRST_COLUMN = -1196
-EFR_SPACING = 270.0
-SWATH_EDGES_M = (EFR_FIRST_COLUMN * EFR_SPACING,
-                 (EFR_FIRST_COLUMN + EFR_COLUMNS - 1) * EFR_SPACING)
-#: ERR binning of the EFR grid (columns and rows)
-ERR_BINNING = 4
+SWATH_EDGES_M = (EFR_FIRST_COLUMN * EFR.column_spacing_m,
+                 (EFR_FIRST_COLUMN + EFR.width - 1) * EFR.column_spacing_m)
 
-#: OLCI band centres and widths (nm), Oa01..Oa21
-OLCI_WAVELENGTHS = (400.0, 412.5, 442.5, 490.0, 510.0, 560.0, 620.0, 665.0, 673.75, 681.25,
-                    708.75, 753.75, 761.25, 764.375, 767.5, 778.75, 865.0, 885.0, 900.0, 940.0,
-                    1020.0)
-OLCI_BANDWIDTHS = (15.0, 10.0, 10.0, 10.0, 10.0, 10.0, 10.0, 10.0, 7.5, 7.5, 10.0, 7.5, 2.5,
-                   3.75, 2.5, 15.0, 20.0, 10.0, 10.0, 20.0, 40.0)
-N_BANDS = len(OLCI_WAVELENGTHS)
+N_BANDS = OLCI.n_bands
 #: mean solar flux of the bands (mW m-2 nm-1), a smoothed extraterrestrial spectrum
 SOLAR_FLUX = (1714.0, 1742.0, 1903.0, 1957.0, 1920.0, 1803.0, 1652.0, 1531.0, 1498.0, 1472.0,
               1408.0, 1266.0, 1255.0, 1248.0, 1239.0, 1186.0, 958.0, 930.0, 895.0, 825.0, 702.0)
@@ -70,7 +61,7 @@ def olci_spectra() -> tuple[np.ndarray, np.ndarray]:
     for r in range(rows.shape[0]):
         values = [EDGE_RADIANCE[400.0][r], *(rows[r, i] for i in keep),
                   EDGE_RADIANCE[1020.0][r]]
-        out[r] = np.interp(OLCI_WAVELENGTHS, lam, values)
+        out[r] = np.interp(OLCI.centres, lam, values)
     for band, t in ABSORPTION.items():
         out[:, band - 1] *= t
     return np.ascontiguousarray(out[:-1]), np.ascontiguousarray(out[-1])
@@ -140,12 +131,12 @@ def instrument_data(seed: int) -> dict[str, np.ndarray]:
     x = (np.arange(DETECTORS_PER_CAMERA) + 0.5) / DETECTORS_PER_CAMERA * 2.0 - 1.0
     smile = np.tile(1.2 * x * x, N_CAMERAS)
     offsets = np.repeat(rng.uniform(-0.3, 0.3, N_CAMERAS), DETECTORS_PER_CAMERA)
-    lam = np.asarray(OLCI_WAVELENGTHS)[:, None] + (smile + offsets)[None, :]
-    fwhm = np.asarray(OLCI_BANDWIDTHS)[:, None] * np.tile(1.0 + 0.03 * np.cos(np.pi * x),
+    lam = np.asarray(OLCI.centres)[:, None] + (smile + offsets)[None, :]
+    fwhm = np.asarray(OLCI.widths)[:, None] * np.tile(1.0 + 0.03 * np.cos(np.pi * x),
                                                          N_CAMERAS)[None, :]
     # solar flux slope around each band centre from the neighbouring bands
     flux = np.asarray(SOLAR_FLUX)
-    slope = np.gradient(flux, np.asarray(OLCI_WAVELENGTHS))
-    sun = flux[:, None] + slope[:, None] * (lam - np.asarray(OLCI_WAVELENGTHS)[:, None])
+    slope = np.gradient(flux, np.asarray(OLCI.centres))
+    sun = flux[:, None] + slope[:, None] * (lam - np.asarray(OLCI.centres)[:, None])
     return {"lambda0": lam.astype(np.float32), "FWHM": fwhm.astype(np.float32),
             "solar_flux": sun.astype(np.float32)}

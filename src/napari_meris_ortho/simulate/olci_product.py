@@ -113,9 +113,8 @@ def olci_arrays(cfg: dict, geom: Any, counts: np.ndarray, meris_flags: np.ndarra
         "quality_flags": quality_flags_of(meris_flags, bits, baseline),
         "detector_index": detector,
         "tie_points": tie_point_arrays(geom),
-        "pixel_geolocation": {"longitude": np.where(invalid, np.nan, lon),
-                              "latitude": np.where(invalid, np.nan, lat),
-                              "altitude": np.round(np.where(invalid, 0.0, alt))},
+        "pixel_geolocation": {"longitude": lon, "latitude": lat,
+                              "altitude": np.round(np.nan_to_num(alt))},
         "lambda0": inst["lambda0"], "fwhm": inst["FWHM"], "solar_flux": inst["solar_flux"],
         "start_time": np.datetime64("2000-01-01T00:00:00", "us")
         + np.timedelta64(t0_us, "us"),

@@ -20,6 +20,7 @@ from numba import njit, prange
 from .._atomic import atomic_path
 from ..errors import DemError, OptionsError, OutputError
 from ..geometry.parallax import stored_corrections
+from ..products.olci.layout import EFR, ERR
 from ..progress import ProgressCallback
 from . import olci, sensor
 from .orbit import ENVISAT, SENTINEL3, Orbit, Platform, solve_pass
@@ -43,8 +44,8 @@ RESOLUTIONS = {
     # frame time (s), column spacing (m), tie-point spacing DF = DJ, product type
     "FR": (0.044, 260.0, 64, "MER_FR__1P"),
     "RR": (0.176, 1040.0, 16, "MER_RR__1P"),
-    "EFR": (0.044, 270.0, 64, "OL_1_EFR___"),
-    "ERR": (0.176, 1080.0, 16, "OL_1_ERR___"),
+    "EFR": (EFR.line_interval_s, EFR.column_spacing_m, EFR.samples_per_tie_point, "OL_1_EFR___"),
+    "ERR": (ERR.line_interval_s, ERR.column_spacing_m, ERR.samples_per_tie_point, "OL_1_ERR___"),
 }
 #: the sensor of each resolution; OLCI has tie points on every row
 SENSOR_OF_RESOLUTION = {"FR": "MERIS", "RR": "MERIS", "EFR": "OLCI", "ERR": "OLCI"}
