@@ -42,14 +42,12 @@ def column_detectors(geom: Any) -> np.ndarray:
     return camera_fan(geom).detector(psi)
 
 
-def tie_point_arrays(geom: Any) -> dict[str, np.ndarray]:
+def tie_point_arrays(geom: Any, e: np.ndarray) -> dict[str, np.ndarray]:
     """Tie points (every row, every ``tie_step`` columns) on the ellipsoid, on the pixel
     centres (i, k x DJ) as the reader gives them back (the writer moves them where ESA's products
-    have them): latitude, longitude, view and sun angles (deg) and meteorological fields."""
-    from .scene import locate
-
+    have them): latitude, longitude, view and sun angles (deg) and meteorological fields.
+    ``e``: the direct model at the tie points (``scene.locate``, no terrain)."""
     lines = geom.tie_lines
-    e = locate(geom, lines, geom.tie_cols)
     lon = (e[..., 0] + 180.0) % 360.0 - 180.0
     lat = e[..., 1]
     times = geom.line_time(lines)[:, None] * np.ones_like(lon)
@@ -83,10 +81,11 @@ def saturate(counts: np.ndarray, cfg: dict) -> np.ndarray:
 
 
 def olci_arrays(cfg: dict, geom: Any, counts: np.ndarray, meris_flags: np.ndarray,
-                points: np.ndarray) -> dict[str, Any]:
+                points: np.ndarray, ties: np.ndarray) -> dict[str, Any]:
     """The keyword arguments of ``products.olci.write_olci`` from the rendered counts
-    (21, H, W) (0 where invalid), the simulator's L1b flags and the terrain points (3, H, W) of
-    every pixel. ``counts`` and ``meris_flags`` are changed in place."""
+    (21, H, W) (0 where invalid), the simulator's L1b flags, the terrain points (3, H, W) of
+    every pixel and the direct model at the tie points (``ties``). ``counts`` and
+    ``meris_flags`` are changed in place."""
     from ..flags import FLAG_DUPLICATED, FLAG_INVALID
     from ..products.olci.layout import FlagBaseline
     from ..products.olci.writer import quality_flags_of
@@ -112,7 +111,7 @@ def olci_arrays(cfg: dict, geom: Any, counts: np.ndarray, meris_flags: np.ndarra
         "scale_factors": list(olci.SCALE_FACTORS),
         "quality_flags": quality_flags_of(meris_flags, bits, baseline),
         "detector_index": detector,
-        "tie_points": tie_point_arrays(geom),
+        "tie_points": tie_point_arrays(geom, ties),
         "pixel_geolocation": {"longitude": lon, "latitude": lat,
                               "altitude": np.round(np.nan_to_num(alt))},
         "lambda0": inst["lambda0"], "fwhm": inst["FWHM"], "solar_flux": inst["solar_flux"],
@@ -135,7 +134,7 @@ def sample_spacing_m(geom: Any) -> float:
 
 
 def write_olci_scene(target: Path, cfg: dict, geom: Any, counts: np.ndarray,
-                     meris_flags: np.ndarray, points: np.ndarray,
+                     meris_flags: np.ndarray, points: np.ndarray, ties: np.ndarray,
                      progress: ProgressCallback | None = None) -> Path:
     """Write the scene's OLCI ``.SEN3`` directory into ``target`` (an older config's product
     removed); returns its path."""
@@ -143,7 +142,7 @@ def write_olci_scene(target: Path, cfg: dict, geom: Any, counts: np.ndarray,
 
     from ..products.olci.writer import default_olci_name, write_olci
 
-    args = olci_arrays(cfg, geom, counts, meris_flags, points)
+    args = olci_arrays(cfg, geom, counts, meris_flags, points, ties)
     duration = (geom.lines - 1) * geom.frame_time
     name = default_olci_name(geom.product_type, args["platform"], args["start_time"], duration)
     for old in target.glob("S3?_OL_1_*.SEN3"):

@@ -696,7 +696,7 @@ def _load_cached(out_dir: Path, cfg: dict) -> SimulatedScene | None:
 
 def generate_scene(name_or_config: str | dict, out_dir: str | os.PathLike[str] | None = None,
                    progress: ProgressCallback | None = None) -> SimulatedScene:
-    """Generate (or load from the cache) a simulated MERIS L1b scene with its truth.
+    """Generate (or load from the cache) a simulated MERIS or OLCI L1b scene with its truth.
 
     ``name_or_config``: a scene name (``napari_meris_ortho/scenes/<name>.json``) or a config dict,
     possibly ``{"base": "<name>", ...overrides}``. Outputs go to ``out_dir`` (default: the
@@ -727,6 +727,7 @@ def generate_scene(name_or_config: str | dict, out_dir: str | os.PathLike[str] |
         counts, flags = render_product(cfg, geom, grid, dem, truth, _stage(progress, 10, 55),
                                        terrain_points=points)
         product_path = write_olci_scene(target, cfg, geom, counts, flags, points,
+                                        locate(geom, geom.tie_lines, geom.tie_cols),
                                         _stage(progress, 65, 10))
         del points
     else:
