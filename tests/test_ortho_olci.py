@@ -16,11 +16,17 @@ from napari_meris_ortho.ortho import orthorectify
 STRIDE = 7
 
 
-def _truth(scene, result):
+def _truth(scene, result, near: int = 0):
     """The true antecedent of every STRIDE-th output point at its DEM height, whether it lies
-    in the product (not within half a pixel of its edge), and the points picked."""
+    in the product (not within half a pixel of its edge), and the points picked; ``near``: only
+    points within that many output pixels of a mapped one (a thin strip's box is mostly
+    empty)."""
     pick = np.zeros(result.valid.shape, bool)
     pick.ravel()[::STRIDE] = True
+    if near:
+        from scipy.ndimage import binary_dilation
+
+        pick &= binary_dilation(result.valid, iterations=near)
     lon, lat = result.grid.lonlat()
     h = scene.dem_height(lon[pick], lat[pick])
     tl, tc = scene.true_antecedent(lon[pick], lat[pick], h)
@@ -72,14 +78,40 @@ def test_dem_mode_matches_the_truth_without_holes(olci_runs, parallax):
 
 @pytest.mark.slow
 def test_pixel_geolocation_matches_the_truth(olci_runs):
-    """ESA's per-pixel "DEM corrected" geolocation (no parallax left): within 0.05 px RMS of
-    the truth, 0.25 px at the 99th percentile (a bilinear model between terrain points of
-    pixel centres; larger only at crests hiding ground)."""
+    """ESA's per-pixel "DEM corrected" geolocation (no parallax left): within 0.08 px RMS and
+    0.3 px at the 99th percentile of the truth (a bilinear model between the terrain points of
+    pixel centres, which relief seen at up to 57 deg folds: pixels at crests hiding ground);
+    the ground of the DEM mode's map is mapped but for the hidden ground, which is reported."""
     r, truth = olci_runs.runs["pixel"], olci_runs.truth
     e = _error(r, truth)
-    assert np.sqrt(np.mean(e ** 2)) <= 0.05 and np.percentile(e, 99) <= 0.25, (
+    assert np.sqrt(np.mean(e ** 2)) <= 0.08 and np.percentile(e, 99) <= 0.3, (
         float(np.sqrt(np.mean(e ** 2))), float(np.percentile(e, 99)))
-    assert e.max() < 3.0
-    # the same ground as the DEM mode, but the hidden ground
+    assert e.max() < 6.0
     n_dem = int(olci_runs.runs["handbook"].valid.sum())
     assert abs(int(r.valid.sum()) - n_dem) < 0.02 * n_dem
+    assert r.stats.facet_search["occluded"] > 0
+
+
+#: a 24-row piece of olci-efr-alps crossing the Alps, its DEM on 0.008 deg posts
+EFR_PIECE = {"base": "olci-efr-alps", "lines": 24, "orbit": {"nadir_lat": 45.9, "nadir_lon": 19.2},
+             "dem": {"spacing_deg": 0.008},
+             "exports": {"getasse30": False, "srtm30": False, "reference": False}}
+
+
+def test_one_row_facets_and_77_tie_columns_of_an_efr_piece(tmp_path):
+    """The whole EFR width (4865 columns, 77 tie columns 64 apart, tie points on every row:
+    facets one row tall) up to 57 deg view zenith over the Alps: DEM mode within the targets,
+    no hole."""
+    from napari_meris_ortho.products.open import read_product
+    from napari_meris_ortho.simulate.scene import generate_scene
+
+    scene = generate_scene(EFR_PIECE, out_dir=tmp_path)
+    p = read_product(scene.product_path)
+    assert p.tie_points["latitude"].shape == (24, 77) and p.lines_per_tie_point == 1
+    r = orthorectify(p, dems=[scene.dem_paths["geotiff"]], bands=[8], diagnostics=True)
+    truth = _truth(scene, r, near=8)
+    e = _error(r, truth)
+    assert np.sqrt(np.mean(e ** 2)) <= 0.05 and e.max() <= 0.25
+    assert truth.inside.sum() > 20_000 and not (truth.inside & ~r.valid[truth.pick]).any()
+    vz = p.tie_points["view_zenith"]
+    assert vz[:, -1].min() > 56.0 and r.diagnostics["elevation"][r.valid].max() > 3000.0
