@@ -1,13 +1,15 @@
 """Accuracy and speed of the mapping of simulated OLCI scenes, beside a MERIS scene of the
 same size.
 
-Per OLCI scene (default ``olci-efr-alps`` and ``olci-err-andes``): the error against the
-simulator's ``true_antecedent`` (every 7th mapped point; px of the product) of the DEM mode
-(tie-point geolocation + the scene's DEM, handbook and ellipsoid parallax) and of the per-pixel
-geolocation on the same grid; the holes (points whose true antecedent lies at least half a
-pixel inside the product, left unmapped); the time of ``meris-ortho map`` (DEM mode, one band,
-a GeoTIFF written) of the scene and of a MERIS scene of as many pixels at the same
-resolution (``fr-alps`` 2241 or ``rr-segment`` 1121 columns wide, as many lines as needed).
+Per OLCI scene (default ``olci-efr-alps`` and ``olci-err-andes``), on every 7th point of the
+output grid: the error (px of the product) against the simulator's ``true_antecedent`` of the
+DEM mode (tie-point geolocation + the scene's DEM, handbook and ellipsoid parallax) and of the
+per-pixel geolocation on the same grid, and the holes: points whose true antecedent lies at
+least half a pixel inside the product, left unmapped (for the per-pixel geolocation, ground
+hidden from the sensor, which it reports instead of mapping). Then the time of
+``meris-ortho map`` (DEM mode, one band, a GeoTIFF on the default grid, whose size is printed)
+of the scene and of a MERIS scene of as many pixels at the same resolution (``fr-alps`` 2241
+or ``rr-segment`` 1121 columns wide, as many lines as needed).
 A benchmark, not a test: ``python benchmarks/bench_olci.py [--scene NAME ...]``.
 """
 
@@ -46,14 +48,19 @@ def errors(scene, result, stride: int = 7) -> tuple[np.ndarray, int]:
     return e, int(np.count_nonzero(inside & ~ok))
 
 
-def map_seconds(product: Path, dem: Path, out: Path) -> float:
-    """Wall time of ``meris-ortho map`` (DEM mode, band Oa08/M07 at 665 nm, one GeoTIFF)."""
+def map_seconds(product: Path, dem: Path, out: Path) -> tuple[float, float]:
+    """Wall time of ``meris-ortho map`` (DEM mode, band Oa08/M07 at 665 nm, one GeoTIFF on
+    the default grid) and the size of that grid (million pixels)."""
+    import rasterio
+
     band = "8" if product.suffix == ".SEN3" else "7"
     cmd = [sys.executable, "-m", "napari_meris_ortho.cli", "map", str(product), "-o", str(out),
            "--dem", str(dem), "--bands", band, "--quiet"]
     t0 = time.perf_counter()
     subprocess.run(cmd, check=True, capture_output=True)
-    return time.perf_counter() - t0
+    seconds = time.perf_counter() - t0
+    with rasterio.open(out) as ds:
+        return seconds, ds.width * ds.height / 1e6
 
 
 def run(name: str, work: Path) -> list[tuple]:
@@ -107,9 +114,11 @@ def main() -> None:
                       f"{np.percentile(e, 99):8.4f} {e.max():8.3f} {holes:6d} {seconds:7.2f}",
                       flush=True)
             timings.append((name, t_olci, meris, t_meris))
-    print(f"\n{'scene':<15} {'map s':>7}   {'MERIS scene':<22} {'map s':>7}")
-    for name, t_olci, meris, t_meris in timings:
-        print(f"{name:<15} {t_olci:7.2f}   {meris:<22} {t_meris:7.2f}")
+    print(f"\n{'scene':<15} {'map s':>7} {'grid Mpx':>9}   {'MERIS scene':<22} {'map s':>7} "
+          f"{'grid Mpx':>9}")
+    for name, (t_olci, px_olci), meris, (t_meris, px_meris) in timings:
+        print(f"{name:<15} {t_olci:7.2f} {px_olci:9.1f}   {meris:<22} {t_meris:7.2f} "
+              f"{px_meris:9.1f}")
 
 
 if __name__ == "__main__":
