@@ -1,8 +1,9 @@
 """``meris-ortho info PRODUCT.N1``: the decoded MPH/SPH summary, the data sets and a tie-point
 table like the handbook's Appendix A and E (first and last tie point of every 8th tie-point line,
-and of the last one). A file that is not a readable MERIS L1b product: one message, exit code 2.
-``.SEN3`` directories: the member files instead of the DSDs; FRG/FSG and SEN3 products: the
-extent of their per-pixel geolocation.
+and of the last one). A file that is not a readable MERIS L1b or OLCI Level 1B product: one
+message, exit code 2. ``.SEN3`` directories (MERIS and OLCI): the member files instead of the
+DSDs; FRG/FSG and SEN3 products: the extent of their per-pixel geolocation; OLCI: its 21 bands,
+the quality-flag coding and every 512th row of its tie points (on every row).
 """
 
 from __future__ import annotations
@@ -27,29 +28,32 @@ def register(subparsers: Any) -> None:
     """Add the ``info`` subcommand."""
     p = subparsers.add_parser(
         "info",
-        help="describe a MERIS L1b product (headers, data sets, tie points)",
+        help="describe a MERIS L1b or OLCI Level 1B product (headers, data sets, tie points)",
         description="Print the decoded main and specific product headers of a MERIS L1b N1 "
         "product, its data set descriptors and a tie-point table like the handbook's "
-        "Appendix A (first and last tie point of every 8th tie-point line).",
+        "Appendix A (first and last tie point of every 8th tie-point line); for a .SEN3 "
+        "product (MERIS or OLCI) its member files instead of the data sets.",
     )
     p.add_argument(
         "product", metavar="PRODUCT", help="MERIS L1b product: N1 file (MER_FR__1P, "
         "MER_RR__1P, MER_FRG_1P, MER_FSG_1P, MER_RRG_1P...) or .SEN3 directory (ME_1_FRG___, "
-        "ME_1_RRG___)"
+        "ME_1_RRG___), or OLCI Level 1B .SEN3 directory or zip (OL_1_EFR___, OL_1_ERR___)"
     )
     p.add_argument(
         "--every",
         type=positive_int("a positive integer"),
-        default=8,
+        default=None,
         metavar="N",
-        help="tie-point lines in the table: 1, 1+N, 1+2N, ... and the last (default 8)",
+        help="tie-point lines in the table: 1, 1+N, 1+2N, ... and the last (default 8; 512 "
+        "for OLCI, whose tie points are on every row)",
     )
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
     product = read_product(args.product)
-    print("\n".join(printable(line) for line in describe(product, every=args.every)))
+    every = args.every or (8 if product.lines_per_tie_point > 1 else 512)
+    print("\n".join(printable(line) for line in describe(product, every=every)))
     return 0
 
 
@@ -76,7 +80,7 @@ def describe(product: MerisProduct, every: int = 8) -> list[str]:
     lines = [
         f"Product        {product.product_name}",
         f"File           {product.path} ({size} bytes)",
-        f"Product type   {product.product_type} (MERIS Level 1b, {res})",
+        f"Product type   {product.product_type} ({_level(product)}, {res})",
         f"Size           {product.width} columns x {product.height} lines",
         f"Tie points     {product.n_tie_columns} columns x {product.n_tie_lines} lines, every "
         f"{product.samples_per_tie_point} samples and {product.lines_per_tie_point} lines",
@@ -104,23 +108,24 @@ def describe(product: MerisProduct, every: int = 8) -> list[str]:
         row = f"  {which.lower()} line".ljust(20) + "".join(c.ljust(24) for c in cells)
         lines.append(row.rstrip())
     sf = product.scaling
-    lines += [
-        "",
-        f"Scaling factors  altitude {sf.altitude:g}, roughness {sf.roughness:g}, "
-        f"zonal wind {sf.zonal_wind:g}, meridional wind {sf.merid_wind:g}, "
-        f"pressure {sf.atm_pressure:g}, ozone {sf.ozone:g}, humidity {sf.rel_humidity:g}",
-        f"Sampling rate    {sf.sampling_rate_us} (1e-6 s)",
-        "",
-        "Band  wavelength  bandwidth  radiance factor  sun flux",
-    ]
-    for b in range(15):
+    if str(getattr(product, "sensor", "MERIS")) == "MERIS":  # the Scaling Factor GADS
+        lines += [
+            "",
+            f"Scaling factors  altitude {sf.altitude:g}, roughness {sf.roughness:g}, "
+            f"zonal wind {sf.zonal_wind:g}, meridional wind {sf.merid_wind:g}, "
+            f"pressure {sf.atm_pressure:g}, ozone {sf.ozone:g}, humidity {sf.rel_humidity:g}",
+            f"Sampling rate    {sf.sampling_rate_us} (1e-6 s)",
+        ]
+    lines += ["", "Band  wavelength  bandwidth  radiance factor  sun flux"]
+    for b in range(_n_bands(product)):
         lines.append(
             f"{b + 1:>4}  {product.wavelengths[b]:8.3f} nm {product.bandwidths[b]:6.3f} nm  "
             f"{sf.radiance[b]:15.6f}  {sf.sun_flux[b]:9.3f}"
         )
     bits = ", ".join(f"{name}={1 << i}" for i, name in enumerate(FLAG_NAMES))
     if is_dir:
-        return lines + ["", f"Flags (mapped from quality_flags)  {bits}", "",
+        return lines + ["", f"Flags (mapped from quality_flags)  {bits}", *_coding_lines(product),
+                        "",
                         *_member_lines(product), "", "Tie points (tie_geo_coordinates.nc, "
                         "tie_geometries.nc; first and last tie point of the tie-point lines)",
                         *tie_point_table(product, every)]
@@ -140,6 +145,31 @@ def describe(product: MerisProduct, every: int = 8) -> list[str]:
     lines += ["", 'DATA SET "Tie points ADS" (first and last tie point of the tie-point lines)']
     lines += tie_point_table(product, every)
     return lines
+
+
+def _level(product: MerisProduct) -> str:
+    """"MERIS Level 1b", "OLCI Level 1B (Sentinel-3A)"."""
+    sensor = str(getattr(product, "sensor", "MERIS"))
+    if sensor == "MERIS":
+        return "MERIS Level 1b"
+    name = product.product_name
+    platform = f" (Sentinel-3{name[2]})" if name[:2] == "S3" and name[2:3] in "AB" else ""
+    return f"{sensor} Level 1B{platform}, {_n_bands(product)} bands"
+
+
+def _n_bands(product: MerisProduct) -> int:
+    return int(getattr(product, "n_bands", 15))
+
+
+def _coding_lines(product: MerisProduct) -> list[str]:
+    """The quality-flag baseline of an OLCI product, else nothing."""
+    baseline = getattr(product, "baseline", None)
+    if baseline is None:
+        return []
+    text = ("saturated_Oa01..Oa21 per band (before processing baseline 2.24)"
+            if baseline == "per-band" else
+            "saturated, partially_saturated (baseline 2.24 on; saturated samples are fill)")
+    return [f"Quality flags  {text}"]
 
 
 def _headers_line(product: MerisProduct) -> str:

@@ -101,16 +101,20 @@ def _map(args: argparse.Namespace, grid: Any) -> Any:
     """Precompute the antecedents and stream the bands into the output (``Antecedents``), a
     bar per stage: reading, locating (output rows), resampling and writing (bands)."""
     from ..ortho import precompute
+    from ..ortho.core import band_count
     from ..ortho.writing import write_map
+    from ..products.open import read_product
     from ..progress import stages
 
-    n = len(args.bands or args.options.bands)
     with stages(enabled=log.isEnabledFor(logging.INFO)) as bars:
         bars.show("reading the product and DEMs")
+        product = read_product(args.product)
+        # the bands the engine counts after the rows: all of the product's (15 MERIS, 21 OLCI)
+        n = len(args.bands) if args.bands else band_count(product)
         # the engine counts the output rows, then the bands: each stage counts its own
         locate = bars.stage("locating (prediction/correction)", "rows",
                             count=lambda done, total: (min(done, total - n), total - n))
-        ante = precompute(args.product, grid=grid, dems=args.dem, options=args.options,
+        ante = precompute(product, grid=grid, dems=args.dem, options=args.options,
                           progress=locate, crs=args.crs or DEFAULT_CRS,
                           pixel_size=args.pixel_size,
                           max_pixels=args.max_pixels)

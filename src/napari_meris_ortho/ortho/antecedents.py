@@ -440,10 +440,11 @@ class Antecedents:
         return self._nearest([self.prod.flags], np.uint8)
 
     def saturated(self) -> np.ndarray | None:
-        """Per-band saturation bits (uint16, bit b-1: band b) of the nearest pixel, 0 =
-        background; None for a product without them (``MerisProduct.saturated``)."""
+        """Per-band saturation bits (bit b-1: band b; the product's type: uint16 MERIS,
+        uint32 OLCI) of the nearest pixel, 0 = background; None for a product without them
+        (``MerisProduct.saturated``)."""
         sat = self.prod.saturated
-        return None if sat is None else self._nearest([sat], np.uint16)
+        return None if sat is None else self._nearest([sat], sat.dtype)
 
     def _nearest(self, images: Sequence[Any], dtype: Any) -> np.ndarray:
         """The nearest pixel of one image at the antecedents (rows, cols), 0 = background."""

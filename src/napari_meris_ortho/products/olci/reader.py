@@ -133,9 +133,11 @@ def sentinel3_type(members: Members) -> str | None:
 def read_olci(path: str | os.PathLike[str]) -> OlciL1bProduct:
     """Open an OLCI Level 1B product: a ``.SEN3`` directory (or its ``xfdumanifest.xml``) or a
     zip archive of one. Its type from the manifest's ``productType`` (else the name); every
-    member checked (``sen3.reader.read_members``). :class:`OlciFormatError` for a Sentinel-3
-    product of another kind (OLCI Level 2, SYNERGY, SLSTR...), :class:`Sen3FormatError` for
-    a missing, truncated or damaged member."""
+    member checked (``sen3.reader.read_members``).
+    :class:`~napari_meris_ortho.errors.OlciFormatError` for a Sentinel-3 product of another
+    kind (OLCI Level 2, SYNERGY, SLSTR...),
+    :class:`~napari_meris_ortho.errors.Sen3FormatError` for a missing, truncated or damaged
+    member."""
     members = Members(path)
     found = sentinel3_type(members) or ""
     product_type = product_type_of(found)

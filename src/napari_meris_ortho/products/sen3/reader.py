@@ -219,10 +219,10 @@ class MerisSen3Product:
         return RADIANCE_FILL
 
     def counts(self, band: int) -> np.ndarray:
-        """Stored uint16 values of ``band`` (1..15), radiance = counts x scaling.radiance[b-1],
-        read-only; no-data pixels (fill, outside valid_min/valid_max, negative) hold
-        ``no_data_count(band)`` (counted in a warning, once per band). Decoded once while a
-        run keeps decoded bands (``kept``)."""
+        """Stored uint16 values of ``band`` (1..n_bands), radiance = counts x
+        scaling.radiance[b-1], read-only; no-data pixels (fill, outside valid_min/valid_max,
+        negative) hold ``no_data_count(band)`` (counted in a warning, once per band). Decoded
+        once while a run keeps decoded bands (``kept``)."""
         n = self.n_bands
         if isinstance(band, bool) or not isinstance(band, int | np.integer):
             raise TypeError(f"band must be an integer 1..{n}, got {band!r}")
@@ -237,7 +237,7 @@ class MerisSen3Product:
         return self.kept.fetch(int(band), partial(self._counts, int(band)))
 
     def prepare_bands(self, bands: Sequence[int]) -> None:
-        """While a run keeps decoded bands: decode ``bands`` (1..15) now, those no other
+        """While a run keeps decoded bands: decode ``bands`` (1..n_bands) now, those no other
         process of the run is decoding first (``KeptBands.prepare``)."""
         self.kept.prepare([int(b) for b in bands if 1 <= int(b) <= self.n_bands], self._decoded)
 
@@ -255,7 +255,7 @@ class MerisSen3Product:
         self.kept.release_pages()
 
     def read_ahead(self, bands: Sequence[int]) -> None:
-        """Start reading ``bands`` (1..15) whole, in order, in the background (bands kept
+        """Start reading ``bands`` (1..n_bands) whole, in order, in the background (bands kept
         already are not; ``reading_pool``: every product's bands in the order asked, several
         at once): a band inflates outside the GIL (``chunks``), so the reading overlaps the
         caller's work (a mapping's prediction/correction, the synthesis of the products
@@ -773,7 +773,7 @@ def _tie_altitude_of_pixels(members: Members, shape: tuple[int, int], df: int, d
     pixels, attrs = _variables(members, GEO_FILE, ["altitude"], image)
     lines = np.minimum(np.arange(shape[0]) * df, image[0] - 1)
     columns = np.arange(shape[1]) * dj
-    (log.info if expected else log.warning)(
+    (log.debug if expected else log.warning)(
         "%s: %s has no tie-point altitude: taken from %s at the tie points",
         members.path.name, TIE_GEO_FILE, GEO_FILE)
     return pixels["altitude"][np.ix_(lines, columns)], attrs["altitude"]
