@@ -136,3 +136,15 @@ def test_flag_baseline_of_a_config():
     assert olci.baseline_of({"processing_baseline": "2.23"}) == "per-band"
     assert olci.baseline_of({"processing_baseline": "2.24"}) == "2.24"
     assert olci.baseline_of({"processing_baseline": "3.01"}) == "2.24"
+
+
+@pytest.mark.parametrize(("override", "message"), [
+    ({"sensor": "MSI"}, "scene sensor must be MERIS or OLCI, not 'MSI'"),
+    ({"sensor": "MERIS"}, "scene resolution EFR is not one of sensor MERIS"),
+    ({"platform": "Envisat"}, "an OLCI scene's platform is S3A or S3B, not 'Envisat'"),
+])
+def test_a_config_naming_another_sensor_is_refused(override, message):
+    from napari_meris_ortho.errors import OptionsError
+
+    with pytest.raises(OptionsError, match=message):
+        resolve_config({"base": "olci-efr-alps", **override})

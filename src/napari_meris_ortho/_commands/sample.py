@@ -41,6 +41,7 @@ def register(subparsers: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from ..bands import Sensor
     from ..progress import tqdm_progress
     from ..simulate import generate_scene, scene_names
     from ..simulate.scene import check_overrides, resolve_config, sensor_of
@@ -58,7 +59,7 @@ def run(args: argparse.Namespace) -> int:
             raise OptionsError("--set: expected a JSON object")
         check_overrides(args.name, over)
         scene = {"base": args.name, **over}
-    if (args.fsg or args.sen3) and sensor_of(resolve_config(scene)) != "MERIS":
+    if (args.fsg or args.sen3) and sensor_of(resolve_config(scene)) is not Sensor.MERIS:
         raise OptionsError(f"--fsg and --sen3 write MERIS products; scene {args.name!r} is an "
                            "OLCI product, which carries its per-pixel geolocation already")
     quiet = getattr(args, "quiet", False)

@@ -18,6 +18,7 @@ import numpy as np
 from numba import njit, prange
 
 from .._atomic import atomic_path
+from ..bands import Sensor
 from ..errors import DemError, OptionsError, OutputError
 from ..geometry.parallax import stored_corrections
 from ..products.olci.layout import EFR, ERR
@@ -41,14 +42,16 @@ log = logging.getLogger(__name__)
 #: bump when the generator changes its output for a given config (part of the cache key)
 GENERATOR_VERSION = 4
 RESOLUTIONS = {
-    # frame time (s), column spacing (m), tie-point spacing DF = DJ, product type
+    # frame time (s), column spacing (m), tie-point spacing DJ (MERIS: DF = DJ; OLCI: DF = 1),
+    # product type
     "FR": (0.044, 260.0, 64, "MER_FR__1P"),
     "RR": (0.176, 1040.0, 16, "MER_RR__1P"),
     "EFR": (EFR.line_interval_s, EFR.column_spacing_m, EFR.samples_per_tie_point, "OL_1_EFR___"),
     "ERR": (ERR.line_interval_s, ERR.column_spacing_m, ERR.samples_per_tie_point, "OL_1_ERR___"),
 }
 #: the sensor of each resolution; OLCI has tie points on every row
-SENSOR_OF_RESOLUTION = {"FR": "MERIS", "RR": "MERIS", "EFR": "OLCI", "ERR": "OLCI"}
+SENSOR_OF_RESOLUTION = {"FR": Sensor.MERIS, "RR": Sensor.MERIS, "EFR": Sensor.OLCI,
+                        "ERR": Sensor.OLCI}
 PLATFORMS = {"Envisat": ENVISAT, "S3A": SENTINEL3, "S3B": SENTINEL3}
 DEFAULTS: dict[str, Any] = {
     "resolution": "FR",
@@ -189,9 +192,13 @@ def _kind_of(have: Any) -> str:
     return "a string" if isinstance(have, str) else type(have).__name__
 
 
-def sensor_of(cfg: dict) -> str:
-    """The sensor of a resolved config: ``MERIS`` (the default) or ``OLCI``."""
-    return str(cfg.get("sensor", "MERIS"))
+def sensor_of(cfg: dict) -> Sensor:
+    """The sensor of a config: ``MERIS`` (without a ``sensor`` key) or ``OLCI``."""
+    name = cfg.get("sensor", Sensor.MERIS)
+    try:
+        return Sensor(name)
+    except ValueError:
+        raise OptionsError(f"scene sensor must be MERIS or OLCI, not {name!r}") from None
 
 
 def _validate(cfg: dict) -> None:
@@ -201,7 +208,7 @@ def _validate(cfg: dict) -> None:
     if SENSOR_OF_RESOLUTION[cfg["resolution"]] != sensor_of(cfg):
         raise OptionsError(f"scene resolution {cfg['resolution']} is not one of sensor "
                            f"{sensor_of(cfg)}")
-    if sensor_of(cfg) == "OLCI" and cfg.get("platform") not in ("S3A", "S3B"):
+    if sensor_of(cfg) is Sensor.OLCI and cfg.get("platform") not in ("S3A", "S3B"):
         raise OptionsError(f"an OLCI scene's platform is S3A or S3B, not {cfg.get('platform')!r}")
     step = RESOLUTIONS[cfg["resolution"]][2]
     cols = int(cfg["columns"])
@@ -298,7 +305,7 @@ def scene_geometry(cfg: dict) -> SceneGeometry:
     return SceneGeometry(orbit=orbit, t0=t0, frame_time=frame_time, spacing=spacing,
                          first_column=int(cfg["first_column"]), lines=int(cfg["lines"]),
                          columns=int(cfg["columns"]), tie_step=step, product_type=ptype,
-                         tie_line_step=1 if sensor_of(cfg) == "OLCI" else 0,
+                         tie_line_step=1 if sensor_of(cfg) is Sensor.OLCI else 0,
                          platform=platform)
 
 
@@ -419,7 +426,7 @@ class SimulatedScene:
         return out.reshape(lon_a.shape)
 
     @property
-    def sensor(self) -> str:
+    def sensor(self) -> Sensor:
         """``MERIS`` or ``OLCI``."""
         return sensor_of(self.config)
 
@@ -596,7 +603,7 @@ def _chunk_sun(geom: SceneGeometry, lines: np.ndarray,
 def band_radiometry(cfg: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Class spectra (4, bands), cloud spectrum and radiance scale factors of the config's
     sensor: MERIS 15 bands (Scaling Factor GADS of Appendix A), OLCI 21 bands."""
-    if sensor_of(cfg) == "OLCI":
+    if sensor_of(cfg) is Sensor.OLCI:
         return (olci.OLCI_SPECTRA, olci.OLCI_CLOUD_SPECTRUM,
                 np.array(olci.SCALE_FACTORS, dtype=np.float64))
     from ..products.n1 import ScalingFactors
@@ -720,7 +727,7 @@ def generate_scene(name_or_config: str | dict, out_dir: str | os.PathLike[str] |
     dem = terrain.height
     if progress is not None:
         progress(10, 100)
-    if sensor_of(cfg) == "OLCI":
+    if sensor_of(cfg) is Sensor.OLCI:
         from .olci_product import write_olci_scene
 
         points = np.empty((3, geom.lines, geom.columns))
