@@ -30,6 +30,13 @@ With ``--sen3``: the scene's ``.SEN3`` product instead (``simulate.geocorrected`
 next to the scene once), opened only (no runs), and the reader's peak allocation
 (``tracemalloc`` around ``read_layers``, outside the timed opens).
 
+With ``--first-open-table OLD_SRC``: the first open of a session, each in a fresh process
+(``viewer.open`` of the N1 until it returns and one event-loop turn ran), with no dock and with
+the Orthorectify dock opened 0.2 s, 1.5 s and 5 s before, ``OPEN_RUNS`` runs each, for this
+source tree beside ``OLD_SRC`` (another checkout's ``src``); then, for each tree, the longest
+stall of the window while the dock warms up (from the dock's opening to the end of its warm-up)
+and one Orthorectify run (time, longest stall, memory). The warm-up is on, as a user has it.
+
 A benchmark, not a test: ``xvfb-run -a python benchmarks/bench_napari.py [--sen3] [--json F]``;
 to compare two versions of the package, run the same command with ``PYTHONPATH`` on each
 source tree. Wall times depend on whatever else the machine runs.
@@ -51,6 +58,13 @@ import psutil
 RUNS = 4
 #: then runs whose layers replace the previous run's (same names: napari removes them)
 RERUNS = 2
+#: fresh processes per situation of the first-open table
+OPEN_RUNS = 3
+#: seconds between the dock's opening and the open, of the table's rows (None: no dock)
+DOCK_BEFORE = (None, 0.2, 1.5, 5.0)
+#: the issue's targets of the first open (s): no dock or a dock opened 0.2 s before, and a dock
+#: opened 1.5 s or more before
+TARGET_UNPREPARED_S, TARGET_PREPARED_S = 1.5, 1.0
 
 
 def _rss_mb() -> float:
@@ -225,7 +239,7 @@ def bench(scene_name: str, sen3: bool = False, store: bool = False,
     out["rss_after_malloc_trim_mb"] = _trimmed_rss_mb()
     # reruns: each run's layers replace the previous run's (napari removes them, then collects)
     reruns = []
-    for _ in range(RERUNS + 1):
+    for _ in range(RERUNS + 1) if RERUNS else ():
         with LoopTurns() as turns:
             t0 = time.perf_counter()
             assert widget.start() is not None, widget.status.value
@@ -240,7 +254,124 @@ def bench(scene_name: str, sen3: bool = False, store: bool = False,
     return out
 
 
+def _warm_up_done() -> bool:
+    """Whether the dock's warm-up has ended (this tree's idle pieces, or an older tree's
+    warm-up thread)."""
+    import sys
+
+    warm = sys.modules.get("napari_meris_ortho._napari._qt.warm")
+    if warm is not None and getattr(warm, "_STARTED", None) is not None:
+        return bool(warm._STARTED.done.is_set())
+    from napari_meris_ortho import warmup
+
+    thread = getattr(warmup, "_STARTED", None)
+    return thread is not None and not thread.is_alive()
+
+
+def first_open(scene_name: str, dock_before: float | None, warm_up_stall: bool = False
+               ) -> dict[str, Any]:
+    """One fresh session: the window up, the dock opened ``dock_before`` s before the N1's
+    first open (None: no dock), the open timed until it returns and one event turn ran; with
+    ``warm_up_stall``, no open: the longest stall from the dock's opening to the end of its
+    warm-up."""
+    import tempfile
+
+    os.environ["NAPARI_CONFIG"] = os.path.join(tempfile.mkdtemp(prefix="bench-napari-"),
+                                               "settings.yaml")
+    from qtpy.QtWidgets import QApplication
+
+    import napari
+    from napari_meris_ortho.simulate.scene import generate_scene
+
+    product = str(generate_scene(scene_name).product_path)
+    viewer = napari.Viewer(show=True)
+    app = QApplication.instance()
+    _spin(app, lambda: False, 1.0)  # the window is up
+    out: dict[str, Any] = {"dock_before_s": dock_before}
+    if warm_up_stall:
+        with LoopTurns() as turns:
+            t0 = time.perf_counter()
+            viewer.window.add_plugin_dock_widget("napari-meris-ortho", "Orthorectify")
+            _spin(app, _warm_up_done, 600.0)
+            out["warm_up_s"] = time.perf_counter() - t0
+        out["warm_up_longest_stall_s"] = turns.longest_gap
+        viewer.close()
+        return out
+    if dock_before is not None:
+        viewer.window.add_plugin_dock_widget("napari-meris-ortho", "Orthorectify")
+        _spin(app, lambda: False, dock_before)
+    t0 = time.perf_counter()
+    viewer.open(product, plugin="napari-meris-ortho")
+    app.processEvents()  # one turn of the event loop
+    out["open_s"] = time.perf_counter() - t0
+    viewer.close()
+    return out
+
+
+def _child(src: str, args: list[str]) -> dict[str, Any]:
+    """This script's figures from a fresh process on the source tree ``src``."""
+    import subprocess
+    import sys
+    import tempfile
+
+    with tempfile.NamedTemporaryFile(suffix=".json") as fh:
+        env = dict(os.environ, PYTHONPATH=os.pathsep.join(
+            [src, os.path.dirname(os.path.abspath(__file__))]))
+        env.pop("MERIS_ORTHO_NO_WARMUP", None)
+        subprocess.run([sys.executable, os.path.abspath(__file__), *args, "--json", fh.name],
+                       env=env, check=True, timeout=1800)
+        with open(fh.name) as result:
+            return dict(json.load(result))
+
+
+def first_open_table(scene_name: str, old_src: str) -> dict[str, Any]:
+    """The first-open table, the warm-up's longest stall and one run, this tree and
+    ``old_src``, each figure from fresh processes."""
+    import napari_meris_ortho
+
+    trees = {"new": os.path.dirname(os.path.dirname(napari_meris_ortho.__file__)),
+             "old": os.path.abspath(old_src)}
+    table: dict[str, Any] = {"trees": trees, "rows": []}
+    for before in DOCK_BEFORE:
+        row: dict[str, Any] = {"dock_before_s": before}
+        for key, src in trees.items():
+            flag = [] if before is None else ["--dock-before", str(before)]
+            row[key] = [_child(src, ["--scene", scene_name, "--first-open", *flag])["open_s"]
+                        for _ in range(OPEN_RUNS)]
+        table["rows"].append(row)
+        _print_row(row)
+    for key, src in trees.items():
+        table[f"{key}_warm_up"] = _child(src, ["--scene", scene_name, "--warm-up-stall"])
+        table[f"{key}_run"] = _child(src, ["--scene", scene_name, "--runs", "1"])
+    return table
+
+
+def _print_row(row: dict[str, Any]) -> None:
+    before = row["dock_before_s"]
+    what = "no dock" if before is None else f"dock opened {before:g} s before"
+    target = TARGET_PREPARED_S if before is not None and before >= 1.5 else TARGET_UNPREPARED_S
+    cells = [f"{min(row[k]):.2f}-{max(row[k]):.2f} s" for k in ("new", "old")]
+    print(f"| {what:<26} | {cells[0]:>13} | {cells[1]:>13} | <= {target:.1f} s |", flush=True)
+
+
+def _print_table(table: dict[str, Any]) -> None:
+    print(f"new: {table['trees']['new']}\nold: {table['trees']['old']}")
+    print(f"| {'first open of a session':<26} | {'new':>13} | {'old':>13} | target   |")
+    print(f"|{'-' * 28}|{'-' * 15}|{'-' * 15}|----------|")
+    for row in table["rows"]:
+        _print_row(row)
+    for key in ("new", "old"):
+        warm, run = table[f"{key}_warm_up"], table[f"{key}_run"]
+        first = run["runs"][0]
+        print(f"{key}: the dock's warm-up took {warm['warm_up_s']:.1f} s, longest stall "
+              f"{warm['warm_up_longest_stall_s']:.3f} s (target <= 0.1 s); a run "
+              f"{first['run_s']:.2f} s, longest stall {first['longest_stall_s']:.3f} s, "
+              f"{run['rss_after_first_run_mb']:.0f} MB after it "
+              f"({run['rss_before_runs_mb']:.0f} MB before)")
+
+
 def main() -> None:
+    global RUNS, RERUNS
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--scene", default="fr-alps")
     parser.add_argument("--sen3", action="store_true",
@@ -252,7 +383,29 @@ def main() -> None:
     parser.add_argument("--synthesis", type=int, default=0, metavar="N",
                         help="the runs: the widget's synthesis of N products of the scene")
     parser.add_argument("--json", help="write the figures to this file")
+    parser.add_argument("--first-open-table", metavar="OLD_SRC",
+                        help="the first-open table of this tree beside OLD_SRC's (module doc)")
+    parser.add_argument("--first-open", action="store_true",
+                        help="one first open of a fresh session (a row's measure)")
+    parser.add_argument("--dock-before", type=float, default=None, metavar="S",
+                        help="with --first-open: open the dock S seconds before")
+    parser.add_argument("--warm-up-stall", action="store_true",
+                        help="the longest stall while the dock warms up")
+    parser.add_argument("--runs", type=int, default=None, metavar="N",
+                        help=f"Orthorectify runs (default {RUNS}), no reruns when given")
     args = parser.parse_args()
+    if args.first_open or args.warm_up_stall or args.first_open_table:
+        if args.first_open_table:
+            out = first_open_table(args.scene, args.first_open_table)
+            _print_table(out)
+        else:
+            out = first_open(args.scene, args.dock_before, args.warm_up_stall)
+        if args.json:
+            with open(args.json, "w") as fh:
+                json.dump(out, fh, indent=1)
+        return
+    if args.runs is not None:
+        RUNS, RERUNS = args.runs, 0
     out = bench(args.scene, args.sen3, args.store, args.open_only, args.synthesis)
     print(f"source: {out['source']}")
     kind = "SEN3" if args.sen3 else "Europe-size synthesis store" if args.store else "N1"

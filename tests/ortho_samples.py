@@ -23,7 +23,7 @@ def terrain(lon, lat):
 
 
 def make_product(path: Path, height: int = 200, width: int = 513, lon0: float = 11.0,
-                 nadir_col: float = 0.0) -> Path:
+                 nadir_col: float = 0.0, first_line_time: dt.datetime | None = None) -> Path:
     """An FR product on the analytic swath; bands 1/2 = line/column, flags = (line+col) % 256."""
     g = analytic_swath(height=height, width=width, lon0=lon0, nadir_col=nadir_col)
     tp = dict(latitude=g.latitude, longitude=(g.longitude + 180.0) % 360.0 - 180.0,
@@ -35,7 +35,7 @@ def make_product(path: Path, height: int = 200, width: int = 513, lon0: float = 
     flags = ((line.astype(np.int64) + col) % 256).astype(np.uint8)
     return write_product(path, product_type="MER_FR__1P", tie_points=tp, counts=counts,
                          flags=flags, detector_index=col.astype(np.int16),
-                         first_line_time=dt.datetime(2003, 9, 21, 9, 23))
+                         first_line_time=first_line_time or dt.datetime(2003, 9, 21, 9, 23))
 
 
 def make_dem(path: Path, lon0: float, lat0: float, lon1: float, lat1: float,

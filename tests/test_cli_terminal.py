@@ -4,6 +4,7 @@ record times print as such instead of raising OverflowError in ``info``."""
 
 from __future__ import annotations
 
+import datetime as dt
 import os
 import subprocess
 import sys
@@ -150,10 +151,45 @@ def test_synthesize_in_a_terminal_shows_the_run_from_the_start(tmp_path):
                           "--bands", "7,13", "--workers", "0", "--elevation", "tiepoints"])
     bars = _bars(raw)
     assert "reading 2 product(s)" in bars
-    assert "orthorectifying 2 product(s), merging tiles:   0%" in bars  # its total at once
+    assert "products merged 0/2:   0%" in bars  # its total at once
+    assert "tasks (tile parts + tile merges)" in bars  # what the bar counts, said
     screen = _screen(raw)
     reports = [line for line in screen if line.startswith("PRODUCT ")]
     assert len(reports) == 2  # the second, of the same name, is reported as already merged
     assert all(r.startswith(f"PRODUCT {p}") for r, p in zip(reports, products, strict=True))
     assert any(line.startswith("synthesis ") and "committed to" in line for line in screen)
     assert not any("%|" in line for line in screen)
+
+
+def test_synthesize_on_workers_shows_its_bar_then_its_log(tmp_path):
+    """On a LocalCluster of 2 workers the bar counts the products merged of n, and the log
+    lines that follow start at column 0 with no bar text, escape or worker chatter in them."""
+    products = [str(make_product(tmp_path / f"p{k}.N1", height=130, width=321, lon0=15.0 + k,
+                                 nadir_col=-800.0,
+                                 first_line_time=dt.datetime(2003, 9, 21 + k, 9, 23)))
+                for k in range(2)]
+    raw = _in_a_terminal(["synthesize", *products, "--out", str(tmp_path / "store"),
+                          "--bands", "7,13", "--workers", "2", "--elevation", "tiepoints"])
+    bars = _bars(raw)
+    assert "products merged 0/2:   0%" in bars
+    assert "products merged 2/2" in bars or "committing the synthesis" in bars
+    screen = [line for line in _screen(raw) if line]
+    reports = [line for line in screen if line.startswith("PRODUCT ")]
+    assert len(reports) == 2
+    committed = [line for line in screen if line.startswith("synthesis ")]
+    assert len(committed) == 1 and "2 product(s) merged" in committed[0]
+    first_log = screen.index(reports[0])
+    assert all("%|" not in line and "tasks" not in line for line in screen[first_log:])
+    assert not any(word in raw for word in ("distributed.", "Traceback", "UserWarning"))
+
+
+def test_export_bar_counts_bands(tmp_path):
+    """export's bar names the band being written and counts bands, not tiles."""
+    prod = make_product(tmp_path / "p.N1", height=130, width=321, lon0=15.0, nadir_col=-800.0)
+    store = tmp_path / "store"
+    _in_a_terminal(["synthesize", str(prod), "--out", str(store), "--bands", "7,13",
+                    "--workers", "0", "--elevation", "tiepoints", "--quiet"])
+    raw = _in_a_terminal(["export", str(store), "-o", str(tmp_path / "b.tif")])
+    bars = _bars(raw)
+    assert "writing band 1 of 2" in bars and " bands [" in bars
+    assert "tiles" not in bars

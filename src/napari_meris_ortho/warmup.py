@@ -7,7 +7,14 @@ every elevation source, sampling method and search method, on a geographic and a
 that the kernels and specialisations a ``meris-ortho map`` uses are compiled once (and the
 COG overview kernel of its output dtypes).
 ``scripts/setup.sh`` runs ``python -m napari_meris_ortho.warmup`` in the background after
-installing; the napari Orthorectify widget starts ``warm_up_in_background()`` when it opens.
+installing.
+
+The napari Orthorectify widget never compiles in its own process: numba's compiler holds the
+GIL for the length of a compilation, and a user opening a product meanwhile would wait for it.
+``kernels_out_of_process`` runs ``warm_up`` in a child process of low priority (it fills
+numba's on-disk cache, or only reads it when it is warm) and returns the specialisations it
+used (``kernel_signatures``); the widget then loads them from the cache one kernel at a time
+(``load_kernel``), each piece a few milliseconds, only in turns when the window is idle.
 """
 
 from __future__ import annotations
@@ -21,6 +28,7 @@ import tempfile
 import threading
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -174,6 +182,61 @@ def stop(child: subprocess.Popen[bytes] | None) -> None:
             child.wait(timeout=5)
 
 
+Signature = tuple[str, str, Any]  # module, kernel name, argument types
+
+
+def kernel_signatures() -> list[Signature]:
+    """Every specialisation of the package's ``cache=True`` kernels compiled (or loaded) in
+    this process so far: (module, name, argument types), in the order of the modules."""
+    from numba.core.dispatcher import Dispatcher
+
+    out: list[Signature] = []
+    for module_name, module in list(sys.modules.items()):
+        if not module_name.startswith("napari_meris_ortho.") or module is None:
+            continue
+        for name, obj in list(vars(module).items()):
+            if (isinstance(obj, Dispatcher) and obj.__module__ == module_name
+                    and numba_cache_index(obj) is not None):
+                out += [(module_name, name, sig) for sig in obj.signatures]
+    return out
+
+
+#: seconds the child of ``kernels_out_of_process`` may take (a cold cache compiles every kernel)
+CHILD_TIMEOUT_S = 900.0
+
+
+def kernels_out_of_process(timeout: float = CHILD_TIMEOUT_S) -> list[Signature]:
+    """``warm_up`` in a child process at the lowest priority (numba's on-disk cache filled, or
+    read when warm), and the specialisations it used (``kernel_signatures``); [] when the child
+    fails. Waiting holds no GIL."""
+    import pickle
+
+    try:
+        proc = subprocess.run([sys.executable, "-m", "napari_meris_ortho.warmup", "--child"],
+                              stdin=subprocess.DEVNULL, capture_output=True, timeout=timeout,
+                              check=True)
+        return list(pickle.loads(proc.stdout))
+    except (OSError, subprocess.SubprocessError, pickle.UnpicklingError, EOFError,
+            ValueError, TypeError, AttributeError, ImportError):
+        return []  # best effort: the first run loads or compiles what it needs
+
+
+def load_kernel(signature: Signature) -> bool:
+    """Load one specialisation from numba's on-disk cache into this process (a few ms); False,
+    doing nothing, when the cache has no file of that kernel (it would compile here, holding
+    the GIL for seconds)."""
+    import importlib
+
+    module_name, name, sig = signature
+    kernel: Any = getattr(importlib.import_module(module_name), name, None)
+    index = None if kernel is None else numba_cache_index(kernel)
+    if kernel is None or index is None or not os.path.exists(index):
+        return False
+    if tuple(sig) not in kernel.overloads:
+        kernel.compile(tuple(sig))
+    return True
+
+
 def warm_up_in_background() -> threading.Thread | None:
     """``warm_up`` once per process in a daemon thread (errors are ignored: a cold cache
     only costs time); nothing when ``MERIS_ORTHO_NO_WARMUP`` is set (tests)."""
@@ -192,10 +255,28 @@ def warm_up_in_background() -> threading.Thread | None:
     return _STARTED
 
 
+def _child() -> None:
+    """``kernels_out_of_process``'s child: ``warm_up`` at the lowest priority, then the
+    pickled ``kernel_signatures`` on stdout (nothing else is written there)."""
+    import pickle
+
+    with contextlib.suppress(OSError):
+        os.nice(19)
+    tune_process()
+    start_numba_without_blas()
+    out = sys.stdout.buffer
+    sys.stdout = sys.stderr  # anything printed meanwhile stays off the pickle's stream
+    warm_up()
+    out.write(pickle.dumps(kernel_signatures()))
+    out.flush()
+
+
 if __name__ == "__main__":
     if sys.argv[1:] == ["--late"]:  # a child of `meris-ortho map`: a process of ours
         tune_process()
         start_numba_without_blas()
         compile_late()
+    elif sys.argv[1:] == ["--child"]:  # a child of the napari widget's warm-up
+        _child()
     else:
         print(f"numba kernels compiled in {warm_up():.1f} s")

@@ -13,7 +13,7 @@ from napari_meris_ortho.products.n1 import read_product, write_product
 
 pytestmark = pytest.mark.slow
 
-STAMP = "2003-09-21 09:23"  # sensing start of the tiny product
+STAMP = "09-21 09:23"  # sensing start of the tiny product
 
 
 def _ortho_widget(viewer):
@@ -65,11 +65,17 @@ def test_status_bar_shows_positive_northing_and_crs(mapped):
     assert "-" not in coords.split("EPSG")[0]
 
 
+def _parallax(viewer):
+    """The run's parallax layer ("parallax ×<the exaggeration drawn> · ...")."""
+    layer, = [x for x in viewer.layers if x.name.startswith("parallax ×")]
+    return layer
+
+
 def test_short_names_full_product_in_metadata_and_reruns_replace(mapped, qtbot, tiny_n1):
     viewer, widget = mapped
     names = [layer.name for layer in viewer.layers]
     for name in (f"ortho RGB 7-5-2 · {STAMP}", f"ortho b7 · {STAMP}", f"ortho b5 · {STAMP}",
-                 f"footprint · {STAMP}", f"facets · {STAMP}", f"parallax ×10 · {STAMP}",
+                 f"footprint · {STAMP}", f"facets · {STAMP}", _parallax(viewer).name,
                  f"iterations · {STAMP}", f"elevation · {STAMP}",
                  f"elevation source · {STAMP}"):
         assert name in names, (name, names)
@@ -86,8 +92,9 @@ def test_short_names_full_product_in_metadata_and_reruns_replace(mapped, qtbot, 
 
 def test_parallax_vectors_legend(mapped):
     viewer, _ = mapped
-    vectors = viewer.layers[f"parallax ×10 · {STAMP}"]
-    assert vectors.metadata["exaggeration"] == 10.0
+    vectors = _parallax(viewer)
+    exaggeration = vectors.metadata["exaggeration"]
+    assert vectors.name == f"parallax ×{exaggeration:g} · {STAMP}" and 0 < exaggeration <= 10
     legend = vectors.metadata["legend"]
     lo, hi = vectors.edge_contrast_limits
     assert legend == f"colour: height {lo:.0f}–{hi:.0f} m (viridis)"
@@ -107,10 +114,14 @@ def test_parallax_vector_spacing_is_automatic_unless_chosen(mapped):
     viewer, widget = mapped
     assert widget.vector_step.value == 0
     assert widget.vector_step.label == "vector every (px, 0 = auto)"
-    vectors = viewer.layers[f"parallax ×10 · {STAMP}"]
+    vectors = _parallax(viewer)
     rgb = viewer.layers[f"ortho RGB 7-5-2 · {STAMP}"]
     shape = (rgb.data[0] if rgb.multiscale else rgb.data).shape[:2]
-    assert vectors.metadata["step"] == max(8, max(shape) // 60)
+    step = vectors.metadata["step"]
+    assert max(8, max(shape) // 60) <= step <= max(8, max(shape) // 10)
+    # no arrow reaches the next tail: the longest under half the spacing
+    longest = float(np.hypot(*np.asarray(vectors.data)[:, 1].T).max())
+    assert longest <= 0.45 * step * vectors.metadata["pixel_size"] * (1 + 1e-9)
 
     fr_alps = OutputGrid("EPSG:32632", 300_000.0, 5_200_000.0, 300.0, 300.0, 2950, 2720)
     assert vector_step_for(fr_alps) == 49

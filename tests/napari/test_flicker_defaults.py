@@ -16,7 +16,7 @@ def test_sample_then_run_pairs_newest_ortho_with_reference(make_napari_viewer, q
     viewer = make_napari_viewer()
     viewer.open_sample("napari-meris-ortho", "fr-small")
     flicker = FlickerWidget(viewer)
-    assert flicker.layer_a.value is viewer.layers["orthorectified b7"]
+    assert flicker.layer_a.value is viewer.layers["ortho b7"]
     assert flicker.layer_b.value is viewer.layers["reference b7"]
 
     ortho = OrthorectifyWidget(viewer)

@@ -16,7 +16,7 @@ def test_screenshot_of_shown_viewer_has_content(make_napari_viewer):
     show_viewer(viewer)
     viewer.open_sample("napari-meris-ortho", "fr-small")
     for layer in viewer.layers:
-        layer.visible = layer.name in ("orthorectified RGB 7-5-2", "footprint")
+        layer.visible = layer.name in ("ortho RGB 7-5-2", "footprint")
     viewer.reset_view()
     shot = viewer.screenshot(canvas_only=True, flash=False)
     assert shot.ndim == 3 and shot.shape[2] == 4 and min(shot.shape[:2]) > 200
@@ -36,10 +36,10 @@ def test_flicker_gif_of_sample(make_napari_viewer, tmp_path):
     show_viewer(viewer)
     viewer.open_sample("napari-meris-ortho", "fr-small")
     widget = FlickerWidget(viewer)
-    widget.layer_a.value = viewer.layers["orthorectified b7"]
+    widget.layer_a.value = viewer.layers["ortho b7"]
     widget.layer_b.value = viewer.layers["reference b7"]
     for layer in viewer.layers:
-        layer.visible = layer.name in ("orthorectified b7", "reference b7")
+        layer.visible = layer.name in ("ortho b7", "reference b7")
     viewer.reset_view()
     out = widget.export_gif(tmp_path / "snap_ortho_anim.gif")
     frames = iio.imread(out, index=None)

@@ -9,7 +9,7 @@ from napari.layers import Vectors
 
 from napari_meris_ortho.products.n1 import read_product
 
-STAMP = " · 2003-09-21 09:23"
+STAMP = " · 09-21 09:23"
 
 
 def _widget(viewer, n1):

@@ -34,12 +34,24 @@ def register(subparsers: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..progress import tqdm_progress
+    from ..progress import stages
     from ..synthesis.export import export_cog
     from ..synthesis.reading import open_synthesis
 
     store = open_synthesis(args.store, at=args.at)
-    with tqdm_progress("tiles", enabled=not args.quiet, unit="tiles") as progress:
+    with stages(enabled=not args.quiet) as bars:
+        if args.layer is not None:  # one plane: written whole, then its overviews
+            bars.show(f"writing the {args.layer} layer")
+            progress = None
+        else:
+            # export_cog counts (k, n + 1) as band k goes to the writer, then (1, 1) when
+            # the COG is complete: the bar counts bands written
+            n = len(dict.fromkeys(args.bands or store.bands))
+            progress = bars.stage(
+                "writing bands", "bands",
+                count=lambda done, total: (n, n) if total == 1 else (done - 1, n),
+                describe=lambda done, total: (f"writing band {done + 1} of {total}"
+                                              if done < total else f"{total} bands written"))
         out = export_cog(store, args.out, bands=args.bands, layer=args.layer, dtype=args.dtype,
                          progress=progress)
     log.info("%s written (snapshot %s)", out, store.snapshot)

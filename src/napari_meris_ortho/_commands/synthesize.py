@@ -103,10 +103,16 @@ def run(args: argparse.Namespace) -> int:
     n = len(args.products)
     with stages(enabled=not args.quiet) as bars:
         bars.show(f"reading {n} product(s)")
-        # a task per piece (a product's part of a tile) and per tile merged
+        # the bar counts tasks: a product's part of a tile orthorectified, a tile merged; its
+        # label the products whose every tile is merged
+        state = {"merged": 0, "of": n}
+
+        def merged(done: int, total: int) -> None:
+            state["merged"], state["of"] = done, total
+
         merge = bars.stage(
-            "orthorectifying and merging", "tasks",
-            describe=lambda done, total: (f"orthorectifying {n} product(s), merging tiles"
+            "products merged", "tasks (tile parts + tile merges)",
+            describe=lambda done, total: (f"products merged {state['merged']}/{state['of']}"
                                           if done < total else "committing the synthesis"))
         result = synthesize(
             args.products, args.out, algorithm=args.algorithm, input=args.input, grid=grid,
@@ -115,7 +121,7 @@ def run(args: argparse.Namespace) -> int:
             options=options, bands=args.bands, reject_bright=args.reject_bright,
             tile=args.tile, progress=merge, workers=0 if args.scheduler else workers,
             scheduler=args.scheduler or None, max_pixels=args.max_pixels, codec=args.codec,
-            keep=args.keep)
+            keep=args.keep, merged=merged)
     if result.snapshot is not None:
         log.info("synthesis %s (%s) committed to %s: %d product(s) merged", result.snapshot,
                  result.algorithm, result.path, len(result.merged))

@@ -102,9 +102,10 @@ def facet_at(grid: np.ndarray, row: float, col: float) -> tuple[int, int] | None
 
 
 def _edge_width(poly: np.ndarray) -> float:
-    """An edge width of about 1/400 of the polygon's extent (world units)."""
+    """A thin edge: about 1/800 of the polygon's extent (world units), a line of one or two
+    screen pixels with the whole scene in view."""
     extent = np.ptp(np.asarray(poly).reshape(-1, 2), axis=0).max()
-    return float(max(extent / 400.0, 1e-9))
+    return float(max(extent / 800.0, 1e-9))
 
 
 def _pixel_centres(frame: OutputGrid, step: int
@@ -164,6 +165,57 @@ def vector_step_for(frame: OutputGrid) -> int:
     return max(MIN_VECTOR_STEP, max(frame.width, frame.height) // VECTORS_ACROSS)
 
 
+#: the longest arrow's share of the spacing of the sampled points. An arrow ends on its point
+#: (the corrected position) and starts at the uncorrected one, so two neighbours' tails are
+#: closer than their points by the difference of their arrows: at most one arrow length when
+#: both point to the satellite's side. At less than half the spacing, the tails stay at least
+#: one longest arrow apart, and no arrow reaches another
+ARROW_ROOM = 0.45
+
+
+def pixel_metres(frame: OutputGrid) -> float:
+    """The smaller ground side of a pixel of ``frame`` (m): a geographic pixel's east-west side
+    at the grid's edge farthest from the equator."""
+    if not frame.is_geographic:
+        return float(min(frame.dx, frame.dy))
+    lat = max(abs(frame.y0), abs(frame.y0 - frame.height * frame.dy))
+    metre = np.deg2rad(1.0) * MEAN_EARTH_RADIUS
+    return float(min(frame.dy * metre, frame.dx * metre * np.cos(np.deg2rad(min(lat, 89.0)))))
+
+
+#: the fewest vectors across the larger side of the grid that the automatic spacing keeps; a
+#: field that would need fewer gets a smaller exaggeration instead (``readable_vectors``)
+MIN_VECTORS_ACROSS = 10
+
+
+def _nice_below(value: float) -> float:
+    """``value`` rounded down to two significant digits (3.478 -> 3.4, 0.4712 -> 0.47)."""
+    power = 10.0 ** (np.floor(np.log10(value)) - 1)
+    return float(np.floor(value / power * (1 + 1e-9)) * power)
+
+
+def readable_vectors(frame: OutputGrid, shift_east: np.ndarray, shift_north: np.ndarray,
+                     exaggeration: float, valid: np.ndarray | None = None
+                     ) -> tuple[int, float]:
+    """The automatic spacing of the parallax vectors (px) and the exaggeration they are drawn
+    with, so that no arrow reaches the next tail (the longest exaggerated shift at most
+    ``ARROW_ROOM`` of the spacing) and no two arrows overlap: ``vector_step_for`` widened as
+    far as ``MIN_VECTORS_ACROSS`` vectors across; when even that spacing is too short for the
+    longest arrow, ``exaggeration`` lowered to a value of two significant digits that fits."""
+    length = np.hypot(np.asarray(shift_east, np.float64), np.asarray(shift_north, np.float64))
+    keep = np.isfinite(length)
+    if valid is not None:
+        keep &= np.asarray(valid, bool)
+    longest = float(length[keep].max()) if keep.any() else 0.0
+    pixel = ARROW_ROOM * pixel_metres(frame)
+    base = vector_step_for(frame)
+    widest = max(base, max(frame.width, frame.height) // MIN_VECTORS_ACROSS)
+    need = int(np.ceil(longest * abs(exaggeration) / pixel))
+    if need <= widest:
+        return max(base, need), exaggeration
+    return widest, min(exaggeration, _nice_below(widest * pixel / longest))
+
+
 def parallax_name(exaggeration: float) -> str:
     """'parallax ×10': the layer name carries the exaggeration of the vectors."""
     return f"parallax ×{exaggeration:g}"
@@ -180,8 +232,11 @@ def parallax_layer_data(frame: OutputGrid, shift_east: np.ndarray, shift_north: 
     lo, hi = (float(h.min()), float(h.max())) if len(h) else (0.0, 1.0)
     hi = hi if hi > lo else lo + 1.0
     pixel = max(frame.dx, frame.dy)
+    longest = float(np.hypot(vectors[:, 1, 0], vectors[:, 1, 1]).max()) if len(h) else 0.0
+    # thin: a twelfth of the spacing, a quarter of the longest arrow at most
+    width = max(min(pixel * step / 12.0, longest / 4.0), pixel / 2.0)
     kwargs = {
-        "name": name or parallax_name(exaggeration), "edge_width": pixel * step / 5.0,
+        "name": name or parallax_name(exaggeration), "edge_width": width,
         "features": {"height": h}, "edge_color": "height", "edge_colormap": "viridis",
         "edge_contrast_limits": (lo, hi), "vector_style": "arrow", "length": 1.0,
         "metadata": {"exaggeration": exaggeration, "step": step, "pixel_size": pixel,
@@ -196,14 +251,17 @@ def geometry_layers(tie_points: Mapping[str, np.ndarray], frame: OutputGrid, suf
                     valid: np.ndarray | None = None, exaggeration: float = 10.0,
                     step: int = 0) -> list[tuple[Any, dict, str]]:
     """Footprint boundary, tie-point facets and (with diagnostics) parallax shift vectors (one
-    every ``step`` px; 0: ``vector_step_for``), named "footprint", "facets", "parallax ×10"
-    followed by ``suffix``."""
-    step = step if step > 0 else vector_step_for(frame)
+    every ``step`` px; 0: ``readable_vectors``, which may lower the exaggeration), named
+    "footprint", "facets", "parallax ×10" followed by ``suffix``."""
     lat, lon = tie_points["latitude"], tie_points["longitude"]
     layers: list[tuple[Any, dict, str]] = [
         facets_layer_data(lat, lon, frame.crs, name=f"facets{suffix}"),
         footprint_layer_data(lat, lon, frame.crs, name=f"footprint{suffix}")]
     if diagnostics and "shift_east_m" in diagnostics:
+        if step <= 0:
+            step, exaggeration = readable_vectors(frame, diagnostics["shift_east_m"],
+                                                  diagnostics["shift_north_m"], exaggeration,
+                                                  valid)
         layers.append(parallax_layer_data(
             frame, diagnostics["shift_east_m"], diagnostics["shift_north_m"],
             diagnostics.get("elevation"), step=step, exaggeration=exaggeration, valid=valid,

@@ -1,9 +1,11 @@
-"""The colour legend of the parallax vectors on the canvas.
+"""The colour key of the selected layer on the canvas.
 
-A vectors layer of parallax shifts (``geometry_layers.parallax_layer_data``) is coloured by the
-terrain height (viridis); its legend (``metadata["legend"]``, the height range) is shown as
-napari's canvas text overlay while such a layer is visible, one line per visible layer:
-"parallax ×10 · 2003-09-21 09:23: colour = height, purple 412 m → yellow 2391 m".
+Every coloured layer of the plugin carries its key in ``metadata["legend"]``: the parallax
+vectors (height, viridis; ``geometry_layers.parallax_layer_data``), iterations, elevation and
+elevation source (``product_layers.diagnostic_layers``), a synthesis's NDVI and count. The key
+of the selected layer, while it is visible, is napari's canvas text overlay in the top left
+corner (napari's notifications come up in the bottom right):
+"parallax ×10 · 09-21 09:23: colour = height, purple 412 m → yellow 2391 m".
 """
 
 from __future__ import annotations
@@ -22,31 +24,37 @@ _SHOWING: weakref.WeakSet[Any] = weakref.WeakSet()
 #: viewers whose canvas still renders the legend's glyphs (``prepare_glyphs``): their legend
 #: waits for it
 _PREPARING: weakref.WeakSet[Any] = weakref.WeakSet()
+#: where the key is drawn: clear of napari's notifications (bottom right)
+LEGEND_POSITION = "top_left"
 #: the ends of napari's viridis colormap, in words
 VIRIDIS_ENDS = ("purple", "yellow")
 
 
 def legend_line(layer: Any) -> str | None:
-    """The legend line of a height-coloured vectors layer, None for any other layer."""
+    """The colour key of a layer of ours ("<name>: <key>"), None for a layer without one; a
+    parallax layer's from its colour limits as they are now."""
     meta = getattr(layer, "metadata", {}) or {}
-    if "legend" not in meta or "exaggeration" not in meta:
+    if "legend" not in meta:
         return None
+    if "exaggeration" not in meta:
+        return f"{layer.name}: {meta['legend']}"
     lo, hi = (float(v) for v in layer.edge_contrast_limits)
     low, high = VIRIDIS_ENDS
     return f"{layer.name}: colour = height, {low} {lo:.0f} m → {high} {hi:.0f} m"
 
 
 def update_legend(viewer: Any) -> None:
-    """Show the legends of the visible parallax layers in the canvas text overlay (hide it when
-    there is none and it shows ours); after the glyphs are ready (``prepare_glyphs``)."""
+    """Show the key of the selected layer, when it is visible and has one, in the canvas text
+    overlay (hide it when there is none and it shows ours); after the glyphs are ready
+    (``prepare_glyphs``)."""
     if viewer in _PREPARING:
         return  # shown at the end of the preparation
-    lines = [line for layer in viewer.layers if layer.visible
-             for line in [legend_line(layer)] if line is not None]
+    active = viewer.layers.selection.active
+    line = legend_line(active) if active is not None and active.visible else None
     overlay = viewer.canvas.overlays.text
-    if lines:
-        overlay.text = "\n".join(lines)
-        overlay.position = "bottom_left"
+    if line is not None:
+        overlay.text = line
+        overlay.position = LEGEND_POSITION
         overlay.font_size = 10
         overlay.color = "white"
         overlay.visible = True
@@ -56,9 +64,9 @@ def update_legend(viewer: Any) -> None:
         _SHOWING.discard(viewer)
 
 
-#: the characters of a legend line (``legend_line``: "parallax ×10 · 2003-09-21 09:23: colour =
+#: the characters of a legend line (``legend_line``: "parallax ×10 · 09-21 09:23: colour =
 #: height, purple 412 m → yellow 2391 m")
-GLYPHS = "0123456789 abcdefghijklmnopqrstuvwxyz:=,.-×·→"
+GLYPHS = "0123456789 abcdefghijklmnopqrstuvwxyz:=,.-×·→()+/NDVIEMR"
 #: glyphs rendered per turn of the event loop (10-20 ms each)
 GLYPHS_PER_TURN = 2
 
@@ -129,7 +137,8 @@ def prepare_glyphs(viewer: Any, step_ms: int = 40,
 
 
 def show_legends(viewer: Any) -> None:
-    """Keep the parallax legend on the canvas as parallax layers come, go, show and hide."""
+    """Keep the selected layer's key on the canvas as layers are selected, come, go, show and
+    hide."""
     if viewer is None or viewer in _WATCHED:
         return
     _WATCHED.add(viewer)
@@ -147,6 +156,7 @@ def show_legends(viewer: Any) -> None:
 
     viewer.layers.events.inserted.connect(watch)
     viewer.layers.events.removed.connect(update)
+    viewer.layers.selection.events.active.connect(update)
     for layer in viewer.layers:
         if legend_line(layer) is not None:
             layer.events.visible.connect(update)

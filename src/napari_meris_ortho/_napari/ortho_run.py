@@ -2,10 +2,10 @@
 product (MERSYN use case 3) or a synthesis (use cases 1-2, handbook section 3.1), and the napari
 layer tuples of the result in the viewer's world frame (``world``).
 
-Layer names are short and distinct: "ortho b7 · 2003-09-21 09:23" (the product's first line
-time), "footprint · ...", "parallax ×10 · ..."; with the per-pixel geolocation
-"ortho b7 (pixel geolocation) · ..."; the full product name and path are in the layer metadata
-("product", "path").
+Layer names are short and distinct: "ortho b7 · 09-21 09:23" (the product's first line
+time without the year: the names fit the layer list), "footprint · ...", "parallax ×10 · ...";
+with the per-pixel geolocation "ortho b7 (pixel geolocation) · ..."; the full product name,
+path and time are in the layer metadata ("product", "path", "acquired") and the tooltip.
 """
 
 from __future__ import annotations
@@ -26,7 +26,14 @@ from ..options import Elevation, MergeRule, OrthoOptions, choices, parse_band_li
 from ..progress import ProgressCallback
 from ..pyramid import level_factors, memory_levels
 from .geometry_layers import geometry_layers
-from .product_layers import band_layers, diagnostic_layers
+from .product_layers import (
+    NDVI_LEGEND,
+    band_layers,
+    count_legend,
+    diagnostic_layers,
+    one_image_shown,
+    zero_transparent,
+)
 from .world import geo_image_kwargs, move_to_frame
 
 #: "mapping" orthorectifies every product on its own; the merge rules build a synthesis
@@ -38,6 +45,8 @@ GEOLOCATIONS = ("tiepoints", "pixel")
 CRS_UTM = "UTM zone of the footprint"
 CRS_GEOGRAPHIC = "geographic (EPSG:4326)"
 CRS_EPSG = "EPSG code"
+#: the CRS, pixel size and grid of an open geocoded layer (CLI ``--like REFERENCE.tif``)
+CRS_LIKE = "like a layer"
 LayerData = tuple[Any, dict[str, Any], str]
 
 
@@ -56,6 +65,8 @@ class RunSettings:
     sampling: str = "nearest"
     crs: str = CRS_UTM
     epsg: int | None = None
+    #: the grid of the layer chosen with ``CRS_LIKE``: outputs on it pixel for pixel
+    like: OutputGrid | None = None
     pixel_size_m: float = 0.0  # 0: the nominal FR 260 m / RR 1040 m
     bands: tuple[int, ...] | None = (7, 5, 2)
     #: location model: "tiepoints" (with the parallax) or "pixel" (FRG/FSG/SEN3 per-pixel
@@ -123,6 +134,9 @@ class RunSettings:
         if missing:
             raise OptionsError(f"N1 product not found: {', '.join(missing)}")
         self.options()
+        if self.crs == CRS_LIKE and self.like is None:
+            raise OptionsError("output CRS 'like a layer' needs a layer: open a GeoTIFF or an "
+                               "orthorectified product and choose it")
         if not self.pixel and self.elevation == Elevation.DEM and not self.dems:
             raise OptionsError("elevation 'dem' needs a DEM: add one, or choose elevation "
                                "'tiepoints' (the product's tie-point heights) or 'none'")
@@ -158,9 +172,12 @@ parse_bands = parse_band_list
 
 
 def output_crs(options: RunSettings, tie_points: Mapping[str, np.ndarray]) -> Any:
-    """The output CRS: the UTM zone of the footprint centre, EPSG:4326 or the given EPSG code."""
+    """The output CRS: the UTM zone of the footprint centre (the default), EPSG:4326, the
+    given EPSG code or the chosen layer's."""
     from ..geometry.grid import footprint_utm, parse_crs
 
+    if options.crs == CRS_LIKE and options.like is not None:
+        return options.like.crs
     if options.crs == CRS_GEOGRAPHIC:
         return parse_crs("EPSG:4326")
     if options.crs == CRS_EPSG:
@@ -176,6 +193,13 @@ def _pixel_size(options: RunSettings, product: Any, crs: Any) -> float:
     metres = options.pixel_size_m or float(
         getattr(getattr(product, "resolution", None), "column_spacing_m", 260.0))
     return pixel_size_for(metres, crs)
+
+
+def name_stamp(product: Any) -> str:
+    """'09-21 09:23': the first line time of a product in its layers' names, without the year
+    (``product_stamp`` in the tooltip and metadata); its file stem if unknown."""
+    stamp = product_stamp(product)
+    return stamp[5:] if getattr(product, "first_line_time", None) is not None else stamp
 
 
 def product_stamp(product: Any) -> str:
@@ -230,8 +254,9 @@ class OrthoRun:
 
 def _item(product: Any, prefix: str = "ortho", **values: Any) -> dict[str, Any]:
     meta = {"product": getattr(product, "product_name", ""), "path": str(product.path),
-            "product_type": str(getattr(product, "product_type", "")).strip("_")}
-    return {"prefix": prefix, "suffix": f" · {product_stamp(product)}", "meta": meta,
+            "product_type": str(getattr(product, "product_type", "")).strip("_"),
+            "acquired": product_stamp(product)}
+    return {"prefix": prefix, "suffix": f" · {name_stamp(product)}", "meta": meta,
             "tie_points": product.tie_points, "bands": {}, "extra": [], "valid": None,
             "diagnostics": {}, "stats": {}, **values}
 
@@ -259,7 +284,8 @@ def _run_mapping(options: RunSettings, progress: ProgressCallback | None) -> Ort
             if progress is not None:
                 progress(k * 1000 + int(1000 * done / max(total, 1)), n * 1000)
 
-        grid = product_grid(product, crs, _pixel_size(options, product, crs))
+        grid = options.like if options.crs == CRS_LIKE and options.like is not None else \
+            product_grid(product, crs, _pixel_size(options, product, crs))
         ante = precompute(product, grid, options.dem_list, options=opts, progress=part,
                           hold_bands=True)  # the layers hold every band (``result``)
         warnings += ante.stats.gap_warnings()
@@ -271,7 +297,7 @@ def _run_mapping(options: RunSettings, progress: ProgressCallback | None) -> Ort
         result = ante.result()
         # the model after the band ("ortho b7 (pixel geolocation) · ..."): names differ within
         # the width the layer list shows, and differ from the tie-point run's
-        extra = {"suffix": f" (pixel geolocation) · {product_stamp(product)}"} \
+        extra = {"suffix": f" (pixel geolocation) · {name_stamp(product)}"} \
             if options.pixel else {}
         items.append(_item(product, bands=result.bands, grid=result.grid,
                            valid=result.valid, diagnostics=result.diagnostics,
@@ -314,6 +340,8 @@ def _run_synthesis(options: RunSettings, progress: ProgressCallback | None) -> O
         crs = output_crs(options, products[0].tie_points)
         grid_options = {"crs": crs, "pixel_size": _pixel_size(options, products[0], crs),
                         "bands": options.bands}  # an update keeps its store's bands
+        if options.crs == CRS_LIKE and options.like is not None:
+            grid_options.update(grid=options.like, crs=None, pixel_size=None)
     temporary = options.output is None and options.input_store is None
     out = (Path(options.output) if options.output is not None
            else Path(options.input_store) if options.input_store is not None
@@ -362,11 +390,13 @@ def _synthesis_item(path: Path, products: list[Any]) -> dict[str, Any]:
         extra.append((levels if len(levels) > 1 else ndvi, geo_image_kwargs(
             grid, name=f"{prefix} NDVI", colormap="RdYlGn", contrast_limits=(-1.0, 1.0),
             visible=False, multiscale=len(levels) > 1,
-            metadata={"units": "NDVI (band 13 - band 7) / (band 13 + band 7)"}), "image"))
+            metadata={"units": "NDVI (band 13 - band 7) / (band 13 + band 7)",
+                      "legend": NDVI_LEGEND}), "image"))
+    top = float(max(int(count.max()), 1))
     extra.append((count, geo_image_kwargs(
-        grid, name=f"{prefix} count", colormap="viridis", visible=False,
-        contrast_limits=(0.0, float(max(int(count.max()), 1))),
-        metadata={"units": "products"}), "image"))
+        grid, name=f"{prefix} count", colormap=zero_transparent("viridis", top), visible=False,
+        contrast_limits=(0.0, top),
+        metadata={"units": "products", "legend": count_legend(top)}), "image"))
     return {"prefix": prefix, "suffix": "", "meta": {"synthesis": str(path),
                                                      "algorithm": algorithm,
                                                      "window": list(window)},
@@ -376,7 +406,8 @@ def _synthesis_item(path: Path, products: list[Any]) -> dict[str, Any]:
 
 
 def run_layers(run: OrthoRun, world: OutputGrid | None = None) -> list[LayerData]:
-    """napari layer tuples of a run: bands, diagnostics and geometry, in the world frame;
+    """napari layer tuples of a run: bands, diagnostics and geometry, in the world frame, the
+    newest image alone visible and the geometry above (``one_image_shown``);
     rasters bigger than ``MAX_LEVEL_SIDE`` multiscale (``multiscale_layer``).
 
     ``world``: the viewer's frame; results in another CRS are moved into it (reprojected).
@@ -390,7 +421,7 @@ def run_layers(run: OrthoRun, world: OutputGrid | None = None) -> list[LayerData
             item_layers = [move_to_frame(layer, frame, world) for layer in item_layers]
         key = run_key(item)
         layers += [_tagged(multiscale_layer(layer), key) for layer in item_layers]
-    return layers
+    return one_image_shown(layers)
 
 
 #: layer metadata key: the product (or synthesis store) a run's layer shows
@@ -471,6 +502,7 @@ def _item_layers(item: dict[str, Any], frame: OutputGrid, opts: RunSettings) -> 
     return layers
 
 
-__all__ = ["ALGORITHMS", "CRS_EPSG", "CRS_GEOGRAPHIC", "CRS_UTM", "GEOLOCATIONS", "Cancelled",
+__all__ = ["ALGORITHMS", "CRS_EPSG", "CRS_GEOGRAPHIC", "CRS_LIKE", "CRS_UTM", "GEOLOCATIONS",
+           "Cancelled",
            "OrthoRun", "RunSettings", "output_crs", "parse_bands", "run_layers",
            "run_orthorectify"]

@@ -4,7 +4,7 @@ source), all placed in the world frame (``world``)."""
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
@@ -14,15 +14,37 @@ from ..geometry.grid import OutputGrid
 from .world import geo_image_kwargs
 
 QUICKLOOK_BANDS = (7, 5, 2)
+#: a band's short label in layer names: "b7" for MERIS band 7; a sensor whose bands are named
+#: otherwise gives its own function (an OLCI product: "Oa08")
+BandLabel = Callable[[int], str]
+
+
+def meris_band_label(band: int) -> str:
+    """'b7': MERIS band 7 in a layer name."""
+    return f"b{band}"
+
+
+def one_image_shown(layers: list[tuple[Any, dict, str]]) -> list[tuple[Any, dict, str]]:
+    """The first view of a set of layers: only the last visible image (the newest result)
+    stays visible, every other image and labels layer hidden, ready to toggle or flicker;
+    geometry layers (vectors) untouched, above the images."""
+    shown = [k for k, (_, kwargs, kind) in enumerate(layers)
+             if kind == "image" and kwargs.get("visible", True)]
+    for k, (_, kwargs, kind) in enumerate(layers):
+        if kind in ("image", "labels") and (not shown or k != shown[-1]):
+            kwargs["visible"] = False
+    images = [layer for layer in layers if layer[2] != "vectors"]
+    return images + [layer for layer in layers if layer[2] == "vectors"]
 
 
 def band_layers(bands: dict[int, np.ndarray], frame: OutputGrid, prefix: str,
                 meta: dict[str, Any] | None = None, valid: np.ndarray | None = None,
-                suffix: str = "") -> list[tuple[Any, dict, str]]:
+                suffix: str = "", label: BandLabel = meris_band_label
+                ) -> list[tuple[Any, dict, str]]:
     """Image layers of radiance bands on ``frame``: an RGB 7-5-2 quick-look when those bands
     are present ("<prefix> RGB 7-5-2<suffix>"), then one grey layer per band
-    ("<prefix> b7<suffix>", background 0), hidden under the quick-look; without one, the grey
-    layer of the first band given is shown."""
+    ("<prefix> b7<suffix>", ``label`` naming the band; background 0), hidden under the
+    quick-look; without one, the grey layer of the first band given is shown."""
     layers: list[tuple[Any, dict, str]] = []
     base = dict(meta or {})
     limits = {b: contrast_limits(bands[b]) for b in bands}
@@ -36,11 +58,45 @@ def band_layers(bands: dict[int, np.ndarray], frame: OutputGrid, prefix: str,
                        "image"))
     for b in sorted(bands):
         data = np.asarray(bands[b])
-        kwargs = geo_image_kwargs(frame, name=f"{prefix} b{b}{suffix}", colormap="gray",
+        kwargs = geo_image_kwargs(frame, name=f"{prefix} {label(b)}{suffix}", colormap="gray",
                                   contrast_limits=limits[b],
                                   metadata=dict(base, band=b), visible=b == shown)
         layers.append((data, kwargs, "image"))
     return layers
+
+
+#: the colour key of an NDVI layer (RdYlGn over -1..1)
+NDVI_LEGEND = "NDVI (band 13 - band 7) / (band 13 + band 7), red -1 → yellow 0 → green +1"
+
+
+def zero_transparent(name: str, top: float) -> Any:
+    """napari colormap ``name`` over contrast limits (0, ``top``) with 0 transparent: a count
+    layer's background outside every footprint shows the layers below, not a colour."""
+    import numpy as np
+    from napari.utils.colormaps import Colormap, ensure_colormap
+
+    colors = np.asarray(ensure_colormap(name).colors, np.float32)
+    edge = min(0.5 / max(top, 1.0), 0.5)  # half a count above 0
+    controls = np.concatenate([[0.0], edge + (1.0 - edge) * np.linspace(0.0, 1.0, len(colors))])
+    return Colormap(colors=np.vstack([[0.0, 0.0, 0.0, 0.0], colors]), controls=controls,
+                    name=f"{name} (0 transparent)")
+
+
+def count_legend(top: float, low: str = "dark purple 1", high: str = "yellow",
+                 none: str = "; none: transparent") -> str:
+    """The colour key of a count layer: the number of products with a valid pixel."""
+    return f"products with a valid pixel, {low} → {high} {top:.0f}{none}"
+
+
+#: colours of the DEMs in the elevation-source layer, in the order they are tried (then again)
+DEM_COLOURS = ("orange", "deepskyblue", "magenta", "lime", "yellow")
+
+
+def source_colours(n_dems: int) -> dict[int, str]:
+    """Label -> colour of the elevation-source layer: the DEMs in ``DEM_COLOURS``, the tie
+    points red, none transparent."""
+    colours = {k + 1: DEM_COLOURS[k % len(DEM_COLOURS)] for k in range(n_dems)}
+    return {0: "transparent", **colours, n_dems + 1: "red"}
 
 
 def elevation_source_features(dem_names: Sequence[str]) -> dict[str, list[Any]]:
@@ -54,23 +110,42 @@ def diagnostic_layers(diagnostics: dict[str, np.ndarray], frame: OutputGrid, suf
     """Iteration-count, elevation and elevation-source images of an OrthoResult (section 3.2,
     Appendix B statistics), named "iterations", "elevation", "elevation source" + ``suffix``.
     Elevation source codes: 0..n-1 DEM index, -1 tie points, -2 none; shown as labels 1..n for
-    the DEMs, n+1 tie points, 0 none, with the DEM names as features (status bar)."""
+    the DEMs, n+1 tie points, 0 none, with the DEM names as features (status bar). Outside the
+    footprint (iterations -1) every layer is transparent (NaN, label 0), not a colour of its
+    scale; each carries its colour key (``metadata["legend"]``, shown by ``legend``)."""
     layers: list[tuple[Any, dict, str]] = []
+    outside = None
     if "iterations" in diagnostics:
-        it = np.asarray(diagnostics["iterations"]).astype(np.int16)
+        raw = np.asarray(diagnostics["iterations"])
+        outside = raw < 0
+        it = np.where(outside, np.nan, raw).astype(np.float32)
+        top = float(max(int(raw.max()), 1))
         layers.append((it, geo_image_kwargs(
             frame, name=f"iterations{suffix}", colormap="turbo", visible=False,
-            contrast_limits=(-1.0, float(max(int(it.max()), 1)))), "image"))
+            contrast_limits=(0.0, top), metadata={"legend": (
+                f"prediction/correction iterations, dark blue 0 → dark red {top:.0f} "
+                "(turbo)")}), "image"))
     if "elevation" in diagnostics:
-        h = np.asarray(diagnostics["elevation"], np.float32)
+        h = np.array(diagnostics["elevation"], np.float32)
+        if outside is not None:
+            h[outside] = np.nan
+        lo, hi = contrast_limits(h, None)
         layers.append((h, geo_image_kwargs(
             frame, name=f"elevation{suffix}", colormap="gist_earth", visible=False,
-            contrast_limits=contrast_limits(h, None), metadata={"units": "m"}), "image"))
+            contrast_limits=(lo, hi), metadata={"units": "m", "legend": (
+                f"height of the output points, dark blue {lo:.0f} m → white {hi:.0f} m "
+                "(gist_earth)")}), "image"))
     if "elevation_source" in diagnostics:
         src = np.asarray(diagnostics["elevation_source"]).astype(np.int16)
         n = len(dem_names)
         labels = np.where(src >= 0, src + 1, np.where(src == -1, n + 1, 0)).astype(np.uint8)
+        colours = source_colours(n)
+        names = elevation_source_features(dem_names)["source"]
+        key = ", ".join(f"{colours[k]} {name}" for k, name in enumerate(names) if k)
         layers.append((labels, geo_image_kwargs(
-            frame, name=f"elevation source{suffix}", visible=False, opacity=0.5,
-            features=elevation_source_features(dem_names)), "labels"))
+            frame, name=f"elevation source{suffix}", visible=False, opacity=0.6,
+            features=elevation_source_features(dem_names),
+            colormap={None: "transparent", 0: "transparent", **{
+                k: c for k, c in colours.items() if k}},
+            metadata={"legend": f"heights from: {key}; none: transparent"}), "labels"))
     return layers

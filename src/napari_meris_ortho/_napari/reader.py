@@ -357,7 +357,7 @@ def _n1_layer_data(path: str | Path, frame: OutputGrid | None
                    ) -> tuple[list[LayerData], str | None]:
     """``n1_layers``'s layers and the placement's warning (None when its fit is good); no Qt."""
     from ..products.open import read_product
-    from .ortho_run import product_stamp
+    from .ortho_run import name_stamp
 
     try:
         product = read_product(path)
@@ -366,7 +366,7 @@ def _n1_layer_data(path: str | Path, frame: OutputGrid | None
     except (OSError, ValueError) as exc:
         raise N1FormatError(path, str(exc)) from None
     meta = n1_metadata(product)
-    suffix = f" · {product_stamp(product)}"
+    suffix = f" · {name_stamp(product)}"
     place, warning = _placement(product, frame, meta)
     band_axis = {"affine": _with_band_axis(place["affine"]), "units": ("pixel", *place["units"]),
                  "axis_labels": (BAND_AXIS, *place["axis_labels"])}

@@ -38,7 +38,7 @@ from .geometry_layers import geometry_layers
 from .layout import frame_layers
 from .memory import collections_paused, short_collections
 from .ortho_run import multiscale_layer
-from .product_layers import band_layers
+from .product_layers import band_layers, one_image_shown
 from .reader import meris_band_of
 from .world import current_viewer, geo_image_kwargs
 
@@ -131,13 +131,16 @@ def sample_layers(sample: SampleScene) -> list[LayerData]:
     layers.append((dem, geo_image_kwargs(frame, name="DEM", colormap="gist_earth",
                                          contrast_limits=contrast_limits(dem, None),
                                          metadata={"units": "m"}, visible=False), "image"))
+    source = {"path": str(scene.product_path)}  # the flicker's GIF goes beside it
     layers += band_layers(sample.uncorrected, frame, "uncorrected",
-                          {"elevation": "none"}, sample.uncorrected[7] > 0)
-    layers += band_layers(sample.orthorectified, frame, "orthorectified",
-                          {"elevation": "dem"}, sample.valid)
+                          {"elevation": "none", **source}, sample.uncorrected[7] > 0)
+    layers += band_layers(sample.orthorectified, frame, "ortho",
+                          {"elevation": "dem", **source}, sample.valid)
     layers += geometry_layers(sample.tie_points, frame, "", sample.diagnostics,
                               valid=sample.valid, exaggeration=10.0)
-    return [multiscale_layer(layer) for layer in layers]  # big rasters as pyramids, as a run's
+    # one image shown (the orthorectified quick-look), the geometry above; big rasters as
+    # pyramids, as a run's
+    return [multiscale_layer(layer) for layer in one_image_shown(layers)]
 
 
 def _napari_progress(name: str) -> tuple[Any, ProgressCallback]:
@@ -157,11 +160,13 @@ def _make(name: str) -> list[LayerData]:
     built in the background (``SampleLoader``) and a placeholder layer is returned at once;
     from a script or a test (no event loop running yet) the layers are built here."""
     from .._process import unit_registry_from_disk
+    from .legend import show_legends
     from .status import show_map_coordinates
 
     unit_registry_from_disk()  # napari's units, before its first layer (the placeholder)
     viewer = current_viewer()
     show_map_coordinates(viewer)
+    show_legends(viewer)  # the key of the selected layer
     if viewer is not None and _event_loop_running():
         return [SampleLoader(name, viewer).placeholder()]
     bar, update = _napari_progress(name)

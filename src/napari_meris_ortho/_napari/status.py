@@ -36,6 +36,27 @@ def map_position(world_row: float, world_col: float, geographic: bool, label: st
     return f"E {fixed(x, 0)} m, N {fixed(y, 0)} m ({label})"
 
 
+def source_text(layer: Any) -> str:
+    """The layer list's tooltip of a layer of ours: its name, then the product (or store) it
+    shows and when that was acquired, which the short name leaves out."""
+    meta = getattr(layer, "metadata", None) or {}
+    lines = [str(layer.name)]
+    what = meta.get("product") or meta.get("synthesis") or meta.get("path")
+    if what:
+        lines.append(str(what))
+    if meta.get("acquired"):
+        lines.append(f"acquired {meta['acquired']}")
+    return "\n".join(lines)
+
+
+def wrap_tooltip(layer: Any) -> None:
+    """The layer list's tooltip of ``layer`` (napari's ``get_source_str``): ``source_text``
+    when the layer names a product or store; napari's own otherwise."""
+    meta = getattr(layer, "metadata", None) or {}
+    if any(meta.get(key) for key in ("product", "synthesis", "acquired")):
+        layer.get_source_str = lambda: source_text(layer)
+
+
 def wrap_status(layer: Any) -> None:
     """Replace ``layer.get_status`` by one reporting map coordinates (world layers only).
     Cheap and thread-free: a run wraps its layers in its worker, before their insertion."""

@@ -13,6 +13,7 @@ from ..display import contrast_limits
 from ..products.n1.format import APPENDIX_A_WAVELENGTHS
 from ..synthesis import store as st
 from ..synthesis.reading import DecodedLayer, DecodedStack, SynthesisStore, open_synthesis
+from .product_layers import NDVI_LEGEND, count_legend
 from .status import BAND_AXIS
 from .world import geo_image_kwargs
 
@@ -112,6 +113,9 @@ def store_layers(path: str | Path, at: str | None = None) -> list[LayerData]:
         ndvi = name == "ndvi"  # as the widget shows it
         kwargs.update(colormap="RdYlGn" if ndvi else "gray", visible=name == top,
                       contrast_limits=(-1.0, 1.0) if ndvi else limits[name])
+        if ndvi or name == "count":
+            key = NDVI_LEGEND if ndvi else count_legend(limits[name][1], "black 0", "white", "")
+            kwargs["metadata"] = {**kwargs["metadata"], "legend": key}
         layers.append((levels if len(levels) > 1 else levels[0], kwargs, "image"))
     return layers
 

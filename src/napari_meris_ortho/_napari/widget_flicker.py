@@ -144,8 +144,23 @@ def layer_band(layer: Any) -> int | None:
     return int(found.group(1)) if found else None
 
 
+#: the default name of the flicker's GIF
+GIF_NAME = "flicker_anim.gif"
+
+
+def data_directory(layer: Any) -> Path | None:
+    """The directory of the file a layer shows (its product, store, GeoTIFF or the sample's
+    scene), None when nothing on disk is behind it."""
+    meta = getattr(layer, "metadata", {}) or {}
+    path = meta.get("path") or meta.get("synthesis") or getattr(
+        getattr(layer, "source", None), "path", None)
+    if not path:
+        return None
+    return Path(str(path)).expanduser().absolute().parent
+
+
 def is_ortho(layer: Any) -> bool:
-    """An orthorectified radiance band: "ortho b7 · ..." (widget), "orthorectified b7" (sample),
+    """An orthorectified radiance band: "ortho b7 · ..." (widget), "ortho b7" (sample),
     a synthesis's band (the widget's or an opened store's: metadata "synthesis")."""
     from napari.layers import Image
 
@@ -222,9 +237,10 @@ class FlickerWidget(Container):
         self.cycles = SpinBox(label="GIF cycles", value=2, min=1, max=50,
                               tooltip="A/B cycles in the exported GIF")
         self.gif_path = FileEdit(label="GIF file", mode=FileDialogMode.OPTIONAL_FILE,
-                                 filter="*.gif", value=Path.home() / "flicker_anim.gif",
-                                 tooltip="animated GIF to write (default in your home "
-                                         "directory, not wherever napari was started)")
+                                 filter="*.gif", value=Path.home() / GIF_NAME,
+                                 tooltip="animated GIF to write (default: beside the data "
+                                         "of layer A; without a file behind it, in your "
+                                         "home directory)")
         self.export_button = PushButton(text="Export GIF", tooltip="write the flicker as a GIF")
         self.disparity_button = PushButton(
             text="Measure disparity", tooltip="ZNCC disparity of B against A (section 4.6), "
@@ -248,6 +264,10 @@ class FlickerWidget(Container):
         self.stop_button.changed.connect(self.stop)
         self.rate.changed.connect(self._set_interval)
         self.export_button.changed.connect(self._export_clicked)
+        self._gif_chosen = False  # the user's own GIF path: kept whatever A becomes
+        self._gif_default = Path.home() / GIF_NAME
+        self.gif_path.changed.connect(self._gif_changed)
+        self.layer_a.changed.connect(self._gif_beside_a)
         self.disparity_button.changed.connect(self._disparity_clicked)
         viewer.layers.events.inserted.connect(self._refresh_choices)
         viewer.layers.events.removed.connect(self._refresh_choices)
@@ -369,6 +389,18 @@ class FlickerWidget(Container):
         self.toggle()
 
     # ---------------------------------------------------------------- GIF
+    def _gif_changed(self, value: Any) -> None:
+        if isinstance(value, str | Path) and Path(value) != self._gif_default:
+            self._gif_chosen = True
+
+    def _gif_beside_a(self, _value: Any = None) -> None:
+        """The default GIF file beside the data of layer A (until the user chooses one)."""
+        place = None if self.layer_a.value is None else data_directory(self.layer_a.value)
+        if self._gif_chosen or place is None:
+            return
+        self._gif_default = place / GIF_NAME
+        self.gif_path.value = self._gif_default
+
     def export_gif(self, path: str | Path | None = None) -> Path:
         """Export the flicker of the chosen pair as an animated GIF."""
         a, b = self._pair()

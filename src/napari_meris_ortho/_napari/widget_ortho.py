@@ -67,6 +67,7 @@ from .ortho_run import (
     ALGORITHMS,
     CRS_EPSG,
     CRS_GEOGRAPHIC,
+    CRS_LIKE,
     CRS_UTM,
     GEOLOCATIONS,
     MAPPING,
@@ -81,13 +82,18 @@ from .ortho_run import (
 )
 from .settings import remember
 from .status import show_map_coordinates
-from .world import viewer_frame
+from .world import source_frame, viewer_frame
 from .writer import layers_reading
 
 if TYPE_CHECKING:
     import napari
 
 DEM_FILE, DEM_DIR = "GeoTIFF / SRTM30 tile", "GETASSE30 directory"
+#: what the CRS choices mean, the default first
+CRS_TOOLTIP = ("coordinate system of the output grid. Default: the UTM zone of the footprint's "
+               "centre, in metres as the viewer's world (the CLI's map defaults to geographic "
+               "EPSG:4326, as MERSYN). 'like a layer': the CRS, pixel size and grid of an open "
+               "GeoTIFF or orthorectified layer")
 #: seconds to wait for a cancelled job when the viewer closes
 CLOSE_TIMEOUT_S = 60.0
 
@@ -95,11 +101,17 @@ __all__ = ["CRS_EPSG", "CRS_GEOGRAPHIC", "CRS_UTM", "Cancelled", "RunSettings", 
            "OrthorectifyWidget", "output_crs", "parse_bands", "run_layers", "run_orthorectify"]
 
 
-def warm_up_in_background() -> None:
-    """Compile the engine's numba kernels in a background thread (``warmup``)."""
-    from ..warmup import warm_up_in_background as start
+def _start_warm_up(widget: OrthorectifyWidget) -> None:
+    """The dock's warm-up in idle turns, held back while a run goes on (``warm``)."""
+    from ._qt.warm import start_warm_up
 
-    start()
+    ref = weakref.ref(widget)
+
+    def paused() -> bool:
+        alive = ref()
+        return alive is None or alive.running or bool(alive._queue)
+
+    start_warm_up(paused, widget.native)
 
 
 def _import_engine() -> None:
@@ -152,7 +164,7 @@ def build_layers(options: RunSettings, report: Any, check: Any, world: Any,
     the insertions."""
     from napari.layers import Layer
 
-    from .status import wrap_status
+    from .status import wrap_status, wrap_tooltip
 
     run = run_orthorectify(options, report)
     layers = []
@@ -161,6 +173,7 @@ def build_layers(options: RunSettings, report: Any, check: Any, world: Any,
             check()
             layer = Layer.create(data, kwargs, kind)
             wrap_status(layer)  # here, not at its insertion on the Qt thread
+            wrap_tooltip(layer)
             layers.append(layer)
     run.release()
     if not any(layer.name in replacing for layer in layers):
@@ -228,8 +241,14 @@ class OrthorectifyWidget(ScrolledForm):
         self.sampling = ComboBox(label="sampling", choices=choices(Sampling),
                                  value=Sampling.NEAREST.value,
                                  tooltip="resampling of the product at the antecedents")
-        self.crs = ComboBox(label="output CRS", choices=[CRS_UTM, CRS_GEOGRAPHIC, CRS_EPSG],
-                            value=CRS_UTM, tooltip="coordinate system of the output grid")
+        self.crs = ComboBox(label="output CRS", choices=[CRS_UTM, CRS_GEOGRAPHIC, CRS_EPSG,
+                                                         CRS_LIKE],
+                            value=CRS_UTM, tooltip=CRS_TOOLTIP)
+        self.like = ComboBox(label="like layer", choices=self._like_choices, visible=False,
+                             nullable=True,
+                             tooltip="an open GeoTIFF or orthorectified layer: its CRS, pixel "
+                                     "size and grid (as the CLI's --like REFERENCE.tif), so "
+                                     "outputs align with it pixel for pixel")
         self.epsg = SpinBox(label="EPSG code", value=4326, min=1024, max=999999, visible=False,
                             tooltip="EPSG code of the output CRS")
         self.pixel_size = FloatSpinBox(label="pixel size (m, 0 = nominal)", value=0.0, min=0.0,
@@ -257,7 +276,7 @@ class OrthorectifyWidget(ScrolledForm):
         super().__init__(widgets=[
             self.products, self.dem_kind, self.dem_path, self.dem_add, self.dem_list,
             dem_buttons, self.elevation, self.geolocation, self.algorithm, self.input_store,
-            self.keep, self.parallax, self.search, self.sampling, self.crs, self.epsg,
+            self.keep, self.parallax, self.search, self.sampling, self.crs, self.epsg, self.like,
             self.pixel_size, self.bands, self.geometry, self.exaggeration, self.vector_step,
             self.output,
         ], footer=[self.mode, self.run_button, self.cancel_button, self.progress_bar,
@@ -295,13 +314,15 @@ class OrthorectifyWidget(ScrolledForm):
         for widget in (self.products, self.algorithm, self.input_store, self.output):
             widget.changed.connect(self._show_mode)
         self._show_mode()
-        self.epsg.visible = self.crs.value == CRS_EPSG
+        self._crs_changed(self.crs.value)
         self.dem_kind.changed.connect(self._dem_kind_changed)
         self.dem_add.changed.connect(lambda _=None: self.add_dem(self.dem_path.value))
         self.dem_remove.changed.connect(self._remove_selected)
         self.dem_up.changed.connect(lambda _=None: self._move_selected(-1))
         self.dem_down.changed.connect(lambda _=None: self._move_selected(+1))
-        self.crs.changed.connect(lambda v: setattr(self.epsg, "visible", v == CRS_EPSG))
+        self.crs.changed.connect(self._crs_changed)
+        for event in (viewer.layers.events.inserted, viewer.layers.events.removed):
+            event.connect(lambda _e=None: self.like.reset_choices())
         self.run_button.changed.connect(lambda _=None: self.start())
         self.cancel_button.changed.connect(lambda _=None: self.cancel())
         self.native.destroyed.connect(self._shutdown)
@@ -319,7 +340,25 @@ class OrthorectifyWidget(ScrolledForm):
         in_turns([_while_open(this, OrthorectifyWidget._prepare_glyphs),
                   *dash_pattern_steps(),
                   _while_open(this, OrthorectifyWidget._freeze_when_idle),
-                  _while_open(this, lambda _w: warm_up_in_background())])
+                  _while_open(this, _start_warm_up)])
+
+    # ---------------------------------------------------------------- output grid
+    def _crs_changed(self, value: str) -> None:
+        self.epsg.visible = value == CRS_EPSG
+        self.like.visible = value == CRS_LIKE
+        self.pixel_size.enabled = value != CRS_LIKE  # the layer's pixel size
+
+    def _like_choices(self, _widget: Any = None) -> list[tuple[str, str]]:
+        """The layers an output can align with: geocoded rasters (read again at every
+        ``reset_choices``)."""
+        return [(layer.name, layer.name) for layer in self.viewer.layers
+                if source_frame(layer) is not None]
+
+    def like_grid(self) -> Any:
+        """The grid of the layer chosen in "like layer" (None: none chosen or gone)."""
+        name = self.like.value
+        layer = next((la for la in self.viewer.layers if la.name == name), None)
+        return None if layer is None else source_frame(layer)
 
     # ---------------------------------------------------------------- DEM list
     @property
@@ -408,6 +447,7 @@ class OrthorectifyWidget(ScrolledForm):
             algorithm=self.algorithm.value, parallax=self.parallax.value,
             search=self.search.value, input_store=store, keep=int(self.keep.value),
             sampling=self.sampling.value, crs=self.crs.value, epsg=int(self.epsg.value),
+            like=self.like_grid() if self.crs.value == CRS_LIKE else None,
             pixel_size_m=float(self.pixel_size.value), bands=parse_bands(self.bands.value),
             output=output, geometry=self.geometry.value,
             exaggeration=float(self.exaggeration.value), vector_step=int(self.vector_step.value))
@@ -536,6 +576,7 @@ class OrthorectifyWidget(ScrolledForm):
                          if type(layer).__name__ == "Labels"),
                        (self._scene_graph, False),
                        *((self._activate, layer) for layer in layers[-1:]),
+                       (self._hide_others, layers),
                        (self._frame_result, shown), (self._canvas_updates, True),
                        *(step for layer in shown
                          for step in ((self._show, layer), (self._draw, layer)))]
@@ -545,6 +586,17 @@ class OrthorectifyWidget(ScrolledForm):
         self._summary = run.summary()
         self._canvas_updates(False)
         self._schedule_step()
+
+    def _hide_others(self, layers: list[Any]) -> None:
+        """The first view of a run: its newest image alone visible; the images and labels
+        layers shown before it (a product's quick-look, an earlier run's) hidden, ready to
+        toggle or flicker."""
+        ours = set(map(id, layers))
+        for layer in self.viewer.layers:
+            if (id(layer) not in ours and layer.visible
+                    and type(layer).__name__ in ("Image", "Labels")):
+                layer.visible = False
+                self._removed.append((-1, layer))  # shown again by a Cancel
 
     def _prepare_glyphs(self) -> None:
         """The legend's glyphs rendered beforehand (``legend.prepare_glyphs``), not in a run."""
@@ -643,7 +695,9 @@ class OrthorectifyWidget(ScrolledForm):
                 self.viewer.layers.remove(layer)
                 undone += 1
         for index, layer in reversed(self._removed):
-            if layer not in self.viewer.layers:
+            if index < 0:  # hidden by ``_hide_others``
+                layer.visible = True
+            elif layer not in self.viewer.layers:
                 self.viewer.layers.insert(min(index, len(self.viewer.layers)), layer)
                 undone += 1
         self._hidden = [x for x in self._hidden if x in self.viewer.layers]

@@ -59,6 +59,18 @@ def layer_frame(layer: Any) -> OutputGrid | None:
     return OutputGrid.from_transform(geo["crs"], geo["transform"], geo["shape"])
 
 
+#: layer metadata: the grid a raster came on before it was reprojected into the world
+REPROJECTED_KEY = "reprojected_from"
+
+
+def source_frame(layer: Any) -> OutputGrid | None:
+    """The grid a geocoded raster layer came on (its file's or its run's: before any
+    reprojection into the viewer's world), else None: a grid other outputs can align with."""
+    meta = getattr(layer, "metadata", {}) or {}
+    geo = meta.get(REPROJECTED_KEY) or meta.get(GEO_KEY)
+    return OutputGrid.from_transform(geo["crs"], geo["transform"], geo["shape"]) if geo else None
+
+
 def _world_geo(layer: Any) -> dict[str, Any] | None:
     """The grid record of the world a layer lives in: its own (``metadata["geo"]``) or the one
     it was placed in (``metadata["world"]``, product and geometry layers); None if neither."""
@@ -164,7 +176,7 @@ def move_to_frame(layer: tuple[Any, dict, str], source: OutputGrid, target: Outp
         if rgb:
             out = np.moveaxis(out, 0, -1).astype(np.asarray(data).dtype)
         meta = dict(kwargs.pop("metadata", {}) or {})
-        meta["reprojected_from"] = geo_metadata(source)
+        meta[REPROJECTED_KEY] = geo_metadata(source)
         kwargs.update(geo_image_kwargs(target, metadata=meta))
         return out, kwargs, kind
     kwargs.update(world_axes(target.crs))

@@ -41,7 +41,8 @@ def synthesize(products: Sequence[str | os.PathLike[str]], out: str | os.PathLik
                tile: int = DEFAULT_TILE, progress: ProgressCallback | None = None,
                workers: int = 0, scheduler: str | None = None,
                max_pixels: int | None = None, codec: StoreCodec | str | None = None,
-               keep: int | None = None, **modes: Any) -> SynthesisResult:
+               keep: int | None = None, merged: ProgressCallback | None = None,
+               **modes: Any) -> SynthesisResult:
     """Orthorectify ``products`` onto the synthesis grid and merge them (section 3.1 use cases
     1-2, Appendix C) into the synthesis store ``out``: one Icechunk commit.
 
@@ -57,7 +58,9 @@ def synthesize(products: Sequence[str | os.PathLike[str]], out: str | os.PathLik
     worker processes; ``scheduler``: address of an existing dask scheduler (the store path and
     the products must then be on storage every worker sees: absolute paths). ``progress(done,
     total)`` is called with 0 done before the first task, then after each task; an exception
-    raised by it cancels the run (nothing is committed). ``options`` (``OrthoOptions``) and/or
+    raised by it cancels the run (nothing is committed). ``merged(k, n)``: the products whose
+    every tile is merged, of the ``n`` products the run merges (called with 0 first, then as
+    each product's last tile is written). ``options`` (``OrthoOptions``) and/or
     its fields as keywords (``modes``:
     ``elevation``, ``sampling``, ``geolocation``, ``parallax``, ``tolerance``, ``method``; as
     ``orthorectify``, checked by ``OrthoOptions.of``): how each product is orthorectified
@@ -100,7 +103,7 @@ def synthesize(products: Sequence[str | os.PathLike[str]], out: str | os.PathLik
                     target, paths, algorithm=algorithm, grid=grid, crs=crs,
                     pixel_size=pixel_size, dems=[str(d) for d in dems], options=opts,
                     bands=bands, reject_bright=reject_bright, tile=tile,
-                    progress=progress, max_pixels=max_pixels,
+                    progress=progress, merged=merged, max_pixels=max_pixels,
                     codec=parse(StoreCodec, codec or StoreCodec.ZSTD)).run(runner)
             except BaseException:
                 _undo(out_dir, created, was_empty)

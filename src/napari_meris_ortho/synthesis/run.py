@@ -743,7 +743,8 @@ class Synthesis:
                  crs: Any, pixel_size: float | None, dems: list[str], options: OrthoOptions,
                  bands: Sequence[int] | None, reject_bright: bool, tile: int,
                  progress: ProgressCallback | None, max_pixels: int | None = None,
-                 codec: StoreCodec = StoreCodec.ZSTD) -> None:
+                 codec: StoreCodec = StoreCodec.ZSTD,
+                 merged: ProgressCallback | None = None) -> None:
         self.target = target
         self.paths = paths
         old = target.synthesis
@@ -758,6 +759,7 @@ class Synthesis:
         self.max_pixels = max_pixels
         self.codec = codec
         self.progress = progress
+        self.merged = merged  # (products whose every tile is merged, products to merge)
         self.table: list[dict[str, Any]] = old.products if old else []
         self._branch: str | None = None  # run branch of a new synthesis
 
@@ -951,7 +953,23 @@ class Synthesis:
             if self.progress is not None:
                 self.progress(count[0], total)
 
+        # the tiles each product is merged into: a product is merged with its last tile
+        tiles_left: dict[int, int] = {}
+        for tasks in jobs.values():
+            for index in {job[0] for job in tasks if job[0] not in exclude}:
+                tiles_left[index] = tiles_left.get(index, 0) + 1
+        products_done = [0]
+
+        def tile_merged(window: Window) -> None:
+            for index in {job[0] for job in jobs[window] if job[0] not in exclude}:
+                tiles_left[index] -= 1
+                products_done[0] += tiles_left[index] == 0
+            if self.merged is not None:
+                self.merged(products_done[0], len(tiles_left))
+
         advance(0)  # the total known before the first piece
+        if self.merged is not None:
+            self.merged(0, len(tiles_left))
         # in process: the writer thread, and progress (and Cancel) after every piece
         extra: tuple[Any, ...] = ((runner.writer, lambda: advance(1))
                                   if isinstance(runner, InProcess) else ())
@@ -969,6 +987,7 @@ class Synthesis:
                 errors = [p.dem_error for p in tile.pieces if p.dem_error is not None]
                 if errors:  # not the product's fault: stop the run (exit 2)
                     raise DemError(errors[0])
+                tile_merged(tile.window)
                 advance(1 if extra else steps[tile.window])  # pieces counted already
             for tile in written:
                 tile.wait()

@@ -1,0 +1,80 @@
+"""The Orthorectify dock's warm-up, in pieces that never compete with the user.
+
+What a user's first open and first Run would otherwise pay, prepared while they choose:
+
+- napari's own first-layer set-up: the modules napari imports at its first image layer
+  (xarray, pandas, scipy.ndimage for its thumbnails: about 1 s), one import per piece;
+- the engine's numba kernels: compiled out of the process (``warmup.kernels_out_of_process``:
+  a child at the lowest priority fills numba's on-disk cache, or reads it when warm), then
+  loaded from the cache one specialisation per piece (``warmup.load_kernel``).
+
+The pieces run through ``idle.IdlePieces``: one per idle turn of the event loop, none
+while napari opens a file or a run is under way.
+"""
+
+from __future__ import annotations
+
+import functools
+import importlib
+import os
+import threading
+from collections.abc import Callable
+from typing import Any
+
+from .idle import IdlePieces, run_when_idle
+
+#: modules napari imports at its first image layer, leaves first (each import a piece; a
+#: missing one is skipped)
+FIRST_LAYER_IMPORTS = (
+    "dateutil.parser", "dateutil.tz", "pandas._libs.tslibs", "pandas._libs",
+    "pandas.core.dtypes.common", "pandas.core.arrays", "pandas.core.frame", "pandas",
+    "cftime", "xarray.core.dataarray", "xarray", "scipy.special", "scipy.ndimage._filters",
+    "scipy.ndimage._interpolation", "scipy.ndimage._measurements", "scipy.ndimage",
+)
+
+
+def _import(name: str) -> Callable[[], None]:
+    def piece() -> None:
+        try:
+            importlib.import_module(name)
+        except ImportError:  # another napari, another set of modules
+            pass
+    return piece
+
+
+def warm_up_pieces() -> list[Callable[[], Any]]:
+    """The pieces of the warm-up: the child process started, napari's first-layer imports,
+    the child's kernels waited for, then loaded one per piece (appended to the list as the
+    child answers: ``IdlePieces`` runs them in order)."""
+    from ... import warmup
+
+    pieces: list[Callable[[], Any]] = []
+    found: list[Any] = []
+    child = threading.Thread(target=lambda: found.extend(warmup.kernels_out_of_process()),
+                             name="meris-ortho-kernels", daemon=True)
+
+    def wait_for_kernels() -> None:
+        child.join()  # no GIL held while the child process works
+        from ..._process import start_numba_without_blas
+
+        pieces.append(start_numba_without_blas)
+        pieces.extend(functools.partial(warmup.load_kernel, s) for s in found)
+
+    pieces.append(child.start)
+    pieces.extend(_import(name) for name in FIRST_LAYER_IMPORTS)
+    pieces.append(wait_for_kernels)
+    return pieces
+
+
+def start_warm_up(paused: Callable[[], bool], owner: Any) -> IdlePieces | None:
+    """Start the dock's warm-up (``warm_up_pieces`` in idle turns), unless
+    ``MERIS_ORTHO_NO_WARMUP`` is set or it already ran in this process."""
+    global _STARTED
+    if os.environ.get("MERIS_ORTHO_NO_WARMUP") or _STARTED is not None:
+        return None
+    pieces = warm_up_pieces()
+    _STARTED = run_when_idle(pieces, paused, owner, name="meris-ortho-warmup")
+    return _STARTED
+
+
+_STARTED: IdlePieces | None = None
