@@ -99,3 +99,33 @@ def test_bad_overrides_are_one_line_and_leave_nothing(override, said, tmp_path, 
     err = capsys.readouterr().err.strip().splitlines()
     assert err == [f"meris-ortho: error: --set: {said}" + err[0].split(said, 1)[1]], err
     assert not out.exists()
+
+
+def test_sample_writes_an_olci_scene(tmp_path, capsys):
+    """An olci-* scene: an OLCI .SEN3 product of ESA's name; --fsg/--sen3 (MERIS products)
+    refused with one message, nothing written."""
+    from napari_meris_ortho.products.open import read_product as read_any
+
+    assert {"olci-efr-alps", "olci-err-andes"} <= set(_listed(capsys))
+    out = tmp_path / "olci"
+    small = {"lines": 24, "orbit": {"nadir_lat": -16.0, "nadir_lon": -63.0},
+             "exports": {"getasse30": False, "srtm30": False, "reference": False}}
+    code = main(["-q", "sample", "olci-err-andes", "--out", str(out), "--set",
+                 json.dumps(small)])
+    assert code == 0
+    lines = dict(line.split(None, 1) for line in capsys.readouterr().out.splitlines())
+    product = Path(lines["product"])
+    assert product.name.startswith("S3B_OL_1_ERR____20210831T") and product.suffix == ".SEN3"
+    p = read_any(product)
+    assert (p.height, p.width, p.n_bands) == (24, 1217, 21)
+    refused = tmp_path / "refused"
+    assert main(["sample", "olci-err-andes", "--out", str(refused), "--set", json.dumps(small),
+                 "--sen3"]) == 2
+    err = capsys.readouterr().err
+    assert "--fsg and --sen3 write MERIS products" in err and len(err.strip().splitlines()) == 1
+    assert not refused.exists()
+
+
+def _listed(capsys) -> list[str]:
+    assert main(["sample", "--list"]) == 0
+    return capsys.readouterr().out.split()

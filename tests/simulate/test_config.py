@@ -27,7 +27,7 @@ TINY = {"base": "fr-small", "lines": 40, "columns": 65, "exports": OFF}
 
 def test_named_scenes_are_package_data(tmp_path, monkeypatch):
     names = {"fr-alps", "fr-small", "rr-segment", "rr-antimeridian", "fr-south-ascending",
-             "fr-steep"}
+             "fr-steep", "olci-efr-alps", "olci-err-andes"}
     assert names <= set(scene_names())
     package = scene_dirs()[-1]
     assert package == Path(napari_meris_ortho.__file__).parent / "scenes"

@@ -1,5 +1,5 @@
-"""``meris-ortho sample [NAME] --out DIR``: generate a simulated MERIS L1b scene with its DEMs
-and reference image and print where everything is."""
+"""``meris-ortho sample [NAME] --out DIR``: generate a simulated MERIS or OLCI L1b scene with
+its DEMs and reference image and print where everything is."""
 
 from __future__ import annotations
 
@@ -17,9 +17,10 @@ def register(subparsers: Any) -> None:
     """Add the ``sample`` subcommand."""
     p = subparsers.add_parser(
         "sample",
-        help="generate a simulated MERIS L1b product with exact ground truth",
-        description="Generate a named simulated scene (N1 product, DEM exports, reference "
-        "image). Outputs are cached and reused when complete.",
+        help="generate a simulated MERIS or OLCI L1b product with exact ground truth",
+        description="Generate a named simulated scene (a MERIS N1 product, or an OLCI EFR/ERR "
+        ".SEN3 product for the olci-* scenes; DEM exports, reference image). Outputs are "
+        "cached and reused when complete.",
     )
     p.add_argument("name", nargs="?", default="fr-alps", metavar="NAME",
                    help="scene name (default fr-alps); --list shows them")
@@ -40,9 +41,10 @@ def register(subparsers: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from ..bands import Sensor
     from ..progress import tqdm_progress
     from ..simulate import generate_scene, scene_names
-    from ..simulate.scene import check_overrides
+    from ..simulate.scene import check_overrides, resolve_config, sensor_of
 
     if args.list:
         print("\n".join(scene_names()))
@@ -57,6 +59,9 @@ def run(args: argparse.Namespace) -> int:
             raise OptionsError("--set: expected a JSON object")
         check_overrides(args.name, over)
         scene = {"base": args.name, **over}
+    if (args.fsg or args.sen3) and sensor_of(resolve_config(scene)) is not Sensor.MERIS:
+        raise OptionsError(f"--fsg and --sen3 write MERIS products; scene {args.name!r} is an "
+                           "OLCI product, which carries its per-pixel geolocation already")
     quiet = getattr(args, "quiet", False)
     with tqdm_progress(f"sample {args.name}", enabled=not quiet, unit="%") as progress:
         result = generate_scene(scene, out_dir=args.out, progress=progress)

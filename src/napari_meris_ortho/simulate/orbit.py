@@ -1,9 +1,11 @@
-"""Envisat-like sun-synchronous circular orbit on the rotating WGS84 Earth.
+"""Sun-synchronous circular orbits (Envisat, Sentinel-3) on the rotating WGS84 Earth.
 
 Times are seconds since 2000-01-01T00:00:00 UTC (MJD2000, like the N1 ``dsr_time``; UT1 = UTC,
-no leap seconds). The orbit is a circle of radius 7159.5 km, inclination 98.55 deg, propagated in
-an inertial (true-of-date, simplified) frame with its node drifting at the sun-synchronous rate,
-then rotated with the Earth by the Greenwich mean sidereal time into ECEF (WGS84).
+no leap seconds). An orbit is a circle (Envisat: radius 7159.5 km, inclination 98.55 deg;
+Sentinel-3: 7177.9 km, about 814.5 km above the Earth, 98.65 deg; both descending node 10:00),
+propagated in an inertial (true-of-date, simplified) frame with its node drifting at the
+sun-synchronous rate, then rotated with the Earth by the Greenwich mean sidereal time into ECEF
+(WGS84).
 """
 
 from __future__ import annotations
@@ -25,8 +27,26 @@ OMEGA_EARTH = 7.2921158553e-5  # rad/s
 SEMI_MAJOR_AXIS = 7159500.0
 INCLINATION_DEG = 98.55
 DESCENDING_NODE_LOCAL_TIME_H = 10.0
+#: Sentinel-3 orbit: radius (m) of the circle (814.5 km mean altitude) and its inclination
+SENTINEL3_SEMI_MAJOR_AXIS = 7177937.0
+SENTINEL3_INCLINATION_DEG = 98.65
 NODE_RATE = 2.0 * math.pi / (365.2422 * 86400.0)  # sun-synchronous drift of the node (rad/s)
 MJD2000_EPOCH = datetime(2000, 1, 1, tzinfo=UTC)
+
+
+@dataclass(frozen=True)
+class Platform:
+    """The circular sun-synchronous orbit of a satellite: radius (m), inclination and local time
+    (h) of the descending node."""
+
+    name: str
+    radius: float
+    inclination_deg: float
+    descending_node_h: float = DESCENDING_NODE_LOCAL_TIME_H
+
+
+ENVISAT = Platform("Envisat", SEMI_MAJOR_AXIS, INCLINATION_DEG)
+SENTINEL3 = Platform("Sentinel-3", SENTINEL3_SEMI_MAJOR_AXIS, SENTINEL3_INCLINATION_DEG)
 
 
 def to_mjd2000_seconds(when: datetime) -> float:
@@ -79,11 +99,13 @@ class Orbit:
         return pos.reshape(shape), vel.reshape(shape)
 
 
-def sun_synchronous_orbit(t_node: float) -> Orbit:
-    """The orbit whose ascending node at ``t_node`` is at 22:00 local time (descending 10:00)."""
-    ltan = DESCENDING_NODE_LOCAL_TIME_H + 12.0
+def sun_synchronous_orbit(t_node: float, platform: Platform = ENVISAT) -> Orbit:
+    """The orbit of ``platform`` whose ascending node at ``t_node`` is at 22:00 local time
+    (descending 10:00)."""
+    ltan = platform.descending_node_h + 12.0
     raan = mean_sun_right_ascension_rad(t_node) + math.radians((ltan - 12.0) * 15.0)
-    return Orbit(t_node=t_node, raan_node=raan % (2.0 * math.pi))
+    return Orbit(t_node=t_node, raan_node=raan % (2.0 * math.pi), radius=platform.radius,
+                 inclination=math.radians(platform.inclination_deg))
 
 
 @njit(cache=True)
@@ -165,17 +187,19 @@ def _subsatellite(orbit: Orbit, t: float) -> tuple[float, float]:
 
 
 def solve_pass(date: datetime, nadir_lat: float, nadir_lon: float,
-               direction: str = "descending") -> tuple[Orbit, float]:
-    """Orbit and time (MJD2000 s) at which the geodetic nadir passes over (lat, lon) on ``date``.
+               direction: str = "descending",
+               platform: Platform = ENVISAT) -> tuple[Orbit, float]:
+    """Orbit of ``platform`` and time (MJD2000 s) at which the geodetic nadir passes over
+    (lat, lon) on ``date``.
 
     The pass is the one of that UTC day (the day of local time about 10:00 for descending passes);
     ``direction`` chooses the descending or the ascending half of the orbit.
     """
-    incl = math.radians(INCLINATION_DEG)
+    incl = math.radians(platform.inclination_deg)
     if direction not in ("descending", "ascending"):
         raise OptionsError(
             f"orbit direction must be 'descending' or 'ascending', not {direction!r}")
-    max_lat = 180.0 - INCLINATION_DEG
+    max_lat = 180.0 - platform.inclination_deg
     if abs(nadir_lat) >= max_lat - 0.05:
         raise OptionsError(
             f"nadir latitude {nadir_lat} is beyond the orbit's reach (+-{max_lat:.2f})")
@@ -186,12 +210,12 @@ def solve_pass(date: datetime, nadir_lat: float, nadir_lon: float,
         u = math.pi - u
     if u < 0.0:
         u += 2.0 * math.pi
-    n = math.sqrt(GM / SEMI_MAJOR_AXIS**3)
+    n = math.sqrt(GM / platform.radius**3)
     # first guess of the time over the point: 10:30 local solar time
     t = day0 + (10.5 - nadir_lon / 15.0) * 3600.0
     t = day0 + (t - day0) % 86400.0
     for _ in range(40):
-        orbit = sun_synchronous_orbit(t - u / n)
+        orbit = sun_synchronous_orbit(t - u / n, platform)
         lon, lat = _subsatellite(orbit, t)
         dlon = _wrap_deg(lon - nadir_lon)
         dlat = lat - nadir_lat
@@ -201,5 +225,5 @@ def solve_pass(date: datetime, nadir_lat: float, nadir_lon: float,
         t += math.radians(dlon) / (OMEGA_EARTH - NODE_RATE)
         dlat_du = math.sin(incl) * math.cos(u) / max(math.cos(math.radians(lat)), 1e-6)
         u -= math.radians(dlat) / dlat_du
-    orbit = sun_synchronous_orbit(t - u / n)
+    orbit = sun_synchronous_orbit(t - u / n, platform)
     return orbit, t

@@ -240,7 +240,8 @@ def product_radiometry(t_lon: np.ndarray, t_lat: np.ndarray, glint: np.ndarray,
                        post_flags: np.ndarray, spectra: np.ndarray, cloud_spec: np.ndarray,
                        sf_rad: np.ndarray, geo: np.ndarray, counts: np.ndarray,
                        flags: np.ndarray) -> None:
-    """Counts (15, H, W) and flags (H, W) of the product from the truth at the terrain points T.
+    """Counts (bands, H, W) and flags (H, W) of the product from the truth at the terrain points T;
+    the bands are those of ``spectra`` (MERIS 15, OLCI 21).
 
     ``glint`` (H, W) is True where the sun glint geometry is risky (section 2.2 flags)."""
     nr, nc = brightness.shape
@@ -249,13 +250,13 @@ def product_radiometry(t_lon: np.ndarray, t_lat: np.ndarray, glint: np.ndarray,
         for j in range(w):
             r, c, fx, fy = _weights(geo, nr, nc, t_lon[i, j], t_lat[i, j])
             if r < 0:
-                for b in range(15):
+                for b in range(counts.shape[0]):
                     counts[b, i, j] = 0
                 flags[i, j] = FLAG_INVALID
                 continue
             acc = np.empty(spectra.shape[0])
             cl = _mixture(cover, brightness, cloud, r, c, fx, fy, acc)
-            for b in range(15):
+            for b in range(counts.shape[0]):
                 rad = cl * cloud_spec[b]
                 for m in range(acc.size):
                     rad += acc[m] * spectra[m, b]

@@ -18,11 +18,13 @@ import numpy as np
 from numba import njit, prange
 
 from .._atomic import atomic_path
+from ..bands import Sensor
 from ..errors import DemError, OptionsError, OutputError
 from ..geometry.parallax import stored_corrections
+from ..products.olci.layout import EFR, ERR
 from ..progress import ProgressCallback
-from . import sensor
-from .orbit import Orbit, solve_pass
+from . import olci, sensor
+from .orbit import ENVISAT, SENTINEL3, Orbit, Platform, solve_pass
 from .radiometry import (
     CLOUD_SPECTRUM,
     SPECTRA,
@@ -40,10 +42,17 @@ log = logging.getLogger(__name__)
 #: bump when the generator changes its output for a given config (part of the cache key)
 GENERATOR_VERSION = 4
 RESOLUTIONS = {
-    # frame time (s), column spacing (m), tie-point spacing DF = DJ, product type
+    # frame time (s), column spacing (m), tie-point spacing DJ (MERIS: DF = DJ; OLCI: DF = 1),
+    # product type
     "FR": (0.044, 260.0, 64, "MER_FR__1P"),
     "RR": (0.176, 1040.0, 16, "MER_RR__1P"),
+    "EFR": (EFR.line_interval_s, EFR.column_spacing_m, EFR.samples_per_tie_point, "OL_1_EFR___"),
+    "ERR": (ERR.line_interval_s, ERR.column_spacing_m, ERR.samples_per_tie_point, "OL_1_ERR___"),
 }
+#: the sensor of each resolution; OLCI has tie points on every row
+SENSOR_OF_RESOLUTION = {"FR": Sensor.MERIS, "RR": Sensor.MERIS, "EFR": Sensor.OLCI,
+                        "ERR": Sensor.OLCI}
+PLATFORMS = {"Envisat": ENVISAT, "S3A": SENTINEL3, "S3B": SENTINEL3}
 DEFAULTS: dict[str, Any] = {
     "resolution": "FR",
     "date": "2003-09-21",
@@ -183,9 +192,24 @@ def _kind_of(have: Any) -> str:
     return "a string" if isinstance(have, str) else type(have).__name__
 
 
+def sensor_of(cfg: dict) -> Sensor:
+    """The sensor of a config: ``MERIS`` (without a ``sensor`` key) or ``OLCI``."""
+    name = cfg.get("sensor", Sensor.MERIS)
+    try:
+        return Sensor(name)
+    except ValueError:
+        raise OptionsError(f"scene sensor must be MERIS or OLCI, not {name!r}") from None
+
+
 def _validate(cfg: dict) -> None:
     if cfg["resolution"] not in RESOLUTIONS:
-        raise OptionsError(f"scene resolution must be FR or RR, not {cfg['resolution']!r}")
+        raise OptionsError("scene resolution must be FR or RR (MERIS), EFR or ERR (OLCI), "
+                           f"not {cfg['resolution']!r}")
+    if SENSOR_OF_RESOLUTION[cfg["resolution"]] != sensor_of(cfg):
+        raise OptionsError(f"scene resolution {cfg['resolution']} is not one of sensor "
+                           f"{sensor_of(cfg)}")
+    if sensor_of(cfg) is Sensor.OLCI and cfg.get("platform") not in ("S3A", "S3B"):
+        raise OptionsError(f"an OLCI scene's platform is S3A or S3B, not {cfg.get('platform')!r}")
     step = RESOLUTIONS[cfg["resolution"]][2]
     cols = int(cfg["columns"])
     if cols < step + 1 or (cols - 1) % step:
@@ -229,6 +253,9 @@ class SceneGeometry:
     columns: int
     tie_step: int
     product_type: str
+    #: product lines between tie-point rows (0: ``tie_step``; OLCI: 1, every row)
+    tie_line_step: int = 0
+    platform: Platform = ENVISAT
 
     @property
     def orb(self) -> np.ndarray:
@@ -244,12 +271,16 @@ class SceneGeometry:
         return 1.0 if self.first_column + 0.5 * (self.columns - 1) >= 0 else -1.0
 
     @property
+    def lines_per_tie_point(self) -> int:
+        return self.tie_line_step or self.tie_step
+
+    @property
     def n_tie_lines(self) -> int:
-        return math.ceil((self.lines - 1) / self.tie_step) + 1
+        return math.ceil((self.lines - 1) / self.lines_per_tie_point) + 1
 
     @property
     def tie_lines(self) -> np.ndarray:
-        return np.arange(self.n_tie_lines, dtype=np.float64) * self.tie_step
+        return np.arange(self.n_tie_lines, dtype=np.float64) * self.lines_per_tie_point
 
     @property
     def tie_cols(self) -> np.ndarray:
@@ -268,11 +299,14 @@ def scene_geometry(cfg: dict) -> SceneGeometry:
     frame_time, spacing, step, ptype = RESOLUTIONS[cfg["resolution"]]
     ob = cfg["orbit"]
     day = datetime.fromisoformat(str(cfg["date"]))
+    platform = PLATFORMS[str(cfg.get("platform", "Envisat"))]
     orbit, t0 = solve_pass(day, float(ob["nadir_lat"]), float(ob["nadir_lon"]),
-                           ob.get("direction", "descending"))
+                           ob.get("direction", "descending"), platform)
     return SceneGeometry(orbit=orbit, t0=t0, frame_time=frame_time, spacing=spacing,
                          first_column=int(cfg["first_column"]), lines=int(cfg["lines"]),
-                         columns=int(cfg["columns"]), tie_step=step, product_type=ptype)
+                         columns=int(cfg["columns"]), tie_step=step, product_type=ptype,
+                         tie_line_step=1 if sensor_of(cfg) is Sensor.OLCI else 0,
+                         platform=platform)
 
 
 _EMPTY_DEM = (np.zeros((2, 2), np.float32), np.array([0.0, 90.0, 1, 1, 8, 100.0, 0, 0]),
@@ -358,7 +392,7 @@ class SimulatedScene:
         misses crests grazed by 1-6 m between samples)."""
         from scipy.ndimage import map_coordinates
 
-        from ..products.n1 import read_product
+        from ..products.open import read_product
 
         prod = read_product(self.product_path)
         tp = prod.tie_points
@@ -391,10 +425,18 @@ class SimulatedScene:
                           np.ascontiguousarray(lat_a.ravel()))
         return out.reshape(lon_a.shape)
 
+    @property
+    def sensor(self) -> Sensor:
+        """``MERIS`` or ``OLCI``."""
+        return sensor_of(self.config)
+
     def truth_radiance(self, lon: Any, lat: Any, band: int) -> np.ndarray:
-        """Truth TOA radiance (mW m-2 sr-1 nm-1) of ``band`` (1..15) at ground points."""
-        if not 1 <= int(band) <= 15:
-            raise OptionsError(f"band must be 1..15, not {band}")
+        """Truth TOA radiance (mW m-2 sr-1 nm-1) of ``band`` (MERIS 1..15, OLCI 1..21) at
+        ground points."""
+        spectra, cloud_spectrum, _ = band_radiometry(self.config)
+        n_bands = spectra.shape[1]
+        if not 1 <= int(band) <= n_bands:
+            raise OptionsError(f"band must be 1..{n_bands}, not {band}")
         lon_a, lat_a = np.broadcast_arrays(np.asarray(lon, np.float64),
                                            np.asarray(lat, np.float64))
         out = np.empty((1, lon_a.size))
@@ -402,7 +444,7 @@ class SimulatedScene:
         truth_radiance_kernel(np.ascontiguousarray(lon_a.ravel()),
                               np.ascontiguousarray(lat_a.ravel()),
                               np.array([int(band) - 1]), t.cover, t.brightness, t.cloud,
-                              SPECTRA, CLOUD_SPECTRUM, self._geo, out)
+                              spectra, cloud_spectrum, self._geo, out)
         return out[0].reshape(lon_a.shape)
 
     def pixel_geometry(self, lines: Any, cols: Any) -> dict[str, np.ndarray]:
@@ -558,17 +600,30 @@ def _chunk_sun(geom: SceneGeometry, lines: np.ndarray,
     return np.broadcast_to(sz_row, out.shape[:2]), np.broadcast_to(sa_row, out.shape[:2])
 
 
-def render_product(cfg: dict, geom: SceneGeometry, grid: DemGrid, dem: np.ndarray,
-                   truth: GroundTruth, progress: ProgressCallback | None = None,
-                   chunk: int = 64) -> tuple[np.ndarray, np.ndarray]:
-    """Counts (15, H, W) uint16 and flags (H, W) uint8: the truth at every pixel's T."""
+def band_radiometry(cfg: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Class spectra (4, bands), cloud spectrum and radiance scale factors of the config's
+    sensor: MERIS 15 bands (Scaling Factor GADS of Appendix A), OLCI 21 bands."""
+    if sensor_of(cfg) is Sensor.OLCI:
+        return (olci.OLCI_SPECTRA, olci.OLCI_CLOUD_SPECTRUM,
+                np.array(olci.SCALE_FACTORS, dtype=np.float64))
     from ..products.n1 import ScalingFactors
 
-    sf = np.array(ScalingFactors.appendix_a().radiance, dtype=np.float64)
+    return SPECTRA, CLOUD_SPECTRUM, np.array(ScalingFactors.appendix_a().radiance,
+                                             dtype=np.float64)
+
+
+def render_product(cfg: dict, geom: SceneGeometry, grid: DemGrid, dem: np.ndarray,
+                   truth: GroundTruth, progress: ProgressCallback | None = None,
+                   chunk: int = 64, terrain_points: np.ndarray | None = None,
+                   ) -> tuple[np.ndarray, np.ndarray]:
+    """Counts (bands, H, W) uint16 and flags (H, W) uint8: the truth at every pixel's T.
+
+    ``terrain_points`` (3, H, W), when given, receives T's longitude, latitude and height."""
+    spectra, cloud_spectrum, sf = band_radiometry(cfg)
     model = terrain_model(dem, grid)
     geo = model[1]
     h, w = geom.lines, geom.columns
-    counts = np.empty((15, h, w), np.uint16)
+    counts = np.empty((spectra.shape[1], h, w), np.uint16)
     flags = np.empty((h, w), np.uint8)
     cols = np.arange(w, dtype=np.float64)
     for start in range(0, h, chunk):
@@ -579,7 +634,11 @@ def render_product(cfg: dict, geom: SceneGeometry, grid: DemGrid, dem: np.ndarra
         sl = slice(start, start + lines.size)
         product_radiometry(np.ascontiguousarray(out[..., 4]), np.ascontiguousarray(out[..., 5]),
                            glint, truth.cover, truth.brightness, truth.cloud, truth.post_flags,
-                           SPECTRA, CLOUD_SPECTRUM, sf, geo, counts[:, sl], flags[sl])
+                           spectra, cloud_spectrum, sf, geo, counts[:, sl], flags[sl])
+        if terrain_points is not None:
+            terrain_points[0, sl] = (out[..., 4] + 180.0) % 360.0 - 180.0
+            terrain_points[1, sl] = out[..., 5]
+            terrain_points[2, sl] = out[..., 6]
         if progress is not None:
             progress(start + lines.size, h)
     rng = np.random.default_rng(int(cfg["seed"]) + 31)
@@ -644,7 +703,7 @@ def _load_cached(out_dir: Path, cfg: dict) -> SimulatedScene | None:
 
 def generate_scene(name_or_config: str | dict, out_dir: str | os.PathLike[str] | None = None,
                    progress: ProgressCallback | None = None) -> SimulatedScene:
-    """Generate (or load from the cache) a simulated MERIS L1b scene with its truth.
+    """Generate (or load from the cache) a simulated MERIS or OLCI L1b scene with its truth.
 
     ``name_or_config``: a scene name (``napari_meris_ortho/scenes/<name>.json``) or a config dict,
     possibly ``{"base": "<name>", ...overrides}``. Outputs go to ``out_dir`` (default: the
@@ -668,9 +727,20 @@ def generate_scene(name_or_config: str | dict, out_dir: str | os.PathLike[str] |
     dem = terrain.height
     if progress is not None:
         progress(10, 100)
-    counts, flags = render_product(cfg, geom, grid, dem, truth, _stage(progress, 10, 55))
-    product_path = _write_product(target, cfg, geom, grid, dem, bathymetry(terrain), counts,
-                                  flags, _stage(progress, 65, 10))
+    if sensor_of(cfg) is Sensor.OLCI:
+        from .olci_product import write_olci_scene
+
+        points = np.empty((3, geom.lines, geom.columns))
+        counts, flags = render_product(cfg, geom, grid, dem, truth, _stage(progress, 10, 55),
+                                       terrain_points=points)
+        product_path = write_olci_scene(target, cfg, geom, counts, flags, points,
+                                        locate(geom, geom.tie_lines, geom.tie_cols),
+                                        _stage(progress, 65, 10))
+        del points
+    else:
+        counts, flags = render_product(cfg, geom, grid, dem, truth, _stage(progress, 10, 55))
+        product_path = _write_product(target, cfg, geom, grid, dem, bathymetry(terrain), counts,
+                                      flags, _stage(progress, 65, 10))
     del counts
     scene = SimulatedScene(config=cfg, out_dir=target, product_path=product_path,
                            dem_paths={}, reference_path=None, geometry=geom, dem_grid=grid,
