@@ -110,3 +110,30 @@ def test_olci_dem_and_pixel_geolocation_maps_flicker(make_napari_viewer, qtbot, 
     dx, dy = result.global_displacement
     assert abs(dx) < 0.1 and abs(dy) < 0.1, (dx, dy)
     assert np.mean(a[both] == b[both]) > 0.9  # the same input pixel almost everywhere
+
+
+def test_olci_zip_is_claimed_by_name_and_read(make_napari_viewer, scene, tmp_path):
+    import zipfile
+    from fnmatch import fnmatch
+
+    import npe2
+
+    product = scene.product_path
+    archive = tmp_path / f"{product.name}.zip"
+    with zipfile.ZipFile(archive, "w", zipfile.ZIP_STORED) as zf:
+        for member in sorted(product.rglob("*")):
+            zf.write(member, member.relative_to(product.parent).as_posix())
+    # the manifest's first reader claims it by name, as npe2 matches (fnmatch, lower case)
+    make_napari_viewer()
+    manager = npe2.PluginManager.instance()
+    manager.discover()
+    patterns = manager.get_manifest("napari-meris-ortho").contributions.readers[0]
+    assert [p for p in patterns.filename_patterns
+            if fnmatch(str(archive).lower(), p.lower())] == ["*S3?_OL_1_E?R*.zip"]
+    assert not fnmatch(str(tmp_path / "S3B_SL_1_RBT____x.zip").lower(), "*s3?_ol_1_e?r*.zip")
+    reader = get_reader(str(archive))
+    assert reader is not None
+    layers = {kwargs["name"]: data for data, kwargs, _ in reader(str(archive))}
+    stack = layers[f"radiance{STAMP}"]
+    assert (stack[0] if isinstance(stack, list) else stack).shape == (21, 1000, 1217)
+    assert f"RGB 8-6-3{STAMP}" in layers
