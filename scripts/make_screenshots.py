@@ -238,6 +238,8 @@ def _run_and_readers(viewer, ortho, args) -> list[str]:
 
 #: the window of the OLCI screenshot
 OLCI_SIZE = (1920, 1080)
+#: the OLCI screenshot's view across (m): its facets (one tie row high) stay apart
+OLCI_VIEW_M = 400_000.0
 
 
 def _olci_screenshot(scene_name: str, out: Path) -> str:
@@ -260,12 +262,20 @@ def _olci_screenshot(scene_name: str, out: Path) -> str:
     _only_prefixed(viewer, "ortho RGB 8-6-3", "footprint ·", "facets ·", "parallax ×")
     parallax = _named(viewer, "parallax ×")
     parallax.opacity = 1.0
+    _named(viewer, "facets ·").opacity = 0.5
     viewer.layers.selection.active = parallax  # its key in the corner
-    viewer.reset_view()
+    # the tie points are on every row: the facets are read on a part of the swath, its
+    # western edge (view zeniths up to 57 deg, the largest parallax) and footprint in view
+    length = np.hypot(parallax.data[:, 1, 0], parallax.data[:, 1, 1])
+    west = parallax.data[int(np.argmin(parallax.data[:, 0, 1])), 0]
+    camera = viewer.camera
+    camera.center = (float(west[0]), float(west[1]) + 0.2 * OLCI_VIEW_M)
+    camera.zoom = min(viewer.window._qt_viewer.canvas.size) / OLCI_VIEW_M
     _close_toasts(viewer)
     name = f"olci_{scene_name.removeprefix('olci-').replace('-', '_')}.png"
     viewer.screenshot(str(out / name), canvas_only=False, flash=False)
-    print(f"{scene_name}: {parallax.name}, {len(parallax.data)} vectors; "
+    print(f"{scene_name}: {parallax.name}, {len(parallax.data)} vectors, the longest "
+          f"{length.max() / parallax.metadata['exaggeration']:.0f} m; "
           f"{ortho.status.value}")
     viewer.close()
     return name

@@ -84,6 +84,9 @@ def test_olci_dem_and_pixel_geolocation_maps_flicker(make_napari_viewer, qtbot, 
     _run(widget, qtbot)
     for name in ("footprint", "facets"):
         assert isinstance(viewer.layers[f"{name}{STAMP}"], Vectors)
+    # tie points on every row (1176 m apart in ERR): facet edges a quarter of that, not a fill
+    facets = viewer.layers[f"facets{STAMP}"]
+    assert 0 < float(np.max(facets.edge_width)) <= 0.25 * 1176 * 1.05
     assert [x for x in viewer.layers if x.name.startswith("parallax ×")
             and isinstance(x, Vectors) and len(x.data) > 10]
     widget.geolocation.value = "pixel"
