@@ -264,13 +264,15 @@ def _olci_screenshot(scene_name: str, out: Path) -> str:
     parallax.opacity = 1.0
     _named(viewer, "facets ·").opacity = 0.5
     viewer.layers.selection.active = parallax  # its key in the corner
-    # the tie points are on every row: the facets are read on a part of the swath, its
-    # western edge (view zeniths up to 57 deg, the largest parallax) and footprint in view
+    # the tie points are on every row: the facets are read on a part of the swath, from its
+    # western edge (the footprint) to the longest parallax vector
     length = np.hypot(parallax.data[:, 1, 0], parallax.data[:, 1, 1])
     west = parallax.data[int(np.argmin(parallax.data[:, 0, 1])), 0]
+    longest = parallax.data[int(np.argmax(length)), 0]
+    across = max(OLCI_VIEW_M, 1.4 * float(np.abs(longest - west).max()))
     camera = viewer.camera
-    camera.center = (float(west[0]), float(west[1]) + 0.2 * OLCI_VIEW_M)
-    camera.zoom = min(viewer.window._qt_viewer.canvas.size) / OLCI_VIEW_M
+    camera.center = tuple(0.5 * (west + longest) - (0.0, 0.1 * across))
+    camera.zoom = min(viewer.window._qt_viewer.canvas.size) / across
     _close_toasts(viewer)
     name = f"olci_{scene_name.removeprefix('olci-').replace('-', '_')}.png"
     viewer.screenshot(str(out / name), canvas_only=False, flash=False)
