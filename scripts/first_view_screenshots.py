@@ -58,6 +58,13 @@ def _select(viewer, prefix: str) -> None:
 
 
 def _save(viewer, out: Path, name: str) -> Path:
+    import time
+
+    from napari_meris_ortho._napari import legend
+
+    end = time.monotonic() + 30.0  # the key waits for its glyphs (rendered after a run)
+    while viewer in legend._PREPARING and time.monotonic() < end:
+        _process_events(0.2)
     _close_toasts(viewer)
     viewer.reset_view()
     _process_events(1.0)

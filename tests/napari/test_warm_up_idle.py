@@ -11,9 +11,11 @@ import numpy as np
 import pytest
 
 #: the longest the event loop or a pure-Python thread may wait while the dock warms up (s).
-#: The pieces take a few ms each; a numba compilation in the process holds the GIL 0.3-3 s,
-#: napari's first-layer imports in one piece 1 s. A shared 2-core machine adds its noise.
-STALL_BOUND_S = 0.25
+#: A piece holds the GIL for milliseconds at a time (an import's C extension a little longer);
+#: a numba compilation in the process holds it for 1-3 s, napari's first-layer imports in one
+#: piece for about 1 s. The bound leaves room for a loaded 2-core machine (gaps of 0.4 s seen
+#: at a load of 7); the benchmark measures the window's stall on a quiet one.
+STALL_BOUND_S = 0.6
 #: how long the test keeps the Qt thread busy, as a user's open would (s)
 BUSY_S = 0.6
 
