@@ -89,3 +89,30 @@ def test_wrap180_keeps_a_difference_on_the_range_exact():
     assert wrap180(190.25) == -169.75
     assert wrap180(-190.25) == 169.75
     assert wrap180(719.5) == -0.5
+
+
+@pytest.mark.parametrize("lon0", [11.0, -176.0])
+def test_a_point_clear_of_the_grid_is_not_searched_through_every_facet(lon0):
+    """Tie points on every row (OLCI: 77 x thousands of facets): a point outside the grid's
+    border is known outside at once; the border test agrees with the search through all facets,
+    also across the antimeridian and right at the border."""
+    from napari_meris_ortho.engine.inverse import BORDER_MARGIN_DEG, clear_of_grid
+
+    g = analytic_swath(height=300, width=1217, df=1, dj=16, lon0=lon0, pixel_m=1080.0)
+    lat_tp, lon_tp = g.latitude, g.lon_unwrapped
+    rng = np.random.default_rng(3)
+    line = rng.uniform(-150, 450, 3000)
+    col = rng.uniform(-600, 1800, 3000)
+    lon, lat = direct_location(g, line, col, 0.0)
+    inside = (line >= 0) & (line <= 299) & (col >= 0) & (col <= 1216)
+    for k in range(lon.size):
+        clear = clear_of_grid(float(lon[k]), float(lat[k]), lat_tp, lon_tp)
+        *_, path = search_facet(float(lon[k]), float(lat[k]), -1, -1, lat_tp, lon_tp)
+        assert clear == (not inside[k]), (line[k], col[k])
+        assert (path == -1) == (not inside[k])
+    # just outside the border: within the margin, searched (and not found); beyond, clear
+    edge_lon, edge_lat = direct_location(g, np.array([120.0]), np.array([-1e-5]), 0.0)
+    assert not clear_of_grid(float(edge_lon[0]), float(edge_lat[0]), lat_tp, lon_tp)
+    far_lon, far_lat = direct_location(g, np.array([120.0]), np.array([-0.01]), 0.0)
+    assert clear_of_grid(float(far_lon[0]), float(far_lat[0]), lat_tp, lon_tp)
+    assert BORDER_MARGIN_DEG <= 1e-6  # 0.1 m

@@ -119,6 +119,66 @@ def _inside(u: float, v: float) -> bool:
 #: facets tried around the last one, in the handbook's order: same, 4-connex, 8-connex
 _NEAR_DF = (0, -1, 1, 0, 0, -1, -1, 1, 1)
 _NEAR_DJ = (0, 0, 0, -1, 1, -1, 1, -1, 1)
+#: jumps of the walk towards a point from the last facet, before the search through all facets
+WALK_STEPS = 12
+#: distance (deg) from the tie-point grid's border within which a point outside it is still
+#: searched through all facets (a facet holds points up to _EPS beyond its edges)
+BORDER_MARGIN_DEG = 1e-6
+
+
+@njit(cache=True, inline="always")
+def _edge_step(px: float, py: float, x: float, y: float, margin: float) -> tuple[bool, bool]:
+    """For the border edge (px, py)-(x, y), point at the origin: (the edge crosses the ray
+    towards +x, the edge passes within ``margin`` of the point)."""
+    cross = (y > 0.0) != (py > 0.0) and px + (x - px) * (-py) / (y - py) > 0.0
+    if (min(px, x) > margin or max(px, x) < -margin or min(py, y) > margin
+            or max(py, y) < -margin):
+        return cross, False
+    dx = x - px
+    dy = y - py
+    d2 = dx * dx + dy * dy
+    t = 0.0 if d2 == 0.0 else min(max(-(px * dx + py * dy) / d2, 0.0), 1.0)
+    cx = px + t * dx
+    cy = py + t * dy
+    return cross, cx * cx + cy * cy <= margin * margin
+
+
+@njit(cache=True)
+def clear_of_grid(lon: float, lat: float, lat_tp: np.ndarray, lon_tp: np.ndarray) -> bool:
+    """True when (lon, lat) lies outside the border of the tie-point grid by more than
+    BORDER_MARGIN_DEG: no facet holds it. The bilinear facets (eq. 4a-4b) have straight edges
+    in longitude and latitude, so their union is the polygon of the border tie points (first
+    tie line, last tie column, last tie line and first tie column, once round); the point is
+    tested against it (crossings of a ray, then the distance to each edge), longitudes taken
+    relative to the point. False (not known) for a border spanning more than +-90 deg of
+    longitude around the point."""
+    n, m = lat_tp.shape
+    px = wrap180(lon_tp[0, 0] - lon)
+    py = lat_tp[0, 0] - lat
+    inside = False
+    for side in range(4):
+        count = m - 1 if side % 2 == 0 else n - 1
+        for k in range(1, count + 1):
+            if side == 0:
+                i, j = 0, k
+            elif side == 1:
+                i, j = k, m - 1
+            elif side == 2:
+                i, j = n - 1, m - 1 - k
+            else:
+                i, j = n - 1 - k, 0
+            x = wrap180(lon_tp[i, j] - lon)
+            y = lat_tp[i, j] - lat
+            if abs(x) > 90.0:
+                return False
+            cross, near = _edge_step(px, py, x, y, BORDER_MARGIN_DEG)
+            if near:
+                return False
+            if cross:
+                inside = not inside
+            px = x
+            py = y
+    return not inside
 
 
 @njit(cache=True)
@@ -127,6 +187,11 @@ def search_facet(lon: float, lat: float, f0: int, j0: int, lat_tp: np.ndarray,
     """Handbook facet search (section 3.4, fig. 24): last facet, 4-connex, 8-connex, all facets.
 
     Returns (f, j, u, v, path) with path 0..3 as ``PATH_NAMES`` or -1 when no facet holds the point.
+    "All facets" starts with a walk from the last facet, each jump by the point's offsets in
+    the current facet (the bilinear facet extended), and a point clear of the grid's border
+    (:func:`clear_of_grid`) is not searched through every facet: with tie points on every row
+    (OLCI) they are tens of thousands, and the next point of a search lies many facets away.
+    The facet holding a point is one, whichever path finds it.
     """
     nl, nc = lat_tp.shape
     if f0 >= 0:
@@ -138,6 +203,22 @@ def search_facet(lon: float, lat: float, f0: int, j0: int, lat_tp: np.ndarray,
             u, v = facet_offsets(lon, lat, f, j, lat_tp, lon_tp)
             if _inside(u, v):
                 return f, j, u, v, (k + 3) // 4
+        f = min(max(f0, 0), nl - 2)
+        j = min(max(j0, 0), nc - 2)
+        for _ in range(WALK_STEPS):
+            u, v = facet_offsets(lon, lat, f, j, lat_tp, lon_tp)
+            if not (abs(u) < 1e6 and abs(v) < 1e6):
+                break
+            if _inside(u, v):
+                return f, j, u, v, 3
+            f2 = min(max(f + int(math.floor(u)), 0), nl - 2)
+            j2 = min(max(j + int(math.floor(v)), 0), nc - 2)
+            if f2 == f and j2 == j:
+                break
+            f = f2
+            j = j2
+    if clear_of_grid(lon, lat, lat_tp, lon_tp):
+        return -1, -1, math.nan, math.nan, NOT_FOUND
     for f in range(nl - 1):
         for j in range(nc - 1):
             # quick bounding-box reject before the exact test

@@ -82,7 +82,8 @@ def primary_grid(lon: np.ndarray, lat: np.ndarray, lat_tp: np.ndarray, lon_tp: n
     """Exact zero-height inverse (section 3.4) at the primary-grid nodes (2-D lon/lat arrays).
 
     Nodes held by a facet come from the handbook search (warm-started from the previous node's
-    facet: the facet found is the same from any start); nodes outside the tie-point grid from
+    facet, walking from it when the next node lies many facets away, as with OLCI's one-row
+    facets: the facet found is the same from any start); nodes outside the tie-point grid from
     Newton on the extended edge facets (they are needed to predict output points near the swath
     border), started from the edge tie point nearest to the node (``_edge_start``), so that a
     node's antecedent depends on the node alone, not on the nodes computed before it (a window
