@@ -3,11 +3,14 @@
 A real run: the sample scene is generated (or taken from the cache), mapped without and with
 terrain correction, shown in a napari viewer, and captured; then the Orthorectify widget maps
 the scene's product with its DEM (the layers of a run), the product is opened with the
-plugin's reader, and a synthesis store of two cloudy dates of the scene is opened. Needs an X
-display with OpenGL; without one the script re-runs itself under ``xvfb-run`` (Qt's offscreen
-platform has no OpenGL context: its screenshots are black). Usage::
+plugin's reader, and a synthesis store of two cloudy dates of the scene is opened; last an
+OLCI scene (``--olci``) is mapped with its DEM and shown with its footprint, tie-point facets
+and parallax vectors (``olci_<scene>.png``, 1920 x 1080). Needs an X display with OpenGL;
+without one the script re-runs itself under ``xvfb-run`` (Qt's offscreen platform has no
+OpenGL context: its screenshots are black). Usage::
 
-    python scripts/make_screenshots.py [--scene fr-alps] [--out docs/images]
+    python scripts/make_screenshots.py [--scene fr-alps] [--olci olci-err-andes]
+                                       [--only olci] [--out docs/images]
 """
 
 from __future__ import annotations
@@ -233,9 +236,60 @@ def _run_and_readers(viewer, ortho, args) -> list[str]:
     return wrote
 
 
+#: the window of the OLCI screenshot
+OLCI_SIZE = (1920, 1080)
+#: the OLCI screenshot's view across (m): its facets (one tie row high) stay apart
+OLCI_VIEW_M = 400_000.0
+
+
+def _olci_screenshot(scene_name: str, out: Path) -> str:
+    """An OLCI scene mapped by the Orthorectify widget with its DEM: the true-colour map
+    (Oa08, Oa06, Oa03) under its footprint, tie-point facets and parallax vectors, in a
+    1920 x 1080 window. Returns the file name."""
+    import napari
+    from napari_meris_ortho.simulate.scene import generate_scene
+
+    scene = generate_scene(scene_name)
+    viewer = napari.Viewer(title=f"napari-meris-ortho: {scene_name}")
+    viewer.window.show()
+    viewer.window.resize(*OLCI_SIZE)
+    viewer.scale_bar.visible = True
+    viewer.scale_bar.box = True
+    _, ortho = viewer.window.add_plugin_dock_widget("napari-meris-ortho", "Orthorectify")
+    ortho.products.value = [scene.product_path]
+    ortho.add_dem(scene.dem_paths["geotiff"])
+    _run_widget(ortho, timeout=1800.0)
+    _only_prefixed(viewer, "ortho RGB 8-6-3", "footprint ·", "facets ·", "parallax ×")
+    parallax = _named(viewer, "parallax ×")
+    parallax.opacity = 1.0
+    _named(viewer, "facets ·").opacity = 0.5
+    viewer.layers.selection.active = parallax  # its key in the corner
+    # the tie points are on every row: the facets are read on a part of the swath, from its
+    # western edge (the footprint) to the longest parallax vector
+    length = np.hypot(parallax.data[:, 1, 0], parallax.data[:, 1, 1])
+    west = parallax.data[int(np.argmin(parallax.data[:, 0, 1])), 0]
+    longest = parallax.data[int(np.argmax(length)), 0]
+    across = max(OLCI_VIEW_M, 1.4 * float(np.abs(longest - west).max()))
+    camera = viewer.camera
+    camera.center = tuple(0.5 * (west + longest) - (0.0, 0.1 * across))
+    camera.zoom = min(viewer.window._qt_viewer.canvas.size) / across
+    _close_toasts(viewer)
+    name = f"olci_{scene_name.removeprefix('olci-').replace('-', '_')}.png"
+    viewer.screenshot(str(out / name), canvas_only=False, flash=False)
+    print(f"{scene_name}: {parallax.name}, {len(parallax.data)} vectors, the longest "
+          f"{length.max() / parallax.metadata['exaggeration']:.0f} m; "
+          f"{ortho.status.value}")
+    viewer.close()
+    return name
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--scene", default="fr-alps", choices=["fr-alps", "fr-small"])
+    parser.add_argument("--olci", default="olci-err-andes",
+                        choices=["olci-err-andes", "olci-efr-alps"])
+    parser.add_argument("--only", choices=["olci"], default=None,
+                        help="only the OLCI screenshot")
     parser.add_argument("--out", type=Path, default=ROOT / "docs" / "images")
     args = parser.parse_args(argv)
     _ensure_display()
@@ -246,6 +300,9 @@ def main(argv: list[str] | None = None) -> int:
     from napari_meris_ortho._napari.widget_flicker import FlickerWidget, export_flicker_gif
 
     args.out.mkdir(parents=True, exist_ok=True)
+    if args.only == "olci":
+        print("wrote", args.out / _olci_screenshot(args.olci, args.out))
+        return 0
     viewer = napari.Viewer(title=f"napari-meris-ortho: {args.scene}")
     viewer.window.show()
     viewer.window.resize(*SIZE)
@@ -306,13 +363,14 @@ def main(argv: list[str] | None = None) -> int:
     wrote.append("widgets.png")
 
     wrote += _run_and_readers(viewer, ortho, args)
+    viewer.close()
+    wrote.append(_olci_screenshot(args.olci, args.out))
 
     dx, dy = result.global_displacement
     print(f"scene {args.scene}: highest point {peak:.0f} m, pixel {pixel:.0f} m")
     print(f"disparity orthorectified vs reference: dX {dx:+.2f} px, dY {dy:+.2f} px "
           f"({int(result.candidate.sum())} points)")
     print("wrote", ", ".join(str(args.out / w) for w in wrote))
-    viewer.close()
     return 0
 
 

@@ -80,7 +80,8 @@ def facets_layer_data(lat: np.ndarray, lon: np.ndarray, crs: Any,
     grid = tie_grid_world(lat, lon, crs)
     kwargs = {
         "name": name, "edge_color": "cyan", "vector_style": "line", "length": 1.0,
-        "edge_width": _edge_width(grid) * 0.6, "opacity": 0.6, "visible": True,
+        "edge_width": min(_edge_width(grid) * 0.6, 0.25 * _shortest_side(grid)),
+        "opacity": 0.6, "visible": True,
         "metadata": {TIE_GRID_KEY: grid}, **world_axes(crs),
     }
     return grid_edges(grid), kwargs, "vectors"
@@ -103,6 +104,17 @@ def facet_at(grid: np.ndarray, row: float, col: float) -> tuple[int, int] | None
     inside = np.all(s >= 0, axis=0) | np.all(s <= 0, axis=0)
     hits = np.argwhere(inside)
     return None if hits.size == 0 else (int(hits[0][0]), int(hits[0][1]))
+
+
+def _shortest_side(grid: np.ndarray) -> float:
+    """The median length of a facet's shorter sides (world units): between tie lines, or
+    between tie columns when those are closer. An OLCI product's tie points are on every row
+    (1.2 km apart in ERR): its edges stay thinner than that, not one solid fill."""
+    g = np.asarray(grid, np.float64)
+    sides = [np.hypot(*np.moveaxis(np.diff(g, axis=axis), -1, 0)).ravel()
+             for axis in (0, 1) if g.shape[axis] > 1]
+    medians = [float(np.median(side)) for side in sides if side.size]
+    return min(medians) if medians and min(medians) > 0 else np.inf
 
 
 def _edge_width(poly: np.ndarray) -> float:

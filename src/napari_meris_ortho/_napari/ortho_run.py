@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 
 from .._atomic import same_file
+from ..bands import MERIS, BandTable, Sensor, band_table
 from ..errors import MerisOrthoError, OptionsError
 from ..geometry.grid import OutputGrid, same_crs
 from ..options import Elevation, MergeRule, OrthoOptions, choices, parse_band_list
@@ -68,7 +69,9 @@ class RunSettings:
     #: the grid of the layer chosen with ``CRS_LIKE``: outputs on it pixel for pixel
     like: OutputGrid | None = None
     pixel_size_m: float = 0.0  # 0: the nominal FR 260 m / RR 1040 m
-    bands: tuple[int, ...] | None = (7, 5, 2)
+    #: the bands mapped (None: all); the default is MERIS's quick-look, an OLCI product's is
+    #: its own (``default_bands``)
+    bands: tuple[int, ...] | None = MERIS.true_colour
     #: location model: "tiepoints" (with the parallax) or "pixel" (FRG/FSG/SEN3 per-pixel
     #: terrain-corrected geolocation; with DEMs, moved back to the ellipsoid and given their
     #: parallax: ``engine.pixeldem``)
@@ -117,6 +120,11 @@ class RunSettings:
         return f"mapping: orthorectify {what}, one by one"
 
     @property
+    def sensor(self) -> Sensor:
+        """OLCI when a product is an OLCI one (its 21 bands accepted), else MERIS."""
+        return products_sensor(self.products)
+
+    @property
     def dem_list(self) -> list[str]:
         """The DEMs used (as strings)."""
         return [str(d) for d in self.dems]
@@ -124,6 +132,7 @@ class RunSettings:
     def options(self) -> OrthoOptions:
         """The checked ``OrthoOptions`` of the run (``OrthoOptions.of``, as the CLI)."""
         return OrthoOptions.of(n_dems=len(self.dem_list), elevation=self.elevation,
+                               n_bands=band_table(self.sensor).n_bands,
                                sampling=self.sampling, bands=self.bands,
                                geolocation="pixel" if self.pixel else None,
                                parallax=self.parallax, method=self.search,
@@ -170,8 +179,23 @@ class RunSettings:
         return [_output_path(self.output, k, n) for k in range(n)]
 
 
-#: "7,5,2" -> (7, 5, 2); "all" or "" -> None (all 15 bands); OptionsError otherwise
+#: "7,5,2" -> (7, 5, 2); "all" or "" -> None (all bands); OptionsError otherwise
 parse_bands = parse_band_list
+
+
+def products_sensor(paths: list[Path]) -> Sensor:
+    """OLCI when one of ``paths`` is a Sentinel-3 product (by its name or manifest), else
+    MERIS: which band numbers the widget accepts and offers."""
+    from ..products.open import is_sentinel3
+
+    return Sensor.OLCI if any(Path(p).exists() and is_sentinel3(Path(p)) for p in paths) \
+        else Sensor.MERIS
+
+
+def default_bands(sensor: Sensor | str) -> str:
+    """The widget's band list for a sensor's products: its true-colour bands ("7,5,2" MERIS,
+    "8,6,3" OLCI: the RGB quick-look)."""
+    return ",".join(str(b) for b in band_table(sensor).true_colour)
 
 
 def output_crs(options: RunSettings, tie_points: Mapping[str, np.ndarray]) -> Any:
@@ -256,12 +280,14 @@ class OrthoRun:
 
 
 def _item(product: Any, prefix: str = "ortho", **values: Any) -> dict[str, Any]:
+    sensor = Sensor(getattr(product, "sensor", Sensor.MERIS))
     meta = {"product": getattr(product, "product_name", ""), "path": str(product.path),
+            "sensor": str(sensor),
             "product_type": str(getattr(product, "product_type", "")).strip("_"),
             "acquired": product_stamp(product)}
     return {"prefix": prefix, "suffix": f" · {name_stamp(product)}", "meta": meta,
             "tie_points": product.tie_points, "bands": {}, "extra": [], "valid": None,
-            "diagnostics": {}, "stats": {}, **values}
+            "diagnostics": {}, "stats": {}, "table": band_table(sensor), **values}
 
 
 def run_orthorectify(options: RunSettings, progress: ProgressCallback | None = None) -> OrthoRun:
@@ -492,8 +518,11 @@ def _item_layers(item: dict[str, Any], frame: OutputGrid, opts: RunSettings) -> 
     meta = {"stats": item["stats"], "algorithm": opts.algorithm, "elevation": opts.elevation,
             **item["meta"]}
     if item["bands"]:
+        table: BandTable = item.get("table", MERIS)
+        label = None if table.sensor == Sensor.MERIS else table.name  # "b7" / "Oa08"
         layers += band_layers(item["bands"], frame, item["prefix"], meta, item["valid"],
-                              suffix=item["suffix"])
+                              suffix=item["suffix"], table=table,
+                              **({"label": label} if label else {}))
     layers += item["extra"]
     hidden = item.get("hidden")
     if hidden is not None and np.any(hidden):  # the ground the sensor cannot see
@@ -510,5 +539,6 @@ def _item_layers(item: dict[str, Any], frame: OutputGrid, opts: RunSettings) -> 
 
 __all__ = ["ALGORITHMS", "CRS_EPSG", "CRS_GEOGRAPHIC", "CRS_LIKE", "CRS_UTM", "GEOLOCATIONS",
            "Cancelled",
-           "OrthoRun", "RunSettings", "output_crs", "parse_bands", "run_layers",
+           "OrthoRun", "RunSettings", "default_bands", "output_crs", "parse_bands",
+           "products_sensor", "run_layers",
            "run_orthorectify"]

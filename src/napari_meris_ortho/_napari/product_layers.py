@@ -1,5 +1,6 @@
-"""Product layers of the napari front end: radiance bands (an RGB 7-5-2 quick-look and one grey
-layer per band) and the diagnostics of an orthorectification (iterations, elevation and its
+"""Product layers of the napari front end: radiance bands (an RGB quick-look of the sensor's
+true-colour bands, "RGB 7-5-2" for MERIS, "RGB 8-6-3" for OLCI, and one grey layer per
+band) and the diagnostics of an orthorectification (iterations, elevation and its
 source), all placed in the world frame (``world``)."""
 
 from __future__ import annotations
@@ -9,11 +10,13 @@ from typing import Any
 
 import numpy as np
 
+from ..bands import MERIS, BandTable
 from ..display import contrast_limits, stretch_rgb
 from ..geometry.grid import OutputGrid
 from .world import geo_image_kwargs
 
-QUICKLOOK_BANDS = (7, 5, 2)
+#: the MERIS quick-look bands (red, green, blue)
+QUICKLOOK_BANDS = MERIS.true_colour
 #: a band's short label in layer names: "b7" for MERIS band 7; a sensor whose bands are named
 #: otherwise gives its own function (an OLCI product: "Oa08")
 BandLabel = Callable[[int], str]
@@ -22,6 +25,11 @@ BandLabel = Callable[[int], str]
 def meris_band_label(band: int) -> str:
     """'b7': MERIS band 7 in a layer name."""
     return f"b{band}"
+
+
+def quicklook_name(table: BandTable) -> str:
+    """'RGB 7-5-2' (MERIS), 'RGB 8-6-3' (OLCI): the quick-look layer's name."""
+    return "RGB " + "-".join(str(b) for b in table.true_colour)
 
 
 def one_image_shown(layers: list[tuple[Any, dict, str]]) -> list[tuple[Any, dict, str]]:
@@ -39,22 +47,24 @@ def one_image_shown(layers: list[tuple[Any, dict, str]]) -> list[tuple[Any, dict
 
 def band_layers(bands: dict[int, np.ndarray], frame: OutputGrid, prefix: str,
                 meta: dict[str, Any] | None = None, valid: np.ndarray | None = None,
-                suffix: str = "", label: BandLabel = meris_band_label
-                ) -> list[tuple[Any, dict, str]]:
-    """Image layers of radiance bands on ``frame``: an RGB 7-5-2 quick-look when those bands
-    are present ("<prefix> RGB 7-5-2<suffix>"), then one grey layer per band
-    ("<prefix> b7<suffix>", ``label`` naming the band; background 0), hidden under the
-    quick-look; without one, the grey layer of the first band given is shown."""
+                suffix: str = "", label: BandLabel = meris_band_label,
+                table: BandTable = MERIS) -> list[tuple[Any, dict, str]]:
+    """Image layers of radiance bands on ``frame``: an RGB quick-look of ``table``'s
+    true-colour bands when they are present ("<prefix> RGB 7-5-2<suffix>", OLCI's "RGB 8-6-3"),
+    then one grey layer per band ("<prefix> b7<suffix>", ``label`` naming the band; background
+    0), hidden under the quick-look; without one, the grey layer of the first band given is
+    shown."""
     layers: list[tuple[Any, dict, str]] = []
     base = dict(meta or {})
     limits = {b: contrast_limits(bands[b]) for b in bands}
-    quicklook = all(b in bands for b in QUICKLOOK_BANDS)
+    colour = table.true_colour
+    quicklook = all(b in bands for b in colour)
     shown = None if quicklook or not bands else next(iter(bands))
     if quicklook:
-        rgb = stretch_rgb([bands[b] for b in QUICKLOOK_BANDS], valid,
-                          [limits[b] for b in QUICKLOOK_BANDS])
-        layers.append((rgb, geo_image_kwargs(frame, name=f"{prefix} RGB 7-5-2{suffix}", rgb=True,
-                                             metadata=dict(base, bands=QUICKLOOK_BANDS)),
+        rgb = stretch_rgb([bands[b] for b in colour], valid, [limits[b] for b in colour])
+        layers.append((rgb, geo_image_kwargs(frame, name=f"{prefix} {quicklook_name(table)}"
+                                             f"{suffix}", rgb=True,
+                                             metadata=dict(base, bands=colour)),
                        "image"))
     for b in sorted(bands):
         data = np.asarray(bands[b])

@@ -1,8 +1,10 @@
 """napari readers: MERIS L1b ``.N1`` products and ``.SEN3`` directories (product geometry),
 geocoded GeoTIFFs and synthesis stores (directories; ``synthesis_layers``).
 
-N1: the 15 radiance bands as one multichannel image (band axis first), an RGB quick-look
-from bands 7, 5, 2, the flags as a labels layer; tie points and headers in the layer metadata.
+A Level 1 product (a MERIS N1 or ``.SEN3``, an OLCI Level 1B ``.SEN3``): its radiance bands
+(MERIS 15, OLCI 21) as one multichannel image (band axis first), an RGB quick-look from the
+sensor's true-colour bands (``bands.BandTable.true_colour``: MERIS 7, 5, 2; OLCI Oa08, Oa06,
+Oa03), the flags as a labels layer; tie points and headers in the layer metadata.
 A product wider or longer than ``pyramid.MAX_LEVEL_SIDE`` opens as multiscale layers read on
 demand (``pyramid``): napari reads only the lines of the level on screen from an N1's memory
 map; a ``.SEN3``'s bands are read whole when first shown (chunked, compressed netCDF: a part
@@ -25,6 +27,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from ..bands import BandTable, band_table
 from ..display import contrast_limits, stretch_channel, stretch_rgb
 from ..errors import MerisOrthoError, N1FormatError
 from ..geometry.grid import OutputGrid
@@ -48,8 +51,8 @@ from ..pyramid import (
 )
 from ._qt.insertion import defer_controls, thumbnails_later
 from ._qt.waiting import responsively
-from .product_layers import QUICKLOOK_BANDS
-from .status import BAND_AXIS
+from .product_layers import quicklook_name
+from .status import band_axis_name
 from .world import current_viewer, geo_image_kwargs, viewer_frame
 
 if TYPE_CHECKING:
@@ -319,8 +322,9 @@ def _contrast_limits(band: np.ndarray, nodata: float | None) -> tuple[float, flo
 # N1
 # --------------------------------------------------------------------------------------------
 def n1_layers(path: str | Path, frame: OutputGrid | None = None) -> list[LayerData]:
-    """Radiance stack (band axis = MERIS band numbers 1..15), RGB quick-look (bands 7, 5, 2)
-    and flags (named bits in the features) of a MERIS L1b product (N1 or .SEN3; FRG/FSG and
+    """Radiance stack (band axis = the product's band numbers, MERIS 1..15, OLCI 1..21), RGB
+    quick-look (the sensor's true-colour bands: MERIS 7, 5, 2; OLCI 8, 6, 3) and flags (named
+    bits in the features) of a Level 1 product (MERIS N1 or .SEN3, OLCI .SEN3; FRG/FSG and
     SEN3 products also carry their per-pixel altitude in the metadata), in product geometry
     placed in the world (``frame``, or a new one in the UTM zone of the footprint) by an affine
     fit of its tie points (``_placement``). The radiance stack opens hidden (the opaque RGB
@@ -368,11 +372,12 @@ def _n1_layer_data(path: str | Path, frame: OutputGrid | None
     meta = n1_metadata(product)
     suffix = f" · {name_stamp(product)}"
     place, warning = _placement(product, frame, meta)
+    table = product_bands(product)
     band_axis = {"affine": _with_band_axis(place["affine"]), "units": ("pixel", *place["units"]),
-                 "axis_labels": (BAND_AXIS, *place["axis_labels"])}
+                 "axis_labels": (band_axis_name(table.sensor), *place["axis_labels"])}
     read = radiance_reader(product)  # one band cache for the stack and the quick-look
     radiance = radiance_levels(product, read)
-    rgb = quicklook_levels(product, read=read)
+    rgb = quicklook_levels(product, table.true_colour, read=read)
     flags = flag_levels(product)
     multiscale = {"multiscale": len(radiance) > 1}
     _import_for_first_layer()
@@ -381,9 +386,10 @@ def _n1_layer_data(path: str | Path, frame: OutputGrid | None
                                  "colormap": "gray", "visible": False, **band_axis,
                                  **multiscale,
                                  "contrast_limits": _contrast_limits(
-                                     np.asarray(radiance[-1][6]), None)}, "image"),
-        (_one_or_all(rgb), {"name": f"RGB 7-5-2{suffix}", "rgb": True, "metadata": meta,
-                            **place, **multiscale}, "image"),
+                                     np.asarray(radiance[-1][table.true_colour[0] - 1]),
+                                     None)}, "image"),
+        (_one_or_all(rgb), {"name": f"{quicklook_name(table)}{suffix}", "rgb": True,
+                            "metadata": meta, **place, **multiscale}, "image"),
         (_one_or_all(flags), {"name": f"flags{suffix}", "metadata": meta, "opacity": 0.4,
                               "visible": False, "features": flag_features(flags[0]), **place,
                               **multiscale}, "labels"),
@@ -438,23 +444,37 @@ def _placement(product: Any, frame: OutputGrid | None, meta: dict[str, Any]
 
 
 def _with_band_axis(affine: np.ndarray) -> np.ndarray:
-    """The 2-D placement with the band axis in front (world band = 1..15)."""
+    """The 2-D placement with the band axis in front (world band = 1..n_bands)."""
     out = np.eye(4)
     out[0, 3] = 1.0
     out[1:, 1:] = affine
     return out
 
 
+def product_bands(product: MerisProduct) -> BandTable:
+    """The band table of a product's sensor (MERIS for a product that does not say)."""
+    return band_table(getattr(product, "sensor", "MERIS"))
+
+
+def band_label(table: BandTable, band: int, wavelength: float) -> str:
+    """A band as the band axis names it after the sensor: 'band 7 (665 nm)' (MERIS, whose
+    products number their bands), 'Oa08 (665 nm)' (OLCI, whose products name them)."""
+    what = f"band {band}" if table.sensor == "MERIS" else table.name(band)
+    return f"{what} ({wavelength:.0f} nm)"
+
+
 def n1_metadata(product: MerisProduct) -> dict[str, Any]:
     """Tie points and headers of a product, for the layer metadata."""
+    table = product_bands(product)
     return {
+        "sensor": str(table.sensor), "true_colour": table.true_colour,
         "path": str(product.path), "product_type": product.product_type,
         "mph": dict(product.mph), "sph": dict(product.sph),
         "tie_points": {k: np.asarray(v) for k, v in product.tie_points.items()},
         "lines_per_tie_point": product.lines_per_tie_point,
         "samples_per_tie_point": product.samples_per_tie_point,
         "wavelengths": list(product.wavelengths),
-        "band_names": [f"band {b} ({w:.0f} nm)" for b, w in enumerate(product.wavelengths, 1)],
+        "band_names": [band_label(table, b, w) for b, w in enumerate(product.wavelengths, 1)],
         "column_order": "stored (chronological/detector)",
         "pixel_geolocation": bool(getattr(product, "has_pixel_geolocation", False)),
     }
@@ -485,14 +505,14 @@ def _reads_lines(product: MerisProduct) -> bool:
 
 
 def radiance_levels(product: MerisProduct, read: RadianceReader | None = None) -> list[Any]:
-    """The 15 radiance bands (15, H, W) float32 (``radiance_stack``) and its decimated levels
+    """The radiance bands (n_bands, H, W) float32 (``radiance_stack``) and its decimated levels
     (``pyramid``; one level for a small product)."""
     stack = radiance_stack(product, read)
     return stack.levels() if len(_product_factors(product)) > 1 else [stack]
 
 
 def radiance_stack(product: MerisProduct, read: RadianceReader | None = None) -> LazyArray:
-    """The 15 radiance bands as a lazy (15, H, W) float32 array: a selection reads only the
+    """The radiance bands as a lazy (n_bands, H, W) float32 array: a selection reads only the
     selected bands (``radiance_reader``: of an N1 only its lines)."""
     radiance = read or radiance_reader(product)
 
@@ -502,16 +522,18 @@ def radiance_stack(product: MerisProduct, read: RadianceReader | None = None) ->
         out = np.stack([radiance(b + 1, rows, cols) for b in bands])
         return out[0] if isinstance(band, int) else out
 
-    return LazyArray(read_stack, (NUM_BANDS, product.height, product.width), np.float32)
+    n_bands = int(getattr(product, "n_bands", NUM_BANDS))
+    return LazyArray(read_stack, (n_bands, product.height, product.width), np.float32)
 
 
 def quicklook_levels(product: MerisProduct,
-                     bands: tuple[int, int, int] = QUICKLOOK_BANDS,
+                     bands: tuple[int, int, int] | None = None,
                      read: RadianceReader | None = None) -> list[Any]:
     """The RGB quick-look (H, W, 3) uint8 of a small product (1-99 % stretch of each band,
     ``stretch_rgb``); of a big one a lazy (H, W, 3)
     uint8 array and its decimated levels, each channel stretched by the 1-99 % limits of the
-    coarsest level (``stretch_channel``)."""
+    coarsest level (``stretch_channel``); ``bands``: the sensor's true colour by default."""
+    bands = product_bands(product).true_colour if bands is None else bands
     factors = _product_factors(product)
     radiance = read or radiance_reader(product)
     if len(factors) == 1:

@@ -1,13 +1,14 @@
 """The status bar over geocoded layers: positive northing and easting (or latitude and
 longitude) and the CRS, instead of napari's world (row, col) = (-northing, easting); and the
-band slider of a product's radiance stack naming the MERIS band shown.
+band slider of a product's radiance stack naming the band shown (MERIS or OLCI).
 
 napari builds the status text from the selected layer's ``get_status``;
 ``show_map_coordinates(viewer)`` wraps it for every layer of the viewer that lives in the world
 (``world.world_crs``: rasters, products, footprint/facet and parallax vectors), now and
 when added, so that the coordinates are right whatever layer is selected (after a run, a
 vectors layer). napari's slider shows the step index (0-14); the axis label of a radiance stack
-names the band at the dims point instead ("MERIS band 7 (665 nm)", world band axis = 1..15).
+names the band at the dims point instead ("MERIS band 7 (665 nm)", "OLCI Oa08 (665 nm)"; world
+band axis = 1..n_bands).
 """
 
 from __future__ import annotations
@@ -110,25 +111,34 @@ def show_map_coordinates(viewer: Any) -> None:
     bands()
 
 
-#: axis label of the band axis of a radiance stack (``reader.n1_layers``)
+#: axis label of the band axis of a MERIS radiance stack (``reader.n1_layers``)
 BAND_AXIS = "MERIS band"
+
+
+def band_axis_name(sensor: str) -> str:
+    """The axis label of the band axis of a radiance stack of ``sensor``: 'MERIS band',
+    'OLCI band'."""
+    return f"{sensor} band"
 
 
 def label_bands(viewer: Any) -> None:
     """Name the band at the dims point on the band axis of every radiance stack (a layer with
-    ``metadata["band_names"]`` whose first axis is the band axis, world band = 1..15)."""
+    ``metadata["band_names"]`` whose first axis is the band axis, world band = 1..n_bands):
+    'MERIS band 7 (665 nm)', 'OLCI Oa08 (665 nm)'."""
     for layer in viewer.layers:
-        names = getattr(layer, "metadata", {}).get("band_names")
+        meta = getattr(layer, "metadata", {}) or {}
+        names = meta.get("band_names")
+        sensor = str(meta.get("sensor", "MERIS"))
         labels = tuple(layer.axis_labels)
-        if not names or layer.ndim != 3 or not labels[0].startswith(BAND_AXIS):
+        if not names or layer.ndim != 3 or not labels[0].startswith(sensor):
             continue
         axis = viewer.dims.ndim - layer.ndim
         band = int(round(float(viewer.dims.point[axis])))
-        text = (f"{BAND_AXIS} {names[band - 1].removeprefix('band ')}"
-                if 1 <= band <= len(names) else BAND_AXIS)
+        text = (f"{sensor} {names[band - 1]}" if 1 <= band <= len(names)
+                else band_axis_name(sensor))
         if labels[0] != text:
             layer.axis_labels = (text, *labels[1:])
 
 
-__all__ = ["BAND_AXIS", "GEO_KEY", "label_bands", "map_position",
+__all__ = ["BAND_AXIS", "GEO_KEY", "band_axis_name", "label_bands", "map_position",
            "show_map_coordinates", "wrap_status"]

@@ -33,6 +33,7 @@ from ..pyramid import full_resolution
 from ._qt.closing import OnClose
 from ._qt.insertion import start_after_paint
 from .layout import StatusLabel, compact_combo
+from .ortho_run import RUN_KEY
 from .settings import remember
 from .world import (
     WORLD_KEY,
@@ -173,7 +174,10 @@ def default_pair(layers: list[Any]) -> tuple[Any, Any] | None:
     """The check the flicker exists for (handbook section 4.4): A = the newest orthorectified
     band, B = the reference image (same band when there is one); without a reference, the
     previous product's orthorectified band, then the uncorrected one; without an orthorectified
-    band, the two top-most images. None with fewer than two images."""
+    band, the two top-most images. Two runs of one product with different location models
+    (its tie points with the DEMs, its per-pixel geolocation: an OLCI product's "DEM corrected"
+    positions) are partners when no other product's band is. None with fewer than two
+    images."""
     from napari.layers import Image, Labels
 
     images = [x for x in layers if isinstance(x, Image | Labels)]
@@ -194,7 +198,10 @@ def default_pair(layers: list[Any]) -> tuple[Any, Any] | None:
         same_band = [x for x in images if x is not a and layer_band(x) == layer_band(a)]
         previous = [x for x in same_band if is_ortho(x)
                     and x.metadata.get("path") != a.metadata.get("path")]
-        return previous or [x for x in same_band if str(x.name).startswith("uncorrected")]
+        other_model = [x for x in same_band if is_ortho(x)
+                       and x.metadata.get(RUN_KEY) != a.metadata.get(RUN_KEY)]
+        return previous or other_model or [x for x in same_band
+                                           if str(x.name).startswith("uncorrected")]
 
     for a in reversed(newest):  # a band of the newest product that has a partner
         if partners(a):

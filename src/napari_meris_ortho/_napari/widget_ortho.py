@@ -40,6 +40,7 @@ from magicgui.widgets import (
 )
 
 from .._process import unit_registry_from_disk
+from ..bands import Sensor, band_table
 from ..errors import MerisOrthoError, OptionsError
 from ..options import (
     PARALLAX_CHOICES,
@@ -82,9 +83,11 @@ from .ortho_run import (
     Cancelled,
     OrthoRun,
     RunSettings,
+    default_bands,
     layer_source,
     output_crs,
     parse_bands,
+    products_sensor,
     run_layers,
     run_orthorectify,
 )
@@ -198,8 +201,9 @@ class OrthorectifyWidget(ScrolledForm):
         self.products = FileEdit(label="products (N1, SEN3 manifest)",
                                  mode=FileDialogMode.EXISTING_FILES,
                                  filter="*.N1 *.n1 xfdumanifest.xml *.zip *.ZIP",
-                                 tooltip="MERIS L1b products: .N1 files (FR/RR, FRG/FSG), the "
-                                         "xfdumanifest.xml of a .SEN3 product or its .zip")
+                                 tooltip="MERIS L1b products: .N1 files (FR/RR, FRG/FSG); "
+                                         "MERIS or OLCI Level 1B (EFR/ERR) .SEN3 products: "
+                                         "their xfdumanifest.xml or .zip")
         self.dem_kind = ComboBox(label="DEM type", choices=[DEM_FILE, DEM_DIR], value=DEM_FILE,
                                  tooltip="a DEM file, or a directory of GETASSE30 tiles")
         self.dem_path = FileEdit(label="DEM", mode=FileDialogMode.EXISTING_FILE,
@@ -268,8 +272,9 @@ class OrthorectifyWidget(ScrolledForm):
         self.pixel_size = FloatSpinBox(label="pixel size (m, 0 = nominal)", value=0.0, min=0.0,
                                        max=100_000.0, step=10.0,
                                        tooltip="output pixel size; 0: 260 m (FR), 1040 m (RR)")
-        self.bands = LineEdit(label="bands", value="7,5,2",
-                              tooltip="MERIS bands 1..15, e.g. 7,5,2 (RGB quick-look) or all")
+        self.bands = LineEdit(label="bands", value=default_bands(Sensor.MERIS),
+                              tooltip="MERIS bands 1..15, e.g. 7,5,2 (RGB quick-look); OLCI "
+                                      "bands 1..21, e.g. 8,6,3 (Oa08, Oa06, Oa03); or all")
         self.geometry = CheckBox(label="geometry layers", value=True,
                                  tooltip="footprint, tie-point facets, parallax vectors, "
                                          "iterations and elevation source")
@@ -329,6 +334,7 @@ class OrthorectifyWidget(ScrolledForm):
                                  "Run builds a synthesis")
         for widget in (self.products, self.algorithm, self.input_store, self.output):
             widget.changed.connect(self._show_mode)
+        self.products.changed.connect(self._products_changed)
         self._show_mode()
         self._crs_changed(self.crs.value)
         self.dem_kind.changed.connect(self._dem_kind_changed)
@@ -454,9 +460,18 @@ class OrthorectifyWidget(ScrolledForm):
         self.mode.value = settings.mode()
         self.keep.visible = settings.synthesis  # pruning a store's commits: syntheses only
 
+    def _products_changed(self, _value: Any = None) -> None:
+        """A band list left at one sensor's quick-look bands follows the products' sensor
+        ("7,5,2" for MERIS, "8,6,3" for OLCI); a list the user typed stays."""
+        sensor = products_sensor(self._paths()[0])
+        defaults = {default_bands(other) for other in Sensor}
+        if self.bands.value.replace(" ", "") in defaults:
+            self.bands.value = default_bands(sensor)
+
     def settings(self) -> RunSettings:
         """The widget's values as checked RunSettings (raises OptionsError on bad input)."""
         products, output, store = self._paths()
+        n_bands = band_table(products_sensor(products)).n_bands
         options = RunSettings(
             products=products, dems=self.dems,
             elevation=self.elevation.value, geolocation=self.geolocation.value,
@@ -464,7 +479,7 @@ class OrthorectifyWidget(ScrolledForm):
             search=self.search.value, input_store=store, keep=int(self.keep.value),
             sampling=self.sampling.value, crs=self.crs.value, epsg=int(self.epsg.value),
             like=self.like_grid() if self.crs.value == CRS_LIKE else None,
-            pixel_size_m=float(self.pixel_size.value), bands=parse_bands(self.bands.value),
+            pixel_size_m=float(self.pixel_size.value), bands=parse_bands(self.bands.value, n_bands),
             output=output, geometry=self.geometry.value,
             exaggeration=float(self.exaggeration.value), vector_step=int(self.vector_step.value),
             hidden=self.hidden.value)
