@@ -4,12 +4,12 @@ same size.
 Per OLCI scene (default ``olci-efr-alps`` and ``olci-err-andes``), on every 7th point of the
 output grid: the error (px of the product) against the simulator's ``true_antecedent`` of the
 DEM mode (tie-point geolocation + the scene's DEM, handbook and ellipsoid parallax) and of the
-per-pixel geolocation on the same grid, and the holes: points whose true antecedent lies at
-least half a pixel inside the product, left unmapped (for the per-pixel geolocation, ground
-hidden from the sensor, which it reports instead of mapping). Then the time of
-``meris-ortho map`` (DEM mode, one band, a GeoTIFF on the default grid, whose size is printed)
-of the scene and of a MERIS scene of as many pixels at the same resolution (``fr-alps`` 2241
-or ``rr-segment`` 1121 columns wide, as many lines as needed).
+per-pixel geolocation on the same grid, and the holes: points whose true antecedent lies in
+the product and that the sensor sees (``SimulatedScene.seen_from_sensor``), left unmapped;
+the ground hidden from the sensor is left unmapped by both models (``hidden="mask"``). Then
+the time of ``meris-ortho map`` (DEM mode, one band, a GeoTIFF on the default grid, whose size
+is printed) of the scene and of a MERIS scene of as many pixels at the same resolution
+(``fr-alps`` 2241 or ``rr-segment`` 1121 columns wide, as many lines as needed).
 A benchmark, not a test: ``python benchmarks/bench_olci.py [--scene NAME ...]``.
 """
 
@@ -32,8 +32,8 @@ NO_EXPORTS = {"srtm30": False, "getasse30": False, "getasse30_beam": False,
 
 
 def errors(scene, result, stride: int = 7) -> tuple[np.ndarray, int]:
-    """Distance (px) to the truth of every ``stride``-th mapped point, and the holes among the
-    ``stride``-th points of the grid."""
+    """Distance (px) to the truth of every ``stride``-th mapped point, and the holes (seen
+    ground left unmapped) among the ``stride``-th points of the grid."""
     pick = np.zeros(result.valid.shape, bool)
     pick.ravel()[::stride] = True
     lon, lat = result.grid.lonlat()
@@ -42,6 +42,10 @@ def errors(scene, result, stride: int = 7) -> tuple[np.ndarray, int]:
     g = scene.geometry
     inside = ((tl >= 0.0) & (tl <= g.lines - 1.0) & (tc >= 0.0) & (tc <= g.columns - 1.0)
               & np.isfinite(h))
+    seen = np.zeros_like(inside)
+    seen[inside] = scene.seen_from_sensor(lon[pick][inside], lat[pick][inside], h[inside],
+                                          tl[inside], tc[inside])
+    inside &= seen
     ok = result.valid[pick]
     e = np.hypot(result.diagnostics["line"][pick][ok] - tl[ok],
                  result.diagnostics["col"][pick][ok] - tc[ok])

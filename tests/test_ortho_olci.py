@@ -33,7 +33,11 @@ def _truth(scene, result, near: int = 0):
     g = scene.geometry
     inside = ((tl >= 0.0) & (tl <= g.lines - 1.0) & (tc >= 0.0) & (tc <= g.columns - 1.0)
               & np.isfinite(h))
-    return SimpleNamespace(pick=pick, tl=tl, tc=tc, inside=inside)
+    seen = np.zeros_like(inside)
+    seen[inside] = scene.seen_from_sensor(lon[pick][inside], lat[pick][inside], h[inside],
+                                          tl[inside], tc[inside])
+    return SimpleNamespace(pick=pick, tl=tl, tc=tc, inside=inside & seen,
+                           hidden=inside & ~seen)
 
 
 def _error(result, truth):
@@ -62,7 +66,8 @@ def olci_runs(request):
 def test_dem_mode_matches_the_truth_without_holes(olci_runs, parallax):
     """Tie-point geolocation + the scene's DEM: within 0.05 px RMS and 0.25 px of the truth
     everywhere, up to 57 deg view zenith over 5-7 km relief; every output point whose true
-    antecedent lies in the product is mapped."""
+    antecedent lies in the product and that the sensor sees is mapped, the hidden ground is
+    left unmapped (``hidden="mask"``, the default)."""
     r, truth = olci_runs.runs[parallax], olci_runs.truth
     e = _error(r, truth)
     assert e.size > 50_000
@@ -70,6 +75,7 @@ def test_dem_mode_matches_the_truth_without_holes(olci_runs, parallax):
         float(np.sqrt(np.mean(e ** 2))), float(e.max()))
     holes = truth.inside & ~r.valid[truth.pick]
     assert holes.sum() == 0, np.flatnonzero(holes)[:5]
+    assert not r.valid[truth.pick][truth.hidden].any()
     # the relief and the tilt are real: the DEM heights and their parallax shifts
     ok = r.valid
     assert r.diagnostics["elevation"][ok].max() > 4000.0
