@@ -43,7 +43,8 @@ class _Parser(argparse.ArgumentParser):
 def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(
         prog="meris-ortho",
-        description="Orthorectify, synthesize and analyse Envisat MERIS L1b products.",
+        description="Orthorectify, synthesize and analyse Envisat MERIS L1b and Sentinel-3 OLCI "
+        "Level 1B products.",
     )
     parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     _add_logging_options(parser, False)

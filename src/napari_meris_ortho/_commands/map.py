@@ -37,10 +37,11 @@ def register(subparsers: Any) -> None:
     """Add the ``map`` subcommand."""
     p = subparsers.add_parser(
         "map", help="orthorectify one product to a GeoTIFF",
-        description="Orthorectify a MERIS L1b product onto a map grid (handbook sections 3.1-3.4, "
+        description="Orthorectify a MERIS L1b or OLCI Level 1B product onto a map grid (handbook "
+        "sections 3.1-3.4, "
         "MERSYN use case 3) and write the radiances as a GeoTIFF. " + DEFAULT_GRID)
-    p.add_argument("product", metavar="PRODUCT", help="MERIS L1b product: N1 file or .SEN3 "
-                   "directory")
+    p.add_argument("product", metavar="PRODUCT", help="MERIS L1b product (N1 file or .SEN3 "
+                   "directory) or OLCI Level 1B product (.SEN3 directory or zip)")
     p.add_argument("-o", "--output", required=True, metavar="OUT.tif", help="output GeoTIFF")
     add_height_options(
         p, dem_help="DEM (repeatable; tried in order at each point, then the tie points)",
