@@ -41,13 +41,16 @@ def _post_tiles(data, tile, gaps, out):  # pragma: no cover
             out[i, j] = -np.inf
     for r in range(nr):
         i = r // tile
-        for c in range(nc):
-            v = data[r, c]
-            if v >= MIN_TERRAIN_M and v <= MAX_TERRAIN_M:
-                if v > out[i, c // tile]:
-                    out[i, c // tile] = v
-            elif gaps:
-                out[i, c // tile] = np.inf
+        for j in range(out.shape[1]):  # a tile's posts of the row, no division a post
+            m = out[i, j]
+            for c in range(j * tile, min((j + 1) * tile, nc)):
+                v = data[r, c]
+                if v >= MIN_TERRAIN_M and v <= MAX_TERRAIN_M:
+                    if v > m:
+                        m = v
+                elif gaps:
+                    m = np.inf
+            out[i, j] = m
 
 
 def tile_maxima(data: np.ndarray, tile: int, gaps: bool = False,
@@ -246,6 +249,23 @@ def _horizon_sweep(posts, gaps, step, ceiling, low, col_m, row_m, tan_vz, out_ab
         c -= step
 
 
+@njit(cache=True, nogil=True)
+def _transposed(data, out):  # pragma: no cover
+    """``data`` transposed into ``out`` (by blocks of 32 x 32 posts); the lowest valid post
+    (inf: none)."""
+    nr, nc = data.shape
+    low = np.inf
+    for r0 in range(0, nr, 32):
+        for c0 in range(0, nc, 32):
+            for r in range(r0, min(r0 + 32, nr)):
+                for c in range(c0, min(c0 + 32, nc)):
+                    v = data[r, c]
+                    out[c, r] = v
+                    if v >= MIN_TERRAIN_M and v < low:
+                        low = v
+    return float(low)
+
+
 def horizon_bound(data: np.ndarray, ceiling: float, east: bool, west: bool, gaps: bool,
                   spacing: tuple[float, float], tan_vz: float) -> np.ndarray:
     """Per cell of a window (posts r..r+1, c..c+1; float32, indexed [c, r]: column first,
@@ -262,10 +282,9 @@ def horizon_bound(data: np.ndarray, ceiling: float, east: bool, west: bool, gaps
     than the ray rises (the ray leaves such terrain), their span elsewhere. Beyond the
     window and, with ``gaps``, on posts without data (the next DEM of a stack has heights
     there) the terrain may reach ``ceiling``."""
-    with np.errstate(invalid="ignore"):
-        low = float(np.nanmin(np.where(data >= MIN_TERRAIN_M, data, np.nan), initial=np.inf))
+    posts = np.empty((data.shape[1], data.shape[0]), np.float32)
+    low = _transposed(np.asarray(data, np.float32), posts)
     low = low if math.isfinite(low) else 0.0
-    posts = np.ascontiguousarray(np.asarray(data, np.float32).T)
     shape = (max(posts.shape[0] - 1, 0), max(posts.shape[1] - 1, 0))
     out_abs = np.full(shape, -np.inf, np.float32)
     out_rel = np.full(shape, -np.inf, np.float32)
