@@ -266,6 +266,18 @@ def _transposed(data, out):  # pragma: no cover
     return float(low)
 
 
+@njit(cache=True, nogil=True)
+def lowest_finite(data):  # pragma: no cover
+    """The lowest finite value of ``data`` (2-D; inf: none), in one pass without masks."""
+    low = np.inf
+    for r in range(data.shape[0]):
+        for c in range(data.shape[1]):
+            v = data[r, c]
+            if v < low and v > -np.inf:
+                low = v
+    return float(low)
+
+
 def horizon_bound(data: np.ndarray, ceiling: float, east: bool, west: bool, gaps: bool,
                   spacing: tuple[float, float], tan_vz: float) -> np.ndarray:
     """Per cell of a window (posts r..r+1, c..c+1; float32, indexed [c, r]: column first,
@@ -327,6 +339,45 @@ def reachable(lon: np.ndarray, lat: np.ndarray, h: np.ndarray, inv: np.ndarray,
     args = (lon, lat, h, inv, lattice, float(wrap_centre), bound, float(tol), out)
     split_range(lambda lo, hi: _reachable_range(lo, hi, *args), lon.size, min_size=1 << 14)
     return out
+
+
+@njit(cache=True, nogil=True)
+def _to_march(lon, lat, h, col, iters, inv, lattice, wrap_centre, bound, tol, near_lo,
+              near_hi, out):  # pragma: no cover
+    """``to_march`` into ``out``; their number."""
+    n_c, n_r = bound.shape  # (column, row)
+    r_off, c_off = lattice[0], lattice[1]
+    a, c, e_, f = inv[0], inv[2], inv[4], inv[5]
+    m = 0
+    for k in range(lon.size):
+        hk = h[k]
+        if iters[k] < 0 or not math.isfinite(hk):
+            continue
+        go = near_lo <= col[k] <= near_hi
+        if not go:
+            x0 = lon[k]
+            if abs(wrap_centre - x0) > 180.0:
+                x0 = x0 + 360.0 * np.rint((wrap_centre - x0) / 360.0)
+            r = int(math.floor(e_ * lat[k] + f - 0.5)) - r_off
+            cc = int(math.floor(a * x0 + c - 0.5)) - c_off
+            go = r < 0 or cc < 0 or r >= n_r or cc >= n_c or bound[cc, r] > hk + tol
+        if go:
+            out[m] = k
+            m += 1
+    return m
+
+
+def to_march(lon: np.ndarray, lat: np.ndarray, h: np.ndarray, col: np.ndarray,
+             iters: np.ndarray, inv: np.ndarray, lattice: np.ndarray, wrap_centre: float,
+             bound: np.ndarray, tol: float, near: tuple[float, float]) -> np.ndarray:
+    """The indices of the flat points (``lon``, ``lat``, ``h``; antecedent column ``col``,
+    ``iters`` of the solution) whose rays ``march`` must decide: solved (``iters`` >= 0),
+    with a height, and ``reachable`` or at a column within ``near`` (near nadir) -- one pass
+    over a block, no masks."""
+    out = np.empty(lon.size, np.int64)
+    m = _to_march(lon, lat, h, col, iters, inv, lattice, float(wrap_centre), bound,
+                  float(tol), float(near[0]), float(near[1]), out)
+    return out[:m]
 
 
 def march(lon: np.ndarray, lat: np.ndarray, h: np.ndarray, e: np.ndarray, n: np.ndarray,
