@@ -332,9 +332,10 @@ def hidden_ground(sight: Sightlines, kernel_args: tuple, lon: np.ndarray, lat: n
     out = np.asarray(iters == OCCLUDED).copy()
     w = sight.window
     if sight.bound is not None and w is not None:  # one pass: the points to march
-        index = sightline.to_march(
-            *(np.ascontiguousarray(a).reshape(-1) for a in (lon, lat, h, res["col"], iters)),
-            w.inv, w.lattice, w.wrap_centre, sight.bound, TOLERANCE_M, sight.near_nadir)
+        plon, plat, ph, pcol, piters = (np.ascontiguousarray(a).reshape(-1)
+                                         for a in (lon, lat, h, res["col"], iters))
+        index = sightline.to_march(plon, plat, ph, pcol, piters, w.inv, w.lattice,
+                                   w.wrap_centre, sight.bound, TOLERANCE_M, sight.near_nadir)
     else:
         index = np.flatnonzero(((iters >= 0) & np.isfinite(h)).reshape(-1))
     if index.size == 0:
