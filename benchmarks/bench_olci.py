@@ -5,8 +5,8 @@ Per OLCI scene (default ``olci-efr-alps`` and ``olci-err-andes``), on every 7th 
 output grid: the error (px of the product) against the simulator's ``true_antecedent`` of the
 DEM mode (tie-point geolocation + the scene's DEM, handbook and ellipsoid parallax) and of the
 per-pixel geolocation on the same grid, and the holes: points whose true antecedent lies in
-the product and that the sensor sees (``SimulatedScene.seen_from_sensor``), left unmapped;
-the ground hidden from the sensor is left unmapped by both models (``hidden="mask"``). Then
+the product and that the sensor sees (``SimulatedScene.seen_from_sensor``), left unmapped
+and not found hidden by the run (the hidden ground is no data: ``hidden="mask"``). Then
 the time of ``meris-ortho map`` (DEM mode, one band, a GeoTIFF on the default grid, whose size
 is printed) of the scene and of a MERIS scene of as many pixels at the same resolution
 (``fr-alps`` 2241 or ``rr-segment`` 1121 columns wide, as many lines as needed).
@@ -49,7 +49,9 @@ def errors(scene, result, stride: int = 7) -> tuple[np.ndarray, int]:
     ok = result.valid[pick]
     e = np.hypot(result.diagnostics["line"][pick][ok] - tl[ok],
                  result.diagnostics["col"][pick][ok] - tc[ok])
-    return e, int(np.count_nonzero(inside & ~ok))
+    found_hidden = (result.hidden[pick] if result.hidden is not None
+                    else np.zeros_like(ok))
+    return e, int(np.count_nonzero(inside & ~ok & ~found_hidden))
 
 
 def map_seconds(product: Path, dem: Path, out: Path) -> tuple[float, float]:

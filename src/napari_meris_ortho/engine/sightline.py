@@ -41,13 +41,16 @@ def _post_tiles(data, tile, gaps, out):  # pragma: no cover
             out[i, j] = -np.inf
     for r in range(nr):
         i = r // tile
-        for c in range(nc):
-            v = data[r, c]
-            if v >= MIN_TERRAIN_M and v <= MAX_TERRAIN_M:
-                if v > out[i, c // tile]:
-                    out[i, c // tile] = v
-            elif gaps:
-                out[i, c // tile] = np.inf
+        for j in range(out.shape[1]):  # a tile's posts of the row, no division a post
+            m = out[i, j]
+            for c in range(j * tile, min((j + 1) * tile, nc)):
+                v = data[r, c]
+                if v >= MIN_TERRAIN_M and v <= MAX_TERRAIN_M:
+                    if v > m:
+                        m = v
+                elif gaps:
+                    m = np.inf
+            out[i, j] = m
 
 
 def tile_maxima(data: np.ndarray, tile: int, gaps: bool = False,
@@ -246,6 +249,35 @@ def _horizon_sweep(posts, gaps, step, ceiling, low, col_m, row_m, tan_vz, out_ab
         c -= step
 
 
+@njit(cache=True, nogil=True)
+def _transposed(data, out):  # pragma: no cover
+    """``data`` transposed into ``out`` (by blocks of 32 x 32 posts); the lowest valid post
+    (inf: none)."""
+    nr, nc = data.shape
+    low = np.inf
+    for r0 in range(0, nr, 32):
+        for c0 in range(0, nc, 32):
+            for r in range(r0, min(r0 + 32, nr)):
+                for c in range(c0, min(c0 + 32, nc)):
+                    v = data[r, c]
+                    out[c, r] = v
+                    if v >= MIN_TERRAIN_M and v < low:
+                        low = v
+    return float(low)
+
+
+@njit(cache=True, nogil=True)
+def lowest_finite(data):  # pragma: no cover
+    """The lowest finite value of ``data`` (2-D; inf: none), in one pass without masks."""
+    low = np.inf
+    for r in range(data.shape[0]):
+        for c in range(data.shape[1]):
+            v = data[r, c]
+            if v < low and v > -np.inf:
+                low = v
+    return float(low)
+
+
 def horizon_bound(data: np.ndarray, ceiling: float, east: bool, west: bool, gaps: bool,
                   spacing: tuple[float, float], tan_vz: float) -> np.ndarray:
     """Per cell of a window (posts r..r+1, c..c+1; float32, indexed [c, r]: column first,
@@ -262,10 +294,9 @@ def horizon_bound(data: np.ndarray, ceiling: float, east: bool, west: bool, gaps
     than the ray rises (the ray leaves such terrain), their span elsewhere. Beyond the
     window and, with ``gaps``, on posts without data (the next DEM of a stack has heights
     there) the terrain may reach ``ceiling``."""
-    with np.errstate(invalid="ignore"):
-        low = float(np.nanmin(np.where(data >= MIN_TERRAIN_M, data, np.nan), initial=np.inf))
+    posts = np.empty((data.shape[1], data.shape[0]), np.float32)
+    low = _transposed(np.asarray(data, np.float32), posts)
     low = low if math.isfinite(low) else 0.0
-    posts = np.ascontiguousarray(np.asarray(data, np.float32).T)
     shape = (max(posts.shape[0] - 1, 0), max(posts.shape[1] - 1, 0))
     out_abs = np.full(shape, -np.inf, np.float32)
     out_rel = np.full(shape, -np.inf, np.float32)
@@ -308,6 +339,45 @@ def reachable(lon: np.ndarray, lat: np.ndarray, h: np.ndarray, inv: np.ndarray,
     args = (lon, lat, h, inv, lattice, float(wrap_centre), bound, float(tol), out)
     split_range(lambda lo, hi: _reachable_range(lo, hi, *args), lon.size, min_size=1 << 14)
     return out
+
+
+@njit(cache=True, nogil=True)
+def _to_march(lon, lat, h, col, iters, inv, lattice, wrap_centre, bound, tol, near_lo,
+              near_hi, out):  # pragma: no cover
+    """``to_march`` into ``out``; their number."""
+    n_c, n_r = bound.shape  # (column, row)
+    r_off, c_off = lattice[0], lattice[1]
+    a, c, e_, f = inv[0], inv[2], inv[4], inv[5]
+    m = 0
+    for k in range(lon.size):
+        hk = h[k]
+        if iters[k] < 0 or not math.isfinite(hk):
+            continue
+        go = near_lo <= col[k] <= near_hi
+        if not go:
+            x0 = lon[k]
+            if abs(wrap_centre - x0) > 180.0:
+                x0 = x0 + 360.0 * np.rint((wrap_centre - x0) / 360.0)
+            r = int(math.floor(e_ * lat[k] + f - 0.5)) - r_off
+            cc = int(math.floor(a * x0 + c - 0.5)) - c_off
+            go = r < 0 or cc < 0 or r >= n_r or cc >= n_c or bound[cc, r] > hk + tol
+        if go:
+            out[m] = k
+            m += 1
+    return m
+
+
+def to_march(lon: np.ndarray, lat: np.ndarray, h: np.ndarray, col: np.ndarray,
+             iters: np.ndarray, inv: np.ndarray, lattice: np.ndarray, wrap_centre: float,
+             bound: np.ndarray, tol: float, near: tuple[float, float]) -> np.ndarray:
+    """The indices of the flat points (``lon``, ``lat``, ``h``; antecedent column ``col``,
+    ``iters`` of the solution) whose rays ``march`` must decide: solved (``iters`` >= 0),
+    with a height, and ``reachable`` or at a column within ``near`` (near nadir) -- one pass
+    over a block, no masks."""
+    out = np.empty(lon.size, np.int64)
+    m = _to_march(lon, lat, h, col, iters, inv, lattice, float(wrap_centre), bound,
+                  float(tol), float(near[0]), float(near[1]), out)
+    return out[:m]
 
 
 def march(lon: np.ndarray, lat: np.ndarray, h: np.ndarray, e: np.ndarray, n: np.ndarray,

@@ -236,8 +236,8 @@ def _horizon(window: LatticeWindow, ceiling: float, gaps: bool, view_zenith: np.
     if not ok.any():
         return None
     tan_vz = TAN_VZ_SLACK * float(tz[ok].max())
-    valid = np.isfinite(window.data)
-    low = float(np.min(window.data[valid])) if valid.any() else 0.0
+    low = sightline.lowest_finite(window.data)
+    low = low if math.isfinite(low) else 0.0
     # lines of sight that stay within a post of their point (near nadir)
     short = ok & (tz * max(ceiling - low, 1.0) < min(col_m, row_m))
     far = ok & ~short
@@ -330,13 +330,14 @@ def hidden_ground(sight: Sightlines, kernel_args: tuple, lon: np.ndarray, lat: n
     hidden."""
     iters = res["iterations"]
     out = np.asarray(iters == OCCLUDED).copy()
-    test = (iters >= 0) & np.isfinite(h)
-    maybe = sight.candidates(lon, lat, h)
-    if maybe is not None:
-        lo, hi = sight.near_nadir
-        col = res["col"]
-        test &= maybe | ((col >= lo) & (col <= hi))
-    index = np.flatnonzero(test.reshape(-1))
+    w = sight.window
+    if sight.bound is not None and w is not None:  # one pass: the points to march
+        plon, plat, ph, pcol, piters = (np.ascontiguousarray(a).reshape(-1)
+                                         for a in (lon, lat, h, res["col"], iters))
+        index = sightline.to_march(plon, plat, ph, pcol, piters, w.inv, w.lattice,
+                                   w.wrap_centre, sight.bound, TOLERANCE_M, sight.near_nadir)
+    else:
+        index = np.flatnonzero(((iters >= 0) & np.isfinite(h)).reshape(-1))
     if index.size == 0:
         return out
     _, _, coef, df, dj = kernel_args
