@@ -5,10 +5,13 @@ a product pixel's centre holds that pixel's count; all 21 bands by default."""
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import olci_samples as samples
 import pytest
 
+from napari_meris_ortho import orthorectify
 from napari_meris_ortho.cli import main
 from napari_meris_ortho.options import OrthoOptions
 from napari_meris_ortho.output.geotiff import read_geotiff
@@ -91,6 +94,13 @@ def test_all_21_bands_by_default_and_band_21(product, tmp_path, capsys):
     assert main(["-q", "map", str(product), "-o", str(out21), "--bands", "21",
                  "--geolocation", "pixel", "--crs", "EPSG:32632", "--pixel-size", "2000"]) == 0
     assert np.array_equal(read_geotiff(out21)[0][0], arrays[20])
+    import rasterio
+
+    with rasterio.open(out21) as ds:  # the band named as the sensor names it
+        assert ds.descriptions[0].startswith("Oa21 (") and "MERIS" not in ds.descriptions[0]
+    x = orthorectify(product, bands=[8], geolocation="pixel", crs="EPSG:32632",
+                     pixel_size=2000).to_xarray()
+    assert "MERIS" not in json.dumps(x.attrs, default=str)
     with pytest.raises(SystemExit) as exc:
         main(["-q", "map", str(product), "-o", str(tmp_path / "x.tif"), "--bands", "22"])
     assert exc.value.code == 2 and "OLCI bands are 1..21" in capsys.readouterr().err

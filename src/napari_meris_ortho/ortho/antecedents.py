@@ -18,6 +18,7 @@ import numpy as np
 import pyproj
 from affine import Affine
 
+from ..bands import BandTable, band_table
 from ..geometry.grid import OutputGrid, check_grid_size
 from ..options import OrthoOptions, Sampling
 from ..products.protocol import MerisProduct
@@ -51,6 +52,8 @@ class OrthoResult:
     #: ground hidden from the sensor by the relief (bool; the lines of sight marched over the
     #: DEMs): no data with hidden "mask", mapped with "keep"; None: not looked for (no DEM)
     hidden: np.ndarray | None = None
+    #: the bands of the product's sensor (None: MERIS), for the names in ``to_xarray``
+    band_table: BandTable | None = None
 
     @property
     def crs(self) -> pyproj.CRS:
@@ -100,7 +103,8 @@ class OrthoResult:
         for name, values in self.diagnostics.items():
             if name != "hidden" or self.hidden is None:
                 variables[name] = (("y", "x"), values, {"long_name": f"diagnostics: {name}"})
-        described = describe_map(self.stats, bands, "float32")  # the files' tags
+        described = describe_map(self.stats, bands, "float32",  # the files' tags
+                                 table=self.band_table)
         attrs = {**{k: v for k, v in described.tags().items() if k != "radiance"},
                  **described.run}
         return grid_dataset(self.grid, variables, bands=bands,
@@ -222,6 +226,11 @@ class Antecedents:
     _held: tuple[tuple[int, ...], np.ndarray] | None = field(default=None, repr=False)
     #: ground hidden by the relief over the ``area`` (bool), None: not looked for (no DEM)
     area_hidden: np.ndarray | None = None
+
+    @property
+    def band_table(self) -> BandTable:
+        """The bands of the product's sensor: their names in the files' descriptions."""
+        return band_table(getattr(self.prod, "sensor", "MERIS"))
 
     @property
     def line(self) -> np.ndarray:
@@ -496,6 +505,6 @@ class Antecedents:
             total = self.grid.height + len(self.bands)
             self.progress(total, total)
         return OrthoResult(radiance, self.grid, self.valid, flags, self.finish(),
-                           self.diagnostics, self.saturated(), self.hidden)
+                           self.diagnostics, self.saturated(), self.hidden, self.band_table)
 
 
