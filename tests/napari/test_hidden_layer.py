@@ -39,3 +39,22 @@ def test_the_widget_offers_mask_and_keep(make_napari_viewer) -> None:
     settings = RunSettings(products=[], hidden=widget.hidden.value)
     assert settings.options().hidden is Hidden.KEEP
     assert RunSettings(products=[]).options().hidden is Hidden.MASK
+
+
+def test_category_layers_draw_without_compiling_in_the_qt_thread() -> None:
+    """The hidden-ground and elevation-source labels use napari's cyclic label colormap, whose
+    uint8 mapping is numpy (a dict colormap builds a numba typed dict, compiled in the Qt
+    thread at the first draw): labels 1..n get their own colours, 0 stays transparent."""
+    from napari.utils.colormaps import CyclicLabelColormap
+
+    from napari_meris_ortho._napari.product_layers import category_colormap, source_colours
+
+    grid = OutputGrid("EPSG:32632", 600_000.0, 5_100_000.0, 260.0, 260.0, 4, 3)
+    _, kwargs, _ = hidden_layer_data(grid, np.ones(grid.shape, bool))
+    assert isinstance(kwargs["colormap"], CyclicLabelColormap)
+    cmap = category_colormap(source_colours(2))  # orange, deepskyblue, red (tie points)
+    assert isinstance(cmap, CyclicLabelColormap)
+    rgba = cmap.map(np.arange(4, dtype=np.uint8))
+    assert rgba[0][3] == 0.0
+    assert np.allclose(rgba[1:, :3], [[1.0, 0.647, 0.0], [0.0, 0.749, 1.0], [1.0, 0.0, 0.0]],
+                       atol=0.01)

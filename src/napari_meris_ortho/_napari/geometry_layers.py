@@ -14,6 +14,7 @@ from ..engine.boundary import segment_boundary
 from ..geometry.earth import MEAN_EARTH_RADIUS
 from ..geometry.grid import OutputGrid, crs_wkt, lonlat_to_crs
 from ..placement import to_world
+from .product_layers import category_colormap
 from .world import TIE_GRID_KEY, WORLD_KEY, geo_image_kwargs, geo_metadata, world_axes
 
 #: colour of the ground hidden from the sensor by the relief (labels layer, semi-transparent)
@@ -271,7 +272,7 @@ def hidden_layer_data(frame: OutputGrid, hidden: np.ndarray, name: str = "hidden
     n = int(np.count_nonzero(labels))
     kwargs = geo_image_kwargs(
         frame, name=name, opacity=HIDDEN_OPACITY,
-        colormap={0: "transparent", 1: HIDDEN_COLOUR, None: "transparent"},
+        colormap=category_colormap({1: HIDDEN_COLOUR}),
         features={"index": [0, 1], "ground": ["", "hidden by the relief"]},
         metadata={"hidden_points": n,
                   "legend": f"{HIDDEN_COLOUR}: ground hidden from the sensor by the relief "

@@ -5,7 +5,7 @@ source), all placed in the world frame (``world``)."""
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -109,6 +109,20 @@ def source_colours(n_dems: int) -> dict[int, str]:
     return {0: "transparent", **colours, n_dems + 1: "red"}
 
 
+def category_colormap(colours: Mapping[int, str]) -> Any:
+    """The colours of labels 1..n (``colours[k]``; 0 the transparent background) as napari's
+    cyclic label colormap of n + 1 colours, which maps labels 1..n to them one to one. A
+    direct (dict) colormap would make napari build a numba typed dict, compiled in the Qt
+    thread the first time a layer is drawn (over a second); the cyclic one maps uint8 labels
+    with numpy."""
+    from napari.utils.colormaps import CyclicLabelColormap
+
+    n = max(colours)
+    return CyclicLabelColormap(
+        colors=["transparent", *(colours.get(k, "transparent") for k in range(1, n + 1))],
+        background_value=0)
+
+
 def elevation_source_features(dem_names: Sequence[str]) -> dict[str, list[Any]]:
     """Legend of the elevation-source labels: 0 none, 1..n the DEMs, n+1 the tie points."""
     names = ["none", *(str(d) for d in dem_names), "tie points"]
@@ -155,7 +169,6 @@ def diagnostic_layers(diagnostics: dict[str, np.ndarray], frame: OutputGrid, suf
         layers.append((labels, geo_image_kwargs(
             frame, name=f"elevation source{suffix}", visible=False, opacity=0.6,
             features=elevation_source_features(dem_names),
-            colormap={None: "transparent", 0: "transparent", **{
-                k: c for k, c in colours.items() if k}},
+            colormap=category_colormap(colours),
             metadata={"legend": f"heights from: {key}; none: transparent"}), "labels"))
     return layers
