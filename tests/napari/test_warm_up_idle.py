@@ -47,6 +47,8 @@ class GilProbe:
 
 
 @pytest.mark.slow
+@pytest.mark.xfail(reason="with a cold numba cache, loading a kernel in process can hold the "
+                          "GIL past the bound", strict=False)
 def test_dock_warm_up_yields_to_the_user(make_napari_viewer, qtbot, monkeypatch):
     from qtpy.QtCore import QTimer
 
