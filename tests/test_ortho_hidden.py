@@ -69,6 +69,39 @@ def steep():
                            truth=_truth(scene, first.grid))
 
 
+#: fr-steep seen from an orbit west of its range: lines of sight going west
+STEEP_WEST = {"base": "fr-steep", "name": "fr-steep-west",
+              "orbit": {"nadir_lon": 7.0, "nadir_lat": 48.0}, "first_column": -2240}
+
+
+@pytest.mark.parametrize("scene_name", ["fr-steep", "fr-steep-west", "rr-segment"])
+def test_the_horizon_bound_marches_every_point_that_can_be_hidden(scene_name, monkeypatch
+                                                                    ) -> None:
+    """Points the horizon bound clears are seen: the hidden-ground mask is the same as when
+    every line of sight is marched (east- and west-looking scenes, one across nadir); on
+    moderate relief the bound clears most points."""
+    from napari_meris_ortho.engine import sightline
+    from napari_meris_ortho.ortho import occlusion
+    from napari_meris_ortho.simulate.scene import generate_scene
+
+    scene = generate_scene(STEEP_WEST if scene_name == "fr-steep-west" else scene_name)
+    kw = {"dems": [scene.dem_paths["geotiff"]], "bands": [7]}
+    marched: list[int] = []
+    to_march = sightline.to_march
+    monkeypatch.setattr(sightline, "to_march",
+                        lambda *a, **k: marched.append((r := to_march(*a, **k)).size) or r)
+    bounded = orthorectify(scene.product_path, **kw)
+    monkeypatch.undo()
+    monkeypatch.setattr(occlusion, "_horizon", lambda *a, **k: None)
+    every = orthorectify(scene.product_path, **kw)
+    assert np.array_equal(bounded.hidden, every.hidden)
+    assert np.array_equal(bounded.valid, every.valid)
+    assert bounded.hidden.sum() == every.hidden.sum() > (1000 if "steep" in scene_name else 10)
+    if scene_name == "rr-segment":  # moderate relief: beyond the columns near nadir (a
+        # ninth of the swath, always marched) few points are within reach of a slope
+        assert sum(marched) < 0.2 * bounded.valid.sum()
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize(("parallax", "method"), [("handbook", "primary"),
                                                   ("ellipsoid", "primary"),

@@ -27,19 +27,24 @@ TILES = (32, 8, 2)
 #: a relative bound (m) of ``horizon_bound`` at or below this: the terrain cannot rise
 #: above the ray (the callers' tolerance is larger)
 TOLERANCE_FREE = 0.0
+#: cells per side of the tiles of ``horizon_bound``'s bounds of the view zenith
+VIEW_TILE = 32
+#: rows of cells of the bands ``horizon_bound`` sweeps at the same time (at least), and the
+#: rows of the neighbouring bands each takes as its edge
+BAND_ROWS, BAND_HALO = 256, 64
 #: results of ``march``
 SEEN, HIDDEN, UNDECIDED = 0, 1, 2
 
 
 @njit(cache=True, nogil=True)
-def _post_tiles(data, tile, gaps, out):  # pragma: no cover
-    """The highest valid post of each ``tile`` x ``tile`` tile of ``data`` into ``out``
-    (-inf: none; a post without data +inf with ``gaps``)."""
+def _post_tiles(data, tile, gaps, i_lo, i_hi, out):  # pragma: no cover
+    """The highest valid post of each ``tile`` x ``tile`` tile of ``data`` in tile rows
+    [``i_lo``, ``i_hi``) into ``out`` (-inf: none; a post without data +inf with ``gaps``)."""
     nr, nc = data.shape
-    for i in range(out.shape[0]):
+    for i in range(i_lo, i_hi):
         for j in range(out.shape[1]):
             out[i, j] = -np.inf
-    for r in range(nr):
+    for r in range(i_lo * tile, min(i_hi * tile, nr)):
         i = r // tile
         for j in range(out.shape[1]):  # a tile's posts of the row, no division a post
             m = out[i, j]
@@ -53,37 +58,68 @@ def _post_tiles(data, tile, gaps, out):  # pragma: no cover
             out[i, j] = m
 
 
-def tile_maxima(data: np.ndarray, tile: int, gaps: bool = False,
-                raw: np.ndarray | None = None, raw_tile: int = 1) -> np.ndarray:
-    """The highest post (float64, -inf: none) of every ``tile`` x ``tile`` tile of the window
-    and its 8 neighbours: the bound of the terrain of any cell within tile - 1 posts of it.
-    ``gaps``: a post without data counts as +inf (the next DEM of a stack has heights there:
-    the march must not jump over it). ``raw``: the tiles' own maxima of a smaller tile
-    ``raw_tile`` dividing ``tile`` (``tile_raw``), to start from."""
-    tiles = tile_raw(data, tile, gaps, raw, raw_tile)
+@njit(cache=True, nogil=True)
+def _grown(tiles, out):  # pragma: no cover
+    """Each tile's maximum with its 8 neighbours' into ``out`` (a row's 3, then a column's)."""
     nr, nc = tiles.shape
-    grown = np.full((nr + 2, nc + 2), -np.inf)
-    grown[1:-1, 1:-1] = tiles
-    out = tiles.copy()
-    for dr in (0, 1, 2):
-        for dc in (0, 1, 2):
-            np.maximum(out, grown[dr:dr + nr, dc:dc + nc], out=out)
-    return out
+    row = np.empty(nc)
+    for i in range(nr):
+        for j in range(nc):
+            m = tiles[i, j]
+            if j > 0 and tiles[i, j - 1] > m:
+                m = tiles[i, j - 1]
+            if j + 1 < nc and tiles[i, j + 1] > m:
+                m = tiles[i, j + 1]
+            out[i, j] = m
+    prev = np.full(nc, -np.inf)
+    for i in range(nr):
+        for j in range(nc):
+            row[j] = out[i, j]
+        for j in range(nc):
+            m = row[j]
+            if prev[j] > m:
+                m = prev[j]
+            if i + 1 < nr and out[i + 1, j] > m:
+                m = out[i + 1, j]
+            out[i, j] = m
+        for j in range(nc):
+            prev[j] = row[j]
 
 
-def tile_raw(data: np.ndarray, tile: int, gaps: bool = False, raw: np.ndarray | None = None,
-             raw_tile: int = 1) -> np.ndarray:
-    """The highest post of every ``tile`` x ``tile`` tile (its own, no neighbours; as
-    ``tile_maxima``), from ``raw`` (of tiles ``raw_tile``) when given."""
-    nr, nc = -(-data.shape[0] // tile), -(-data.shape[1] // tile)
-    if raw is None:
-        out = np.empty((nr, nc))
-        _post_tiles(data, tile, gaps, out)
-        return out
-    k = tile // raw_tile
-    padded = np.full((nr * k, nc * k), -np.inf)
-    padded[:raw.shape[0], :raw.shape[1]] = raw
-    return padded.reshape(nr, k, nc, k).max(axis=(1, 3))
+@njit(cache=True, nogil=True)
+def _coarser(raw, k, out):  # pragma: no cover
+    """The maximum of each ``k`` x ``k`` block of ``raw`` into ``out``."""
+    nr, nc = raw.shape
+    for i in range(out.shape[0]):
+        for j in range(out.shape[1]):
+            m = -np.inf
+            for a in range(i * k, min((i + 1) * k, nr)):
+                for b in range(j * k, min((j + 1) * k, nc)):
+                    if raw[a, b] > m:
+                        m = raw[a, b]
+            out[i, j] = m
+
+
+def tile_maxima(data: np.ndarray, gaps: bool = False) -> tuple[np.ndarray, ...]:
+    """For each tile size of ``TILES`` (largest first), the highest post (float64, -inf: none)
+    of every tile x tile tile of the window and its 8 neighbours: the bound of the terrain of
+    any cell within tile - 1 posts of it. ``gaps``: a post without data counts as +inf (the
+    next DEM of a stack has heights there: the march must not jump over it). Each size from
+    the next smaller one's own maxima."""
+    sizes = sorted(TILES)
+    raw = np.empty((-(-data.shape[0] // sizes[0]), -(-data.shape[1] // sizes[0])))
+    split_range(lambda lo, hi: _post_tiles(data, sizes[0], gaps, lo, hi, raw), raw.shape[0],
+                min_size=max(256 // sizes[0], 1), pieces_per_thread=1)
+    out = {}
+    for n, tile in enumerate(sizes):
+        if n:
+            k = tile // sizes[n - 1]
+            coarse = np.empty((-(-raw.shape[0] // k), -(-raw.shape[1] // k)))
+            _coarser(raw, k, coarse)
+            raw = coarse
+        out[tile] = np.empty_like(raw)
+        _grown(raw, out[tile])
+    return tuple(out[t] for t in TILES)
 
 
 @njit(cache=True, nogil=True)
@@ -177,14 +213,15 @@ def _post(v, gap):  # pragma: no cover
 
 
 @njit(cache=True, nogil=True)
-def _horizon_sweep(posts, gaps, step, ceiling, low, col_m, row_m, tan_vz, out_abs,
-                   out_rel):  # pragma: no cover
-    """One direction (``step`` +1: east, -1: west) of ``horizon_bound`` on the transposed
-    posts (column, row), its point bounds folded into ``out_abs``/``out_rel`` (cells,
-    transposed) by their maximum."""
-    n_c, n_r = posts.shape[0] - 1, posts.shape[1] - 1
+def _horizon_sweep(data, row0, n_r, gaps, step, ceiling, low, col_m, row_m, tan_vz, tile, c_lo,
+                   c_hi, out):  # pragma: no cover
+    """One direction (``step`` +1: east, -1: west) of ``horizon_bound`` over the ``n_r`` rows of
+    cells of the window ``data`` from row ``row0`` (a band; its posts read in place: a column
+    of the band stays in the cache for the next ones), columns ``c_lo`` .. ``c_hi`` of cells
+    swept from the far end; ``tan_vz`` the tiles' bounds of tan vz (``view_tiles``, 0: no line
+    of sight this way); the cells' bounds folded into ``out`` (column, row - ``row0``) by their
+    maximum."""
     gap = ceiling if gaps else -np.inf
-    rise = col_m / tan_vz
     path = math.hypot(col_m, row_m)  # the longest way of a ray across a column
     rel_edge = ceiling - low
     prev_abs = np.full(n_r, ceiling)
@@ -197,11 +234,21 @@ def _horizon_sweep(posts, gaps, step, ceiling, low, col_m, row_m, tan_vz, out_ab
     slope = np.empty(n_r)
     near_abs = np.empty(n_r)
     near_rel = np.empty(n_r)
-    c = n_c - 1 if step > 0 else 0
-    while 0 <= c < n_c:
+    west = np.empty(n_r + 1)  # the posts of the cells' west and east sides
+    east = np.empty(n_r + 1)
+    c = c_hi if step > 0 else c_lo
+    for r in range(n_r + 1):  # the first column's far side
+        west[r] = _post(data[row0 + r, c + 1], gap) if step > 0 else _post(data[row0 + r, c], gap)
+    while c_lo <= c <= c_hi:
+        if step > 0:  # (the side shared with the column before)
+            east, west = west, east
+            for r in range(n_r + 1):
+                west[r] = _post(data[row0 + r, c], gap)
+        else:
+            for r in range(n_r + 1):
+                east[r] = _post(data[row0 + r, c + 1], gap)
         for r in range(n_r):
-            v00, v01 = _post(posts[c, r], gap), _post(posts[c + 1, r], gap)
-            v10, v11 = _post(posts[c, r + 1], gap), _post(posts[c + 1, r + 1], gap)
+            v00, v01, v10, v11 = west[r], east[r], west[r + 1], east[r + 1]
             hi[r] = max(max(v00, v01), max(v10, v11))
             lo[r] = min(min(v00, v01), min(v10, v11))
             gx = max(abs(v01 - v00), abs(v11 - v10)) / col_m
@@ -228,41 +275,98 @@ def _horizon_sweep(posts, gaps, step, ceiling, low, col_m, row_m, tan_vz, out_ab
             else:
                 a, b = ceiling, rel_edge
             near_abs[r], near_rel[r] = a, b
+        tc = c // tile
         for r in range(n_r):
-            rises = steep[r] * tan_vz >= 1.0
+            tz = tan_vz[tc, (r + row0) // tile]
+            if not tz > 0.0:  # no line of sight this way: the cell's terrain for the next
+                prev_abs[r] = top[r]
+                prev_rel[r] = 0.0
+                continue
+            inv = 1.0 / tz
+            rises = steep[r] * tz >= 1.0
             # a point of the cell: the terrain of its column, then the next column's bounds
             pa = max(top[r], near_abs[r])
-            pr = max(near_rel[r], 0.0) + (
-                min(span[r], (steep[r] - 1.0 / tan_vz) * path) if rises else 0.0)
-            out_abs[c, r] = max(out_abs[c, r], pa)
-            out_rel[c, r] = max(out_rel[c, r], min(pr, rel_edge))
-            # crossing the whole column: the ray rises at least ``rise``; the terrain gains
-            # at most its span (steep) or (slope - 1 / tan vz) x width (gentle) on it
-            prev_abs[r] = min(max(top[r], near_abs[r] - rise), ceiling)
+            pr = max(near_rel[r], 0.0) + (min(span[r], (steep[r] - inv) * path) if rises
+                                          else 0.0)
+            if min(pr, rel_edge) > TOLERANCE_FREE and pa > out[c, r]:
+                out[c, r] = pa
+            # crossing the whole column: the ray rises at least col_m / tan vz; the terrain
+            # gains at most its span (steep) or (slope - 1 / tan vz) x width (gentle) on it
+            prev_abs[r] = min(max(top[r], near_abs[r] - col_m * inv), ceiling)
             if rises:  # the ray's way in the column is at most ``path`` long
-                within = min(span[r], (steep[r] - 1.0 / tan_vz) * path)
+                within = min(span[r], (steep[r] - inv) * path)
                 gain = within
             else:
-                gain = (steep[r] - 1.0 / tan_vz) * col_m
+                gain = (steep[r] - inv) * col_m
                 within = 0.0
             prev_rel[r] = min(max(within, near_rel[r] + gain), rel_edge)
+        if step < 0:  # the east side is the next column's west side
+            east, west = west, east
         c -= step
 
 
 @njit(cache=True, nogil=True)
-def _transposed(data, out):  # pragma: no cover
-    """``data`` transposed into ``out`` (by blocks of 32 x 32 posts); the lowest valid post
-    (inf: none)."""
-    nr, nc = data.shape
+def _view_tiles(row, col, tz, east, pad_r, pad_c, tile, out_east, out_west):  # pragma: no cover
+    """``view_tiles`` into ``out_east``/``out_west`` (tile column, tile row)."""
+    n_i, n_k = tz.shape
+    n_tc, n_tr = out_east.shape
+    for i in range(max(n_i - 1, 1)):
+        i1 = min(i + 1, n_i - 1)
+        for k in range(max(n_k - 1, 1)):
+            k1 = min(k + 1, n_k - 1)
+            r_min, r_max, c_min, c_max = np.inf, -np.inf, np.inf, -np.inf
+            m = 0.0
+            to_east = to_west = False
+            for ii, kk in ((i, k), (i, k1), (i1, k), (i1, k1)):
+                r, c, t, e = row[ii, kk], col[ii, kk], tz[ii, kk], east[ii, kk]
+                if not (math.isfinite(r) and math.isfinite(c) and math.isfinite(t)):
+                    continue
+                r_min, r_max = min(r_min, r), max(r_max, r)
+                c_min, c_max = min(c_min, c), max(c_max, c)
+                m = max(m, t)
+                to_east = to_east or e > 0.0
+                to_west = to_west or e < 0.0
+            if not m > 0.0:
+                continue
+            tr0 = max(int(math.floor((r_min - pad_r) / tile)), 0)
+            tr1 = min(int(math.floor((r_max + pad_r) / tile)), n_tr - 1)
+            tc0 = max(int(math.floor((c_min - pad_c) / tile)), 0)
+            tc1 = min(int(math.floor((c_max + pad_c) / tile)), n_tc - 1)
+            for tc in range(tc0, tc1 + 1):
+                for tr in range(tr0, tr1 + 1):
+                    if to_east and out_east[tc, tr] < m:
+                        out_east[tc, tr] = m
+                    if to_west and out_west[tc, tr] < m:
+                        out_west[tc, tr] = m
+
+
+def view_tiles(row: np.ndarray, col: np.ndarray, tan_vz: np.ndarray, east: np.ndarray,
+               cells: tuple[int, int], pad: tuple[float, float], tile: int = VIEW_TILE
+               ) -> tuple[np.ndarray, np.ndarray]:
+    """The largest tan vz of the lines of sight going east, and west, within each tile of
+    ``tile`` x ``tile`` cells of a window of ``cells`` (rows, columns): per tie-point cell,
+    the largest tan vz of its four corners (a bilinear look vector is no longer than the
+    longest of its corners, eq. 5a-5b), over the box of their positions (``row``, ``col``:
+    fractional cell indices) grown by ``pad`` (cells: rows, columns) -- the reach of its
+    points' lines of sight and the parallax of their positions. ``east``: the tie points'
+    eastward look component (its sign the direction). float64 arrays (tile column, tile
+    row), 0 where no line of sight goes that way."""
+    shape = (-(-max(cells[1], 1) // tile), -(-max(cells[0], 1) // tile))
+    out_east, out_west = np.zeros(shape), np.zeros(shape)
+    _view_tiles(*(np.ascontiguousarray(a, np.float64) for a in (row, col, tan_vz, east)),
+                float(pad[0]), float(pad[1]), int(tile), out_east, out_west)
+    return out_east, out_west
+
+
+@njit(cache=True, nogil=True)
+def _lowest_post(data, r0, r1):  # pragma: no cover
+    """The lowest valid post of rows [r0, r1) of ``data`` (inf: none)."""
     low = np.inf
-    for r0 in range(0, nr, 32):
-        for c0 in range(0, nc, 32):
-            for r in range(r0, min(r0 + 32, nr)):
-                for c in range(c0, min(c0 + 32, nc)):
-                    v = data[r, c]
-                    out[c, r] = v
-                    if v >= MIN_TERRAIN_M and v < low:
-                        low = v
+    for r in range(r0, r1):
+        for c in range(data.shape[1]):
+            v = data[r, c]
+            if v >= MIN_TERRAIN_M and v < low:
+                low = v
     return float(low)
 
 
@@ -278,34 +382,52 @@ def lowest_finite(data):  # pragma: no cover
     return float(low)
 
 
-def horizon_bound(data: np.ndarray, ceiling: float, east: bool, west: bool, gaps: bool,
-                  spacing: tuple[float, float], tan_vz: float) -> np.ndarray:
+def horizon_bound(data: np.ndarray, ceiling: float, gaps: bool, spacing: tuple[float, float],
+                  tan_vz: tuple[np.ndarray, np.ndarray], tile: int = VIEW_TILE) -> np.ndarray:
     """Per cell of a window (posts r..r+1, c..c+1; float32, indexed [c, r]: column first,
     one row and column fewer than ``data``): a height such that a point of the cell above it
     (by the tolerance) is seen, -inf where every point of it is (``reachable``: no march).
 
-    Lines of sight go east and/or west (``east``, ``west``) within 45 degrees of a row of
-    cells (they cross less than a row while they cross a column, ``spacing`` = the shortest
-    (column, row) post spacing, m, holds them in the cell's column and its neighbours north
-    and south) and rise at least 1 / ``tan_vz`` per metre. Two bounds, swept against the
-    direction column by column: the highest terrain the ray can meet less the least it has
-    risen by then (a column's width / ``tan_vz`` a column), and the most the terrain can rise
-    above the ray relative to the point: nothing across columns whose bilinear slopes less
-    than the ray rises (the ray leaves such terrain), their span elsewhere. Beyond the
-    window and, with ``gaps``, on posts without data (the next DEM of a stack has heights
-    there) the terrain may reach ``ceiling``."""
-    posts = np.empty((data.shape[1], data.shape[0]), np.float32)
-    low = _transposed(np.asarray(data, np.float32), posts)
-    low = low if math.isfinite(low) else 0.0
-    shape = (max(posts.shape[0] - 1, 0), max(posts.shape[1] - 1, 0))
-    out_abs = np.full(shape, -np.inf, np.float32)
-    out_rel = np.full(shape, -np.inf, np.float32)
-    for step, wanted in ((1, east), (-1, west)):
-        if wanted and out_abs.size:
-            _horizon_sweep(posts, bool(gaps), step, float(ceiling), low, float(spacing[0]),
-                           float(spacing[1]), float(tan_vz), out_abs, out_rel)
-    out_abs[out_rel <= TOLERANCE_FREE] = -np.inf
-    return out_abs
+    Lines of sight go east and west within 45 degrees of a row of cells (they cross less
+    than a row while they cross a column, ``spacing`` = the shortest (column, row) post
+    spacing, m, holds them in the cell's column and its neighbours north and south), those
+    through a tile of ``tile`` x ``tile`` cells no flatter than ``tan_vz`` (east, west:
+    ``view_tiles``) gives there: they rise at least 1 / tan vz per metre. Two bounds, swept
+    against the direction column by column over the columns where such lines of sight are:
+    the highest terrain the ray can meet less the least it has risen by then (a column's
+    width / tan vz a column), and the most the terrain can rise above the ray relative to
+    the point: nothing across columns whose bilinear slopes less than the ray rises (the ray
+    leaves such terrain), their span elsewhere. Beyond the columns swept and, with ``gaps``,
+    on posts without data (the next DEM of a stack has heights there) the terrain may reach
+    ``ceiling``. Bands of rows are swept at the same time (``split_range``), each with
+    ``BAND_HALO`` rows of the next as its edge: there the terrain may reach the ceiling too
+    (a looser bound near the seam, never a wrong one)."""
+    data = np.ascontiguousarray(data, np.float32)
+    n_c, n_r = max(data.shape[1] - 1, 0), max(data.shape[0] - 1, 0)
+    out = np.full((n_c, n_r), -np.inf, np.float32)
+    sweeps = []
+    for step, tz in ((1, tan_vz[0]), (-1, tan_vz[1])):
+        used = np.flatnonzero((tz > 0.0).any(axis=1))
+        if used.size and out.size:
+            c_hi = min((int(used[-1]) + 1) * tile, n_c) - 1
+            sweeps.append((step, np.ascontiguousarray(tz, np.float64), int(used[0]) * tile,
+                           c_hi))
+    if not sweeps:
+        return out
+
+    def band(lo: int, hi: int) -> None:
+        r0, r1 = max(lo - BAND_HALO, 0), min(hi + BAND_HALO, n_r)
+        low = _lowest_post(data, r0, r1 + 1)
+        part = np.full((n_c, r1 - r0), -np.inf, np.float32)
+        for step, tz, c_lo, c_hi in sweeps:
+            if c_lo <= c_hi:
+                _horizon_sweep(data, r0, r1 - r0, bool(gaps), step, float(ceiling),
+                               low if math.isfinite(low) else 0.0, float(spacing[0]),
+                               float(spacing[1]), tz, int(tile), c_lo, c_hi, part)
+        out[:, lo:hi] = part[:, lo - r0:hi - r0]
+
+    split_range(band, n_r, min_size=BAND_ROWS, pieces_per_thread=1)
+    return out
 
 
 @njit(cache=True, nogil=True)
@@ -342,14 +464,14 @@ def reachable(lon: np.ndarray, lat: np.ndarray, h: np.ndarray, inv: np.ndarray,
 
 
 @njit(cache=True, nogil=True)
-def _to_march(lon, lat, h, col, iters, inv, lattice, wrap_centre, bound, tol, near_lo,
+def _to_march(lo, hi, lon, lat, h, col, iters, inv, lattice, wrap_centre, bound, tol, near_lo,
               near_hi, out):  # pragma: no cover
-    """``to_march`` into ``out``; their number."""
+    """``to_march`` of points [lo, hi) into ``out[lo:]``; their number."""
     n_c, n_r = bound.shape  # (column, row)
     r_off, c_off = lattice[0], lattice[1]
     a, c, e_, f = inv[0], inv[2], inv[4], inv[5]
-    m = 0
-    for k in range(lon.size):
+    m = lo
+    for k in range(lo, hi):
         hk = h[k]
         if iters[k] < 0 or not math.isfinite(hk):
             continue
@@ -364,7 +486,7 @@ def _to_march(lon, lat, h, col, iters, inv, lattice, wrap_centre, bound, tol, ne
         if go:
             out[m] = k
             m += 1
-    return m
+    return m - lo
 
 
 def to_march(lon: np.ndarray, lat: np.ndarray, h: np.ndarray, col: np.ndarray,
@@ -375,9 +497,14 @@ def to_march(lon: np.ndarray, lat: np.ndarray, h: np.ndarray, col: np.ndarray,
     with a height, and ``reachable`` or at a column within ``near`` (near nadir) -- one pass
     over a block, no masks."""
     out = np.empty(lon.size, np.int64)
-    m = _to_march(lon, lat, h, col, iters, inv, lattice, float(wrap_centre), bound,
-                  float(tol), float(near[0]), float(near[1]), out)
-    return out[:m]
+    found: dict[int, int] = {}
+
+    def part(lo: int, hi: int) -> None:
+        found[lo] = _to_march(lo, hi, lon, lat, h, col, iters, inv, lattice, float(wrap_centre),
+                              bound, float(tol), float(near[0]), float(near[1]), out)
+
+    split_range(part, lon.size, min_size=1 << 16, pieces_per_thread=1)
+    return np.concatenate([out[lo:lo + found[lo]] for lo in sorted(found)] or [out[:0]])
 
 
 def march(lon: np.ndarray, lat: np.ndarray, h: np.ndarray, e: np.ndarray, n: np.ndarray,

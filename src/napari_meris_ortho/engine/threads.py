@@ -32,12 +32,13 @@ def ranges(n: int, pieces: int, min_size: int = 1) -> list[tuple[int, int]]:
 
 
 def split_range(kernel: Callable[[int, int], object], n: int, *, threads: int | None = None,
-                min_size: int = 1) -> None:
+                min_size: int = 1, pieces_per_thread: int = _PIECES_PER_THREAD) -> None:
     """Call ``kernel(lo, hi)`` on ranges covering [0, n) exactly once each, on up to ``threads``
-    threads (default ``cores.usable_threads()``); ranges of at least ``min_size`` indices. One
-    thread or one range: a single direct call. Exceptions of the kernel are raised here."""
+    threads (default ``cores.usable_threads()``); ranges of at least ``min_size`` indices,
+    ``pieces_per_thread`` of them a thread. One thread or one range: a single direct call.
+    Exceptions of the kernel are raised here."""
     threads = usable_threads() if threads is None else max(int(threads), 1)
-    parts = ranges(n, threads * _PIECES_PER_THREAD if threads > 1 else 1, min_size)
+    parts = ranges(n, threads * pieces_per_thread if threads > 1 else 1, min_size)
     if not parts:
         return
     if threads == 1 or len(parts) == 1 or threading.current_thread().name.startswith(_PREFIX):

@@ -11,10 +11,12 @@ from __future__ import annotations
 import logging
 import math
 import os
+import threading
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+from concurrent.futures import Future
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, TypeVar
 
 import numpy as np
 
@@ -52,6 +54,7 @@ if TYPE_CHECKING:
     from ..dem.stack import DemStack
 
 log = logging.getLogger(__name__)
+T = TypeVar("T")
 _BLOCK_ROWS = 256
 #: the product argument of ``orthorectify``/``precompute``: a path or an opened product
 ProductLike = str | os.PathLike[str] | MerisProduct
@@ -338,6 +341,8 @@ class _Job:
     hold_bands: bool = False
     #: DEM name -> tiles it lacks under the footprint (``Segment.dem_gaps``)
     dem_gaps: dict[str, list[str]] = field(default_factory=dict)
+    #: the lines of sight of the hidden ground (DEM heights), prepared in a thread
+    sightlines: Future[occlusion.Sightlines] | None = None
 
 
 def _height_mode(elevation: Elevation, has_dems: bool) -> int:
@@ -371,25 +376,52 @@ def _prepare(seg: Segment, grid: OutputGrid | None, crs: Any, pixel_size: float 
     margin = (_margin_px(tp, grid, pixel is not None or opts.elevation is not Elevation.NONE,
                          res_m)
               if pixel is not None or opts.method is SearchMethod.PRIMARY else 0)
-    inner = row_spans(boundary, grid)
-    spans = row_spans(boundary, grid, margin=margin) if margin else inner
     if pixel is not None:  # the DEMs' heights with the ellipsoid grid, else none
         hmode = predcorr.HEIGHT_NONE if seg.ellipsoid is None else predcorr.HEIGHT_GIVEN
     else:
         hmode = _height_mode(opts.elevation, stack is not None)
+    sightlines = None
+    if hmode == predcorr.HEIGHT_GIVEN and stack is not None:
+        # the DEM window read and the lines of sight prepared while the spans are found
+        bounds = lonlat_bounds(grid)
+        if not seg.dems_prepared and bounds is not None:
+            stack.prepare(*bounds)
+        sightlines = _in_background(
+            occlusion.Sightlines.of, stack,
+            0.5 * (bounds[1] + bounds[3]) if bounds is not None else 0.0,
+            view=(tp.latitude, tp.longitude, tp.view_zenith, tp.view_azimuth,
+                  float(tp.kernel_args()[4])))
+    inner = row_spans(boundary, grid)
+    spans = row_spans(boundary, grid, margin=margin) if margin else inner
     job = _Job(prod, tp, grid, spans, stack, hmode, opts, margin, inner.count, list(seg.dems),
-               t_start, pixel, seg.ellipsoid, max_pixels)
+               t_start, pixel, seg.ellipsoid, max_pixels, sightlines=sightlines)
     job.area, job.hold_bands = _search_area(job), hold_bands
     job.dem_gaps = dict(seg.dem_gaps)
     r0, r1, c0, c1 = job.area
     share = (r1 - r0) * (c1 - c0) / max(grid.width * grid.height, 1)
     check_grid_size(*size, bytes_per_output_pixel(opts, hold_bands=hold_bands, area_share=share),
                     max_pixels)
-    if stack is not None and not seg.dems_prepared:  # the DEM window under the grid, once
+    if stack is not None and not seg.dems_prepared and sightlines is None:
+        # the DEM window under the grid, once
         bounds = lonlat_bounds(grid)
         if bounds is not None:
             stack.prepare(*bounds)
     return job
+
+
+def _in_background(fn: Callable[..., T], *args: Any, **kwargs: Any) -> Future[T]:
+    """``fn(*args, **kwargs)`` run in a thread of its own; its result (or exception) from the
+    returned future."""
+    future: Future[T] = Future()
+
+    def work() -> None:
+        try:
+            future.set_result(fn(*args, **kwargs))
+        except BaseException as exc:  # raised where the result is taken
+            future.set_exception(exc)
+
+    threading.Thread(target=work, name="meris-ortho-background", daemon=True).start()
+    return future
 
 
 def _pixel_grids(prod: MerisProduct) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -539,13 +571,8 @@ def _run(job: _Job, progress: ProgressCallback | None) -> Antecedents:
     area = job.area
     t_dem = t_lonlat = t_engine = 0.0
     total = nr + len(opts.bands)
-    march = None
-    if hmode == predcorr.HEIGHT_GIVEN:  # DEM heights, every mode: hidden ground looked for
-        assert stack is not None
-        bounds = lonlat_bounds(grid)
-        march = occlusion.Sightlines.of(
-            stack, 0.5 * (bounds[1] + bounds[3]) if bounds is not None else 0.0,
-            view=(job.tp.view_zenith, job.tp.view_azimuth, float(job.tp.kernel_args()[4])))
+    # DEM heights, every mode: hidden ground looked for (``_prepare`` started it)
+    march = job.sightlines.result() if job.sightlines is not None else None
     blocks = _Blocks.empty(area, opts.diagnostics, len(stack.sources) if stack is not None else 0,
                            hidden=march is not None or job.pixel is not None)
     for r0 in range(0, nr, _BLOCK_ROWS):

@@ -85,14 +85,16 @@ class Sightlines:
 
     @classmethod
     def of(cls, stack: DemStack, lat: float,
-           view: tuple[np.ndarray, np.ndarray, float] | None = None) -> Sightlines:
+           view: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float] | None = None
+           ) -> Sightlines:
         """The ceiling and step of ``stack`` (``STEP_OF_POST`` of its finest post spacing at
         latitude ``lat``), the window ``engine.sightline`` marches: the first lattice of the
         stack when it is geographic, north-up and in memory, its heights made ellipsoidal
         once (posts + geoid N, ``_ellipsoidal``); with DEMs or lattices after it, a cell
         without data there ends its march (the stack marches on). ``view``: the product's
-        tie-point view zenith and azimuth (deg) and the pixels between tie-point columns,
-        for the bound of the terrain its lines of sight can meet (``_horizon``)."""
+        tie-point latitude, longitude, view zenith and azimuth (deg) and the pixels between
+        tie-point columns, for the bound of the terrain its lines of sight can meet
+        (``_horizon``)."""
         top, post = -math.inf, math.inf
         windows = []
         for dem in stack.sources:
@@ -134,15 +136,10 @@ class Sightlines:
                 shortest = min(1.0 / abs(window.inv[0]), 1.0 / abs(window.inv[4]))
             out.window = window
             out.gaps = len(windows) > 1
-            raw, raw_tile, tmax = None, 1, {}
-            for t in sorted(sightline.TILES):  # each from the next smaller tile's maxima
-                raw = sightline.tile_raw(window.data, t, out.gaps, raw, raw_tile)
-                raw_tile = t
-                tmax[t] = sightline.tile_maxima(window.data, t, out.gaps, raw, t)
-            out.tmax = tuple(tmax[t] for t in sightline.TILES)
+            out.tmax = sightline.tile_maxima(window.data, out.gaps)
             out.post = 0.99 * shortest
             if window.transform is None and view is not None:
-                horizon = _horizon(window, out.ceiling, out.gaps, *view)
+                horizon = _horizon(window, out.ceiling, out.gaps, view)
                 if horizon is not None:
                     out.bound, out.near_nadir = horizon
         return out
@@ -213,18 +210,23 @@ class Sightlines:
 #: the look vectors of antecedents beyond the tie-point grid (the search's margin) are
 #: extrapolated: their tan vz bounded by the grid's largest times this
 TAN_VZ_SLACK = 1.05
+#: margin (m) of the box of a tie-point cell's lines of sight beyond their reach: the
+#: antecedents the search takes beyond the grid (a few pixels)
+VIEW_PAD_M = 3000.0
 
 
-def _horizon(window: LatticeWindow, ceiling: float, gaps: bool, view_zenith: np.ndarray,
-             view_azimuth: np.ndarray, dj: float
+def _horizon(window: LatticeWindow, ceiling: float, gaps: bool,
+             view: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]
              ) -> tuple[np.ndarray, tuple[float, float]] | None:
-    """``sightline.horizon_bound`` of a geographic window for a product's lines of sight
-    (tie-point view zenith and azimuth, deg; ``dj`` pixels between tie-point columns): they
-    rise at least 1 / tan vz per metre (the largest tan vz, with ``TAN_VZ_SLACK``), east or
-    west as their azimuths go; and the product columns near nadir whose lines of sight
-    reach less than a post (either way: they are marched). None when some line of sight
-    that reaches further runs closer to north-south than a cell's diagonal (the sweep's
-    rows would not hold it: every point is marched)."""
+    """``sightline.horizon_bound`` of a geographic window for a product's lines of sight,
+    ``view`` = its tie points' latitude, longitude, view zenith and azimuth (deg) and the
+    pixels between tie-point columns: near a tie-point cell they rise at least 1 / tan vz per
+    metre (tan vz of its corners, with ``TAN_VZ_SLACK``; ``sightline.view_tiles``), east or
+    west as their azimuths go; and the product columns near nadir whose lines of sight reach
+    less than a post (either way: they are marched). None when some line of sight that
+    reaches further runs closer to north-south than a cell's diagonal (the sweep's rows would
+    not hold it: every point is marched)."""
+    tie_lat, tie_lon, view_zenith, view_azimuth, dj = view
     rows = window.lattice[0] + np.array([0.0, window.data.shape[0]])
     lats = (rows - window.inv[5]) / window.inv[4]
     cos = math.cos(math.radians(min(float(np.max(np.abs(lats))), 89.0)))
@@ -235,7 +237,6 @@ def _horizon(window: LatticeWindow, ceiling: float, gaps: bool, view_zenith: np.
     ok = np.isfinite(tz) & np.isfinite(va)
     if not ok.any():
         return None
-    tan_vz = TAN_VZ_SLACK * float(tz[ok].max())
     low = sightline.lowest_finite(window.data)
     low = low if math.isfinite(low) else 0.0
     # lines of sight that stay within a post of their point (near nadir)
@@ -244,12 +245,26 @@ def _horizon(window: LatticeWindow, ceiling: float, gaps: bool, view_zenith: np.
     east, north = np.sin(va), np.cos(va)
     if np.any(far & (np.abs(north) * col_m > np.abs(east) * row_m)):
         return None
-    go_east, go_west = bool(np.any(far & (east > 0))), bool(np.any(far & (east < 0)))
     columns = np.flatnonzero(short.any(axis=0)) if short.ndim == 2 else np.zeros(0, int)
     near = ((float(columns.min() - 1) * dj, float(columns.max() + 1) * dj) if columns.size
             else (math.inf, -math.inf))
-    bound = sightline.horizon_bound(window.data, ceiling, go_east, go_west, gaps,
-                                    (col_m, row_m), tan_vz)
+    # the tie points' cells of the window; the box of a tie-point cell grown by the reach of
+    # its lines of sight twice (the parallax of its points' positions, then their rays), a
+    # tile and the antecedents the search takes beyond the grid
+    lon = np.asarray(tie_lon, np.float64)
+    lon = lon + 360.0 * np.rint((window.wrap_centre - lon) / 360.0)
+    a, c, e_, f = window.inv[0], window.inv[2], window.inv[4], window.inv[5]
+    cell_col = a * lon + c - 0.5 - window.lattice[1]
+    cell_row = e_ * np.asarray(tie_lat, np.float64) + f - 0.5 - window.lattice[0]
+    reach = float(tz[ok].max()) * TAN_VZ_SLACK * max(ceiling - low, 0.0)
+    pad = 2.0 * reach + VIEW_PAD_M
+    tiles = sightline.view_tiles(cell_row, cell_col,
+                                 np.where(ok, TAN_VZ_SLACK * tz, np.nan),
+                                 np.where(far, east, 0.0),
+                                 (window.data.shape[0] - 1, window.data.shape[1] - 1),
+                                 (pad / row_m + sightline.VIEW_TILE,
+                                  pad / col_m + sightline.VIEW_TILE))
+    bound = sightline.horizon_bound(window.data, ceiling, gaps, (col_m, row_m), tiles)
     return bound, near
 
 
