@@ -32,10 +32,11 @@ from __future__ import annotations
 import contextlib
 import ctypes
 import gc
+import importlib
 import os
 import sys
 import threading
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from typing import Any
 
 #: the one switch: any non-empty value turns the tuning off
@@ -258,6 +259,53 @@ def start_numba_without_blas() -> None:
         _refresh_cpu_target()
     finally:
         del sys.modules["scipy.linalg"]
+
+
+#: the implementation modules numba's CPU target imports at the process's first compilation or
+#: cache load (``BaseContext.refresh``), heaviest first; ``numba_start_pieces`` imports them
+#: one at a time
+NUMBA_TARGET_MODULES = (
+    "numba.cpython.charseq", "numba.cpython.unicode", "numba.np.arrayobj", "numba.np.linalg",
+    "numba.np.arraymath", "numba.np.npyimpl", "numba.cpython.builtins",
+    "numba.cpython.enumimpl", "numba.cpython.hashing", "numba.cpython.heapq",
+    "numba.cpython.iterators", "numba.cpython.listobj", "numba.cpython.numbers",
+    "numba.cpython.rangeobj", "numba.cpython.setobj", "numba.cpython.slicing",
+    "numba.cpython.tupleobj", "numba.core.optional", "numba.core.inline_closurecall",
+    "numba.misc.gdb_hook", "numba.misc.literal", "numba.np.random.generator_core",
+    "numba.np.random.generator_methods", "numba.np.random.legacy",
+    "numba.np.polynomial.polynomial_core", "numba.np.polynomial.polynomial_functions",
+    "numba.typed.typeddict", "numba.typed.dictimpl", "numba.typed.typedlist",
+    "numba.typed.listobject", "numba.typed.typedset", "numba.typed.setobject",
+    "numba.experimental.jitclass", "numba.experimental.function_type",
+    "numba.np.types.datetime_registry", "numba.np.npdatetime", "numba.cpython.cmathimpl",
+    "numba.cpython.mathimpl", "numba.cpython.printimpl", "numba.cpython.randomimpl",
+    "numba.misc.cffiimpl", "numba.experimental.jitclass.base",
+)
+
+
+def numba_start_pieces() -> list[Callable[[], None]]:
+    """``start_numba_without_blas`` in pieces of a few tens of milliseconds each (for a
+    process that must stay responsive while numba starts: the napari dock's warm-up): numba's
+    implementation modules imported one per piece (``numba.np.arraymath`` without
+    scipy.linalg), then the CPU target refreshed with them in memory. Empty when numba's array
+    implementations are imported already or the tuning is off (numba then starts as usual)."""
+    if not enabled() or "scipy.linalg" in sys.modules or "numba.np.arraymath" in sys.modules:
+        return []
+
+    def load(name: str) -> Callable[[], None]:
+        def piece() -> None:
+            if name == "numba.np.arraymath" and "scipy.linalg" not in sys.modules:
+                sys.modules["scipy.linalg"] = None  # type: ignore[assignment]
+                try:
+                    importlib.import_module(name)
+                finally:
+                    del sys.modules["scipy.linalg"]
+            else:
+                importlib.import_module(name)
+        piece.__qualname__ = piece.__name__ = f"import {name}"
+        return piece
+
+    return [*(load(name) for name in NUMBA_TARGET_MODULES), _refresh_cpu_target]
 
 
 # --------------------------------------------------------------------------- numba's privates

@@ -4,6 +4,7 @@ piece while the Qt thread is busy (a user's open), and leaves the kernels loaded
 
 from __future__ import annotations
 
+import gc
 import threading
 import time
 
@@ -49,7 +50,7 @@ class GilProbe:
 @pytest.mark.slow
 @pytest.mark.xfail(reason="with a cold numba cache, loading a kernel in process can hold the "
                           "GIL past the bound", strict=False)
-def test_dock_warm_up_yields_to_the_user(make_napari_viewer, qtbot, monkeypatch):
+def test_dock_warm_up_yields_to_the_user(make_napari_viewer, qtbot, monkeypatch, request):
     from qtpy.QtCore import QTimer
 
     from napari_meris_ortho._napari._qt import warm
@@ -78,6 +79,11 @@ def test_dock_warm_up_yields_to_the_user(make_napari_viewer, qtbot, monkeypatch)
             sum(range(1000))
         busy.append((t0, time.perf_counter()))
 
+    # the session's heap frozen: a full collection of what earlier tests left (seconds in a
+    # long test process) is not the warm-up's stall
+    gc.collect()
+    gc.freeze()
+    request.addfinalizer(gc.unfreeze)
     with GilProbe() as probe:
         widget = OrthorectifyWidget(viewer)
         # the warm-up starts in the last turn of the dock's opening (measured on its own)

@@ -328,12 +328,9 @@ class OrthorectifyWidget(ScrolledForm):
                       "geometry": self.geometry, "exaggeration": self.exaggeration,
                       "vector_step": self.vector_step}
         self.settings_widgets = list(remembered.values())
-        remember("orthorectify", remembered)
-        if self.algorithm.value != MAPPING:  # never a silent switch of the mode
-            self.status.value = (f"selection {self.algorithm.value!r} from the last session: "
-                                 "Run builds a synthesis")
         for widget in (self.products, self.algorithm, self.input_store, self.output):
             widget.changed.connect(self._show_mode)
+        remember("orthorectify", remembered, restored=self._restored)
         self.products.changed.connect(self._products_changed)
         self._show_mode()
         self._crs_changed(self.crs.value)
@@ -359,8 +356,8 @@ class OrthorectifyWidget(ScrolledForm):
         # the rest in turns of the event loop of their own, from the next one on: the dock's
         # opening would be one turn of 0.39-0.49 s with them (warm disk cache)
         this = weakref.ref(self)  # not kept alive by the turns' timers
-        in_turns([_while_open(this, OrthorectifyWidget._prepare_glyphs),
-                  *dash_pattern_steps(),
+        in_turns([*dash_pattern_steps(),  # before the canvas's first draw, which needs them
+                  _while_open(this, OrthorectifyWidget._prepare_glyphs),
                   _while_open(this, OrthorectifyWidget._freeze_when_idle),
                   _while_open(this, _start_warm_up)])
 
@@ -618,6 +615,14 @@ class OrthorectifyWidget(ScrolledForm):
         self._summary = run.summary()
         self._canvas_updates(False)
         self._schedule_step()
+
+    def _restored(self) -> None:
+        """The last session's settings are in the form: a synthesis selection said."""
+        if self._closed:
+            return
+        if self.algorithm.value != MAPPING:  # never a silent switch of the mode
+            self.status.value = (f"selection {self.algorithm.value!r} from the last session: "
+                                 "Run builds a synthesis")
 
     def _hide_others(self, layers: list[Any]) -> None:
         """The first view of a run: its newest image alone visible; the images and labels

@@ -5,7 +5,8 @@ What a user's first open and first Run would otherwise pay, prepared while they 
 - napari's own first-layer set-up: the modules napari imports at its first image layer
   (xarray, pandas, scipy.ndimage for its thumbnails: about 1 s), one import per piece;
 - the engine's numba kernels: compiled out of the process (``warmup.kernels_out_of_process``:
-  a child at the lowest priority fills numba's on-disk cache, or reads it when warm), then
+  a child at the lowest priority fills numba's on-disk cache, or reads it when warm); numba's
+  CPU target started one module per piece (``_process.numba_start_pieces``), then the kernels
   loaded from the cache one specialisation per piece (``warmup.load_kernel``).
 
 The pieces run through ``idle.IdlePieces``: one per idle turn of the event loop, none
@@ -39,6 +40,7 @@ def _import(name: str) -> Callable[[], None]:
             importlib.import_module(name)
         except ImportError:  # another napari, another set of modules
             pass
+    piece.__qualname__ = piece.__name__ = f"import {name}"
     return piece
 
 
@@ -55,9 +57,9 @@ def warm_up_pieces() -> list[Callable[[], Any]]:
 
     def wait_for_kernels() -> None:
         child.join()  # no GIL held while the child process works
-        from ..._process import start_numba_without_blas
+        from ..._process import numba_start_pieces
 
-        pieces.append(start_numba_without_blas)
+        pieces.extend(numba_start_pieces())
         pieces.extend(functools.partial(warmup.load_kernel, s) for s in found)
 
     pieces.append(child.start)
