@@ -252,13 +252,8 @@ def start_numba_without_blas() -> None:
     it: numba imports scipy.linalg again when it compiles one. Before the process's first
     kernel and before it starts other threads; no-op once scipy.linalg or numba's array
     implementations are imported, or with the tuning off."""
-    if not enabled() or "scipy.linalg" in sys.modules or "numba.np.arraymath" in sys.modules:
-        return
-    sys.modules["scipy.linalg"] = None  # type: ignore[assignment]  # import raises ImportError
-    try:
-        _refresh_cpu_target()
-    finally:
-        del sys.modules["scipy.linalg"]
+    for piece in numba_start_pieces():
+        piece()
 
 
 #: the implementation modules numba's CPU target imports at the process's first compilation or
