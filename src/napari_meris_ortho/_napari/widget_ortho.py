@@ -19,9 +19,11 @@ from __future__ import annotations
 
 import contextlib
 import gc
+import importlib
 import threading
 import weakref
 from collections.abc import Callable, Collection
+from functools import partial
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -125,13 +127,17 @@ def _start_warm_up(widget: OrthorectifyWidget) -> None:
     start_warm_up(paused, widget.native)
 
 
-def _import_engine() -> None:
-    """Import the engine in the main thread (module-level pyproj objects made here)."""
-    from .. import ortho  # noqa: F401
-    from ..engine import boundary  # noqa: F401
-    from ..geometry import grid  # noqa: F401
-    from ..products import n1  # noqa: F401
-    from ..synthesis import api  # noqa: F401
+#: the engine's modules a run needs, leaves first: imported in the main thread (their
+#: module-level pyproj objects made there), one per turn of the event loop after the dock's
+#: opening (about 0.3 s together)
+ENGINE_MODULES = ("geometry.grid", "engine.pixelgeo", "engine.pixeldem", "engine.boundary",
+                  "products.n1", "ortho.core", "ortho", "synthesis.api")
+
+
+def _engine_import_steps() -> list[Callable[[], Any]]:
+    """One step per module of ``ENGINE_MODULES``."""
+    package = __name__.rsplit(".", 2)[0]
+    return [partial(importlib.import_module, f"{package}.{name}") for name in ENGINE_MODULES]
 
 
 #: ms between two tries of the opening's ``freeze_long_lived`` while a run goes on
@@ -351,12 +357,12 @@ class OrthorectifyWidget(ScrolledForm):
         show_map_coordinates(viewer)
         show_legends(viewer)
         trim_after_removals(viewer)
-        _import_engine()
-        unit_registry_from_disk()  # napari's units, before its first layer
         # the rest in turns of the event loop of their own, from the next one on: the dock's
-        # opening would be one turn of 0.39-0.49 s with them (warm disk cache)
+        # opening would be one turn of 0.7-0.9 s with them (warm disk cache)
         this = weakref.ref(self)  # not kept alive by the turns' timers
-        in_turns([*dash_pattern_steps(),  # before the canvas's first draw, which needs them
+        in_turns([*_engine_import_steps(),
+                  unit_registry_from_disk,  # napari's units, before its first layer
+                  *dash_pattern_steps(),  # before the canvas's first draw, which needs them
                   _while_open(this, OrthorectifyWidget._prepare_glyphs),
                   _while_open(this, OrthorectifyWidget._freeze_when_idle),
                   _while_open(this, _start_warm_up)])
@@ -513,7 +519,8 @@ class OrthorectifyWidget(ScrolledForm):
         except MerisOrthoError as exc:
             self.status.value = str(exc)
             return None
-        _import_engine()
+        for step in _engine_import_steps():  # (a Run right after the opening: here, not in
+            step()                           # the job's thread)
         self._cancel.clear()
         self.progress_state = (0, 1)
         self.progress_bar.value = 0
