@@ -28,18 +28,16 @@ from ...errors import OptionsError
 from ...progress import ProgressCallback
 from ..n1.format import tie_columns
 from ..sen3.layout import (
-    DOBSON_KG_M2,
     GEO_FILE,
     INSTRUMENT_FILE,
     MANIFEST,
     QUALITY_FILE,
     RADIANCE_FILL,
     TIE_GEO_FILE,
-    TIE_GEOMETRY_FILE,
     TIE_METEO_FILE,
     TIME_FILE,
 )
-from ..sen3.writer import NcWriter, write_geo
+from ..sen3.writer import NcWriter, write_geo, write_tie_angles_and_meteo
 from .layout import (
     N_BANDS,
     OLCI_TYPES,
@@ -310,27 +308,12 @@ def _write_tie_points(nc: NcWriter, tie_points: Mapping[str, np.ndarray],
                    long_name=key.capitalize(),
                    valid_min=np.int32(-90_000_000 if key == "latitude" else -180_000_000),
                    valid_max=np.int32(90_000_000 if key == "latitude" else 180_000_000))
-    with nc.dataset(TIE_GEOMETRY_FILE, tdims) as ds:
-        for name, key, long in (("SZA", "sun_zenith", "Sun Zenith Angle"),
-                                ("SAA", "sun_azimuth", "Sun Azimuth Angle"),
-                                ("OZA", "view_zenith", "Viewing (observation) zenith angle"),
-                                ("OAA", "view_azimuth", "Viewing (observation) azimuth angle")):
-            zenith = name[1] == "Z"
-            deg = get(key) if zenith else 180.0 - (180.0 - get(key)) % 360.0
-            nc.var(ds, name, "u4" if zenith else "i4", tie, np.round(deg * 1e6),
-                   np.uint32(4294967295) if zenith else np.int32(-2147483648),
-                   scale_factor=1e-6, units="degrees", long_name=long,
-                   standard_name=("solar_" if name[0] == "S" else "sensor_")
-                   + ("zenith_angle" if zenith else "azimuth_angle"))
-    with nc.dataset(TIE_METEO_FILE, {**tdims, "wind_vectors": 2}) as ds:
-        wind = np.stack([get("zonal_wind"), get("merid_wind")], axis=-1)
-        nc.var(ds, "horizontal_wind", "f4", (*tie, "wind_vectors"), wind, None,
-               units="m s-1", long_name="Horizontal wind vector at 10m altitude")
-        for name, key, factor, unit in (("sea_level_pressure", "atm_pressure", 1.0, "hPa"),
-                                        ("total_ozone", "ozone", DOBSON_KG_M2, "kg.m-2"),
-                                        ("humidity", "rel_humidity", 1.0, "%")):
-            nc.var(ds, name, "f4", tie, get(key) * factor, None, units=unit,
-                   long_name=name.replace("_", " ").capitalize())
+    write_tie_angles_and_meteo(
+        nc, tdims, get,
+        {("SZA", "sun_zenith"): "Sun Zenith Angle", ("SAA", "sun_azimuth"): "Sun Azimuth Angle",
+         ("OZA", "view_zenith"): "Viewing (observation) zenith angle",
+         ("OAA", "view_azimuth"): "Viewing (observation) azimuth angle"},
+        "Horizontal wind vector at 10m altitude", fills=True)
 
 
 def _manifest(*, name: str, ptype: str, platform: str, height: int, width: int, dj: int,

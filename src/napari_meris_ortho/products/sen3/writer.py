@@ -7,7 +7,7 @@ full ``quality_flags`` coding, and an ``xfdumanifest.xml`` with what SNAP, ocssw
 from __future__ import annotations
 
 import os
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -205,21 +205,39 @@ def _write_tie_points(nc: NcWriter, tie_points: Mapping[str, np.ndarray]) -> Non
     with nc.dataset(TIE_GEO_FILE, tdims) as ds:
         write_geo(nc.var, ds, tie, {"longitude": get("longitude"), "latitude": get("latitude"),
                                      "altitude": get("dem_alt")}, corrected=False)
+    write_tie_angles_and_meteo(nc, tdims, get, ANGLE_LONG_NAMES,
+                               "Horizontal wind vector at 10 m (east, north)", fills=False)
+
+
+#: the tie-point angles (variable, N1 tie-point name) and their long names in MERIS's files
+ANGLE_LONG_NAMES = {("SZA", "sun_zenith"): "Sun zenith angle",
+                    ("SAA", "sun_azimuth"): "Sun azimuth angle",
+                    ("OZA", "view_zenith"): "Observation zenith angle",
+                    ("OAA", "view_azimuth"): "Observation azimuth angle"}
+
+
+def write_tie_angles_and_meteo(nc: NcWriter, tdims: dict[str, int],
+                               get: Callable[[str], np.ndarray],
+                               long_names: Mapping[tuple[str, str], str], wind_long_name: str,
+                               fills: bool) -> None:
+    """``tie_geometries.nc`` (zeniths uint32, azimuths int32 on (-180, 180], x 1e-6 deg;
+    ``fills``: with the integer fill values, as OLCI's files carry them) and ``tie_meteo.nc``
+    (ozone in kg m-2) from the N1-named physical tie points ``get(name)`` gives; the long
+    names as the sensor's files word them."""
+    tie = ("tie_rows", "tie_columns")
     with nc.dataset(TIE_GEOMETRY_FILE, tdims) as ds:
-        for name, key, long in (("SZA", "sun_zenith", "Sun zenith angle"),
-                                ("SAA", "sun_azimuth", "Sun azimuth angle"),
-                                ("OZA", "view_zenith", "Observation zenith angle"),
-                                ("OAA", "view_azimuth", "Observation azimuth angle")):
+        for (name, key), long in long_names.items():
             zenith = name[1] == "Z"
             deg = get(key) if zenith else 180.0 - (180.0 - get(key)) % 360.0
-            nc.var(ds, name, "u4" if zenith else "i4", tie, np.round(deg * 1e6), None,
+            fill = (np.uint32(4294967295) if zenith else np.int32(-2147483648)) if fills else None
+            nc.var(ds, name, "u4" if zenith else "i4", tie, np.round(deg * 1e6), fill,
                    scale_factor=1e-6, units="degrees", long_name=long,
                    standard_name=("solar_" if name[0] == "S" else "sensor_")
                    + ("zenith_angle" if zenith else "azimuth_angle"))
     with nc.dataset(TIE_METEO_FILE, {**tdims, "wind_vectors": 2}) as ds:
         wind = np.stack([get("zonal_wind"), get("merid_wind")], axis=-1)
         nc.var(ds, "horizontal_wind", "f4", (*tie, "wind_vectors"), wind, None,
-               units="m s-1", long_name="Horizontal wind vector at 10 m (east, north)")
+               units="m s-1", long_name=wind_long_name)
         for name, key, factor, unit in (("sea_level_pressure", "atm_pressure", 1.0, "hPa"),
                                         ("total_ozone", "ozone", DOBSON_KG_M2, "kg.m-2"),
                                         ("humidity", "rel_humidity", 1.0, "%")):
