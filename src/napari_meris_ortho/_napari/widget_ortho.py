@@ -358,7 +358,7 @@ class OrthorectifyWidget(ScrolledForm):
         show_legends(viewer)
         trim_after_removals(viewer)
         # the rest in turns of the event loop of their own, from the next one on: the dock's
-        # opening would be one turn of 0.7-0.9 s with them (warm disk cache)
+        # opening would be one long turn with them (the engine's imports, napari's units)
         this = weakref.ref(self)  # not kept alive by the turns' timers
         in_turns([*_engine_import_steps(),
                   unit_registry_from_disk,  # napari's units, before its first layer
