@@ -360,8 +360,10 @@ class OrthorectifyWidget(ScrolledForm):
         # the rest in turns of the event loop of their own, from the next one on: the dock's
         # opening would be one long turn with them (the engine's imports, napari's units)
         this = weakref.ref(self)  # not kept alive by the turns' timers
-        in_turns([*_engine_import_steps(),
-                  unit_registry_from_disk,  # napari's units, before its first layer
+        # (the warm-up after the canvas's first draw of the legend: its pieces, imports in a
+        # thread, would slow that turn down)
+        in_turns([unit_registry_from_disk,  # napari's units, before its first layer
+                  *_engine_import_steps(),
                   *dash_pattern_steps(),  # before the canvas's first draw, which needs them
                   _while_open(this, OrthorectifyWidget._prepare_glyphs),
                   _while_open(this, OrthorectifyWidget._freeze_when_idle),
