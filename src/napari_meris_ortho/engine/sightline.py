@@ -123,10 +123,12 @@ def tile_maxima(data: np.ndarray, gaps: bool = False) -> tuple[np.ndarray, ...]:
 
 
 @njit(cache=True, nogil=True)
-def _march_range(lo, hi, lon, lat, h, e, n, data, inv, lattice, wrap_centre, t0, t1, t2,
-                 post, ceiling, tol, gaps, track, out):  # pragma: no cover
+def _march_range(lo, hi, lon, lat, h, e, n, data, inv, lattice, wrap_centre, jumps, t0, t1, t2,
+                 post, ceiling, tol, gaps, track, bound, col, near_lo, near_hi,
+                 out):  # pragma: no cover
     """Points [lo, hi) of ``march``."""
     n_win_r, n_win_c = data.shape
+    bounded = bound.shape[0] > 0
     r_off, c_off, n_rows, n_cols = lattice[0], lattice[1], lattice[2], lattice[3]
     a, c, e_, f = inv[0], inv[2], inv[4], inv[5]  # (north-up lattice: inv[1] = inv[3] = 0)
     radius = MEAN_EARTH_RADIUS
@@ -159,15 +161,18 @@ def _march_range(lo, hi, lon, lat, h, e, n, data, inv, lattice, wrap_centre, t0,
                     or c_lo < 0 or r_lo + 1 >= n_win_r or c_lo + 1 >= n_win_c):
                 out[k] = UNDECIDED  # the lattice's edge or posts beyond the window
                 break
-            if ray > t0[r_lo // 32, c_lo // 32]:  # (the sizes of TILES)
-                d += 31.0 * post
-                continue
-            if ray > t1[r_lo // 8, c_lo // 8]:
-                d += 7.0 * post
-                continue
-            if ray > t2[r_lo // 2, c_lo // 2]:
-                d += post
-                continue
+            if bounded and not near_lo <= col[k] <= near_hi and ray + tol >= bound[r_lo, c_lo]:
+                break  # seen from this cell on (``horizon_bound``)
+            if jumps:
+                if ray > t0[r_lo // 32, c_lo // 32]:  # (the sizes of TILES)
+                    d += 31.0 * post
+                    continue
+                if ray > t1[r_lo // 8, c_lo // 8]:
+                    d += 7.0 * post
+                    continue
+                if ray > t2[r_lo // 2, c_lo // 2]:
+                    d += post
+                    continue
             # the ray's way through the cell: s in [0, span] from d
             span = math.inf
             if sr > 0.0:
@@ -212,42 +217,92 @@ def _post(v, gap):  # pragma: no cover
     return v if v >= MIN_TERRAIN_M and v <= MAX_TERRAIN_M else gap
 
 
+#: columns of posts a sweep reads (and of bounds it writes) at a time
+STRIP = 64
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _strip(data, row0, n_r, j, step, gap, strip, s0):  # pragma: no cover
+    """The strip of ``_horizon_sweep`` holding post column ``j`` (its first column ``s0``):
+    itself, or the next one the sweep (``step``) reads, its posts as ``_post`` gives them."""
+    if s0 <= j < s0 + STRIP:
+        return s0
+    s0 = max(j - STRIP + 1, 0) if step > 0 else j
+    s1 = min(s0 + STRIP, data.shape[1])
+    for r in range(n_r + 1):
+        for jj in range(s0, s1):
+            strip[jj - s0, r] = _post(data[row0 + r, jj], gap)
+    return s0
+
+
+@njit(cache=True, nogil=True)
+def _fold(out, row0, k0, k1, folds, f0):  # pragma: no cover
+    """The bounds ``folds`` of ``_horizon_sweep``'s columns from ``f0`` (none before the
+    first strip) folded into ``out`` by their maximum, rows ``k0`` .. ``k1`` of the band."""
+    if f0 < 0:
+        return
+    f1 = min(f0 + STRIP, out.shape[1])
+    for r in range(k0, k1):
+        for jj in range(f0, f1):
+            v = folds[jj - f0, r]
+            if v > out[row0 + r, jj]:
+                out[row0 + r, jj] = v
+
+
 @njit(cache=True, nogil=True)
 def _horizon_sweep(data, row0, n_r, gaps, step, ceiling, low, col_m, row_m, tan_vz, tile, c_lo,
-                   c_hi, out):  # pragma: no cover
+                   c_hi, keep, out):  # pragma: no cover
     """One direction (``step`` +1: east, -1: west) of ``horizon_bound`` over the ``n_r`` rows of
-    cells of the window ``data`` from row ``row0`` (a band; its posts read in place: a column
-    of the band stays in the cache for the next ones), columns ``c_lo`` .. ``c_hi`` of cells
+    cells of the window ``data`` from row ``row0`` (a band), columns ``c_lo`` .. ``c_hi`` of cells
     swept from the far end; ``tan_vz`` the tiles' bounds of tan vz (``view_tiles``, 0: no line
-    of sight this way); the cells' bounds folded into ``out`` (column, row - ``row0``) by their
-    maximum."""
+    of sight this way); the bounds of the band's rows ``keep`` (first, last + 1; the others
+    are its edge) folded into ``out`` (row, column) by their maximum."""
     gap = ceiling if gaps else -np.inf
     path = math.hypot(col_m, row_m)  # the longest way of a ray across a column
     rel_edge = ceiling - low
-    prev_abs = np.full(n_r, ceiling)
+    prev_abs = np.full(n_r, ceiling)  # the bounds the column before gives (read), this one's
     prev_rel = np.full(n_r, rel_edge)
-    top = np.empty(n_r)
-    span = np.empty(n_r)
-    steep = np.empty(n_r)
+    next_abs = np.empty(n_r)
+    next_rel = np.empty(n_r)
     hi = np.empty(n_r)
     lo = np.empty(n_r)
     slope = np.empty(n_r)
+    fold = np.empty(n_r)  # the cells' bounds, -inf: none
+    top_r = np.empty(n_r)
+    span_r = np.empty(n_r)
+    steep_r = np.empty(n_r)
     near_abs = np.empty(n_r)
     near_rel = np.empty(n_r)
+    tz_r = np.zeros(n_r)  # the rows' tan vz and its inverse (0: no line of sight this way)
+    inv_r = np.zeros(n_r)
     west = np.empty(n_r + 1)  # the posts of the cells' west and east sides
     east = np.empty(n_r + 1)
+    k0, k1 = max(keep[0], 0), min(keep[1], n_r)
+    # the posts read by strips of STRIP columns, a row's run at a time (a column read in place
+    # would touch a page per row); the bounds written so too
+    strip = np.empty((STRIP, n_r + 1))
+    folds = np.full((STRIP, n_r), -np.inf)  # the bounds of columns f0 .. f0 + STRIP - 1
+    f0 = s0 = -STRIP - 2  # (no strip yet)
     c = c_hi if step > 0 else c_lo
-    for r in range(n_r + 1):  # the first column's far side
-        west[r] = _post(data[row0 + r, c + 1], gap) if step > 0 else _post(data[row0 + r, c], gap)
+    j = c + 1 if step > 0 else c  # the first column's far side
+    s0 = _strip(data, row0, n_r, j, step, gap, strip, s0)
+    west[:] = strip[j - s0]
+    tc = -1
     while c_lo <= c <= c_hi:
+        if c // tile != tc:  # a new column of tiles: the rows' tan vz
+            tc = c // tile
+            for r in range(n_r):
+                tz = tan_vz[tc, (r + row0) // tile]
+                tz_r[r] = tz if tz > 0.0 else 0.0
+                inv_r[r] = 1.0 / tz if tz > 0.0 else 0.0
         if step > 0:  # (the side shared with the column before)
             east, west = west, east
-            for r in range(n_r + 1):
-                west[r] = _post(data[row0 + r, c], gap)
+            s0 = _strip(data, row0, n_r, c, step, gap, strip, s0)
+            west[:] = strip[c - s0]
         else:
-            for r in range(n_r + 1):
-                east[r] = _post(data[row0 + r, c + 1], gap)
-        for r in range(n_r):
+            s0 = _strip(data, row0, n_r, c + 1, step, gap, strip, s0)
+            east[:] = strip[c + 1 - s0]
+        for r in range(n_r):  # each cell: its highest and lowest post, its steepest slope
             v00, v01, v10, v11 = west[r], east[r], west[r + 1], east[r + 1]
             hi[r] = max(max(v00, v01), max(v10, v11))
             lo[r] = min(min(v00, v01), min(v10, v11))
@@ -255,54 +310,48 @@ def _horizon_sweep(data, row0, n_r, gaps, step, ceiling, low, col_m, row_m, tan_
             gy = max(abs(v10 - v00), abs(v11 - v01)) / row_m
             g = math.sqrt(gx * gx + gy * gy)
             slope[r] = g if g == g else math.inf
-        for r in range(n_r):  # the cell and its neighbours north and south
-            if r == 0 or r == n_r - 1:
-                top[r], span[r], steep[r] = ceiling, rel_edge, math.inf
-            else:
-                top[r] = max(max(hi[r - 1], hi[r]), hi[r + 1])
-                span[r] = top[r] - min(min(lo[r - 1], lo[r]), lo[r + 1])
-                if not span[r] < rel_edge:
-                    span[r] = rel_edge
-                steep[r] = max(max(slope[r - 1], slope[r]), slope[r + 1])
-            # the next column's bounds at the rows the line of sight may enter it at
-            a, b = prev_abs[r], prev_rel[r]
-            if r > 0:
-                a, b = max(a, prev_abs[r - 1]), max(b, prev_rel[r - 1])
-            else:
-                a, b = ceiling, rel_edge
-            if r < n_r - 1:
-                a, b = max(a, prev_abs[r + 1]), max(b, prev_rel[r + 1])
-            else:
-                a, b = ceiling, rel_edge
-            near_abs[r], near_rel[r] = a, b
-        tc = c // tile
+        # the cell and its neighbours north and south (the window's first and last rows:
+        # anything), and the next column's bounds at the rows the ray may enter it at
+        top_r[0] = top_r[n_r - 1] = ceiling
+        span_r[0] = span_r[n_r - 1] = rel_edge
+        steep_r[0] = steep_r[n_r - 1] = math.inf
+        near_abs[0] = near_abs[n_r - 1] = ceiling
+        near_rel[0] = near_rel[n_r - 1] = rel_edge
+        for r in range(1, n_r - 1):
+            top = max(max(hi[r - 1], hi[r]), hi[r + 1])
+            span = top - min(min(lo[r - 1], lo[r]), lo[r + 1])
+            top_r[r] = top
+            span_r[r] = span if span < rel_edge else rel_edge
+            steep_r[r] = max(max(slope[r - 1], slope[r]), slope[r + 1])
+            near_abs[r] = max(max(prev_abs[r - 1], prev_abs[r]), prev_abs[r + 1])
+            near_rel[r] = max(max(prev_rel[r - 1], prev_rel[r]), prev_rel[r + 1])
         for r in range(n_r):
-            tz = tan_vz[tc, (r + row0) // tile]
-            if not tz > 0.0:  # no line of sight this way: the cell's terrain for the next
-                prev_abs[r] = top[r]
-                prev_rel[r] = 0.0
-                continue
-            inv = 1.0 / tz
-            rises = steep[r] * tz >= 1.0
+            top, span, steep = top_r[r], span_r[r], steep_r[r]
+            tz, inv = tz_r[r], inv_r[r]
+            rises = steep * tz >= 1.0
+            within = min(span, (steep - inv) * path) if rises else 0.0
+            gain = within if rises else (steep - inv) * col_m
             # a point of the cell: the terrain of its column, then the next column's bounds
-            pa = max(top[r], near_abs[r])
-            pr = max(near_rel[r], 0.0) + (min(span[r], (steep[r] - inv) * path) if rises
-                                          else 0.0)
-            if min(pr, rel_edge) > TOLERANCE_FREE and pa > out[c, r]:
-                out[c, r] = pa
+            pa = max(top, near_abs[r])
+            pr = max(near_rel[r], 0.0) + within
+            seen = tz > 0.0
+            fold[r] = pa if seen and min(pr, rel_edge) > TOLERANCE_FREE else -np.inf
             # crossing the whole column: the ray rises at least col_m / tan vz; the terrain
-            # gains at most its span (steep) or (slope - 1 / tan vz) x width (gentle) on it
-            prev_abs[r] = min(max(top[r], near_abs[r] - col_m * inv), ceiling)
-            if rises:  # the ray's way in the column is at most ``path`` long
-                within = min(span[r], (steep[r] - inv) * path)
-                gain = within
-            else:
-                gain = (steep[r] - inv) * col_m
-                within = 0.0
-            prev_rel[r] = min(max(within, near_rel[r] + gain), rel_edge)
+            # gains at most its span (steep) or (slope - 1 / tan vz) x width (gentle) on it;
+            # no line of sight this way: the cell's terrain for the next
+            next_abs[r] = min(max(top, near_abs[r] - col_m * inv), ceiling) if seen else top
+            next_rel[r] = min(max(within, near_rel[r] + gain), rel_edge) if seen else 0.0
+        prev_abs, next_abs = next_abs, prev_abs
+        prev_rel, next_rel = next_rel, prev_rel
+        if not f0 <= c < f0 + STRIP:  # (written a row's run at a time, as read)
+            _fold(out, row0, k0, k1, folds, f0)
+            f0 = max(c - STRIP + 1, 0) if step > 0 else c
+            folds[:] = -np.inf
+        folds[c - f0] = fold
         if step < 0:  # the east side is the next column's west side
             east, west = west, east
         c -= step
+    _fold(out, row0, k0, k1, folds, f0)
 
 
 @njit(cache=True, nogil=True)
@@ -384,7 +433,7 @@ def lowest_finite(data):  # pragma: no cover
 
 def horizon_bound(data: np.ndarray, ceiling: float, gaps: bool, spacing: tuple[float, float],
                   tan_vz: tuple[np.ndarray, np.ndarray], tile: int = VIEW_TILE) -> np.ndarray:
-    """Per cell of a window (posts r..r+1, c..c+1; float32, indexed [c, r]: column first,
+    """Per cell of a window (posts r..r+1, c..c+1; float32, indexed [r, c] as ``data``,
     one row and column fewer than ``data``): a height such that a point of the cell above it
     (by the tolerance) is seen, -inf where every point of it is (``reachable``: no march).
 
@@ -404,7 +453,7 @@ def horizon_bound(data: np.ndarray, ceiling: float, gaps: bool, spacing: tuple[f
     (a looser bound near the seam, never a wrong one)."""
     data = np.ascontiguousarray(data, np.float32)
     n_c, n_r = max(data.shape[1] - 1, 0), max(data.shape[0] - 1, 0)
-    out = np.full((n_c, n_r), -np.inf, np.float32)
+    out = np.empty((n_r, n_c), np.float32)  # (filled by the bands, in their threads)
     sweeps = []
     for step, tz in ((1, tan_vz[0]), (-1, tan_vz[1])):
         used = np.flatnonzero((tz > 0.0).any(axis=1))
@@ -413,18 +462,19 @@ def horizon_bound(data: np.ndarray, ceiling: float, gaps: bool, spacing: tuple[f
             sweeps.append((step, np.ascontiguousarray(tz, np.float64), int(used[0]) * tile,
                            c_hi))
     if not sweeps:
+        out.fill(-np.inf)
         return out
 
     def band(lo: int, hi: int) -> None:
+        out[lo:hi] = -np.inf
         r0, r1 = max(lo - BAND_HALO, 0), min(hi + BAND_HALO, n_r)
         low = _lowest_post(data, r0, r1 + 1)
-        part = np.full((n_c, r1 - r0), -np.inf, np.float32)
         for step, tz, c_lo, c_hi in sweeps:
             if c_lo <= c_hi:
                 _horizon_sweep(data, r0, r1 - r0, bool(gaps), step, float(ceiling),
                                low if math.isfinite(low) else 0.0, float(spacing[0]),
-                               float(spacing[1]), tz, int(tile), c_lo, c_hi, part)
-        out[:, lo:hi] = part[:, lo - r0:hi - r0]
+                               float(spacing[1]), tz, int(tile), c_lo, c_hi,
+                               (lo - r0, hi - r0), out)
 
     split_range(band, n_r, min_size=BAND_ROWS, pieces_per_thread=1)
     return out
@@ -434,7 +484,7 @@ def horizon_bound(data: np.ndarray, ceiling: float, gaps: bool, spacing: tuple[f
 def _reachable_range(lo, hi, lon, lat, h, inv, lattice, wrap_centre, bound, tol,
                      out):  # pragma: no cover
     """Points [lo, hi) of ``reachable``."""
-    n_c, n_r = bound.shape  # (column, row)
+    n_r, n_c = bound.shape
     r_off, c_off = lattice[0], lattice[1]
     a, c, e_, f = inv[0], inv[2], inv[4], inv[5]
     for k in range(lo, hi):
@@ -446,7 +496,7 @@ def _reachable_range(lo, hi, lon, lat, h, inv, lattice, wrap_centre, bound, tol,
         if r < 0 or cc < 0 or r >= n_r or cc >= n_c:
             out[k] = True  # beyond the window: the march decides
         else:
-            out[k] = bound[cc, r] > h[k] + tol
+            out[k] = bound[r, cc] > h[k] + tol
 
 
 def reachable(lon: np.ndarray, lat: np.ndarray, h: np.ndarray, inv: np.ndarray,
@@ -455,7 +505,7 @@ def reachable(lon: np.ndarray, lat: np.ndarray, h: np.ndarray, inv: np.ndarray,
     """True where terrain might rise more than ``tol`` above the line of sight of a point
     (flat float64 ``lon``, ``lat``, ``h`` on a geographic north-up window, as ``march``
     takes them; ``bound``: ``horizon_bound`` of the window): the points ``march`` must
-    decide; the others are seen. One look-up a point (``bound`` indexed [column, row]): no
+    decide; the others are seen. One look-up a point (``bound`` indexed [row, column]): no
     march on plains, seas and the slopes that face the sensor."""
     out = np.empty(lon.size, np.bool_)
     args = (lon, lat, h, inv, lattice, float(wrap_centre), bound, float(tol), out)
@@ -466,26 +516,24 @@ def reachable(lon: np.ndarray, lat: np.ndarray, h: np.ndarray, inv: np.ndarray,
 @njit(cache=True, nogil=True)
 def _to_march(lo, hi, lon, lat, h, col, iters, inv, lattice, wrap_centre, bound, tol, near_lo,
               near_hi, out):  # pragma: no cover
-    """``to_march`` of points [lo, hi) into ``out[lo:]``; their number."""
-    n_c, n_r = bound.shape  # (column, row)
+    """``to_march`` of points [lo, hi) into ``out[lo:]``; their number (without branches on
+    the points: each index written, the count moved on by the ones kept)."""
+    n_r, n_c = bound.shape
     r_off, c_off = lattice[0], lattice[1]
     a, c, e_, f = inv[0], inv[2], inv[4], inv[5]
     m = lo
     for k in range(lo, hi):
         hk = h[k]
-        if iters[k] < 0 or not math.isfinite(hk):
-            continue
-        go = near_lo <= col[k] <= near_hi
-        if not go:
-            x0 = lon[k]
-            if abs(wrap_centre - x0) > 180.0:
-                x0 = x0 + 360.0 * np.rint((wrap_centre - x0) / 360.0)
-            r = int(math.floor(e_ * lat[k] + f - 0.5)) - r_off
-            cc = int(math.floor(a * x0 + c - 0.5)) - c_off
-            go = r < 0 or cc < 0 or r >= n_r or cc >= n_c or bound[cc, r] > hk + tol
-        if go:
-            out[m] = k
-            m += 1
+        x0 = lon[k]
+        if abs(wrap_centre - x0) > 180.0:
+            x0 = x0 + 360.0 * np.rint((wrap_centre - x0) / 360.0)
+        r = int(math.floor(e_ * lat[k] + f - 0.5)) - r_off
+        cc = int(math.floor(a * x0 + c - 0.5)) - c_off
+        inside = r >= 0 and cc >= 0 and r < n_r and cc < n_c
+        high = bound[min(max(r, 0), n_r - 1), min(max(cc, 0), n_c - 1)] > hk + tol
+        go = (near_lo <= col[k] <= near_hi) or not inside or high
+        out[m] = k
+        m += 1 if (iters[k] >= 0 and math.isfinite(hk) and go) else 0
     return m - lo
 
 
@@ -510,7 +558,9 @@ def to_march(lon: np.ndarray, lat: np.ndarray, h: np.ndarray, col: np.ndarray,
 def march(lon: np.ndarray, lat: np.ndarray, h: np.ndarray, e: np.ndarray, n: np.ndarray,
           data: np.ndarray, inv: np.ndarray, lattice: np.ndarray, wrap_centre: float,
           tmax: tuple[np.ndarray, ...], post: float, ceiling: float, tol: float,
-          gaps: bool = False, track: np.ndarray | None = None) -> np.ndarray:
+          gaps: bool = False, track: np.ndarray | None = None,
+          bound: np.ndarray | None = None, col: np.ndarray | None = None,
+          near: tuple[float, float] = (math.inf, -math.inf)) -> np.ndarray:
     """Per point (flat float64 ``lon``, ``lat``, ``h``, look vector ``e``, ``n``): SEEN, HIDDEN
     (terrain more than ``tol`` m above its ray) or UNDECIDED (the ray reached posts beyond the
     window ``data``/``inv``/``lattice``/``wrap_centre``, as ``terrain.window_heights``
@@ -519,10 +569,19 @@ def march(lon: np.ndarray, lat: np.ndarray, h: np.ndarray, e: np.ndarray, n: np.
     a post without data ends the march UNDECIDED (the window is the first DEM of a stack; its
     ``tmax`` of ``tile_maxima(..., gaps=True)``), else its ray goes on (no terrain there);
     ``track``: (n, 4) fractional post row, column of each point and their rates per metre
-    towards the sensor (a projected lattice, ``ortho.occlusion``), else from lon, lat."""
+    towards the sensor (a projected lattice, ``ortho.occlusion``), else from lon, lat;
+    ``bound``: the window's ``horizon_bound``, where a ray that comes within ``tol`` of it
+    is seen (points of antecedent column ``col`` within ``near``, whose lines of sight it
+    leaves out, excepted); ``tmax`` may then be empty (no jumps: the bound ends the rays)."""
     out = np.empty(lon.size, np.int8)
-    args = (lon, lat, h, e, n, data, inv, lattice, float(wrap_centre), *tmax, float(post),
-            float(ceiling), float(tol), bool(gaps),
-            np.zeros((0, 4)) if track is None else np.ascontiguousarray(track, np.float64), out)
+    jumps = len(tmax) == len(TILES)
+    none = np.full((1, 1), np.inf)
+    args = (lon, lat, h, e, n, data, inv, lattice, float(wrap_centre), jumps,
+            *(tmax if jumps else (none,) * len(TILES)), float(post), float(ceiling), float(tol),
+            bool(gaps),
+            np.zeros((0, 4)) if track is None else np.ascontiguousarray(track, np.float64),
+            np.full((0, 0), np.inf, np.float32) if bound is None else bound,
+            np.zeros(0) if col is None else np.ascontiguousarray(col, np.float64),
+            float(near[0]), float(near[1]), out)
     split_range(lambda lo, hi: _march_range(lo, hi, *args), lon.size, min_size=1 << 12)
     return out

@@ -66,8 +66,9 @@ _DEGREE_M = math.radians(1.0) * MEAN_EARTH_RADIUS
 class Sightlines:
     """What the marches of a run need, once: the ceiling (the highest post of the DEMs'
     prepared windows; MAX_TERRAIN_M when a DEM has none), the first march's ``step`` (m) and,
-    for a stack of one geographic ellipsoidal lattice in memory, its window with the tiles'
-    maxima and its shortest post (m) for ``engine.sightline``, which marches there."""
+    for a stack of one geographic ellipsoidal lattice in memory, its window and its shortest
+    post (m) for ``engine.sightline``, which marches there, ending each ray where the window's
+    ``bound`` says it is seen or, without a bound, jumping by the tiles' maxima ``tmax``."""
 
     stack: DemStack
     ceiling: float
@@ -136,12 +137,13 @@ class Sightlines:
                 shortest = min(1.0 / abs(window.inv[0]), 1.0 / abs(window.inv[4]))
             out.window = window
             out.gaps = len(windows) > 1
-            out.tmax = sightline.tile_maxima(window.data, out.gaps)
             out.post = 0.99 * shortest
             if window.transform is None and view is not None:
                 horizon = _horizon(window, out.ceiling, out.gaps, view)
                 if horizon is not None:
                     out.bound, out.near_nadir = horizon
+            if out.bound is None:  # (else the bound ends the marches: no jumps)
+                out.tmax = sightline.tile_maxima(window.data, out.gaps)
         return out
 
     def candidates(self, lon: np.ndarray, lat: np.ndarray, h: np.ndarray
@@ -196,7 +198,8 @@ class Sightlines:
                 if fastest > 0.0:  # a jump of `post` metres: at most one post on the lattice
                     post = min(post, 0.99 / fastest)
             res = sightline.march(*ray, w.data, w.inv, w.lattice, w.wrap_centre, self.tmax,
-                                  post, self.ceiling, TOLERANCE_M, self.gaps, track)
+                                  post, self.ceiling, TOLERANCE_M, self.gaps, track,
+                                  self.bound, col, self.near_nadir)
             out = res == sightline.HIDDEN
             todo = np.flatnonzero(res == sightline.UNDECIDED)
         if todo.size:
