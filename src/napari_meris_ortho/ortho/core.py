@@ -565,58 +565,116 @@ class _Blocks:
 
 def _run(job: _Job, progress: ProgressCallback | None) -> Antecedents:
     """Prediction/correction by blocks of output rows (section 3.2); the bands are sampled
-    later by the returned ``Antecedents``."""
+    later by the returned ``Antecedents``. With DEM heights, hidden ground is looked for
+    (``occlusion.hidden_ground``) block by block in a thread of its own, one block behind the
+    search: the lines of sight ``_prepare`` started are made while the first blocks are
+    solved."""
     grid, spans, stack, hmode, opts = job.grid, job.spans, job.stack, job.hmode, job.options
     nr = grid.shape[0]
     area = job.area
     t_dem = t_lonlat = t_engine = 0.0
     total = nr + len(opts.bands)
-    # DEM heights, every mode: hidden ground looked for (``_prepare`` started it)
-    march = job.sightlines.result() if job.sightlines is not None else None
     blocks = _Blocks.empty(area, opts.diagnostics, len(stack.sources) if stack is not None else 0,
-                           hidden=march is not None or job.pixel is not None)
-    for r0 in range(0, nr, _BLOCK_ROWS):
-        r1 = min(r0 + _BLOCK_ROWS, nr)
-        p0, p1 = spans.ptr[r0 - spans.row_start], spans.ptr[r1 - spans.row_start]
-        if p1 == p0:  # no point of these rows to search (a grid larger than the segment)
+                           hidden=job.sightlines is not None or job.pixel is not None)
+    behind = _Behind() if job.sightlines is not None else None
+    try:
+        for r0 in range(0, nr, _BLOCK_ROWS):
+            r1 = min(r0 + _BLOCK_ROWS, nr)
+            p0, p1 = spans.ptr[r0 - spans.row_start], spans.ptr[r1 - spans.row_start]
+            if p1 == p0:  # no point of these rows to search (a grid larger than the segment)
+                if progress is not None:
+                    progress(r1, total)
+                continue
+            c0, c1 = _span_columns(job, spans.start[p0:p1], spans.stop[p0:p1])
+            t0 = time.perf_counter()
+            lon, lat = grid.lonlat(r0, r1, col_start=c0, col_stop=c1)
+            t_lonlat += time.perf_counter() - t0
+            ptr = spans.ptr[r0 - spans.row_start: r1 - spans.row_start + 1] - p0
+            start, stop = spans.start[p0:p1] - c0, spans.stop[p0:p1] - c0
+            h = src = None
+            if hmode == predcorr.HEIGHT_GIVEN:
+                t0 = time.perf_counter()
+                mask = np.zeros(lon.shape, bool)
+                _mark(mask, ptr, start, stop)
+                assert stack is not None
+                h, src = dem_heights(stack, lon, lat, mask)
+                t_dem += time.perf_counter() - t0
+            t0 = time.perf_counter()
+            whole = (c0, c1) == area[2:]  # the block's rows of the area: solved in place
+            res = _solve(job, lon, lat, h, (ptr, start, stop), (r0, c0),
+                         blocks.rows(r0, r1) if whole else None)
+            t_engine += time.perf_counter() - t0
+            window = (r0, r1, c0, c1)
+            if behind is not None:  # the lines of sight marched over the DEMs
+                assert h is not None and job.sightlines is not None
+                behind.submit(_hidden_block, job, job.sightlines, blocks, window, lon, lat, h,
+                              res, src)
+            else:
+                hidden = None
+                if job.pixel is not None:  # the pixel geolocation's own hidden ground
+                    hidden = res["iterations"] == pixelgeo.OCCLUDED
+                blocks.add(window, res, src, hmode, hidden)
             if progress is not None:
                 progress(r1, total)
-            continue
-        c0, c1 = _span_columns(job, spans.start[p0:p1], spans.stop[p0:p1])
-        t0 = time.perf_counter()
-        lon, lat = grid.lonlat(r0, r1, col_start=c0, col_stop=c1)
-        t_lonlat += time.perf_counter() - t0
-        ptr = spans.ptr[r0 - spans.row_start: r1 - spans.row_start + 1] - p0
-        start, stop = spans.start[p0:p1] - c0, spans.stop[p0:p1] - c0
-        h = src = None
-        if hmode == predcorr.HEIGHT_GIVEN:
-            t0 = time.perf_counter()
-            mask = np.zeros(lon.shape, bool)
-            _mark(mask, ptr, start, stop)
-            assert stack is not None
-            h, src = dem_heights(stack, lon, lat, mask)
-            t_dem += time.perf_counter() - t0
-        t0 = time.perf_counter()
-        whole = (c0, c1) == area[2:]  # the block's rows of the area: solved in place
-        res = _solve(job, lon, lat, h, (ptr, start, stop), (r0, c0),
-                     blocks.rows(r0, r1) if whole else None)
-        t_engine += time.perf_counter() - t0
-        hidden = None
-        if march is not None:  # the lines of sight marched over the DEMs
-            assert h is not None
-            t0 = time.perf_counter()
-            hidden = occlusion.hidden_ground(march, job.tp.kernel_args(), lon, lat, h, res)
-            if opts.hidden is Hidden.MASK:
-                occlusion.drop_hidden(res, hidden)
-            t_dem += time.perf_counter() - t0
-        elif job.pixel is not None:  # the pixel geolocation's own hidden ground
-            hidden = res["iterations"] == pixelgeo.OCCLUDED
-        blocks.add((r0, r1, c0, c1), res, src, hmode, hidden)
-        if progress is not None:
-            progress(r1, total)
+        if behind is not None:
+            t_dem += behind.finish()
+    finally:
+        if behind is not None:
+            behind.close()
     seconds = {"lonlat": t_lonlat, "dem": t_dem, "prediction_correction": t_engine,
                "read_bands": 0.0, "resample": 0.0, "engine": t_engine}
     return _antecedents(job, blocks, seconds, progress)
+
+
+def _hidden_block(job: _Job, sightlines: Future[occlusion.Sightlines], blocks: _Blocks,
+                  window: tuple[int, int, int, int], lon: np.ndarray, lat: np.ndarray,
+                  h: np.ndarray, res: dict, src: np.ndarray | None) -> None:
+    """The hidden ground of a solved block (``occlusion.hidden_ground``), dropped with hidden
+    ``mask``, then the block added to ``blocks``."""
+    hidden = occlusion.hidden_ground(sightlines.result(), job.tp.kernel_args(), lon, lat, h,
+                                     res)
+    if job.options.hidden is Hidden.MASK:
+        occlusion.drop_hidden(res, hidden)
+    blocks.add(window, res, src, job.hmode, hidden)
+
+
+class _Behind:
+    """Work done in one thread of its own, in the order given, at most ``AHEAD`` pieces
+    waiting (each holds a block's points); its seconds and first exception from
+    ``finish``."""
+
+    AHEAD = 2
+
+    def __init__(self) -> None:
+        from concurrent.futures import ThreadPoolExecutor
+
+        self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="meris-ortho-behind")
+        self._pending: list[Future[float]] = []
+        self._seconds = 0.0
+
+    def submit(self, fn: Callable[..., None], *args: Any) -> None:
+        """``fn(*args)`` once the pieces before it are done; waits while ``AHEAD`` wait."""
+        while len(self._pending) >= self.AHEAD:
+            self._seconds += self._pending.pop(0).result()
+
+        def timed() -> float:
+            t0 = time.perf_counter()
+            fn(*args)
+            return time.perf_counter() - t0
+
+        self._pending.append(self._pool.submit(timed))
+
+    def finish(self) -> float:
+        """Waits for every piece; the seconds of all of them."""
+        while self._pending:
+            self._seconds += self._pending.pop(0).result()
+        return self._seconds
+
+    def close(self) -> None:
+        """The pieces not started dropped, the thread ended (after an error too)."""
+        for f in self._pending:
+            f.cancel()
+        self._pool.shutdown(wait=True)
 
 
 def _antecedents(job: _Job, blocks: _Blocks, seconds: dict[str, float],
