@@ -74,24 +74,42 @@ STEEP_WEST = {"base": "fr-steep", "name": "fr-steep-west",
               "orbit": {"nadir_lon": 7.0, "nadir_lat": 48.0}, "first_column": -2240}
 
 
-@pytest.mark.parametrize("scene_name", ["fr-steep", "fr-steep-west", "rr-segment"])
-def test_the_horizon_bound_marches_every_point_that_can_be_hidden(scene_name, monkeypatch
+@pytest.mark.parametrize(("scene_name", "utm"), [("fr-steep", False), ("fr-steep", True),
+                                                 ("fr-steep-west", False),
+                                                 ("rr-segment", False)])
+def test_the_horizon_bound_marches_every_point_that_can_be_hidden(scene_name, utm, monkeypatch
                                                                     ) -> None:
     """Points the horizon bound clears are seen: the hidden-ground mask is the same as when
-    every line of sight is marched (east- and west-looking scenes, one across nadir); on
+    every line of sight is marched (east- and west-looking scenes, one across nadir; a
+    geographic grid, whose cells are found a row and a column at a time, and a UTM one); on
     moderate relief the bound clears most points."""
+    from napari_meris_ortho import read_product
     from napari_meris_ortho.engine import sightline
+    from napari_meris_ortho.geometry.grid import footprint_utm
     from napari_meris_ortho.ortho import occlusion
     from napari_meris_ortho.simulate.scene import generate_scene
 
     scene = generate_scene(STEEP_WEST if scene_name == "fr-steep-west" else scene_name)
     kw = {"dems": [scene.dem_paths["geotiff"]], "bands": [7]}
-    marched: list[int] = []
-    to_march = sightline.to_march
-    monkeypatch.setattr(sightline, "to_march",
-                        lambda *a, **k: marched.append((r := to_march(*a, **k)).size) or r)
+    if utm:
+        tp = read_product(scene.product_path).tie_points
+        kw["crs"] = footprint_utm(tp.latitude, tp.longitude).to_string()
+    marched: dict[str, int] = {}
+
+    def counting(name: str):
+        chooser = getattr(sightline, name)
+
+        def counted(*a, **k):
+            r = chooser(*a, **k)
+            marched[name] = marched.get(name, 0) + r.size
+            return r
+        return counted
+
+    for name in ("to_march", "to_march_grid"):
+        monkeypatch.setattr(sightline, name, counting(name))
     bounded = orthorectify(scene.product_path, **kw)
     monkeypatch.undo()
+    assert list(marched) == (["to_march"] if utm else ["to_march_grid"])
     monkeypatch.setattr(occlusion, "_horizon", lambda *a, **k: None)
     every = orthorectify(scene.product_path, **kw)
     assert np.array_equal(bounded.hidden, every.hidden)
@@ -99,7 +117,7 @@ def test_the_horizon_bound_marches_every_point_that_can_be_hidden(scene_name, mo
     assert bounded.hidden.sum() == every.hidden.sum() > (1000 if "steep" in scene_name else 10)
     if scene_name == "rr-segment":  # moderate relief: beyond the columns near nadir (a
         # ninth of the swath, always marched) few points are within reach of a slope
-        assert sum(marched) < 0.2 * bounded.valid.sum()
+        assert sum(marched.values()) < 0.2 * bounded.valid.sum()
 
 
 @pytest.mark.slow

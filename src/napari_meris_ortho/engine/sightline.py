@@ -555,6 +555,59 @@ def to_march(lon: np.ndarray, lat: np.ndarray, h: np.ndarray, col: np.ndarray,
     return np.concatenate([out[lo:lo + found[lo]] for lo in sorted(found)] or [out[:0]])
 
 
+@njit(cache=True, nogil=True)
+def _to_march_rows(lo, hi, cell_row, cell_col, h, col, iters, bound, tol, near_lo, near_hi,
+                   out):  # pragma: no cover
+    """``to_march_grid`` of the rows [lo, hi) into ``out[lo * columns:]``; their number."""
+    n_r, n_c = bound.shape
+    n_cols = cell_col.size
+    m = lo * n_cols
+    for i in range(lo, hi):
+        r = cell_row[i]
+        r_in = 0 <= r < n_r
+        rc = min(max(r, 0), n_r - 1)
+        for j in range(n_cols):
+            k = i * n_cols + j
+            hk = h[i, j]
+            cc = cell_col[j]
+            inside = r_in and 0 <= cc < n_c
+            high = bound[rc, min(max(cc, 0), n_c - 1)] > hk + tol
+            go = (near_lo <= col[i, j] <= near_hi) or not inside or high
+            out[m] = k
+            m += 1 if (iters[i, j] >= 0 and math.isfinite(hk) and go) else 0
+    return m - lo * n_cols
+
+
+def to_march_grid(lon: np.ndarray, lat: np.ndarray, h: np.ndarray, col: np.ndarray,
+                  iters: np.ndarray, inv: np.ndarray, lattice: np.ndarray, wrap_centre: float,
+                  bound: np.ndarray, tol: float, near: tuple[float, float]) -> np.ndarray:
+    """``to_march`` of the points of a block of a geographic grid, (rows, columns) arrays
+    ``h``, ``col``, ``iters``, whose longitude is ``lon`` in every row and latitude ``lat``
+    in every column: the cells of the window found once a row and a column, as ``to_march``
+    finds them a point (flat indices of the block)."""
+    a, c, e_, f = inv[0], inv[2], inv[4], inv[5]
+    x0 = np.asarray(lon, np.float64)
+    far = np.abs(wrap_centre - x0) > 180.0
+    x0 = np.where(far, x0 + 360.0 * np.rint((wrap_centre - x0) / 360.0), x0)
+    with np.errstate(invalid="ignore"):
+        cell_row = np.floor(e_ * np.asarray(lat, np.float64) + f - 0.5)
+        cell_col = np.floor(a * x0 + c - 0.5)
+    # (no position: beyond the window, which ``march`` decides)
+    cell_row = np.where(np.isfinite(cell_row), cell_row - lattice[0], -1).astype(np.int64)
+    cell_col = np.where(np.isfinite(cell_col), cell_col - lattice[1], -1).astype(np.int64)
+    out = np.empty(h.size, np.int64)
+    found: dict[int, int] = {}
+
+    def part(lo: int, hi: int) -> None:
+        found[lo] = _to_march_rows(lo, hi, cell_row, cell_col, h, col, iters, bound, float(tol),
+                                   float(near[0]), float(near[1]), out)
+
+    n_cols = max(cell_col.size, 1)
+    split_range(part, h.shape[0], min_size=max((1 << 16) // n_cols, 1), pieces_per_thread=1)
+    return np.concatenate([out[lo * n_cols:lo * n_cols + found[lo]] for lo in sorted(found)]
+                          or [out[:0]])
+
+
 def march(lon: np.ndarray, lat: np.ndarray, h: np.ndarray, e: np.ndarray, n: np.ndarray,
           data: np.ndarray, inv: np.ndarray, lattice: np.ndarray, wrap_centre: float,
           tmax: tuple[np.ndarray, ...], post: float, ceiling: float, tol: float,

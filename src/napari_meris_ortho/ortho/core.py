@@ -632,7 +632,7 @@ def _hidden_block(job: _Job, sightlines: Future[occlusion.Sightlines], blocks: _
     """The hidden ground of a solved block (``occlusion.hidden_ground``), dropped with hidden
     ``mask``, then the block added to ``blocks``."""
     hidden = occlusion.hidden_ground(sightlines.result(), job.tp.kernel_args(), lon, lat, h,
-                                     res)
+                                     res, separable=job.grid.is_lonlat)
     if job.options.hidden is Hidden.MASK:
         occlusion.drop_hidden(res, hidden)
     blocks.add(window, res, src, job.hmode, hidden)

@@ -338,18 +338,25 @@ def _march(stack: DemStack, ray: tuple[np.ndarray, ...], ceiling: float, step: f
 
 
 def hidden_ground(sight: Sightlines, kernel_args: tuple, lon: np.ndarray, lat: np.ndarray,
-                  h: np.ndarray, res: dict) -> np.ndarray:
+                  h: np.ndarray, res: dict, separable: bool = False) -> np.ndarray:
     """Where the output points of a block (``lon``, ``lat`` with DEM heights ``h``) solved in
     ``res`` (``predcorr.solve``, ``pixeldem.solve_pixel_dem``: line, col, iterations) are hidden
     by the terrain (bool, the block's shape): every mode with DEMs the same way, the ray along
     the view angles of the tie points at the point's antecedent. Points without an antecedent
     or a DEM height (no DEM has data there: the tie points' height) are not marched, nor the
     points ``Sightlines.candidates`` clears; a pixel geolocation's own ``OCCLUDED`` points are
-    hidden."""
+    hidden. ``separable``: a block of a geographic grid (``lon`` the same in every row,
+    ``lat`` in every column)."""
     iters = res["iterations"]
     out = np.asarray(iters == OCCLUDED).copy()
     w = sight.window
-    if sight.bound is not None and w is not None:  # one pass: the points to march
+    if sight.bound is not None and w is not None and separable and np.ndim(lon) == 2:
+        # one pass over a block of a geographic grid: the points to march
+        gh, gcol, giters = (np.ascontiguousarray(a) for a in (h, res["col"], iters))
+        index = sightline.to_march_grid(lon[0], lat[:, 0], gh, gcol, giters, w.inv, w.lattice,
+                                        w.wrap_centre, sight.bound, TOLERANCE_M,
+                                        sight.near_nadir)
+    elif sight.bound is not None and w is not None:  # one pass: the points to march
         plon, plat, ph, pcol, piters = (np.ascontiguousarray(a).reshape(-1)
                                          for a in (lon, lat, h, res["col"], iters))
         index = sightline.to_march(plon, plat, ph, pcol, piters, w.inv, w.lattice,
