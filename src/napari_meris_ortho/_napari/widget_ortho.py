@@ -99,6 +99,8 @@ from .writer import layers_reading
 if TYPE_CHECKING:
     import napari
 
+    from ._qt.warm import WarmUp
+
 DEM_FILE, DEM_DIR = "GeoTIFF / SRTM30 tile", "GETASSE30 directory"
 #: what the CRS choices mean, the default first
 CRS_TOOLTIP = ("coordinate system of the output grid. Default: the UTM zone of the footprint's "
@@ -113,7 +115,8 @@ __all__ = ["CRS_EPSG", "CRS_GEOGRAPHIC", "CRS_UTM", "Cancelled", "RunSettings", 
 
 
 def _start_warm_up(widget: OrthorectifyWidget) -> None:
-    """The dock's warm-up in idle turns, held back while a run goes on (``warm``)."""
+    """The dock's warm-up in idle turns, held back while a run goes on (``warm``); kept on
+    the widget, whose later opening steps wait for its first-layer imports."""
     from ._qt.warm import start_warm_up
 
     ref = weakref.ref(widget)
@@ -122,7 +125,7 @@ def _start_warm_up(widget: OrthorectifyWidget) -> None:
         alive = ref()
         return alive is None or alive.running or bool(alive._queue)
 
-    start_warm_up(paused, widget.native)
+    widget._warm = start_warm_up(paused, widget.native)
 
 
 def _engine_import_steps() -> list[Callable[[], Any]]:
@@ -324,6 +327,7 @@ class OrthorectifyWidget(ScrolledForm):
         self.worker: Any = None
         #: layer changes (remove an old layer, append a new one) left to make, one per turn
         self._queue: list[tuple[Any, Any]] = []
+        self._warm: WarmUp | None = None  # the dock's warm-up (``_start_warm_up``)
         self._queued, self._summary = 0, ""
         self._hidden: list[Any] = []  # a run's layers waiting to be shown (``_done``)
         self._batch_open = False  # napari's batch of layer removals (``_removals``)
@@ -365,16 +369,20 @@ class OrthorectifyWidget(ScrolledForm):
         show_legends(viewer)
         trim_after_removals(viewer)
         # the rest in turns of the event loop of their own, from the next one on: the dock's
-        # opening would be one long turn with them (the engine's imports, napari's units)
+        # opening would be one long turn with them (the engine's imports, napari's units).
+        # What a first open needs comes first: napari's units, then the warm-up's imports of
+        # napari's first layer; the steps a run needs wait for those imports (sharing the GIL
+        # with them, the canvas's first draw of the legend would take a long turn), and the
+        # warm-up's kernels for those steps
         this = weakref.ref(self)  # not kept alive by the turns' timers
-        # (the warm-up after the canvas's first draw of the legend: its pieces, imports in a
-        # thread, would slow that turn down)
         in_turns([unit_registry_from_disk,  # napari's units, before its first layer
+                  _while_open(this, _start_warm_up),
                   *_engine_import_steps(),
                   *dash_pattern_steps(),  # before the canvas's first draw, which needs them
                   _while_open(this, OrthorectifyWidget._prepare_glyphs),
                   _while_open(this, OrthorectifyWidget._freeze_when_idle),
-                  _while_open(this, _start_warm_up)])
+                  _while_open(this, OrthorectifyWidget._opening_done)],
+                 hold=lambda: (w := this()) is not None and w._warming_first_layer())
 
     # ---------------------------------------------------------------- output grid
     def _crs_changed(self, value: str) -> None:
@@ -650,6 +658,15 @@ class OrthorectifyWidget(ScrolledForm):
                     and type(layer).__name__ in ("Image", "Labels")):
                 layer.visible = False
                 self._removed.append((-1, layer))  # shown again by a Cancel
+
+    def _warming_first_layer(self) -> bool:
+        """Whether the warm-up is importing what napari's first layer needs."""
+        return self._warm is not None and not self._warm.first_layer_ready()
+
+    def _opening_done(self) -> None:
+        """The opening's steps are done: the warm-up's kernels may follow."""
+        if self._warm is not None:
+            self._warm.steps_done()
 
     def _prepare_glyphs(self) -> None:
         """The legend's glyphs rendered beforehand (``legend.prepare_glyphs``), not in a run."""

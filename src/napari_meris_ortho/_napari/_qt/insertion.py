@@ -320,9 +320,14 @@ def defer_controls(viewer: Any, kinds: Sequence[str]) -> None:
     QTimer.singleShot(CONTROLS_FALLBACK_MS, fallback)
 
 
-def in_turns(steps: list[Callable[[], Any]], first_ms: int = 1) -> None:
+#: ms between two looks at whether ``in_turns``'s ``hold`` still holds its steps back
+HOLD_RETRY_MS = 50
+
+
+def in_turns(steps: list[Callable[[], Any]], first_ms: int = 1,
+             hold: Callable[[], bool] | None = None) -> None:
     """Call each of ``steps`` in a turn of the Qt event loop of its own, from the next one on
-    (the first ``first_ms`` from now), never inside napari's opening."""
+    (the first ``first_ms`` from now), never inside napari's opening nor while ``hold()``."""
     from qtpy.QtCore import QTimer
 
     pending = list(steps)
@@ -332,6 +337,9 @@ def in_turns(steps: list[Callable[[], Any]], first_ms: int = 1) -> None:
             return
         if _in_viewer_open():  # napari processes events before its opening returns
             QTimer.singleShot(CONTROLS_AFTER_OPEN_MS, step)
+            return
+        if hold is not None and hold():
+            QTimer.singleShot(HOLD_RETRY_MS, step)
             return
         pending.pop(0)()
         QTimer.singleShot(1, step)

@@ -10,7 +10,9 @@ What a user's first open and first Run would otherwise pay, prepared while they 
   loaded from the cache one specialisation per piece (``warmup.load_kernel``).
 
 The pieces run through ``idle.IdlePieces``: one per idle turn of the event loop, none
-while napari opens a file or a run is under way.
+while napari opens a file or a run is under way. napari's first-layer imports come first (a
+user opens a product before a run); the dock's other opening steps wait for them, and the
+kernels for those steps (``WarmUp``).
 """
 
 from __future__ import annotations
@@ -44,10 +46,17 @@ def _import(name: str) -> Callable[[], None]:
     return piece
 
 
-def warm_up_pieces() -> list[Callable[[], Any]]:
-    """The pieces of the warm-up: the child process started, napari's first-layer imports,
-    the child's kernels waited for, then loaded one per piece (appended to the list as the
-    child answers: ``IdlePieces`` runs them in order)."""
+#: s the kernels' pieces wait at most for the dock's other opening steps (``steps_done``)
+STEPS_WAIT_S = 30.0
+
+
+def warm_up_pieces(first_layer: threading.Event | None = None,
+                   steps_done: threading.Event | None = None) -> list[Callable[[], Any]]:
+    """The pieces of the warm-up: the child process started, napari's first-layer imports
+    (what a first open needs: ``first_layer`` set after them), then, once ``steps_done`` is
+    set (the dock's other opening steps, in the Qt thread: no piece shares the GIL with
+    them) or after ``STEPS_WAIT_S``, the child's kernels waited for and loaded one per piece
+    (appended to the list as the child answers: ``IdlePieces`` runs them in order)."""
     from ... import warmup
 
     pieces: list[Callable[[], Any]] = []
@@ -56,6 +65,8 @@ def warm_up_pieces() -> list[Callable[[], Any]]:
                              name="meris-ortho-kernels", daemon=True)
 
     def wait_for_kernels() -> None:
+        if steps_done is not None:
+            steps_done.wait(STEPS_WAIT_S)  # (no GIL held while waiting)
         child.join()  # no GIL held while the child process works
         from ..._process import numba_start_pieces
 
@@ -64,19 +75,43 @@ def warm_up_pieces() -> list[Callable[[], Any]]:
 
     pieces.append(child.start)
     pieces.extend(_import(name) for name in FIRST_LAYER_IMPORTS)
+    if first_layer is not None:
+        pieces.append(first_layer.set)
     pieces.append(wait_for_kernels)
     return pieces
 
 
-def start_warm_up(paused: Callable[[], bool], owner: Any) -> IdlePieces | None:
+class WarmUp:
+    """The dock's warm-up under way: ``first_layer_ready()`` once napari's first-layer
+    imports are done (or when there is no warm-up); ``steps_done()`` to say the dock's other
+    opening steps are, so that the kernels' pieces follow."""
+
+    def __init__(self, paused: Callable[[], bool], owner: Any) -> None:
+        self._first_layer = threading.Event()
+        self._steps = threading.Event()
+        self.pieces: IdlePieces | None = None
+        global _STARTED
+        if os.environ.get("MERIS_ORTHO_NO_WARMUP") or _STARTED is not None:
+            self._first_layer.set()
+            return
+        pieces = warm_up_pieces(self._first_layer, self._steps)
+        self.pieces = _STARTED = run_when_idle(pieces, paused, owner, name="meris-ortho-warmup")
+
+    def first_layer_ready(self) -> bool:
+        """Whether napari's first-layer imports are done (or not to be done here)."""
+        return self._first_layer.is_set() or (self.pieces is not None
+                                              and self.pieces.done.is_set())
+
+    def steps_done(self) -> None:
+        """The dock's other opening steps are done: the kernels' pieces may start."""
+        self._steps.set()
+
+
+def start_warm_up(paused: Callable[[], bool], owner: Any) -> WarmUp:
     """Start the dock's warm-up (``warm_up_pieces`` in idle turns), unless
-    ``MERIS_ORTHO_NO_WARMUP`` is set or it already ran in this process."""
-    global _STARTED
-    if os.environ.get("MERIS_ORTHO_NO_WARMUP") or _STARTED is not None:
-        return None
-    pieces = warm_up_pieces()
-    _STARTED = run_when_idle(pieces, paused, owner, name="meris-ortho-warmup")
-    return _STARTED
+    ``MERIS_ORTHO_NO_WARMUP`` is set or it already ran in this process (a ``WarmUp`` with no
+    pieces then)."""
+    return WarmUp(paused, owner)
 
 
 _STARTED: IdlePieces | None = None
