@@ -5,6 +5,7 @@ numba kernel loaded from the cache) in a thread of its own, one piece only right
 event loop has turned twice in a row within ``IDLE_TICK_MS`` of each other: while napari opens
 a file, inserts layers or draws a long frame, the loop does not turn, no tick comes and no
 piece starts, so the user's action never shares the GIL with more than the piece under way.
+Inside napari's opening of a file (whose reading may turn the loop) no piece starts either.
 A piece may also wait for something outside the process (a child process): waiting holds no
 GIL. ``paused()`` (a run under way) holds the pieces back too; they resume after it.
 """
@@ -27,6 +28,20 @@ PIECE_REST_S = 0.005
 
 #: the runs under way, kept alive until their last piece
 _RUNNING: set[IdlePieces] = set()
+
+
+def in_viewer_open() -> bool:
+    """Whether this runs inside napari's ``ViewerModel.open`` (its progress bar processes the
+    Qt events before the opening returns)."""
+    import sys
+
+    frame: Any = sys._getframe(1)
+    while frame is not None:
+        code = frame.f_code
+        if code.co_name == "open" and code.co_filename.endswith("viewer_model.py"):
+            return True
+        frame = frame.f_back
+    return False
 
 
 class IdlePieces:
@@ -70,7 +85,7 @@ class IdlePieces:
         if self.done.is_set():
             self._timer.stop()
             _RUNNING.discard(self)
-        elif free and not self.paused():
+        elif free and not self.paused() and not in_viewer_open():
             self._idle.set()
 
     def _work(self) -> None:

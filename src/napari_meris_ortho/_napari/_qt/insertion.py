@@ -18,6 +18,8 @@ from collections.abc import Callable, Sequence
 from functools import partial
 from typing import Any
 
+from .idle import in_viewer_open
+
 #: ms between showing two new layers (a run's, a sample's), one per frame: vispy builds a new
 #: visual's shaders at its first draw, so a frame drawing them all is the longest stall. Each
 #: is drawn in the turn after the one that shows it (canvas updates off while it is shown)
@@ -335,7 +337,7 @@ def in_turns(steps: list[Callable[[], Any]], first_ms: int = 1,
     def step() -> None:
         if not pending:
             return
-        if _in_viewer_open():  # napari processes events before its opening returns
+        if in_viewer_open():  # napari processes events before its opening returns
             QTimer.singleShot(CONTROLS_AFTER_OPEN_MS, step)
             return
         if hold is not None and hold():
@@ -375,20 +377,6 @@ def controls_in_turns(viewer: Any, layers: list[Any], then: Any = None) -> None:
         steps += [partial(make_controls, viewer, layer), partial(polish_controls, viewer, layer),
                   partial(add_controls, viewer, [layer])]
     in_turns(steps if then is None else [*steps, then])
-
-
-def _in_viewer_open() -> bool:
-    """Whether this runs inside napari's ``ViewerModel.open`` (its progress bar processes the
-    Qt events before the opening returns)."""
-    import sys
-
-    frame: Any = sys._getframe(1)
-    while frame is not None:
-        code = frame.f_code
-        if code.co_name == "open" and code.co_filename.endswith("viewer_model.py"):
-            return True
-        frame = frame.f_back
-    return False
 
 
 def _put_stand_in(container: Any, layer: Any) -> None:
