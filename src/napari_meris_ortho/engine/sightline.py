@@ -267,7 +267,6 @@ def _horizon_sweep(data, row0, n_r, gaps, step, ceiling, low, col_m, row_m, tan_
     hi = np.empty(n_r)
     lo = np.empty(n_r)
     slope = np.empty(n_r)
-    fold = np.empty(n_r)  # the cells' bounds, -inf: none
     top_r = np.empty(n_r)
     span_r = np.empty(n_r)
     steep_r = np.empty(n_r)
@@ -325,6 +324,11 @@ def _horizon_sweep(data, row0, n_r, gaps, step, ceiling, low, col_m, row_m, tan_
             steep_r[r] = max(max(slope[r - 1], slope[r]), slope[r + 1])
             near_abs[r] = max(max(prev_abs[r - 1], prev_abs[r]), prev_abs[r + 1])
             near_rel[r] = max(max(prev_rel[r - 1], prev_rel[r]), prev_rel[r + 1])
+        if not f0 <= c < f0 + STRIP:  # (written a row's run at a time, as read)
+            _fold(out, row0, k0, k1, folds, f0)
+            f0 = max(c - STRIP + 1, 0) if step > 0 else c
+            folds[:] = -np.inf
+        fold = folds[c - f0]  # this column's cells' bounds, -inf: none
         for r in range(n_r):
             top, span, steep = top_r[r], span_r[r], steep_r[r]
             tz, inv = tz_r[r], inv_r[r]
@@ -343,11 +347,6 @@ def _horizon_sweep(data, row0, n_r, gaps, step, ceiling, low, col_m, row_m, tan_
             next_rel[r] = min(max(within, near_rel[r] + gain), rel_edge) if seen else 0.0
         prev_abs, next_abs = next_abs, prev_abs
         prev_rel, next_rel = next_rel, prev_rel
-        if not f0 <= c < f0 + STRIP:  # (written a row's run at a time, as read)
-            _fold(out, row0, k0, k1, folds, f0)
-            f0 = max(c - STRIP + 1, 0) if step > 0 else c
-            folds[:] = -np.inf
-        folds[c - f0] = fold
         if step < 0:  # the east side is the next column's west side
             east, west = west, east
         c -= step
@@ -480,19 +479,43 @@ def horizon_bound(data: np.ndarray, ceiling: float, gaps: bool, spacing: tuple[f
     return out
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _cell_row(lat, inv, lattice):  # pragma: no cover
+    """The window row of cells holding latitude ``lat`` (-1 without a position)."""
+    v = math.floor(inv[4] * lat + inv[5] - 0.5)
+    return int(v) - lattice[0] if math.isfinite(v) else -1
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _cell_col(lon, inv, lattice, wrap_centre):  # pragma: no cover
+    """The window column of cells holding longitude ``lon``, taken on the turn nearest
+    ``wrap_centre`` (-1 without a position)."""
+    if abs(wrap_centre - lon) > 180.0:
+        lon = lon + 360.0 * np.rint((wrap_centre - lon) / 360.0)
+    v = math.floor(inv[0] * lon + inv[2] - 0.5)
+    return int(v) - lattice[1] if math.isfinite(v) else -1
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _marched(hk, colk, itk, r, cc, bound, tol, near_lo, near_hi):  # pragma: no cover
+    """Whether a point (height ``hk``, antecedent column ``colk``, iterations ``itk``) in the
+    window's cell (``r``, ``cc``) is marched: solved, with a height, and near nadir, beyond
+    the window or below its ``bound`` (without branches)."""
+    n_r, n_c = bound.shape
+    inside = 0 <= r < n_r and 0 <= cc < n_c
+    high = bound[min(max(r, 0), n_r - 1), min(max(cc, 0), n_c - 1)] > hk + tol
+    go = (near_lo <= colk <= near_hi) or not inside or high
+    return itk >= 0 and math.isfinite(hk) and go
+
+
 @njit(cache=True, nogil=True)
 def _reachable_range(lo, hi, lon, lat, h, inv, lattice, wrap_centre, bound, tol,
                      out):  # pragma: no cover
     """Points [lo, hi) of ``reachable``."""
     n_r, n_c = bound.shape
-    r_off, c_off = lattice[0], lattice[1]
-    a, c, e_, f = inv[0], inv[2], inv[4], inv[5]
     for k in range(lo, hi):
-        x0 = lon[k]
-        if abs(wrap_centre - x0) > 180.0:
-            x0 = x0 + 360.0 * np.rint((wrap_centre - x0) / 360.0)
-        r = int(math.floor(e_ * lat[k] + f - 0.5)) - r_off
-        cc = int(math.floor(a * x0 + c - 0.5)) - c_off
+        r = _cell_row(lat[k], inv, lattice)
+        cc = _cell_col(lon[k], inv, lattice, wrap_centre)
         if r < 0 or cc < 0 or r >= n_r or cc >= n_c:
             out[k] = True  # beyond the window: the march decides
         else:
@@ -518,22 +541,12 @@ def _to_march(lo, hi, lon, lat, h, col, iters, inv, lattice, wrap_centre, bound,
               near_hi, out):  # pragma: no cover
     """``to_march`` of points [lo, hi) into ``out[lo:]``; their number (without branches on
     the points: each index written, the count moved on by the ones kept)."""
-    n_r, n_c = bound.shape
-    r_off, c_off = lattice[0], lattice[1]
-    a, c, e_, f = inv[0], inv[2], inv[4], inv[5]
     m = lo
     for k in range(lo, hi):
-        hk = h[k]
-        x0 = lon[k]
-        if abs(wrap_centre - x0) > 180.0:
-            x0 = x0 + 360.0 * np.rint((wrap_centre - x0) / 360.0)
-        r = int(math.floor(e_ * lat[k] + f - 0.5)) - r_off
-        cc = int(math.floor(a * x0 + c - 0.5)) - c_off
-        inside = r >= 0 and cc >= 0 and r < n_r and cc < n_c
-        high = bound[min(max(r, 0), n_r - 1), min(max(cc, 0), n_c - 1)] > hk + tol
-        go = (near_lo <= col[k] <= near_hi) or not inside or high
+        r = _cell_row(lat[k], inv, lattice)
+        cc = _cell_col(lon[k], inv, lattice, wrap_centre)
         out[m] = k
-        m += 1 if (iters[k] >= 0 and math.isfinite(hk) and go) else 0
+        m += 1 if _marched(h[k], col[k], iters[k], r, cc, bound, tol, near_lo, near_hi) else 0
     return m - lo
 
 
@@ -559,23 +572,24 @@ def to_march(lon: np.ndarray, lat: np.ndarray, h: np.ndarray, col: np.ndarray,
 def _to_march_rows(lo, hi, cell_row, cell_col, h, col, iters, bound, tol, near_lo, near_hi,
                    out):  # pragma: no cover
     """``to_march_grid`` of the rows [lo, hi) into ``out[lo * columns:]``; their number."""
-    n_r, n_c = bound.shape
     n_cols = cell_col.size
     m = lo * n_cols
     for i in range(lo, hi):
         r = cell_row[i]
-        r_in = 0 <= r < n_r
-        rc = min(max(r, 0), n_r - 1)
         for j in range(n_cols):
-            k = i * n_cols + j
-            hk = h[i, j]
-            cc = cell_col[j]
-            inside = r_in and 0 <= cc < n_c
-            high = bound[rc, min(max(cc, 0), n_c - 1)] > hk + tol
-            go = (near_lo <= col[i, j] <= near_hi) or not inside or high
-            out[m] = k
-            m += 1 if (iters[i, j] >= 0 and math.isfinite(hk) and go) else 0
+            out[m] = i * n_cols + j
+            m += 1 if _marched(h[i, j], col[i, j], iters[i, j], r, cell_col[j], bound, tol,
+                               near_lo, near_hi) else 0
     return m - lo * n_cols
+
+
+@njit(cache=True, nogil=True)
+def _grid_cells(lon, lat, inv, lattice, wrap_centre, cell_row, cell_col):  # pragma: no cover
+    """The window's cells of a geographic grid's rows (``lat``) and columns (``lon``)."""
+    for i in range(lat.size):
+        cell_row[i] = _cell_row(lat[i], inv, lattice)
+    for j in range(lon.size):
+        cell_col[j] = _cell_col(lon[j], inv, lattice, wrap_centre)
 
 
 def to_march_grid(lon: np.ndarray, lat: np.ndarray, h: np.ndarray, col: np.ndarray,
@@ -585,16 +599,9 @@ def to_march_grid(lon: np.ndarray, lat: np.ndarray, h: np.ndarray, col: np.ndarr
     ``h``, ``col``, ``iters``, whose longitude is ``lon`` in every row and latitude ``lat``
     in every column: the cells of the window found once a row and a column, as ``to_march``
     finds them a point (flat indices of the block)."""
-    a, c, e_, f = inv[0], inv[2], inv[4], inv[5]
-    x0 = np.asarray(lon, np.float64)
-    far = np.abs(wrap_centre - x0) > 180.0
-    x0 = np.where(far, x0 + 360.0 * np.rint((wrap_centre - x0) / 360.0), x0)
-    with np.errstate(invalid="ignore"):
-        cell_row = np.floor(e_ * np.asarray(lat, np.float64) + f - 0.5)
-        cell_col = np.floor(a * x0 + c - 0.5)
-    # (no position: beyond the window, which ``march`` decides)
-    cell_row = np.where(np.isfinite(cell_row), cell_row - lattice[0], -1).astype(np.int64)
-    cell_col = np.where(np.isfinite(cell_col), cell_col - lattice[1], -1).astype(np.int64)
+    lon, lat = (np.ascontiguousarray(a, np.float64) for a in (lon, lat))
+    cell_row, cell_col = np.empty(lat.size, np.int64), np.empty(lon.size, np.int64)
+    _grid_cells(lon, lat, inv, lattice, float(wrap_centre), cell_row, cell_col)
     out = np.empty(h.size, np.int64)
     found: dict[int, int] = {}
 
