@@ -64,12 +64,13 @@ def _overlay_font(viewer):
 
 
 def _glyphs_rendered(viewer) -> int:
-    """How many glyphs vispy has rendered into the overlay's font (0 before napari has made the
-    overlay's visual: at its first showing)."""
-    visuals = viewer.window._qt_viewer.canvas._viewer_overlay_to_visual
-    if viewer.canvas.overlays.text not in visuals:
-        return 0
-    return len(_overlay_font(viewer)._glyphs)
+    """How many glyphs vispy has rendered into the font the overlay draws with (napari's
+    canvas font of its face, before the overlay's visual is made)."""
+    canvas = viewer.window._qt_viewer.canvas
+    if viewer.canvas.overlays.text in canvas._viewer_overlay_to_visual:
+        return len(_overlay_font(viewer)._glyphs)
+    info = canvas._font_info
+    return len(info.font_manager.get_font(info.face)._glyphs)
 
 
 @pytest.mark.slow
@@ -77,9 +78,10 @@ def test_legend_glyphs_are_rendered_before_a_run(make_napari_viewer, qtbot):
     """The widget has the overlay's font render the legend's characters beforehand, a few per
     turn: the first legend of a session does not render them (0.2-0.6 s under software GL) in
     the frame that shows the run's layers. No frame is drawn for them but the overlay's first
-    (its shaders, in the widget's opening: transparent text) and its last (the overlay hidden
-    and emptied): a frame drawn at each turn would cost 0.13-0.16 s over a run's layers."""
-    from napari_meris_ortho._napari.legend import GLYPHS
+    (its shaders, in the widget's opening: transparent text, whose glyphs came before) and its
+    last (the overlay hidden and emptied): a frame drawn at each turn would cost 0.13-0.16 s
+    over a run's layers."""
+    from napari_meris_ortho._napari.legend import ALIGNMENT_GLYPHS, GLYPHS, GLYPHS_PER_TURN
 
     viewer = make_napari_viewer(show=True)
     qtbot.wait(100)
@@ -87,11 +89,18 @@ def test_legend_glyphs_are_rendered_before_a_run(make_napari_viewer, qtbot):
     color = np.asarray(overlay.color).copy()
     seen: list[tuple[str, float]] = []
 
+    rendered_at_first_show: list[int] = []
+
     def record(_event=None):
         color = overlay.color
         seen.append((overlay.text, 1.0 if color is None else float(np.asarray(color)[3])))
 
+    def shown(event=None):
+        if overlay.visible and not rendered_at_first_show:
+            rendered_at_first_show.append(_glyphs_rendered(viewer))
+
     overlay.events.text.connect(record)
+    overlay.events.visible.connect(shown)
     with paints_of(viewer.window._qt_viewer.canvas.native) as paints:
         viewer.window.add_plugin_dock_widget("napari-meris-ortho", "Orthorectify")
         qtbot.waitUntil(lambda: bool(seen) and seen[-1][0] == "", timeout=10_000)
@@ -102,6 +111,9 @@ def test_legend_glyphs_are_rendered_before_a_run(make_napari_viewer, qtbot):
     font = _overlay_font(viewer)
     assert set(GLYPHS) - {" "} <= set(font._glyphs)
     assert len(paints) <= 4, len(paints)  # not one frame per turn of glyphs (24 turns)
+    # the overlay's first draw renders no glyph of its own text in its frame: they came before
+    first = set(ALIGNMENT_GLYPHS + GLYPHS[:GLYPHS_PER_TURN]) - {" "}
+    assert rendered_at_first_show[0] >= len(first), rendered_at_first_show
 
 
 @pytest.mark.slow
@@ -139,7 +151,7 @@ def test_text_put_in_the_overlay_during_the_preparation_is_seen(make_napari_view
     overlay = viewer.canvas.overlays.text
     color = np.asarray(overlay.color).copy()  # napari's default: None
     viewer.window.add_plugin_dock_widget("napari-meris-ortho", "Orthorectify")
-    qtbot.waitUntil(lambda: overlay.visible, timeout=2000)  # from the turn after the opening
+    qtbot.waitUntil(lambda: overlay.visible, timeout=10_000)  # its first draw, a few turns in
     assert float(np.asarray(overlay.color)[-1]) == 0.0  # preparing
     overlay.text, overlay.visible = "my annotation", True
     qtbot.wait(300)

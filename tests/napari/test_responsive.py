@@ -263,11 +263,12 @@ def test_an_n1_opening_builds_the_dash_patterns_one_per_turn(make_napari_viewer,
 
 def test_the_widget_opens_in_turns_of_its_own(make_napari_viewer, qtbot):
     """Opening the dock in one turn of the event loop would take 0.4-0.5 s (warm disk cache;
-    up to 1.2 s cold): the widget, the text overlay's first draw (its shaders and the nine
-    glyphs vispy always renders, 0.13-0.17 s), a full garbage collection before freezing what
-    napari holds (0.11 s) and vispy's dash patterns (0.04 s). The constructor makes the widget
-    only; the overlay's first draw (transparent text), the patterns and the freeze come in turns
-    of their own right after, before a user can fill the form and reach Run."""
+    up to 1.2 s cold): the widget, the glyphs of the text overlay's first text and the nine
+    vispy always renders (0.15 s), the overlay's first draw (its shaders, 0.2 s), a garbage
+    collection before freezing what napari holds and vispy's dash patterns (0.04 s). The
+    constructor makes the widget only; the patterns, the glyphs a few at a time, the overlay's
+    first draw (transparent text) and the freeze come in turns of their own right after,
+    before a user can fill the form and reach Run."""
     import gc
 
     from napari_meris_ortho._napari import memory

@@ -115,3 +115,27 @@ def test_dock_warm_up_yields_to_the_user(make_napari_viewer, qtbot, monkeypatch,
 
     assert predcorr._antecedent_rows.overloads  # loaded: a first run does not wait for it
     widget.close()
+
+
+def test_the_warm_up_freezes_napari_before_its_imports(make_napari_viewer, qtbot, monkeypatch):
+    """napari's objects are frozen (without a collection) as the warm-up starts: the automatic
+    full collections its imports set off (xarray, pandas: one of them 0.25 s in a napari
+    session) walk only what is new, and the warm-up's thread holds the GIL that long no more."""
+    import gc
+
+    from napari_meris_ortho._napari import memory
+    from napari_meris_ortho._napari._qt import warm
+    from napari_meris_ortho._napari.widget_ortho import OrthorectifyWidget
+
+    monkeypatch.delenv("MERIS_ORTHO_NO_WARMUP", raising=False)
+    monkeypatch.setattr(warm, "_STARTED", None)
+    viewer = make_napari_viewer(show=True)
+    memory.thaw()
+    OrthorectifyWidget(viewer)
+    assert gc.get_freeze_count() == 0  # not in the dock's own turn
+    qtbot.waitUntil(lambda: warm._STARTED is not None, timeout=10_000)
+    run = warm._STARTED
+    frozen, started = gc.get_freeze_count(), len(run.starts)
+    run.stop()
+    assert frozen > 50_000 and started <= 1  # before the first import piece
+    memory.thaw()

@@ -21,7 +21,7 @@ from ._qt.insertion import draw_now, text_overlay_font
 _WATCHED: weakref.WeakSet[Any] = weakref.WeakSet()
 #: viewers whose text overlay shows a legend of ours
 _SHOWING: weakref.WeakSet[Any] = weakref.WeakSet()
-#: viewers whose canvas still renders the legend's glyphs (``prepare_glyphs``): their legend
+#: viewers whose canvas still renders the legend's glyphs (``glyph_steps``): their legend
 #: waits for it
 _PREPARING: weakref.WeakSet[Any] = weakref.WeakSet()
 #: where the key is drawn: clear of napari's notifications (bottom right)
@@ -46,7 +46,7 @@ def legend_line(layer: Any) -> str | None:
 def update_legend(viewer: Any) -> None:
     """Show the key of the selected layer, when it is visible and has one, in the canvas text
     overlay (hide it when there is none and it shows ours); after the glyphs are ready
-    (``prepare_glyphs``)."""
+    (``glyph_steps``)."""
     if viewer in _PREPARING:
         return  # shown at the end of the preparation
     active = viewer.layers.selection.active
@@ -67,73 +67,104 @@ def update_legend(viewer: Any) -> None:
 #: the characters of a legend line (``legend_line``: "parallax ×10 · 09-21 09:23: colour =
 #: height, purple 412 m → yellow 2391 m")
 GLYPHS = "0123456789 abcdefghijklmnopqrstuvwxyz:=,.-×·→()+/NDVIEMR"
+#: the glyphs vispy renders for every text, to align it vertically (``_text_to_vbo``)
+ALIGNMENT_GLYPHS = "ÅÉÑŐjgpqy"
 #: glyphs rendered per turn of the event loop (10-20 ms each)
 GLYPHS_PER_TURN = 2
+#: glyphs of the overlay's first text rendered per step before its first draw
+FIRST_GLYPHS_PER_STEP = 4
 
 
-def prepare_glyphs(viewer: Any, step_ms: int = 40,
-                   paused: Callable[[], bool] | None = None) -> None:
-    """Have the canvas render the legend's glyphs beforehand, so that the first legend of a
-    run does not render them all in the frame that shows the run (vispy renders each new
-    character into its atlas at its first draw: 0.2-0.6 s for a legend line under software
-    GL). The overlay's first draw (its shaders and nine glyphs vispy always renders:
-    0.15-0.2 s), with transparent text, is made at once (the widget calls this in a turn of
-    its own right after its opening, before a user reaches Run); then a few glyphs per turn
-    into the overlay's font (``text_overlay_font``), no frame drawn (drawing the canvas in
-    each turn would cost 0.07-0.11 s during a run's job, 0.13-0.16 s over a run's fr-alps
-    layers), none while ``paused()`` (a run). A legend asked for meanwhile shows at the end.
-    Stops when the overlay is in use by another; no-op when it is in use or nothing is
-    drawn."""
+def glyph_steps(viewer: Any, step_ms: int = 40,
+                paused: Callable[[], bool] | None = None) -> list[Callable[[], None]]:
+    """The steps that have the canvas render the legend's glyphs beforehand, each for a turn
+    of the event loop of its own (``in_turns``), so that the first legend of a run does not
+    render them all in the frame that shows the run (vispy renders each new character into
+    its atlas at its first draw: 0.2-0.6 s for a legend line under software GL).
+
+    The glyphs of the overlay's first text (and the nine vispy aligns every text by) go into
+    the text overlay's font (``text_overlay_font``: 10-20 ms each) a few per step, no frame
+    drawn; the last step is the overlay's first draw (its shaders: about 0.2 s; transparent
+    text), right after the dock's opening, before a user reaches Run. From there the other
+    glyphs follow a few per turn (every ``step_ms``), and the overlay is hidden again; a
+    legend asked for meanwhile shows at the end. Nothing is rendered or drawn while
+    ``paused()`` (a run): the first text's glyphs left then come before the first draw.
+    Stops when the overlay is in use by another; nothing is done when it is in use or
+    nothing is drawn."""
     from qtpy.QtCore import QTimer
 
-    overlay = viewer.canvas.overlays.text
-    if overlay.visible or viewer in _SHOWING or viewer in _PREPARING:
-        return
     ref = weakref.ref(viewer)
-    chunks = [GLYPHS[k:k + GLYPHS_PER_TURN] for k in range(0, len(GLYPHS), GLYPHS_PER_TURN)]
-    state: dict[str, str | None] = {"text": None}
-    # the overlay's colour as it was: the first draw's text is transparent (napari's box
-    # behind it is not: a transparent box colour still draws it, and turning the box off and
-    # on again crashes Mesa's software GL in a later draw)
-    color = overlay.color
+    first_text = GLYPHS[:GLYPHS_PER_TURN]
+
+    def chunked(glyphs: str, size: int) -> list[str]:
+        return [glyphs[k:k + size] for k in range(0, len(glyphs), size)]
+
+    after = chunked(GLYPHS[GLYPHS_PER_TURN:], GLYPHS_PER_TURN)
+    state: dict[str, Any] = {"on": False, "text": None, "color": None}
 
     def restore(text: Any) -> None:
-        """The colour back, unless someone set it meanwhile."""
+        """The overlay's colour as it was, unless someone set it meanwhile (the first draw's
+        text is transparent; napari's box behind it is not: a transparent box colour still
+        draws it, and turning the box off and on again crashes Mesa's software GL later)."""
         if text.color is not None and float(np.asarray(text.color)[-1]) == 0.0:
-            text.color = color
+            text.color = state["color"]
 
-    def step() -> None:
+    def render(first: bool) -> Callable[[], None]:
+        def step() -> None:
+            alive = ref()
+            if alive is None:
+                return
+            if first:
+                overlay = alive.canvas.overlays.text
+                if overlay.visible or alive in _SHOWING or alive in _PREPARING:
+                    return  # in use: the preparation does nothing
+                state["on"], state["color"] = True, overlay.color
+                _PREPARING.add(alive)
+            if not state["on"] or alive.canvas.overlays.text.visible or not before:
+                return
+            if paused is not None and paused():
+                return  # this step's glyphs come before the first draw (``go_on``)
+            font = text_overlay_font(alive)
+            if font is not None:
+                for char in before.pop(0):
+                    font[char]  # vispy renders the glyph when it is first indexed
+        return step
+
+    def go_on() -> None:
         alive = ref()
-        if alive is None:
+        if alive is None or not state["on"]:
             return
         if paused is not None and paused():
-            QTimer.singleShot(step_ms, step)
+            QTimer.singleShot(step_ms, go_on)
             return
         text = alive.canvas.overlays.text
-        if state["text"] is not None and text.text != state["text"]:
+        if state["text"] is None and text.visible or (state["text"] is not None
+                                                      and text.text != state["text"]):
             restore(text)  # someone else uses the overlay: their text is seen
             _PREPARING.discard(alive)
             return
-        if not chunks:
+        font = text_overlay_font(alive)
+        if state["text"] is None and before and font is not None:  # left while a run ran
+            for char in before.pop(0):
+                font[char]
+        elif state["text"] is None:  # the first draw (with no font within reach: its glyphs)
+            state["text"] = first_text
+            text.color, text.font_size = (0.0, 0.0, 0.0, 0.0), 10  # before the text: unseen
+            text.text, text.visible = first_text, True
+            draw_now(alive)
+        elif after and font is not None:
+            for char in after.pop(0):
+                font[char]
+        else:  # every glyph ready: hidden again, a legend asked for meanwhile shown
             text.text, text.visible = "", False
             restore(text)
             _PREPARING.discard(alive)
-            update_legend(alive)  # one asked for meanwhile
+            update_legend(alive)
             return
-        chunk = chunks.pop(0)
-        font = None if state["text"] is None else text_overlay_font(alive)
-        if font is not None:
-            for char in chunk:
-                font[char]  # vispy renders the glyph when it is first indexed
-        else:  # the first step, drawn now; or no font within reach: drawn by the canvas
-            state["text"] = chunk
-            text.color, text.font_size = (0.0, 0.0, 0.0, 0.0), 10  # before the text: unseen
-            text.text, text.visible = chunk, True
-        QTimer.singleShot(step_ms, step)
+        QTimer.singleShot(step_ms, go_on)
 
-    _PREPARING.add(viewer)
-    step()
-    draw_now(viewer)
+    before = chunked(ALIGNMENT_GLYPHS + first_text, FIRST_GLYPHS_PER_STEP)
+    return [*(render(k == 0) for k in range(len(before))), go_on]
 
 
 def show_legends(viewer: Any) -> None:

@@ -70,7 +70,7 @@ from ._qt.insertion import (
 )
 from ._qt.waiting import ThreadCall
 from .layout import ScrolledForm, StatusLabel, frame_layers
-from .legend import prepare_glyphs, show_legends
+from .legend import glyph_steps, show_legends
 from .memory import collections_paused, freeze_long_lived, thaw, trim_after_removals
 from .ortho_run import (
     ALGORITHMS,
@@ -126,6 +126,10 @@ def _start_warm_up(widget: OrthorectifyWidget) -> None:
         return alive is None or alive.running or bool(alive._queue)
 
     widget._warm = start_warm_up(paused, widget.native)
+    if widget._warm.pieces is not None and not gc.get_freeze_count():
+        # napari's objects out of the automatic full collections the warm-up's imports set
+        # off (0.25 s each in the Qt thread's turn otherwise)
+        freeze_long_lived(widget.viewer, collect=False)
 
 
 def _engine_import_steps() -> list[Callable[[], Any]]:
@@ -379,7 +383,8 @@ class OrthorectifyWidget(ScrolledForm):
                   _while_open(this, _start_warm_up),
                   *_engine_import_steps(),
                   *dash_pattern_steps(),  # before the canvas's first draw, which needs them
-                  _while_open(this, OrthorectifyWidget._prepare_glyphs),
+                  *glyph_steps(self.viewer, paused=lambda: (w := this()) is not None
+                               and w._paused_glyphs()),
                   _while_open(this, OrthorectifyWidget._freeze_when_idle),
                   _while_open(this, OrthorectifyWidget._opening_done)],
                  hold=lambda: (w := this()) is not None and w._warming_first_layer())
@@ -667,12 +672,6 @@ class OrthorectifyWidget(ScrolledForm):
         """The opening's steps are done: the warm-up's kernels may follow."""
         if self._warm is not None:
             self._warm.steps_done()
-
-    def _prepare_glyphs(self) -> None:
-        """The legend's glyphs rendered beforehand (``legend.prepare_glyphs``), not in a run."""
-        this = weakref.ref(self)
-        prepare_glyphs(self.viewer,
-                       paused=lambda: (w := this()) is not None and w._paused_glyphs())
 
     def _freeze_when_idle(self) -> None:
         """``freeze_long_lived`` (the engine's modules included), once no run is going on

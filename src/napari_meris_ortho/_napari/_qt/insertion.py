@@ -124,16 +124,22 @@ def _canvas(viewer: Any) -> Any:
 
 
 def text_overlay_font(viewer: Any) -> Any:
-    """vispy's font of the canvas text overlay once the canvas has made its visual (None
-    before, or without napari's Qt internals): indexing it by a character renders the glyph
-    into the font's atlas, without drawing a frame."""
+    """vispy's font of the canvas text overlay (None without napari's Qt internals): the
+    overlay's visual's once the canvas has made it, before that the canvas's font of the same
+    face, which the visual will take (napari's font manager keeps one font per face).
+    Indexing it by a character renders the glyph into the font's atlas, without drawing a
+    frame."""
     canvas = getattr(_qt_viewer(viewer), "canvas", None)
     visuals = getattr(canvas, "_viewer_overlay_to_visual", {}).get(viewer.canvas.overlays.text)
     node: Any = getattr(visuals[0], "node", None) if visuals else None
-    manager: Any = getattr(node, "_font_manager", None)
-    if node is None or not callable(getattr(manager, "get_font", None)):
+    if node is not None:
+        manager, face = getattr(node, "_font_manager", None), getattr(node, "face", None)
+    else:
+        info = getattr(canvas, "_font_info", None)
+        manager, face = getattr(info, "font_manager", None), getattr(info, "face", None)
+    if face is None or not callable(getattr(manager, "get_font", None)):
         return None
-    return manager.get_font(node.face)
+    return manager.get_font(face)
 
 
 def draw_now(viewer: Any) -> None:
