@@ -33,9 +33,10 @@ next to the scene once), opened only (no runs), and the reader's peak allocation
 With ``--first-open-table OLD_SRC``: the first open of a session, each in a fresh process
 (``viewer.open`` of the N1 until it returns and one event-loop turn ran), with no dock and with
 the Orthorectify dock opened 0.2 s, 1.5 s and 5 s before, ``OPEN_RUNS`` runs each, for this
-source tree beside ``OLD_SRC`` (another checkout's ``src``); then, for each tree, the longest
-stall of the window while the dock warms up (from the dock's opening to the end of its warm-up)
-and one Orthorectify run (time, longest stall, memory). The warm-up is on, as a user has it.
+source tree beside ``OLD_SRC`` (another checkout's ``src``); then, for each tree, the dock's
+opening (napari's ``add_plugin_dock_widget``, the user's action), the longest stall of the
+window while the dock warms up (from the end of that call to the end of its warm-up) and one
+Orthorectify run (time, longest stall, memory). The warm-up is on, as a user has it.
 
 A benchmark, not a test: ``xvfb-run -a python benchmarks/bench_napari.py [--sen3] [--json F]``;
 to compare two versions of the package, run the same command with ``PYTHONPATH`` on each
@@ -102,6 +103,11 @@ class LoopTurns:
     @property
     def longest_gap(self) -> float:
         return float(np.diff(self.stamps).max())
+
+    def longest_gap_after(self, t: float) -> float:
+        """The longest gap between two turns that both came after ``t``."""
+        after = [s for s in self.stamps if s >= t]
+        return float(np.diff(after).max()) if len(after) > 1 else 0.0
 
 
 def _spin(app: Any, until: Any, timeout: float = 600.0) -> None:
@@ -272,8 +278,8 @@ def first_open(scene_name: str, dock_before: float | None, warm_up_stall: bool =
                ) -> dict[str, Any]:
     """One fresh session: the window up, the dock opened ``dock_before`` s before the N1's
     first open (None: no dock), the open timed until it returns and one event turn ran; with
-    ``warm_up_stall``, no open: the longest stall from the dock's opening to the end of its
-    warm-up."""
+    ``warm_up_stall``, no open: the dock's opening (``add_plugin_dock_widget``) and the
+    longest stall from its end to the end of the warm-up."""
     import tempfile
 
     os.environ["NAPARI_CONFIG"] = os.path.join(tempfile.mkdtemp(prefix="bench-napari-"),
@@ -292,9 +298,11 @@ def first_open(scene_name: str, dock_before: float | None, warm_up_stall: bool =
         with LoopTurns() as turns:
             t0 = time.perf_counter()
             viewer.window.add_plugin_dock_widget("napari-meris-ortho", "Orthorectify")
+            shown = time.perf_counter()
             _spin(app, _warm_up_done, 600.0)
             out["warm_up_s"] = time.perf_counter() - t0
-        out["warm_up_longest_stall_s"] = turns.longest_gap
+        out["dock_opening_s"] = shown - t0
+        out["warm_up_longest_stall_s"] = turns.longest_gap_after(shown)
         viewer.close()
         return out
     if dock_before is not None:
@@ -363,8 +371,10 @@ def _print_table(table: dict[str, Any]) -> None:
     for key in ("new", "old"):
         warm, run = table[f"{key}_warm_up"], table[f"{key}_run"]
         first = run["runs"][0]
-        print(f"{key}: the dock's warm-up took {warm['warm_up_s']:.1f} s, longest stall "
-              f"{warm['warm_up_longest_stall_s']:.3f} s (target <= 0.1 s); a run "
+        print(f"{key}: the dock opened in {warm['dock_opening_s']:.3f} s (napari's "
+              f"add_plugin_dock_widget); its warm-up took {warm['warm_up_s']:.1f} s, longest "
+              f"stall after the opening {warm['warm_up_longest_stall_s']:.3f} s "
+              f"(target <= 0.1 s); a run "
               f"{first['run_s']:.2f} s, longest stall {first['longest_stall_s']:.3f} s, "
               f"{run['rss_after_first_run_mb']:.0f} MB after it "
               f"({run['rss_before_runs_mb']:.0f} MB before)")
