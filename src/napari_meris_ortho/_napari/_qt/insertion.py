@@ -132,14 +132,16 @@ def text_overlay_font(viewer: Any) -> Any:
     canvas = getattr(_qt_viewer(viewer), "canvas", None)
     visuals = getattr(canvas, "_viewer_overlay_to_visual", {}).get(viewer.canvas.overlays.text)
     node: Any = getattr(visuals[0], "node", None) if visuals else None
+    manager: Any
     if node is not None:
         manager, face = getattr(node, "_font_manager", None), getattr(node, "face", None)
     else:
         info = getattr(canvas, "_font_info", None)
         manager, face = getattr(info, "font_manager", None), getattr(info, "face", None)
-    if face is None or not callable(getattr(manager, "get_font", None)):
+    get_font = getattr(manager, "get_font", None)
+    if face is None or not callable(get_font):
         return None
-    return manager.get_font(face)
+    return get_font(face)
 
 
 def draw_now(viewer: Any) -> None:
