@@ -139,3 +139,43 @@ def test_the_warm_up_freezes_napari_before_its_imports(make_napari_viewer, qtbot
     run.stop()
     assert frozen > 50_000 and started <= 1  # before the first import piece
     memory.thaw()
+
+
+def test_pieces_that_take_no_time_follow_at_once(qtbot):
+    """A piece that took no time (a module the one before imported) does not wait for a new
+    idle tick: the warm-up's first-layer imports end sooner. A piece that took time does."""
+    from napari_meris_ortho._napari._qt.idle import IDLE_TICK_MS, IdlePieces
+
+    pieces = [lambda: None] * 10 + [lambda: time.sleep(0.005)] * 4
+    run = IdlePieces(pieces).start()
+    qtbot.waitUntil(run.done.is_set, timeout=10_000)
+    assert len(run.starts) == len(pieces)
+    quick = np.diff(run.starts[:10])
+    slow = np.diff(run.starts[10:])
+    assert quick.max() < 0.005, quick  # one after the other
+    assert slow.min() > IDLE_TICK_MS / 1000.0 * 0.5, slow  # each after a tick of its own
+
+
+def test_no_piece_starts_while_the_qt_thread_is_busy(qtbot):
+    """Pieces that take no time chain only while the last idle tick is fresh: none starts
+    while the Qt thread is busy (a user's open), however many are left."""
+    from qtpy.QtCore import QTimer
+
+    from napari_meris_ortho._napari._qt.idle import IDLE_TICK_MS, IdlePieces
+
+    busy: list[tuple[float, float]] = []
+
+    def user_open() -> None:
+        t0 = time.perf_counter()
+        while time.perf_counter() - t0 < 0.3:
+            sum(range(1000))
+        busy.append((t0, time.perf_counter()))
+
+    run = IdlePieces([lambda: None] * 200_000).start()
+    qtbot.waitUntil(lambda: len(run.starts) > 10, timeout=5000)
+    QTimer.singleShot(0, user_open)
+    qtbot.waitUntil(lambda: bool(busy), timeout=5000)
+    run.stop()
+    (t0, t1), = busy
+    late = [s for s in run.starts if t0 + IDLE_TICK_MS / 1000.0 + 0.005 < s < t1]
+    assert not late, (len(late), late[0] - t0)
