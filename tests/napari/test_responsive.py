@@ -290,6 +290,30 @@ def test_the_widget_opens_in_turns_of_its_own(make_napari_viewer, qtbot):
     assert not viewer.canvas.overlays.text.color[-1]  # transparent: never seen
 
 
+def test_the_opening_steps_wait_after_a_users_open(make_napari_viewer, qtbot, monkeypatch):
+    """A layer that goes in while the dock opens (a user's open) holds the opening's steps
+    for ``SETTLE_AFTER_INSERT_S``: the legend's first draw and the collection before the
+    freeze (0.2-0.35 s each) do not fall in the frames the user waits for."""
+    from napari_meris_ortho._napari import memory, widget_ortho
+
+    steps: list[float] = []
+    freeze = widget_ortho.freeze_long_lived
+    monkeypatch.setattr(widget_ortho, "freeze_long_lived",
+                        lambda *a, **k: (steps.append(time.perf_counter()), freeze(*a, **k)))
+    viewer = make_napari_viewer(show=True)
+    qtbot.wait(100)
+    memory.thaw()
+    overlay = viewer.canvas.overlays.text
+    drawn: list[float] = []
+    overlay.events.visible.connect(lambda _e=None: drawn.append(time.perf_counter()))
+    OrthorectifyWidget(viewer)
+    viewer.add_image(np.zeros((8, 8), np.float32), name="a user's image")
+    inserted = time.perf_counter()
+    qtbot.waitUntil(lambda: bool(steps), timeout=10_000)
+    assert steps[0] - inserted >= widget_ortho.SETTLE_AFTER_INSERT_S
+    assert drawn and drawn[0] - inserted >= widget_ortho.SETTLE_AFTER_INSERT_S
+
+
 def test_a_run_collects_its_garbage_off_the_qt_thread(make_napari_viewer, tiny_n1):
     """Building a run's layers makes tens of thousands of objects; Python's next full collection
     would then fall in one of their insertion turns on the Qt thread (0.04-0.09 s more in that

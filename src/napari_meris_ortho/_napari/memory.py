@@ -48,6 +48,7 @@ def freeze_long_lived(viewer: Any, collect: bool = True) -> None:
         gc.unfreeze()
         gc.collect()
     gc.freeze()
+    _frozen[0] = True
     # the layers themselves, not the plugin's public-only proxies of them (made at each access)
     layers = getattr(viewer, "__wrapped__", viewer).layers
     layers = getattr(layers, "__wrapped__", layers)
@@ -71,19 +72,27 @@ def freeze_at_first_read(viewer: Any) -> None:
     if not _first_read:
         return
     _first_read.clear()
-    if not gc.get_freeze_count():
+    if not frozen():
         freeze_long_lived(viewer, collect=False)
 
 
 def thaw() -> None:
     """Undo ``freeze_long_lived``: every object back within the collector's reach."""
     gc.unfreeze()
+    _frozen[0] = False
+
+
+def frozen() -> bool:
+    """Whether ``freeze_long_lived`` holds objects frozen (not undone by ``thaw``). Python's
+    ``gc.get_freeze_count`` walks every frozen object: 0.03 s with napari's."""
+    return _frozen[0]
 
 
 _first_read = [True]
+_frozen = [False]
 
-__all__ = ["collections_paused", "freeze_at_first_read", "freeze_long_lived", "short_collections",
-           "thaw", "trim_after_removals"]
+__all__ = ["collections_paused", "freeze_at_first_read", "freeze_long_lived", "frozen",
+           "short_collections", "thaw", "trim_after_removals"]
 
 
 @contextlib.contextmanager
@@ -91,7 +100,7 @@ def short_collections() -> Iterator[None]:
     """For the block, the objects alive now out of napari's full collections (``gc.freeze``),
     so that a layer's removal collects only what was made since; given back after, unless
     objects were frozen before (``freeze_long_lived``: its ``thaw`` gives these back too)."""
-    frozen_before = gc.get_freeze_count()
+    frozen_before = frozen()
     gc.freeze()
     try:
         yield

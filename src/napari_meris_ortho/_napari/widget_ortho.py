@@ -20,6 +20,7 @@ from __future__ import annotations
 import contextlib
 import gc
 import threading
+import time
 import weakref
 from collections.abc import Callable, Collection
 from pathlib import Path
@@ -71,7 +72,7 @@ from ._qt.insertion import (
 from ._qt.waiting import ThreadCall
 from .layout import ScrolledForm, StatusLabel, frame_layers
 from .legend import glyph_steps, show_legends
-from .memory import collections_paused, freeze_long_lived, thaw, trim_after_removals
+from .memory import collections_paused, freeze_long_lived, frozen, thaw, trim_after_removals
 from .ortho_run import (
     ALGORITHMS,
     CRS_EPSG,
@@ -126,7 +127,7 @@ def _start_warm_up(widget: OrthorectifyWidget) -> None:
         return alive is None or alive.running or bool(alive._queue)
 
     widget._warm = start_warm_up(paused, widget.native)
-    if widget._warm.pieces is not None and not gc.get_freeze_count():
+    if widget._warm.pieces is not None and not frozen():
         # napari's objects out of the automatic full collections the warm-up's imports set
         # off (0.25 s each in the Qt thread's turn otherwise)
         freeze_long_lived(widget.viewer, collect=False)
@@ -154,6 +155,10 @@ def _engine_import_steps() -> list[Callable[[], Any]]:
     return [grid, location, products, mapping, synthesis]
 
 
+#: s the dock's opening steps wait after a layer went into the viewer (a user's open: napari
+#: draws its first frames and thumbnails), so that none of them (the legend's first draw, the
+#: collection before the freeze: 0.2-0.35 s each) falls in what the user waits for
+SETTLE_AFTER_INSERT_S = 1.0
 #: ms between two tries of the opening's ``freeze_long_lived`` while a run goes on
 FREEZE_RETRY_MS = 500
 
@@ -363,6 +368,8 @@ class OrthorectifyWidget(ScrolledForm):
         self.crs.changed.connect(self._crs_changed)
         for event in (viewer.layers.events.inserted, viewer.layers.events.removed):
             event.connect(lambda _e=None: self.like.reset_choices())
+        self._inserted_at = -SETTLE_AFTER_INSERT_S  # when a layer last went in (perf_counter)
+        viewer.layers.events.inserted.connect(self._layer_inserted)
         self.run_button.changed.connect(lambda _=None: self.start())
         self.cancel_button.changed.connect(lambda _=None: self.cancel())
         self.native.destroyed.connect(self._shutdown)
@@ -387,7 +394,7 @@ class OrthorectifyWidget(ScrolledForm):
                                and w._paused_glyphs()),
                   _while_open(this, OrthorectifyWidget._freeze_when_idle),
                   _while_open(this, OrthorectifyWidget._opening_done)],
-                 hold=lambda: (w := this()) is not None and w._warming_first_layer())
+                 hold=lambda: (w := this()) is not None and w._holding_opening())
 
     # ---------------------------------------------------------------- output grid
     def _crs_changed(self, value: str) -> None:
@@ -663,6 +670,15 @@ class OrthorectifyWidget(ScrolledForm):
                     and type(layer).__name__ in ("Image", "Labels")):
                 layer.visible = False
                 self._removed.append((-1, layer))  # shown again by a Cancel
+
+    def _layer_inserted(self, _event: Any = None) -> None:
+        self._inserted_at = time.perf_counter()
+
+    def _holding_opening(self) -> bool:
+        """Whether the opening's steps wait: for the warm-up's first-layer imports, and for
+        ``SETTLE_AFTER_INSERT_S`` after a layer went in (a user's open: its first frames)."""
+        settling = time.perf_counter() - self._inserted_at < SETTLE_AFTER_INSERT_S
+        return self._warming_first_layer() or settling
 
     def _warming_first_layer(self) -> bool:
         """Whether the warm-up is importing what napari's first layer needs."""
