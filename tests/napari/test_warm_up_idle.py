@@ -48,11 +48,10 @@ class GilProbe:
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(reason="with a cold numba cache, loading a kernel in process can hold the "
-                          "GIL past the bound", strict=False)
 def test_dock_warm_up_yields_to_the_user(make_napari_viewer, qtbot, monkeypatch, request):
     from qtpy.QtCore import QTimer
 
+    from napari_meris_ortho._napari import widget_ortho
     from napari_meris_ortho._napari._qt import warm
     from napari_meris_ortho._napari.widget_ortho import OrthorectifyWidget
 
@@ -68,6 +67,18 @@ def test_dock_warm_up_yields_to_the_user(make_napari_viewer, qtbot, monkeypatch,
         return loaded[-1]
 
     monkeypatch.setattr(warmup, "load_kernel", load)
+    # the widget's freeze collects every object first, in the Qt thread: in this long test
+    # process, the earlier tests' too (0.6 s and more, against 0.2-0.35 s in a napari session,
+    # which the benchmark measures). Its turn is the opening's, not the warm-up's.
+    freezes: list[tuple[float, float]] = []
+    freeze = widget_ortho.freeze_long_lived
+
+    def timed_freeze(*args, **kwargs):
+        t = time.perf_counter()
+        freeze(*args, **kwargs)
+        freezes.append((t, time.perf_counter()))
+
+    monkeypatch.setattr(widget_ortho, "freeze_long_lived", timed_freeze)
     viewer = make_napari_viewer(show=True)
     qtbot.wait(500)  # the window is up
     ticker = QTimer()
@@ -99,9 +110,13 @@ def test_dock_warm_up_yields_to_the_user(make_napari_viewer, qtbot, monkeypatch,
     ticker.stop()
     loop_gaps = [b - a for a, b in zip(stamps, stamps[1:], strict=False)]
     (t0, t1), = busy
-    # the user's own stall is the test's; every other gap is the warm-up's
+    # the user's own stall is the test's, the freeze's the opening's; every other gap is the
+    # warm-up's
+    def warm_ups(a: float, b: float) -> bool:
+        return (b < t0 or a > t1 + 0.05) and not any(a <= f1 and f0 <= b for f0, f1 in freezes)
+
     outside = [g for (a, b), g in zip(zip(stamps, stamps[1:], strict=False), loop_gaps,
-                                        strict=True) if b < t0 or a > t1 + 0.05]
+                                        strict=True) if warm_ups(a, b)]
     worst = int(np.argmax(loop_gaps))
     assert max(outside) < STALL_BOUND_S, (sorted(outside)[-5:], stamps[worst] - stamps[0],
                                           [round(s - stamps[0], 3) for s in run.starts],
