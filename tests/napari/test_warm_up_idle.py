@@ -27,6 +27,8 @@ class GilProbe:
 
     def __init__(self) -> None:
         self.longest = 0.0
+        #: the gaps over 10 ms: (start, end)
+        self.gaps: list[tuple[float, float]] = []
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, daemon=True)
 
@@ -36,7 +38,14 @@ class GilProbe:
             time.sleep(0.001)
             now = time.perf_counter()
             self.longest = max(self.longest, now - last)
+            if now - last > 0.01:
+                self.gaps.append((last, now))
             last = now
+
+    def longest_outside(self, spans: list[tuple[float, float]]) -> float:
+        """The longest gap that overlaps none of ``spans``."""
+        return max((b - a for a, b in self.gaps
+                    if not any(a <= s1 and s0 <= b for s0, s1 in spans)), default=0.0)
 
     def __enter__(self) -> GilProbe:
         self._thread.start()
@@ -121,7 +130,8 @@ def test_dock_warm_up_yields_to_the_user(make_napari_viewer, qtbot, monkeypatch,
     assert max(outside) < STALL_BOUND_S, (sorted(outside)[-5:], stamps[worst] - stamps[0],
                                           [round(s - stamps[0], 3) for s in run.starts],
                                           [round(d, 3) for d in run.durations])
-    assert probe.longest < STALL_BOUND_S  # Python's switches: the busy loop shares the GIL
+    # Python's switches: the busy loop shares the GIL (the freeze's collection holds it)
+    assert probe.longest_outside(freezes) < STALL_BOUND_S
     started_while_busy = [s for s in run.starts if t0 + 0.02 < s < t1]
     assert not started_while_busy
     assert loaded and all(loaded), "every kernel came from the cache, none compiled here"
