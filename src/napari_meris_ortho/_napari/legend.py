@@ -102,6 +102,10 @@ def glyph_steps(viewer: Any, step_ms: int = 40,
     after = chunked(GLYPHS[GLYPHS_PER_TURN:], GLYPHS_PER_TURN)
     state: dict[str, Any] = {"on": False, "text": None, "color": None}
 
+    def render_next(font: Any, chunks: list[str]) -> None:
+        for char in chunks.pop(0):
+            font[char]  # vispy renders the glyph when it is first indexed
+
     def restore(text: Any) -> None:
         """The overlay's colour as it was, unless someone set it meanwhile (the first draw's
         text is transparent; napari's box behind it is not: a transparent box colour still
@@ -126,8 +130,7 @@ def glyph_steps(viewer: Any, step_ms: int = 40,
                 return  # this step's glyphs come before the first draw (``go_on``)
             font = text_overlay_font(alive)
             if font is not None:
-                for char in before.pop(0):
-                    font[char]  # vispy renders the glyph when it is first indexed
+                render_next(font, before)
         return step
 
     def go_on() -> None:
@@ -145,16 +148,14 @@ def glyph_steps(viewer: Any, step_ms: int = 40,
             return
         font = text_overlay_font(alive)
         if state["text"] is None and before and font is not None:  # left while a run ran
-            for char in before.pop(0):
-                font[char]
+            render_next(font, before)
         elif state["text"] is None:  # the first draw (with no font within reach: its glyphs)
             state["text"] = first_text
             text.color, text.font_size = (0.0, 0.0, 0.0, 0.0), 10  # before the text: unseen
             text.text, text.visible = first_text, True
             draw_now(alive)
         elif after and font is not None:
-            for char in after.pop(0):
-                font[char]
+            render_next(font, after)
         else:  # every glyph ready: hidden again, a legend asked for meanwhile shown
             text.text, text.visible = "", False
             restore(text)
